@@ -1,0 +1,57 @@
+# psyop: the two set-up commands are `make figures` and `make test`.
+# Both bootstrap a local virtual environment (.venv) and any Debian packages they
+# need on first use, so a fresh machine needs nothing else.
+
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed-stamp
+SYSDEPS_STAMP := $(VENV)/.sysdeps-stamp
+JOBS ?= $(shell nproc 2>/dev/null || echo 2)
+export MPLBACKEND := Agg
+export PYTHONHASHSEED := 0
+
+.PHONY: figures test bench clean venv sysdeps help
+
+help:
+	@echo "make figures  - simulate sessions if data/ is empty, then rebuild every figure and table"
+	@echo "make test     - run the whole test suite"
+	@echo "make bench    - run the benchmarks; results in bench/"
+	@echo "make clean    - remove generated figures, results, benchmarks and the venv"
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@echo "[psyop] setting up $(VENV) (first run only)"
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	@$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
+	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test]'
+	@touch $@
+
+# Debian packages: EGL/Mesa for headless rendering, Xvfb for the real-window test.
+# Installed only when missing and only when we can (root + apt-get).
+SYS_PACKAGES := libegl1 libgl1-mesa-dri libgles2 xvfb xauth
+sysdeps: $(SYSDEPS_STAMP)
+
+$(SYSDEPS_STAMP): | $(STAMP)
+	@missing=$$(for p in $(SYS_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "[psyop] installing Debian packages: $$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	  else echo "[psyop] warning: missing Debian packages ($$missing); install them with apt-get"; fi; \
+	fi
+	@touch $@
+
+test: $(STAMP) $(SYSDEPS_STAMP)
+	$(PY) -m pytest -n $(JOBS) -q
+
+bench: $(STAMP) $(SYSDEPS_STAMP)
+	@mkdir -p bench
+	$(PY) -m benchmarks --out bench
+
+include figures.mk
+
+clean:
+	rm -rf figures results bench $(VENV) build *.egg-info .pytest_cache .hypothesis

@@ -1,0 +1,5 @@
+import sys
+
+from psyop.cli import main
+
+sys.exit(main())
