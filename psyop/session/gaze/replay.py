@@ -1,0 +1,56 @@
+"""Replay the gaze recorded in a session's frame log (frames.parquet or its streams)."""
+
+from __future__ import annotations
+
+import bisect
+import math
+from pathlib import Path
+
+import pandas as pd
+
+from psyop.errors import UserError
+from psyop.session.gaze.sample import GazeSample
+
+
+class ReplayTracker:
+    """Serves logged gaze samples by their timestamps (shifted by ``time_offset_s``)."""
+
+    def __init__(self, frames: pd.DataFrame, time_offset_s: float = 0.0) -> None:
+        needed = ["gaze_sample_t_s", "fixation_x_m", "fixation_y_m", "fixation_z_m", "gaze_confidence", "gaze_valid"]
+        missing = [c for c in needed if c not in frames.columns]
+        if missing:
+            raise UserError(f"replay: frame log lacks columns {missing}")
+        table = frames[needed].dropna(subset=["gaze_sample_t_s"])
+        table = table.drop_duplicates(subset="gaze_sample_t_s").sort_values("gaze_sample_t_s")
+        self._t = [float(t) + time_offset_s for t in table["gaze_sample_t_s"]]
+        self._rows = list(table.itertuples(index=False))
+        self._delivered = 0
+
+    @classmethod
+    def from_path(cls, path: Path) -> ReplayTracker:
+        """A frames.parquet file or a session directory holding one."""
+        path = Path(path)
+        if path.is_dir():
+            path = path / "frames.parquet"
+        if not path.exists():
+            raise UserError("replay: no frames.parquet here (run `psyop recover` on a crashed session first)", str(path))
+        return cls(pd.read_parquet(path))
+
+    def start(self) -> None:
+        return None
+
+    def close(self) -> None:
+        return None
+
+    def stats(self) -> dict[str, float | int]:
+        return {"samples_delivered": self._delivered, "samples_available": len(self._t)}
+
+    def latest(self, now_s: float) -> GazeSample | None:
+        i = bisect.bisect_right(self._t, now_s) - 1
+        if i < 0:
+            return None
+        row = self._rows[i]
+        self._delivered += 1
+        fixation = (float(row.fixation_x_m), float(row.fixation_y_m), float(row.fixation_z_m))
+        valid = bool(row.gaze_valid) and all(math.isfinite(v) for v in fixation)
+        return GazeSample(self._t[i], fixation, float(row.gaze_confidence), valid)

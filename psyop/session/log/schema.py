@@ -1,0 +1,59 @@
+"""Arrow schemas of the trial log and the frame log (docs/architecture.md contracts)."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pyarrow as pa
+
+#: Columns the session adds to every schedule row (architecture contract + psyop extras).
+TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
+    pa.field("study", pa.string()),
+    pa.field("participant", pa.string()),
+    pa.field("session", pa.int64()),
+    pa.field("response", pa.string()),
+    pa.field("correct", pa.bool_()),
+    pa.field("reach_m", pa.float64()),
+    pa.field("chosen_mode", pa.string()),
+    pa.field("trial_start_s", pa.float64()),
+    pa.field("trial_end_s", pa.float64()),
+    pa.field("response_time_s", pa.float64()),
+    pa.field("drift_correction_deg", pa.float64()),
+    pa.field("gaze_valid_fraction", pa.float64()),
+    pa.field("n_frames", pa.int64()),
+    pa.field("run", pa.int64()),
+)
+
+#: Columns that depend on wall/virtual time or on where a crash split the session;
+#: everything else in trials.parquet is a pure function of (protocol, seed, participant).
+TIMING_COLUMNS: tuple[str, ...] = (
+    "trial_start_s", "trial_end_s", "response_time_s", "n_frames", "run", "gaze_valid_fraction",
+)
+
+FRAME_SCHEMA = pa.schema(
+    [
+        pa.field("trial", pa.int64()),
+        pa.field("phase", pa.string()),
+        pa.field("frame", pa.int64()),
+        pa.field("gaze_sample_t_s", pa.float64()),
+        pa.field("fixation_x_m", pa.float64()),
+        pa.field("fixation_y_m", pa.float64()),
+        pa.field("fixation_z_m", pa.float64()),
+        pa.field("gaze_confidence", pa.float64()),
+        pa.field("gaze_valid", pa.bool_()),
+        pa.field("gaze_held", pa.bool_()),
+        pa.field("render_start_s", pa.float64()),
+        pa.field("submit_s", pa.float64()),
+        pa.field("sample_age_s", pa.float64()),
+        pa.field("image_checked", pa.bool_()),
+        pa.field("image_ok", pa.bool_()),
+    ]
+)
+
+
+def trial_schema(schedule: pd.DataFrame) -> pa.Schema:
+    """The schedule's columns (their own types) followed by the log columns."""
+    base = pa.Schema.from_pandas(schedule, preserve_index=False).remove_metadata()
+    fields = [f if not pa.types.is_large_string(f.type) else pa.field(f.name, pa.string()) for f in base]
+    names = {f.name for f in fields}
+    fields += [f for f in TRIAL_LOG_FIELDS if f.name not in names]
+    return pa.schema(fields)
