@@ -81,8 +81,10 @@ class CameraArrays:
     valid: np.ndarray  # (n,)
 
 
-def _check_clip(near_m: float, far_m: float) -> None:
-    if not (math.isfinite(near_m) and math.isfinite(far_m) and 0.0 < near_m < far_m):
+def _check_clip(near_m: ArrayLike, far_m: ArrayLike) -> None:
+    near = np.asarray(near_m, dtype=np.float64)
+    far = np.asarray(far_m, dtype=np.float64)
+    if not (np.all(np.isfinite(near)) and np.all(np.isfinite(far)) and np.all((0.0 < near) & (near < far))):
         raise ValueError(f"need finite 0 < near_m < far_m, got near_m={near_m!r}, far_m={far_m!r}")
 
 
@@ -97,9 +99,14 @@ def off_axis_tangents(tangents: ArrayLike, offset_m: ArrayLike, d_m: float) -> n
     return np.stack([(l - sx) * scale, (r - sx) * scale, (b - sy) * scale, (t - sy) * scale], axis=-1)
 
 
-def projection_from_tangents(tangents: ArrayLike, near_m: float, far_m: float) -> np.ndarray:
-    """(n, 4, 4) OpenGL frustum matrices from (n, 4) tangents (glFrustum with l = near * L ...)."""
+def projection_from_tangents(tangents: ArrayLike, near_m: ArrayLike, far_m: ArrayLike) -> np.ndarray:
+    """(n, 4, 4) OpenGL frustum matrices from (n, 4) tangents (glFrustum with l = near * L ...).
+
+    ``near_m`` / ``far_m`` may be scalars or (n,) arrays. The x and y rows depend only on the
+    tangents (2 near / (r - l) = 2 / (R - L)), so they are exact whatever the near plane."""
     tan = np.atleast_2d(np.asarray(tangents, dtype=np.float64))
+    near_m = np.asarray(near_m, dtype=np.float64)
+    far_m = np.asarray(far_m, dtype=np.float64)
     L, R, B, T = tan.T
     n = tan.shape[0]
     p = np.zeros((n, 4, 4))
@@ -120,8 +127,8 @@ def eye_camera_arrays(
     ipd_m: float,
     nc_m: float,
     mode: RenderingMode | str,
-    near_m: float,
-    far_m: float,
+    near_m: ArrayLike,
+    far_m: ArrayLike,
     fallback_direction: ArrayLike | None = None,
     min_fixation_distance_m: float = DEFAULT_MIN_FIXATION_DISTANCE_M,
     max_rotation_deg: float = DEFAULT_MAX_ROTATION_DEG,
