@@ -1,0 +1,94 @@
+"""Load a study's trial logs: every ``data/<study>/sub-<ID>/ses-<N>/trials.parquet``."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from psyop.errors import UserError
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """All trials of one study and whether the data came from simulated sessions."""
+
+    study: str
+    trials: pd.DataFrame
+    simulated: bool
+    n_sessions: int
+
+
+def is_simulated(data_root: Path) -> bool:
+    """Read ``simulated`` from ``data_root/dataset_description.json``.
+
+    A missing file or key counts as *not* simulated only when the file exists and says
+    so; an absent description is treated as simulated=False but never silently: callers
+    show "simulated" in figures only when this returns True.
+    """
+    path = Path(data_root) / "dataset_description.json"
+    if not path.exists():
+        return False
+    try:
+        description = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise UserError(f"not valid JSON: {exc.msg}", f"{path}:{exc.lineno}:{exc.colno}") from exc
+    return bool(description.get("simulated", False))
+
+
+def session_files(data_root: Path, study: str) -> list[Path]:
+    """Sorted paths of every session log of ``study``."""
+    return sorted((Path(data_root) / study).glob("sub-*/ses-*/trials.parquet"))
+
+
+def load_trials(data_root: Path, study: str) -> pd.DataFrame:
+    """Concatenate every session's trials of ``study`` into one tidy table.
+
+    ``participant`` is returned as str and ``session`` as int so that groupings are
+    stable across sessions written by different versions. The result's ``attrs``
+    carry ``simulated`` (bool) and ``n_sessions``.
+    """
+    return load_dataset(data_root, study).trials
+
+
+def load_dataset(data_root: Path, study: str) -> Dataset:
+    """Like :func:`load_trials` but returns a :class:`Dataset` with the simulated flag."""
+    files = session_files(data_root, study)
+    if not files:
+        raise UserError(
+            f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
+            str(Path(data_root)),
+        )
+    frames = [pd.read_parquet(f) for f in files]
+    trials = pd.concat(frames, ignore_index=True)
+    if "participant" in trials:
+        trials["participant"] = trials["participant"].astype(str)
+    if "session" in trials:
+        trials["session"] = trials["session"].astype(int)
+    simulated = is_simulated(data_root)
+    trials.attrs["simulated"] = simulated
+    trials.attrs["n_sessions"] = len(files)
+    return Dataset(study=study, trials=trials, simulated=simulated, n_sessions=len(files))
+
+
+def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: bool) -> list[Path]:
+    """Write trial tables in the session-log layout (for tests and demos).
+
+    Each table is split by ``participant`` and ``session`` into
+    ``<root>/<study>/sub-<ID>/ses-<N>/trials.parquet``; ``dataset_description.json`` records
+    ``simulated``. Returns the written parquet paths.
+    """
+    root = Path(data_root)
+    root.mkdir(parents=True, exist_ok=True)
+    written = []
+    for study, table in tables.items():
+        for (participant, session), part in table.groupby(["participant", "session"], sort=True):
+            path = root / study / f"sub-{participant}" / f"ses-{session}" / "trials.parquet"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            part.reset_index(drop=True).to_parquet(path, index=False)
+            written.append(path)
+    (root / "dataset_description.json").write_text(
+        json.dumps({"Name": "psyop dataset", "simulated": bool(simulated)}, indent=2) + "\n")
+    return written

@@ -1,0 +1,61 @@
+"""Each test in the paper's written form, e.g. ``F(1.70, 30.65) = 17.98, p < 0.0001, eps = 0.85``."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+from psyop.statistics.regression import ConditionComparison, LinearFit
+
+
+def format_p(p: float) -> str:
+    """'p < 0.0001', 'p < 0.001', or 'p = 0.64' / 'p = 0.012' (two significant digits)."""
+    if not math.isfinite(p):
+        return "p = n/a"
+    if p < 0.0001:
+        return "p < 0.0001"
+    if p < 0.001:
+        return "p < 0.001"
+    return f"p = {p:.2g}" if p >= 0.01 else f"p = {p:.3f}"
+
+
+def _df(value: float) -> str:
+    return f"{value:.0f}" if abs(value - round(value)) < 1e-9 else f"{value:.2f}"
+
+
+def format_anova(row: Mapping) -> str:
+    """One ANOVA effect. GG-corrected df and p, with eps, when eps < 1; plain otherwise."""
+    eps = float(row["eps_gg"])
+    if eps < 1.0:
+        return (f"F({_df(row['df1_gg'])}, {_df(row['df2_gg'])}) = {row['F']:.2f}, "
+                f"{format_p(row['p_gg'])}, eps = {eps:.2f}")
+    return f"F({_df(row['df1'])}, {_df(row['df2'])}) = {row['F']:.2f}, {format_p(row['p_unc'])}"
+
+
+def format_ttest(row: Mapping) -> str:
+    """A Bonferroni-corrected paired t-test row from :func:`psyop.statistics.anova.posthoc_paired`."""
+    return f"t({_df(row['dof'])}) = {row['T']:.2f}, {format_p(row['p_bonf'])} (Bonferroni x{int(row['m'])})"
+
+
+def format_binomial(row: Mapping) -> str:
+    """A one-tailed binomial test row from :mod:`psyop.statistics.binomial`."""
+    return (f"{100 * row['proportion']:.1f}% ({row['k']}/{row['n']}), {format_p(row['p'])}, "
+            f"one-tailed binomial test")
+
+
+def format_linear_fit(fit: LinearFit, unit: str = "") -> str:
+    u = f" {unit}" if unit else ""
+    return (f"slope = {fit.slope:.3f} [{fit.slope_ci_low:.3f}, {fit.slope_ci_high:.3f}], "
+            f"intercept = {fit.intercept:.3f}{u} [{fit.intercept_ci_low:.3f}, {fit.intercept_ci_high:.3f}], "
+            f"R^2 = {fit.r2:.2f}, n = {fit.n}")
+
+
+def format_condition_comparison(c: ConditionComparison) -> str:
+    return (f"{c.other} vs {c.reference}: intercept difference = {c.intercept_diff:.3f} ({format_p(c.intercept_diff_p)}), "
+            f"slope difference = {c.slope_diff:.3f} ({format_p(c.slope_diff_p)}); "
+            f"joint F({c.joint_df1}, {c.joint_df2}) = {c.joint_F:.2f}, {format_p(c.joint_p)}")
+
+
+def format_threshold(row: Mapping) -> str:
+    """A threshold with its 95 % interval, e.g. '0.36 D [0.28, 0.45]'."""
+    return f"{row['threshold_D']:.2f} D [{row['threshold_ci_low_D']:.2f}, {row['threshold_ci_high_D']:.2f}]"
