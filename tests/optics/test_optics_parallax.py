@@ -77,8 +77,8 @@ def test_parallax_linear_in_diopters_not_metres():
         r2_m, resid_m = _r_squared(sep_m, arcmin)
         assert r2_D > 0.99995 and resid_D < 0.005 * arcmin.max()
         assert r2_m < 0.99 and resid_m > 0.05 * arcmin.max()
-        # slope in diopters is NC sin 15 deg (first order)
+        # slope in diopters is NC sin 15 deg to first order (next term ~ 2 NC D: 6 % at 4 D)
         slope = np.polyfit(sep_D, np.radians(arcmin / 60), 1)[0]
-        assert math.isclose(slope, NC * math.sin(math.radians(15)), rel_tol=0.05)
+        assert math.isclose(slope, NC * math.sin(math.radians(15)), rel_tol=0.1)
     # infinite back surface works too
     assert bingham_parallax_diopters_rad(0.0, 1.0) > 0
