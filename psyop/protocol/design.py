@@ -1,0 +1,140 @@
+"""Experimental design: factors and their levels, repetitions, practice, randomisation.
+
+Factor names are schedule column names. A numeric factor must say its unit in its name
+(``back_D``, ``target_fraction``); a factor of words (``mode``, ``rendering``, ``pair``) need not.
+Levels are a list, a stepped range (``{start, step, count}``), levels that depend on another
+factor's level (``depends_on`` + ``levels_by``), or ``adaptive`` (filled while the session runs).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from psyop.protocol.base import Integer, Number, StrictModel
+
+Level = Number | str
+
+
+class SteppedLevels(StrictModel):
+    """``count`` levels ``start, start + step, ...`` (e.g. the 0.45 D step set)."""
+
+    start: Number
+    step: Number = Field(gt=0)
+    count: Integer = Field(ge=1, le=100000)
+
+    def values(self) -> list[float]:
+        # round to 12 decimals so that 3 * 0.45 is 1.35, not 1.3500000000000003
+        return [round(self.start + i * self.step, 12) for i in range(self.count)]
+
+
+class AdaptiveLevel(StrictModel):
+    """A level chosen at run time by an adaptive procedure (staircase, QUEST+, ...).
+
+    The schedule leaves the factor's column empty (NaN) and marks the trial ``adaptive``; the
+    session's procedure named here fills it before the trial starts. Procedures are not part
+    of the schedule compiler. An adaptive factor is not crossed: every condition of the other
+    factors gets ``repetitions`` adaptive trials."""
+
+    procedure: str = Field(min_length=1, description="name of the procedure the session runs")
+    start: Number
+    min: Number
+    max: Number
+
+    @model_validator(mode="after")
+    def _range(self) -> "AdaptiveLevel":
+        if not self.min <= self.start <= self.max:
+            raise ValueError("need min <= start <= max")
+        return self
+
+
+class Factor(StrictModel):
+    """One independent variable. Give exactly one of ``levels``, ``levels_by`` or ``adaptive``."""
+
+    levels: list[Level] | SteppedLevels | None = None
+    depends_on: str | None = None
+    levels_by: dict[Number | str, list[Level] | SteppedLevels] | None = None
+    adaptive: AdaptiveLevel | None = None
+    description: str | None = None
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "Factor":
+        given = [n for n in ("levels", "levels_by", "adaptive") if getattr(self, n) is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of: levels (a list or {start, step, count}), "
+                             "depends_on + levels_by, or adaptive")
+        if (self.levels_by is None) != (self.depends_on is None):
+            raise ValueError("levels_by and depends_on go together: levels_by maps each level of the "
+                             "depends_on factor to this factor's levels")
+        for values in self.level_sets():
+            if not values:
+                raise ValueError("a factor needs at least one level")
+            if len({(type(v) is str, v) for v in values}) != len(values):
+                raise ValueError(f"levels repeat: {values}; each level must be listed once")
+            if len({type(v) is str for v in values}) != 1:
+                raise ValueError("levels mix numbers and words; use one kind")
+        return self
+
+    def level_sets(self) -> list[list[Level]]:
+        """Every list of levels this factor can take (one, or one per parent level)."""
+        if self.levels is not None:
+            return [_values(self.levels)]
+        if self.levels_by is not None:
+            return [_values(v) for v in self.levels_by.values()]
+        return []
+
+    def levels_for(self, parent_level: Level | None) -> list[Level]:
+        """This factor's levels, given the parent's level when it depends on one."""
+        if self.levels is not None:
+            return _values(self.levels)
+        assert self.levels_by is not None
+        for key, value in self.levels_by.items():
+            if _same_level(key, parent_level):
+                return _values(value)
+        raise KeyError(parent_level)
+
+    @property
+    def is_numeric(self) -> bool:
+        if self.adaptive is not None:
+            return True
+        return all(not isinstance(v, str) for values in self.level_sets() for v in values)
+
+
+def _values(levels: list[Level] | SteppedLevels) -> list[Level]:
+    return levels.values() if isinstance(levels, SteppedLevels) else list(levels)
+
+
+def _same_level(a: Level | None, b: Level | None) -> bool:
+    if isinstance(a, str) or isinstance(b, str) or a is None or b is None:
+        return a == b
+    return abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(a)))
+
+
+class Randomisation(StrictModel):
+    """Trial order. ``full``: all trials shuffled. ``blocked``: one block per combination of the
+    ``by`` factors, trials shuffled within blocks, blocks in ``block_order``. ``sequential``:
+    conditions in protocol order, repetitions last (pilots and debugging only)."""
+
+    kind: Literal["full", "blocked", "sequential"] = "full"
+    by: list[str] = Field(default_factory=list)
+    block_order: Literal["random", "fixed"] = "random"
+
+    @model_validator(mode="after")
+    def _by(self) -> "Randomisation":
+        if self.kind == "blocked" and not self.by:
+            raise ValueError("blocked randomisation needs by: [factor, ...]")
+        if self.kind != "blocked" and self.by:
+            raise ValueError("by: only applies to kind: blocked")
+        return self
+
+
+class Design(StrictModel):
+    """Factors are fully crossed (dependent levels nested in their parent); every condition is
+    repeated ``repetitions`` times. ``practice_trials`` extra trials (drawn at random from the
+    conditions, flagged ``practice``) come first."""
+
+    factors: dict[str, Factor] = Field(min_length=1)
+    repetitions: Integer = Field(ge=1, le=1000000)
+    practice_trials: Integer = Field(default=0, ge=0, le=1000)
+    randomisation: Randomisation = Field(default_factory=Randomisation)

@@ -1,0 +1,132 @@
+"""Display, eye-model and ipd sections of a protocol.
+
+These stay plain names and numbers here (validated for sanity); ``psyop.optics`` turns them
+into a ``DisplayProfile`` / ``EyeModel`` (see :func:`resolve_display_profile`,
+:func:`resolve_eye_model`). The name lists mirror ``psyop.optics`` (a test checks that they agree).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from psyop.protocol.base import Integer, Number, StrictModel
+
+#: Built-in display profiles (``psyop.optics.display.DISPLAY_PROFILES``).
+DISPLAY_PROFILE_NAMES: tuple[str, ...] = ("vive_pro",)
+#: Schematic eyes of the paper's Table 1 (``psyop.optics.eye_models.EYE_MODELS``).
+EYE_MODEL_NAMES: tuple[str, ...] = (
+    "gullstrand_no1_relaxed",
+    "gullstrand_no1_accommodated",
+    "gullstrand_emsley_relaxed",
+    "gullstrand_emsley_accommodated",
+    "emsley_reduced",
+)
+
+
+def _known(kind: str, names: tuple[str, ...]):
+    def check(value: str) -> str:
+        if value not in names:
+            import difflib
+
+            close = difflib.get_close_matches(value, names, n=1)
+            hint = f" Did you mean '{close[0]}'?" if close else ""
+            raise ValueError(f"unknown {kind} '{value}'.{hint} Known: {', '.join(names)}; or give an inline definition")
+        return value
+
+    return check
+
+
+class InlineDisplayProfile(StrictModel):
+    """A user display: per-eye pixels, refresh rate, and either a symmetric field of view or the
+    four frustum tangents of the right eye (OpenVR ``GetProjectionRaw`` convention)."""
+
+    name: str = Field(min_length=1)
+    width_px: Integer = Field(gt=0, le=32768)
+    height_px: Integer = Field(gt=0, le=32768)
+    refresh_hz: Number = Field(gt=0, le=1000)
+    horizontal_fov_deg: Number | None = Field(default=None, gt=0, lt=180)
+    vertical_fov_deg: Number | None = Field(default=None, gt=0, lt=180)
+    tan_left: Number | None = None
+    tan_right: Number | None = None
+    tan_bottom: Number | None = None
+    tan_top: Number | None = None
+    d_m: Number | Literal["inf"] = Field(default="inf", description="virtual-image distance, metres, or 'inf'")
+
+    @field_validator("d_m")
+    @classmethod
+    def _distance(cls, value: float | str) -> float | str:
+        if isinstance(value, float) and value < 0.05:
+            raise ValueError("the virtual image must be at least 0.05 m away (or 'inf', the paper's choice)")
+        return value
+
+    @model_validator(mode="after")
+    def _extent(self) -> "InlineDisplayProfile":
+        tangents = [self.tan_left, self.tan_right, self.tan_bottom, self.tan_top]
+        given = [t is not None for t in tangents]
+        if any(given) and not all(given):
+            raise ValueError("give all four of tan_left, tan_right, tan_bottom, tan_top, or none")
+        if all(given) and (self.horizontal_fov_deg is not None or self.vertical_fov_deg is not None):
+            raise ValueError("give either the four tangents or horizontal_fov_deg, not both")
+        if not all(given) and self.horizontal_fov_deg is None:
+            raise ValueError("give horizontal_fov_deg (symmetric) or the four tangents tan_left/right/bottom/top")
+        if all(given) and not (self.tan_left < self.tan_right and self.tan_bottom < self.tan_top):
+            raise ValueError("tan_left must be < tan_right and tan_bottom < tan_top")
+        return self
+
+    @property
+    def image_distance_m(self) -> float:
+        return math.inf if self.d_m == "inf" else float(self.d_m)
+
+
+class InlineEyeModel(StrictModel):
+    """A calibrated eye: distance NC from the centre of rotation to the front nodal point."""
+
+    nc_mm: Number = Field(gt=0, le=30, description="centre of rotation to front nodal point, mm (paper: 7.6916)")
+    name: str = "user"
+
+
+class FixedIpd(StrictModel):
+    """Inter-pupillary distance fixed for the session, mm."""
+
+    mm: Number = Field(ge=40, le=90)
+
+
+class DisplaySpec(StrictModel):
+    """Which headset, which schematic eye and where the ipd comes from."""
+
+    profile: Annotated[str, Field(description="built-in profile name")] | InlineDisplayProfile = "vive_pro"
+    eye_model: str | InlineEyeModel = "gullstrand_emsley_relaxed"
+    ipd: Literal["tracker"] | FixedIpd = "tracker"
+
+    @field_validator("profile", mode="after")
+    @classmethod
+    def _profile_name(cls, value: Any) -> Any:
+        return _known("display profile", DISPLAY_PROFILE_NAMES)(value) if isinstance(value, str) else value
+
+    @field_validator("eye_model", mode="after")
+    @classmethod
+    def _eye_name(cls, value: Any) -> Any:
+        return _known("eye model", EYE_MODEL_NAMES)(value) if isinstance(value, str) else value
+
+
+def resolve_display_profile(spec: DisplaySpec):
+    """The ``psyop.optics.DisplayProfile`` for this protocol (imports optics lazily)."""
+    from psyop.optics.display import display_profile_from_mapping, get_display_profile
+
+    if isinstance(spec.profile, str):
+        return get_display_profile(spec.profile)
+    data = spec.profile.model_dump(exclude_none=True)
+    data["d_m"] = spec.profile.image_distance_m
+    return display_profile_from_mapping(data)
+
+
+def resolve_eye_model(spec: DisplaySpec):
+    """The ``psyop.optics.EyeModel`` for this protocol (imports optics lazily)."""
+    from psyop.optics.eye_models import get_eye_model, user_eye_model
+
+    if isinstance(spec.eye_model, str):
+        return get_eye_model(spec.eye_model)
+    return user_eye_model(spec.eye_model.nc_mm / 1000.0, spec.eye_model.name)

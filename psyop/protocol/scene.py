@@ -1,0 +1,260 @@
+"""Scene primitives of a protocol: what is drawn, in degrees of visual angle and explicit depths.
+
+Every primitive has an ``id`` (phases refer to it in ``show:``) and a ``kind`` (the
+discriminator). Sizes are visual angles seen from the eye's centre of rotation, so a disc of
+``size_deg: 2`` subtends 2 deg at any depth. Depths carry their unit: ``{D: 2}`` (dioptres,
+0 = optical infinity), ``{m: 0.5}``, or a reference to factor columns of the trial schedule.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Annotated, Literal, Union
+
+from pydantic import Field, model_validator
+
+from psyop.protocol.base import Integer, Number, StrictModel
+
+RenderingMode = Literal["conventional", "ocular", "reversed"]
+RENDERING_MODES: tuple[str, ...] = ("conventional", "ocular", "reversed")
+
+
+class Depth(StrictModel):
+    """A distance from the eyes with an explicit unit.
+
+    ``{D: 2}``: 2 dioptres (0.5 m). ``{m: 0.5}``: 0.5 m. ``{factor: back_D}``: the trial's value
+    of factor ``back_D`` (dioptres when the name ends in ``_D``, metres when in ``_m``).
+    ``{D: 0.5, factor: separation_D}`` or ``{factor: [back_D, level_D]}``: the sum, in dioptres.
+    """
+
+    D: Number | None = Field(default=None, ge=0, le=100, description="dioptres (1/m); 0 = optical infinity")
+    m: Number | None = Field(default=None, gt=0, description="metres")
+    factor: str | list[str] | None = Field(default=None, description="factor column(s) to add, by name")
+
+    @model_validator(mode="after")
+    def _one_unit(self) -> "Depth":
+        if self.D is not None and self.m is not None:
+            raise ValueError("give the depth either in dioptres (D) or in metres (m), not both")
+        if self.D is None and self.m is None and self.factor is None:
+            raise ValueError("give a depth: {D: 2}, {m: 0.5} or {factor: NAME}")
+        if self.m is not None and self.factor is not None:
+            raise ValueError("a metric depth cannot be added to a factor; use D with dioptre factors")
+        if isinstance(self.factor, list) and not self.factor:
+            raise ValueError("factor list is empty")
+        return self
+
+    @property
+    def factor_names(self) -> tuple[str, ...]:
+        if self.factor is None:
+            return ()
+        return (self.factor,) if isinstance(self.factor, str) else tuple(self.factor)
+
+    def resolve_D(self, row: Mapping[str, float]) -> float:
+        """The depth in dioptres for one trial (``row`` maps factor names to values)."""
+        if self.m is not None:
+            return 1.0 / self.m
+        names = self.factor_names
+        if len(names) == 1 and names[0].endswith("_m"):
+            return 1.0 / float(row[names[0]])
+        return float(self.D or 0.0) + sum(float(row[name]) for name in names)
+
+    def constant_D(self) -> float | None:
+        """The depth in dioptres when it does not depend on factors, else None."""
+        return None if self.factor is not None else self.resolve_D({})
+
+
+# ---- surfaces -------------------------------------------------------------------------------
+
+Rgb = tuple[Annotated[Number, Field(ge=0, le=1)], Annotated[Number, Field(ge=0, le=1)],
+            Annotated[Number, Field(ge=0, le=1)]]
+
+
+class SolidSurface(StrictModel):
+    """A uniform colour, linear RGB in [0, 1]."""
+
+    kind: Literal["solid"]
+    rgb: Rgb
+
+
+class WhiteNoiseSurface(StrictModel):
+    """Binary-free grey-level white noise with square grains of ``grain_deg``."""
+
+    kind: Literal["white_noise"]
+    grain_deg: Number = Field(default=0.05, gt=0, le=10)
+    mean: Number = Field(default=0.5, ge=0, le=1)
+    contrast: Number = Field(default=1.0, ge=0, le=1, description="RMS-free peak contrast around the mean")
+    seed: Integer = Field(default=0, ge=0, description="added to the trial seed, so two surfaces differ")
+
+
+class PinkNoiseSurface(StrictModel):
+    """1/f^exponent amplitude-spectrum noise (``exponent: 1`` is 1/f)."""
+
+    kind: Literal["one_over_f"]
+    exponent: Number = Field(default=1.0, ge=0, le=4)
+    mean: Number = Field(default=0.5, ge=0, le=1)
+    contrast: Number = Field(default=1.0, ge=0, le=1)
+    seed: Integer = Field(default=0, ge=0)
+
+
+class ImageSurface(StrictModel):
+    """An image file, path relative to the protocol file; it must exist."""
+
+    kind: Literal["image"]
+    path: str = Field(min_length=1)
+    tile_deg: Number | None = Field(default=None, gt=0, description="repeat every tile_deg; default: stretch")
+
+
+Surface = Annotated[Union[SolidSurface, WhiteNoiseSurface, PinkNoiseSurface, ImageSurface],
+                    Field(discriminator="kind")]
+
+
+# ---- primitives -----------------------------------------------------------------------------
+
+Point2Deg = tuple[Number, Number]
+
+
+class _Primitive(StrictModel):
+    id: str = Field(min_length=1, pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="name used by phases' show:")
+
+
+class Disc(_Primitive):
+    """A frontoparallel disc subtending ``size_deg`` (diameter) at its depth."""
+
+    kind: Literal["disc"]
+    size_deg: Number = Field(gt=0, lt=180)
+    depth: Depth
+    surface: Surface
+    centre_deg: Point2Deg = (0.0, 0.0)
+
+
+class Quad(_Primitive):
+    """A frontoparallel rectangle ``width_deg`` x ``height_deg`` at its depth."""
+
+    kind: Literal["quad"]
+    width_deg: Number = Field(gt=0, lt=180)
+    height_deg: Number = Field(gt=0, lt=180)
+    depth: Depth
+    surface: Surface
+    centre_deg: Point2Deg = (0.0, 0.0)
+
+
+class SinusoidalBorder(_Primitive):
+    """Two frontoparallel surfaces meeting along a sinusoidal border (the ordinal-depth stimulus).
+
+    ``orientation_deg: 0`` is a vertical border with a ``left`` and a ``right`` surface; positive
+    angles rotate it counter-clockwise. The nearer side is read from the schedule's
+    ``near_side`` column (``near_side: schedule``) or fixed. The far surface extends behind the
+    near one; both are scaled to subtend ``size_deg`` at their depth.
+    """
+
+    kind: Literal["sinusoidal_border"]
+    size_deg: Number = Field(gt=0, lt=180, description="square extent of each surface")
+    amplitude_deg: Number = Field(ge=0, lt=90)
+    period_deg: Number = Field(gt=0, lt=360)
+    orientation_deg: Number = Field(default=0.0, ge=-180, le=180)
+    phase: Literal["random"] | Number = "random"
+    left: Surface
+    right: Surface
+    near_depth: Depth
+    far_depth: Depth
+    near_side: Literal["schedule", "left", "right"] = "schedule"
+
+
+class Aperture(_Primitive):
+    """A circular window fixed to the eye's line of sight from the centre of rotation: it is
+    never shifted by ocular parallax (``ignores_ocular_parallax`` is always true)."""
+
+    kind: Literal["aperture"]
+    diameter_deg: Number = Field(gt=0, lt=180)
+    surround_rgb: Rgb = (0.0, 0.0, 0.0)
+    ignores_ocular_parallax: Literal[True] = True
+
+
+class GridPlanes(_Primitive):
+    """Grid-lined planes (floor, ceiling, walls) forming a corridor that recedes from the viewer."""
+
+    kind: Literal["grid_planes"]
+    planes: list[Literal["floor", "ceiling", "left", "right"]] = Field(min_length=1)
+    half_width_m: Number = Field(gt=0)
+    half_height_m: Number = Field(gt=0)
+    near_m: Number = Field(default=0.1, gt=0)
+    far_m: Number = Field(default=20.0, gt=0)
+    spacing_m: Number = Field(gt=0)
+    line_width_deg: Number = Field(default=0.1, gt=0, lt=10)
+    rgb: Rgb = (1.0, 1.0, 1.0)
+    background_rgb: Rgb = (0.0, 0.0, 0.0)
+
+
+class TargetField(_Primitive):
+    """``count`` frontoparallel discs of ``size_deg``, placed at random (per trial, from the trial
+    seed) within a circular field of ``field_deg`` so that none overlaps another in the
+    conventional view, each at a depth drawn uniformly in dioptres between ``far`` and ``near``."""
+
+    kind: Literal["target_field"]
+    count: Integer = Field(ge=1, le=10000)
+    size_deg: Number = Field(gt=0, lt=180)
+    near: Depth
+    far: Depth
+    field_deg: Number = Field(gt=0, lt=180)
+    min_gap_deg: Number = Field(default=0.0, ge=0)
+    surface: Surface
+
+
+class CirclePath(StrictModel):
+    """Circle around the view centre at ``eccentricity_deg`` with angular speed ``speed_deg_s``.
+    ``start: random`` / ``direction: random`` are drawn per trial and written to the schedule."""
+
+    kind: Literal["circle"]
+    eccentricity_deg: Number = Field(gt=0, lt=90)
+    speed_deg_s: Number = Field(gt=0, le=3600)
+    start: Literal["random"] | Annotated[Number, Field(ge=0, lt=360)] = "random"
+    direction: Literal["random", "clockwise", "counterclockwise"] = "random"
+
+
+class FixationTarget(_Primitive):
+    """A small two-colour fixation target; static at ``centre_deg`` or moving along ``path``."""
+
+    kind: Literal["fixation_target"]
+    size_deg: Number = Field(gt=0, le=10)
+    depth: Depth
+    rgb: Rgb = (1.0, 0.0, 0.0)
+    centre_rgb: Rgb = (1.0, 1.0, 1.0)
+    centre_deg: Point2Deg = (0.0, 0.0)
+    path: CirclePath | None = None
+
+
+class Room(_Primitive):
+    """A simple furnished room (floor, walls, a table) around the viewer, in metres."""
+
+    kind: Literal["room"]
+    width_m: Number = Field(gt=0, le=100)
+    depth_m: Number = Field(gt=0, le=100)
+    height_m: Number = Field(gt=0, le=20)
+    table_height_m: Number | None = Field(default=None, gt=0)
+    eye_height_m: Number = Field(default=1.2, gt=0, description="seated eye height above the floor")
+
+
+class ReachTarget(_Primitive):
+    """An object to reach for, straight ahead at a fraction of the participant's arm reach.
+
+    ``distance_fraction``: a number, or ``{factor: target_fraction}``."""
+
+    kind: Literal["reach_target"]
+    object: Literal["pencil", "sphere", "cube"] = "pencil"
+    size_m: Number = Field(gt=0, le=1, description="longest dimension of the object")
+    distance_fraction: Annotated[Number, Field(gt=0, le=1.5)] | "FactorRef"
+    height_m: Number = Field(default=-0.15, ge=-2, le=2, description="relative to eye height, up positive")
+
+
+class FactorRef(StrictModel):
+    """A value read from the trial schedule's factor column."""
+
+    factor: str
+
+
+ReachTarget.model_rebuild()
+
+Primitive = Annotated[
+    Union[Disc, Quad, SinusoidalBorder, Aperture, GridPlanes, TargetField, FixationTarget, Room, ReachTarget],
+    Field(discriminator="kind"),
+]

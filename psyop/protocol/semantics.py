@@ -1,0 +1,293 @@
+"""Checks that need the whole protocol (or the file system), after each section is valid.
+
+Each finding is an :class:`Issue` with the key path it concerns and a message that says what
+to change; the loader maps the path to file:line:column.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass
+from pathlib import Path as FsPath
+from typing import Any
+
+from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
+from psyop.protocol.conditions import expand_conditions
+from psyop.protocol.model import Protocol
+from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
+from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, ReachTarget,
+                                  SinusoidalBorder, TargetField)
+from psyop.protocol.trial import Blank, Interval
+
+#: Random sequential placement of equal discs jams at about 54.7 % area coverage; above ~50 %
+#: placing them without overlap at random becomes impractically slow or impossible.
+MAX_RANDOM_COVERAGE = 0.5
+
+#: Schedule columns every study has (observers may read them).
+BASE_COLUMNS = ("trial", "block", "condition", "trial_seed", "practice")
+
+
+@dataclass(frozen=True)
+class Issue:
+    """One problem: where (key path) and what to do."""
+
+    path: tuple[Any, ...]
+    message: str
+
+
+def _suggest(name: str, options: list[str]) -> str:
+    close = difflib.get_close_matches(name, options, n=1)
+    return f" Did you mean '{close[0]}'?" if close else ""
+
+
+class _Checker:
+    def __init__(self, protocol: Protocol, base_dir: FsPath | None) -> None:
+        self.p = protocol
+        self.base_dir = base_dir
+        self.issues: list[Issue] = []
+        self.factors = protocol.design.factors
+
+    def add(self, path: tuple[Any, ...], message: str) -> None:
+        self.issues.append(Issue(path, message))
+
+    # -- factors ------------------------------------------------------------------------------
+    def factor_exists(self, name: str, path: tuple[Any, ...], *, numeric: bool | None = None) -> bool:
+        if name not in self.factors:
+            self.add(path, f"'{name}' is not a factor of design.factors.{_suggest(name, list(self.factors))} "
+                           f"Factors: {', '.join(self.factors)}")
+            return False
+        if numeric is not None and self.factors[name].is_numeric != numeric:
+            kind = "numbers" if numeric else "words"
+            self.add(path, f"factor '{name}' must have {kind} as levels here")
+            return False
+        return True
+
+    def check_factors(self) -> None:
+        for name, factor in self.factors.items():
+            path = ("design", "factors", name)
+            if factor.is_numeric and not has_unit_suffix(name):
+                self.add(path, f"numeric factor '{name}' must say its unit in its name: end it with one of "
+                               f"{', '.join(UNIT_SUFFIXES)} (e.g. '{name}_D')")
+            if not factor.is_numeric and has_unit_suffix(name) and name.endswith(("_D", "_m", "_deg", "_s")):
+                self.add(path, f"factor '{name}' has a unit suffix but its levels are words; give numbers or rename")
+            if factor.depends_on is None:
+                continue
+            parent_name = factor.depends_on
+            if parent_name == name:
+                self.add(path + ("depends_on",), "a factor cannot depend on itself")
+                continue
+            if not self.factor_exists(parent_name, path + ("depends_on",)):
+                continue
+            parent = self.factors[parent_name]
+            if parent.depends_on is not None:
+                self.add(path + ("depends_on",), f"'{parent_name}' itself depends on another factor; nest one level only")
+                continue
+            if parent.adaptive is not None:
+                self.add(path + ("depends_on",), f"'{parent_name}' is adaptive; levels cannot depend on it")
+                continue
+            parent_levels = parent.levels_for(None)
+            assert factor.levels_by is not None
+            for key in factor.levels_by:
+                if not any(_same(key, level) for level in parent_levels):
+                    self.add(path + ("levels_by", key), f"{key!r} is not a level of '{parent_name}' "
+                                                       f"(levels: {parent_levels}); fix or remove this entry")
+            for level in parent_levels:
+                if not any(_same(key, level) for key in factor.levels_by):
+                    self.add(path + ("levels_by",), f"no levels given for {parent_name} = {level!r}; add "
+                                                    f"'{level}: [...]' under levels_by")
+        randomisation = self.p.design.randomisation
+        for index, name in enumerate(randomisation.by):
+            self.factor_exists(name, ("design", "randomisation", "by", index))
+
+    # -- scene -------------------------------------------------------------------------------
+    def depth_refs(self, depth: Depth, path: tuple[Any, ...]) -> bool:
+        ok = True
+        names = depth.factor_names
+        for name in names:
+            if not self.factor_exists(name, path + ("factor",), numeric=True):
+                ok = False
+                continue
+            metric = name.endswith("_m")
+            if not (name.endswith("_D") or metric) or (metric and (len(names) > 1 or depth.D is not None)):
+                self.add(path + ("factor",), f"depth factor '{name}' must be in dioptres (name ending in _D), or "
+                                             "a single factor in metres (_m) with no D")
+                ok = False
+        return ok
+
+    def check_scene(self, conditions: list[dict[str, Any]]) -> None:
+        ids: dict[str, int] = {}
+        for index, item in enumerate(self.p.scene):
+            path = ("scene", index)
+            if item.id in ids:
+                self.add(path + ("id",), f"id '{item.id}' is already used by scene[{ids[item.id]}]; ids must be unique")
+            ids.setdefault(item.id, index)
+            for name in ("depth", "near", "far", "near_depth", "far_depth"):
+                depth = getattr(item, name, None)
+                if isinstance(depth, Depth) and self.depth_refs(depth, path + (name,)):
+                    self.check_depth_values(depth, path + (name,), conditions)
+            for surface_name in ("surface", "left", "right"):
+                surface = getattr(item, surface_name, None)
+                if isinstance(surface, ImageSurface):
+                    self.check_image(surface, path + (surface_name, "path"))
+            if isinstance(item, TargetField):
+                self.check_target_field(item, path, conditions)
+            if isinstance(item, SinusoidalBorder):
+                self.check_order(item.near_depth, item.far_depth, path + ("near_depth",), conditions,
+                                 "near_depth must be nearer (more dioptres) than far_depth")
+                if item.amplitude_deg * 2 >= item.size_deg:
+                    self.add(path + ("amplitude_deg",), "the border swings wider than the surfaces; make "
+                                                        "amplitude_deg less than half of size_deg")
+                if item.near_side == "schedule" and self.p.response.kind != "left_right_nearer":
+                    self.add(path + ("near_side",), "near_side: schedule needs a left_right_nearer response; "
+                                                    "set near_side to left or right")
+            if isinstance(item, ReachTarget) and isinstance(item.distance_fraction, FactorRef):
+                self.factor_exists(item.distance_fraction.factor, path + ("distance_fraction", "factor"), numeric=True)
+            if isinstance(item, FixationTarget) and item.path is not None:
+                if item.path.eccentricity_deg + item.size_deg / 2 >= 90:
+                    self.add(path + ("path", "eccentricity_deg"), "the fixation path leaves the visual field")
+        for index, phase in enumerate(self.p.trial.phases):
+            if isinstance(phase, (Interval, Blank)) and isinstance(phase.show, list):
+                for j, name in enumerate(phase.show):
+                    if name not in ids:
+                        self.add(("trial", "phases", index, "show", j),
+                                 f"no scene primitive has id '{name}'.{_suggest(name, list(ids))} Ids: {', '.join(ids)}")
+
+    def check_depth_values(self, depth: Depth, path: tuple[Any, ...], conditions: list[dict[str, Any]]) -> None:
+        for condition in conditions:
+            try:
+                value = depth.resolve_D(condition)
+            except (ZeroDivisionError, KeyError, TypeError, ValueError):
+                value = math.nan
+            if math.isnan(value) and any(math.isnan(float(condition[n])) for n in depth.factor_names):
+                continue  # adaptive: known only at run time
+            if not (math.isfinite(value) and value >= 0):
+                self.add(path, f"this depth is {value} D for condition {condition}; depths must be >= 0 D "
+                               "(0 D = optical infinity)")
+                return
+
+    def check_order(self, near: Depth, far: Depth, path: tuple[Any, ...], conditions: list[dict[str, Any]],
+                    message: str) -> None:
+        for condition in conditions:
+            try:
+                near_D, far_D = near.resolve_D(condition), far.resolve_D(condition)
+            except (ZeroDivisionError, KeyError, TypeError, ValueError):
+                return
+            if near_D <= far_D:
+                self.add(path, f"{message} (here near = {near_D:g} D, far = {far_D:g} D); swap them")
+                return
+
+    def check_target_field(self, item: TargetField, path: tuple[Any, ...], conditions: list[dict[str, Any]]) -> None:
+        self.check_order(item.near, item.far, path + ("near",), conditions,
+                         "the depth range is in the wrong order: near must be more dioptres than far")
+        if item.size_deg >= item.field_deg:
+            self.add(path + ("size_deg",), f"a target of {item.size_deg} deg does not fit in a {item.field_deg} deg "
+                                           "field; make size_deg smaller than field_deg")
+            return
+        # targets' centres lie within field_deg - size_deg so each target stays inside the field
+        effective = (item.size_deg + item.min_gap_deg) ** 2
+        coverage = item.count * effective / (item.field_deg**2)
+        if coverage > MAX_RANDOM_COVERAGE:
+            fit = int(MAX_RANDOM_COVERAGE * item.field_deg**2 / effective)
+            self.add(path + ("count",), f"{item.count} targets of {item.size_deg} deg (gap {item.min_gap_deg} deg) "
+                                        f"cannot be placed at random without overlap in a {item.field_deg} deg field "
+                                        f"(they would cover {coverage:.0%} of it; random placement jams near 55 %). "
+                                        f"Use at most {fit} targets, smaller targets or a wider field.")
+
+    def check_image(self, surface: ImageSurface, path: tuple[Any, ...]) -> None:
+        base = self.base_dir or FsPath.cwd()
+        target = (base / surface.path)
+        if not target.is_file():
+            self.add(path, f"texture file '{surface.path}' not found (looked for {target}); paths are relative "
+                           "to the protocol file. Fix the path or add the file.")
+
+    # -- trial, response, observer ----------------------------------------------------------
+    def check_response(self) -> None:
+        response = self.p.response
+        needed = INTERVALS_NEEDED[response.kind]
+        intervals = len(self.p.trial.intervals)
+        if intervals != needed:
+            self.add(("trial", "phases"), f"a {response.kind} response needs {needed} interval phase(s), "
+                                          f"but trial.phases has {intervals}; add or remove '- kind: interval'")
+        path = ("response",)
+        if response.kind == "two_interval":
+            self.factor_exists(response.level_factor, path + ("level_factor",), numeric=True)
+            for role in ("test", "reference"):
+                spec = getattr(response, role)
+                for key in spec.set:
+                    self.factor_exists(key, path + (role, "set", key), numeric=True)
+                if isinstance(spec.mode, ModeFromFactor):
+                    self.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
+        elif response.kind == "left_right_nearer":
+            if isinstance(response.mode, ModeFromFactor):
+                self.mode_factor(response.mode.factor, path + ("mode", "factor"))
+            self.factor_exists(response.separation_factor, path + ("separation_factor",), numeric=True)
+        elif response.kind == "pairwise_preference":
+            if self.factor_exists(response.pair_factor, path + ("pair_factor",), numeric=False):
+                for level in self.factors[response.pair_factor].levels_for(None):
+                    parts = str(level).split("|")
+                    if len(parts) != 2 or parts[0] == parts[1] or not set(parts) <= set(RENDERING_MODES):
+                        self.add(("design", "factors", response.pair_factor, "levels"),
+                                 f"pair level '{level}' must be two different modes written 'a|b' with modes from "
+                                 f"{', '.join(RENDERING_MODES)}")
+        elif response.kind == "reach":
+            if self.factor_exists(response.rendering_factor, path + ("rendering_factor",), numeric=False):
+                for level in self.factors[response.rendering_factor].levels_for(None):
+                    if level not in response.modes:
+                        self.add(path + ("modes",), f"rendering level '{level}' has no mode; add '{level}: ocular' "
+                                                    "(or conventional/reversed) under modes")
+            self.factor_exists(response.target_factor, path + ("target_factor",), numeric=True)
+
+    def mode_factor(self, name: str, path: tuple[Any, ...]) -> None:
+        if self.factor_exists(name, path, numeric=False):
+            for level in self.factors[name].levels_for(None) if self.factors[name].levels is not None else []:
+                if level not in RENDERING_MODES:
+                    self.add(("design", "factors", name, "levels"),
+                             f"'{level}' is not a rendering mode.{_suggest(str(level), list(RENDERING_MODES))} "
+                             f"Modes: {', '.join(RENDERING_MODES)}")
+
+    def check_observer(self) -> None:
+        observer = self.p.observer
+        if observer is None:
+            return
+        path = ("observer",)
+        response_kind = self.p.response.kind
+        fits = {"psychometric_2afc": "two_interval", "ordinal_accuracy": "left_right_nearer",
+                "pairwise_preference": "pairwise_preference", "reach": "reach"}
+        if fits[observer.kind] != response_kind:
+            self.add(path + ("kind",), f"a {observer.kind} observer cannot answer a {response_kind} response; use "
+                                       f"kind: {next(k for k, v in fits.items() if v == response_kind)}")
+            return
+        if observer.kind == "psychometric_2afc":
+            self.factor_exists(observer.level_column, path + ("level_column",), numeric=True)
+            if observer.threshold_offset_column is not None:
+                self.factor_exists(observer.threshold_offset_column, path + ("threshold_offset_column",), numeric=True)
+        elif observer.kind == "reach":
+            response = self.p.response
+            if response.rendering_factor in self.factors:
+                levels = self.factors[response.rendering_factor].levels_for(None)
+                for level in levels:
+                    if level not in observer.by_condition:
+                        self.add(path + ("by_condition",), f"no reach model for rendering '{level}'; add it")
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, str) or isinstance(b, str):
+        return str(a) == str(b)
+    return abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(a)))
+
+
+def check_protocol(protocol: Protocol, base_dir: FsPath | None) -> list[Issue]:
+    """Every cross-section problem of a structurally valid protocol (empty list: fine)."""
+    checker = _Checker(protocol, base_dir)
+    checker.check_factors()
+    if checker.issues:
+        return checker.issues  # conditions cannot be expanded reliably
+    conditions = expand_conditions(protocol.design)
+    if len(conditions) * protocol.design.repetitions > 10_000_000:
+        checker.add(("design", "repetitions"), f"{len(conditions)} conditions x {protocol.design.repetitions} "
+                                               "repetitions is over 10 million trials; reduce them")
+    checker.check_scene(conditions)
+    checker.check_response()
+    checker.check_observer()
+    return checker.issues

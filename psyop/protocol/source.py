@@ -1,0 +1,160 @@
+"""Read protocol YAML into plain data plus the line/column of every key and value.
+
+The text is composed into PyYAML's node tree (which keeps marks), constructed with the safe
+constructor, and walked once to record, for each key path such as ``("scene", 0, "size_deg")``,
+where its value starts and where its key is written. Validation errors are mapped back to
+those positions. Duplicate keys, which PyYAML would silently overwrite, are reported here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import yaml
+
+from psyop.errors import UserError
+
+Path = tuple[Any, ...]
+
+
+@dataclass(frozen=True)
+class Mark:
+    """A 1-based line and column in the protocol file."""
+
+    line: int
+    column: int
+
+
+@dataclass(frozen=True)
+class YamlDocument:
+    """Constructed data and the marks of every value (``value_marks``) and key (``key_marks``)."""
+
+    data: Any
+    source_name: str
+    value_marks: dict[Path, Mark] = field(default_factory=dict)
+    key_marks: dict[Path, Mark] = field(default_factory=dict)
+
+    def location(self, mark: Mark | None) -> str:
+        return f"{self.source_name}:{mark.line}:{mark.column}" if mark else self.source_name
+
+    def nearest(self, path: Path, *, key: bool = False) -> tuple[Path, Mark | None]:
+        """The longest prefix of ``path`` that exists in the file, and its mark.
+
+        Elements that are not in the file (pydantic's union tags such as ``disc`` or
+        ``InlineDisplayProfile``) are skipped, so ``("scene", 0, "disc", "size_deg")`` maps to
+        ``("scene", 0, "size_deg")``."""
+        found: Path = ()
+        for element in path:
+            candidate = found + (element,)
+            if candidate in self.value_marks:
+                found = candidate
+        marks = self.key_marks if key and found in self.key_marks else self.value_marks
+        return found, marks.get(found)
+
+
+def _mark(node: yaml.Node) -> Mark:
+    return Mark(node.start_mark.line + 1, node.start_mark.column + 1)
+
+
+def format_path(path: Path) -> str:
+    """``("scene", 0, "size_deg")`` -> ``scene[0].size_deg``."""
+    text = ""
+    for element in path:
+        if isinstance(element, int) and not isinstance(element, bool):
+            text += f"[{element}]"
+        else:
+            text += ("." if text else "") + str(element)
+    return text or "(top level)"
+
+
+def _walk(loader: yaml.SafeLoader, node: yaml.Node, path: Path, doc: YamlDocument, seen: set[int], depth: int) -> None:
+    if depth > 200:
+        raise UserError("the protocol is nested more than 200 levels deep; flatten it", doc.location(_mark(node)))
+    doc.value_marks.setdefault(path, _mark(node))
+    if id(node) in seen:  # an alias: marks of the anchor already recorded
+        return
+    seen.add(id(node))
+    if isinstance(node, yaml.MappingNode):
+        keys: dict[Any, Mark] = {}
+        for key_node, value_node in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue  # `<<: *anchor`: merged keys may be overridden; their marks stay at the anchor
+            try:
+                key = loader.construct_object(key_node, deep=True)
+            except yaml.YAMLError as error:
+                raise UserError(f"cannot read this key: {error}", doc.location(_mark(key_node))) from None
+            try:
+                hash(key)
+            except TypeError:
+                raise UserError("a key must be a plain word, not a list or mapping", doc.location(_mark(key_node))) from None
+            if key in keys:
+                first = keys[key]
+                raise UserError(
+                    f"duplicate key '{key}' in {format_path(path)} (first written at line {first.line}, column "
+                    f"{first.column}); YAML would silently keep only the last one. Delete or merge one of them.",
+                    doc.location(_mark(key_node)),
+                )
+            keys[key] = _mark(key_node)
+            doc.key_marks.setdefault(path + (key,), _mark(key_node))
+            _walk(loader, value_node, path + (key,), doc, seen, depth + 1)
+    elif isinstance(node, yaml.SequenceNode):
+        for index, item in enumerate(node.value):
+            _walk(loader, item, path + (index,), doc, seen, depth + 1)
+
+
+def _codepoint(character: Any) -> int:
+    return character if isinstance(character, int) else ord(str(character)[:1] or "\0")
+
+
+def _syntax_error(error: yaml.YAMLError, source_name: str, text: str) -> UserError:
+    mark = getattr(error, "problem_mark", None) or getattr(error, "context_mark", None)
+    if isinstance(error, yaml.reader.ReaderError):
+        before = text[: error.position]
+        line = before.count("\n") + 1
+        column = error.position - (before.rfind("\n") + 1) + 1
+        return UserError(
+            f"YAML cannot contain the character U+{_codepoint(error.character):04X} here; remove it or quote the text "
+            "(protocols are UTF-8 text files)",
+            f"{source_name}:{line}:{column}",
+        )
+    problem = getattr(error, "problem", None) or str(error)
+    context = getattr(error, "context", None)
+    detail = f"{context}, {problem}" if context else problem
+    location = f"{source_name}:{mark.line + 1}:{mark.column + 1}" if mark else source_name
+    return UserError(
+        f"YAML syntax error: {detail}. Check the indentation, colons and quotes on this line and the one "
+        "before it.",
+        location,
+    )
+
+
+def read_yaml(text: str, source_name: str) -> YamlDocument:
+    """Parse ``text``; raise :class:`UserError` (with file:line:column) on any YAML problem."""
+    try:
+        loader = yaml.SafeLoader(text)
+    except yaml.YAMLError as error:
+        raise _syntax_error(error, source_name, text) from None
+    try:
+        try:
+            node = loader.get_single_node()
+            if node is None:
+                raise UserError("the protocol is empty; start from one in protocols/ (see docs/protocols.md)",
+                                f"{source_name}:1:1")
+            if not isinstance(node, yaml.MappingNode):
+                raise UserError(
+                    "a protocol is a mapping of sections (study:, display:, scene:, ...), but this file holds a "
+                    f"{node.id}; start from one in protocols/",
+                    f"{source_name}:{_mark(node).line}:{_mark(node).column}",
+                )
+            # marks and duplicate keys first, on the raw node tree (before merge keys are flattened)
+            document = YamlDocument(data=None, source_name=source_name)
+            _walk(loader, node, (), document, set(), 0)
+            data = loader.construct_document(node)
+        except yaml.YAMLError as error:
+            raise _syntax_error(error, source_name, text) from None
+        except RecursionError:
+            raise UserError("the protocol is nested too deeply to read; flatten it", source_name) from None
+        return YamlDocument(data, source_name, document.value_marks, document.key_marks)
+    finally:
+        loader.dispose()

@@ -1,0 +1,202 @@
+"""Protocol + seed -> trial schedule (one row per trial, in execution order).
+
+Deterministic: the same protocol and seed give the same table on every machine (NumPy's
+PCG64 streams are stable across platforms). Everything random about a trial that is not drawn
+while it runs (order, interval order, near side, fixation start and direction, border phase) is
+decided here and written to the table, so a schedule can be inspected and re-run exactly.
+Columns are described in docs/architecture.md ("the trial table") and docs/protocols.md.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from psyop.errors import UserError
+from psyop.protocol.conditions import condition_label, expand_conditions
+from psyop.protocol.model import Protocol
+from psyop.protocol.response import (LeftRightNearerResponse, ModeFromFactor, PairwisePreferenceResponse,
+                                     ReachResponse, TwoIntervalResponse)
+from psyop.protocol.scene import FixationTarget, SinusoidalBorder
+
+#: Independent random streams derived from the user's seed (adding a stream never changes others).
+_STREAM_ORDER, _STREAM_SEEDS, _STREAM_COUNTERBALANCE, _STREAM_STIMULUS, _STREAM_PRACTICE = range(5)
+
+
+def _rng(seed: int, stream: int) -> np.random.Generator:
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, stream])))
+
+
+def check_seed(seed: Any) -> int:
+    """A schedule seed must be a non-negative integer."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise UserError(f"the seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def _balanced_binary(cond_index: np.ndarray, rep_index: np.ndarray, n_conditions: int, repetitions: int,
+                     rng: np.random.Generator) -> np.ndarray:
+    """0/1 per trial, balanced within each condition: floor(R/2) of each, and for odd R one extra
+    of a seeded random value; the positions within a condition are shuffled."""
+    half = repetitions // 2
+    table = np.zeros((n_conditions, repetitions), dtype=np.int8)
+    table[:, half:2 * half] = 1
+    if repetitions % 2:
+        table[:, -1] = rng.integers(0, 2, size=n_conditions, dtype=np.int8)
+    table = rng.permuted(table, axis=1)
+    return table[cond_index, rep_index]
+
+
+def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.ndarray, rep_index: np.ndarray,
+           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(permutation of the main trials, block number of each trial in the new order)."""
+    randomisation = protocol.design.randomisation
+    n = cond_index.size
+    if randomisation.kind == "full":
+        return rng.permutation(n), np.zeros(n, dtype=np.int64)
+    if randomisation.kind == "sequential":
+        order = np.lexsort((cond_index, rep_index))  # all conditions once, then again
+        return order, np.zeros(n, dtype=np.int64)
+    keys: dict[tuple[Any, ...], int] = {}
+    block_of_condition = np.empty(len(conditions), dtype=np.int64)
+    for index, condition in enumerate(conditions):
+        key = tuple(condition[name] for name in randomisation.by)
+        block_of_condition[index] = keys.setdefault(key, len(keys))
+    rank = np.arange(len(keys)) if randomisation.block_order == "fixed" else rng.permutation(len(keys))
+    block = rank[block_of_condition[cond_index]]
+    order = np.lexsort((rng.random(n), block))
+    return order, block[order]
+
+
+def _column(values: list[Any]) -> np.ndarray:
+    if all(isinstance(v, str) for v in values):
+        return np.array(values, dtype=object)
+    return np.array([float(v) for v in values], dtype=np.float64)
+
+
+def _mode_values(mode: Any, columns: dict[str, np.ndarray], n: int) -> np.ndarray:
+    if isinstance(mode, ModeFromFactor):
+        return columns[mode.factor].astype(object)
+    return np.full(n, mode, dtype=object)
+
+
+def compile_schedule(protocol: Protocol, seed: int) -> pd.DataFrame:
+    """The trial table for one participant session of ``protocol``, drawn with ``seed``."""
+    seed = check_seed(seed)
+    design = protocol.design
+    conditions = expand_conditions(design)
+    n_conditions, repetitions = len(conditions), design.repetitions
+    cond_main = np.repeat(np.arange(n_conditions), repetitions)
+    rep_main = np.tile(np.arange(repetitions), n_conditions)
+
+    order, block_main = _order(protocol, conditions, cond_main, rep_main, _rng(seed, _STREAM_ORDER))
+    binary_main = _balanced_binary(cond_main, rep_main, n_conditions, repetitions, _rng(seed, _STREAM_COUNTERBALANCE))
+    cond_main, binary_main = cond_main[order], binary_main[order]
+
+    n_practice = design.practice_trials
+    practice_rng = _rng(seed, _STREAM_PRACTICE)
+    cond_practice = practice_rng.integers(0, n_conditions, size=n_practice)
+    binary_practice = practice_rng.integers(0, 2, size=n_practice).astype(np.int8)
+
+    cond_index = np.concatenate([cond_practice, cond_main])
+    binary = np.concatenate([binary_practice, binary_main]).astype(bool)
+    n = cond_index.size
+    block = np.concatenate([np.full(n_practice, -1, dtype=np.int64), block_main])
+
+    labels = np.array([condition_label(c, design) for c in conditions], dtype=object)
+    columns: dict[str, np.ndarray] = {
+        "trial": np.arange(n, dtype=np.int64),
+        "block": block,
+        "condition": labels[cond_index],
+        "trial_seed": _rng(seed, _STREAM_SEEDS).integers(0, 2**63 - 1, size=n, dtype=np.int64),
+        "practice": np.arange(n) < n_practice,
+    }
+    for name in design.factors:
+        columns[name] = _column([c[name] for c in conditions])[cond_index]
+    if any(f.adaptive is not None for f in design.factors.values()):
+        columns["adaptive"] = np.ones(n, dtype=bool)
+
+    columns.update(_response_columns(protocol, columns, binary, n))
+    columns.update(_stimulus_columns(protocol, n, _rng(seed, _STREAM_STIMULUS)))
+    return pd.DataFrame(columns)
+
+
+def _response_columns(protocol: Protocol, columns: dict[str, np.ndarray], binary: np.ndarray, n: int
+                      ) -> dict[str, np.ndarray]:
+    response = protocol.response
+    out: dict[str, np.ndarray] = {}
+    if isinstance(response, TwoIntervalResponse):
+        # binary False: the test stimulus comes first
+        test_first = ~binary
+        test_mode = _mode_values(response.test.mode, columns, n)
+        reference_mode = _mode_values(response.reference.mode, columns, n)
+        out["mode_interval1"] = np.where(test_first, test_mode, reference_mode)
+        out["mode_interval2"] = np.where(test_first, reference_mode, test_mode)
+        out["correct_interval"] = np.where(test_first, 1, 2).astype(np.int64)
+        for name in sorted(set(response.test.set) | set(response.reference.set)):
+            test_value = np.full(n, response.test.set[name]) if name in response.test.set else columns[name]
+            ref_value = np.full(n, response.reference.set[name]) if name in response.reference.set else columns[name]
+            out[f"{name}_interval1"] = np.where(test_first, test_value, ref_value).astype(np.float64)
+            out[f"{name}_interval2"] = np.where(test_first, ref_value, test_value).astype(np.float64)
+    elif isinstance(response, LeftRightNearerResponse):
+        mode = _mode_values(response.mode, columns, n)
+        out["mode"] = mode
+        out["mode_interval1"] = mode
+        out["near_side"] = np.where(binary, "right", "left").astype(object)
+    elif isinstance(response, PairwisePreferenceResponse):
+        pairs = columns[response.pair_factor]
+        first = np.array([p.split("|")[0] for p in pairs], dtype=object)
+        second = np.array([p.split("|")[1] for p in pairs], dtype=object)
+        out["mode_a"] = np.where(binary, second, first)
+        out["mode_b"] = np.where(binary, first, second)
+        if response.pair_factor != "pair":
+            out["pair"] = pairs
+        out["mode_interval1"] = out["mode_a"]
+        out["mode_interval2"] = out["mode_b"]
+    elif isinstance(response, ReachResponse):
+        rendering = columns[response.rendering_factor]
+        mode = np.array([response.modes[str(r)] for r in rendering], dtype=object)
+        out["mode"] = mode
+        out["mode_interval1"] = mode
+        if response.rendering_factor != "rendering":
+            out["rendering"] = rendering
+        if response.target_factor != "target_fraction":
+            out["target_fraction"] = columns[response.target_factor]
+    return out
+
+
+def _stimulus_columns(protocol: Protocol, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    out: dict[str, np.ndarray] = {}
+    for item in protocol.scene:
+        if isinstance(item, FixationTarget) and item.path is not None:
+            path = item.path
+            start = rng.uniform(0.0, 360.0, size=n) if path.start == "random" else np.full(n, float(path.start))
+            if path.direction == "random":
+                direction = np.where(rng.integers(0, 2, size=n) == 1, 1, -1)
+            else:
+                direction = np.full(n, 1 if path.direction == "counterclockwise" else -1)
+            out[f"{item.id}_start_deg"] = start
+            out[f"{item.id}_direction"] = direction.astype(np.int64)
+        elif isinstance(item, SinusoidalBorder):
+            phase = rng.uniform(0.0, 360.0, size=n) if item.phase == "random" else np.full(n, float(item.phase))
+            out[f"{item.id}_phase_deg"] = phase
+    return out
+
+
+def expected_duration_s(protocol: Protocol) -> float:
+    """Expected session length (s): trials (practice included) x expected trial length."""
+    design = protocol.design
+    n_trials = len(expand_conditions(design)) * design.repetitions + design.practice_trials
+    return n_trials * protocol.trial.expected_duration_s()
+
+
+def trial_count(protocol: Protocol) -> int:
+    """Rows of the schedule (practice included)."""
+    design = protocol.design
+    return len(expand_conditions(design)) * design.repetitions + design.practice_trials
+
+
+_ = math
