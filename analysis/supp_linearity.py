@@ -1,0 +1,21 @@
+"""Supplement Fig. 1: ocular parallax vs surface separation in metres and in diopters."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from psyop.figures.optics_figures import plot_linearity, save_png_and_pdf
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--out", type=Path, default=Path("figures/supp_linearity.png"))
+    args = parser.parse_args(argv)
+    save_png_and_pdf(plot_linearity(), args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,96 @@
+"""Figures drawn from the analytic optics models: paper Fig. 3 and supplement Fig. 1.
+
+Each ``plot_*`` function returns a matplotlib Figure and does no I/O; :func:`save_png_and_pdf`
+writes a figure as PNG plus a PDF beside it. Uses the Agg backend through
+``matplotlib.figure.Figure`` (no pyplot state).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from psyop.optics.display import VIVE_PRO, DisplayProfile
+from psyop.optics.eye_models import DEFAULT_EYE_MODEL
+from psyop.optics.parallax import (
+    bingham_parallax_rad,
+    minimum_angle_of_resolution_deg,
+    ocular_parallax_exact_rad,
+)
+
+ARCMIN_PER_RAD = 180.0 / np.pi * 60.0
+
+
+def save_png_and_pdf(fig: Figure, out_png: Path, dpi: int = 150) -> tuple[Path, Path]:
+    """Write ``out_png`` and the same figure as a PDF beside it; returns both paths."""
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    out_pdf = out_png.with_suffix(".pdf")
+    fig.savefig(out_png, dpi=dpi)
+    fig.savefig(out_pdf)
+    return out_png, out_pdf
+
+
+def plot_parallax_vs_eccentricity(
+    relative_D: Sequence[float] = (0.5, 1.0, 2.0, 3.0),
+    nc_m: float = DEFAULT_EYE_MODEL.nc_m,
+    display: DisplayProfile = VIVE_PRO,
+    max_eccentricity_deg: float = 40.0,
+    foveal_max_deg: float = 5.0,
+) -> Figure:
+    """Paper Fig. 3: ocular parallax (arcmin) against eccentricity for two points ``relative_D``
+    apart (the far one at optical infinity, exact model), with Guenter's MAR and the display's
+    pixel size. Left: foveal region, semi-log; right: up to ``max_eccentricity_deg``."""
+    fig = Figure(figsize=(9.0, 3.8), layout="constrained")
+    ax_fovea, ax_full = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.6]})
+    colours = [f"C{i}" for i in range(len(relative_D))]
+    for ax, e_max in ((ax_fovea, foveal_max_deg), (ax_full, max_eccentricity_deg)):
+        ecc = np.linspace(0.0, e_max, 400)
+        for rel, colour in zip(relative_D, colours):
+            parallax = ocular_parallax_exact_rad(ecc, rel, 0.0, nc_m) * ARCMIN_PER_RAD
+            ax.plot(ecc, parallax, color=colour, label=f"{rel:g} D")
+        ax.plot(ecc, minimum_angle_of_resolution_deg(ecc) * 60.0, "r--", label="MAR (Guenter et al.)")
+        ax.axhline(display.arcmin_per_px, color="b", ls="--", label=f"{display.name} pixel ({display.arcmin_per_px:.2f}')")
+        ax.set_xlim(0.0, e_max)
+        ax.set_xlabel("eccentricity (deg)")
+        ax.set_ylabel("ocular parallax (arcmin)")
+        ax.grid(True, alpha=0.3)
+    ax_fovea.set_yscale("log")
+    ax_fovea.set_ylim(0.01, 20.0)
+    ax_fovea.set_title("foveal region (semi-log)")
+    ax_full.set_ylim(0.0, None)
+    ax_full.set_title(f"NC = {nc_m * 1000:.4f} mm")
+    ax_full.legend(loc="upper left", fontsize=8)
+    return fig
+
+
+def plot_linearity(
+    back_D: Sequence[float] = (1.0, 2.0, 3.0),
+    max_separation_D: float = 2.0,
+    rotation_deg: float = 15.0,
+    nc_m: float = DEFAULT_EYE_MODEL.nc_m,
+) -> Figure:
+    """Supplement Fig. 1: parallax at an occluding edge (Bingham's geometry, ``rotation_deg``)
+    against the depth separation of the two surfaces, in metres (left) and diopters (right)."""
+    fig = Figure(figsize=(9.0, 3.6), layout="constrained")
+    ax_m, ax_d = fig.subplots(1, 2)
+    for back, colour in zip(back_D, (f"C{i}" for i in range(len(back_D)))):
+        sep_D = np.linspace(0.0, max_separation_D, 200)
+        front_m = 1.0 / (back + sep_D)
+        parallax = bingham_parallax_rad(1.0 / back, front_m, rotation_deg, nc_m) * ARCMIN_PER_RAD
+        ax_m.plot(1.0 / back - front_m, parallax, color=colour, label=f"back at {back:g} D")
+        ax_d.plot(sep_D, parallax, color=colour, label=f"back at {back:g} D")
+    ax_m.set_xlabel("separation (m)")
+    ax_d.set_xlabel("separation (D)")
+    for ax in (ax_m, ax_d):
+        ax.set_ylabel("ocular parallax (arcmin)")
+        ax.set_xlim(0.0, None)
+        ax.set_ylim(0.0, None)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    ax_m.set_title("metric separation: not linear")
+    ax_d.set_title(f"dioptric separation: linear ({rotation_deg:g} deg rotation)")
+    return fig
