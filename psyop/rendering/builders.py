@@ -1,0 +1,235 @@
+"""Builders for the analytic scene elements the studies need, sized in degrees.
+
+Each builder is pure: geometry in, :class:`~psyop.rendering.scene.Primitive` tuples out.
+"Sized in degrees" means the element subtends the given angle as seen from ``origin_m``
+(normally the eye's centre of rotation), whatever its distance.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from psyop.rendering.scene import (
+    Colour,
+    GridMaterial,
+    Material,
+    NoiseKind,
+    NoiseTexture,
+    Primitive,
+    Shape,
+    SineBorder,
+    Solid,
+)
+
+ORIGIN = (0.0, 0.0, 0.0)
+
+
+def direction_from_angles(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
+    """Unit direction in head space; azimuth right-positive, elevation up-positive, 0/0 = -z.
+
+    Defined through tangents (x = tan az, y = tan el, z = -1) so that a grid of angles maps to
+    a grid on a frontoparallel plane, as in the paper's stimulus layout.
+    """
+    d = np.array([math.tan(math.radians(azimuth_deg)), math.tan(math.radians(elevation_deg)), -1.0])
+    return d / np.linalg.norm(d)
+
+
+def frontoparallel_disc(
+    distance_m: float,
+    diameter_deg: float,
+    material: Material,
+    azimuth_deg: float = 0.0,
+    elevation_deg: float = 0.0,
+    origin_m: Sequence[float] = ORIGIN,
+    name: str = "",
+) -> Primitive:
+    """A disc facing the viewer whose centre lies ``distance_m`` along the given direction
+    (measured along -z from ``origin_m``) and that subtends ``diameter_deg`` from ``origin_m``."""
+    o = np.asarray(origin_m, dtype=np.float64)
+    d = direction_from_angles(azimuth_deg, elevation_deg)
+    centre = o + d * (distance_m / -d[2])
+    radius = np.linalg.norm(centre - o) * math.tan(math.radians(diameter_deg) / 2.0)
+    return Primitive(Shape.DISC, centre, (radius, 0, 0), (0, radius, 0), material, name=name)
+
+
+def frontoparallel_rect(
+    distance_m: float,
+    width_deg: float,
+    height_deg: float,
+    material: Material,
+    azimuth_deg: float = 0.0,
+    elevation_deg: float = 0.0,
+    origin_m: Sequence[float] = ORIGIN,
+    border: SineBorder | None = None,
+    name: str = "",
+) -> Primitive:
+    """A frontoparallel rectangle at plane depth ``distance_m`` spanning the given angles
+    (tangent extents measured from ``origin_m``), optionally clipped by a sinusoidal border."""
+    o = np.asarray(origin_m, dtype=np.float64)
+    d = direction_from_angles(azimuth_deg, elevation_deg)
+    centre = o + d * (distance_m / -d[2])
+    hw = distance_m * math.tan(math.radians(width_deg) / 2.0)
+    hh = distance_m * math.tan(math.radians(height_deg) / 2.0)
+    return Primitive(Shape.RECT, centre, (hw, 0, 0), (0, hh, 0), material, border=border, name=name)
+
+
+def detection_stimulus(
+    back_D: float,
+    relative_D: float,
+    origin_m: Sequence[float] = ORIGIN,
+    diameter_deg: float = 2.0,
+    back_colour: Colour = (1.0, 0.0, 0.0),
+    noise_seed: int = 0,
+) -> tuple[Primitive, Primitive]:
+    """The detection/discrimination stimulus: a solid red back disc at ``back_D`` and a
+    white-noise front disc ``relative_D`` nearer, both subtending ``diameter_deg`` from
+    ``origin_m`` and centred on the same ray, so without ocular parallax the front disc hides
+    the back one exactly."""
+    back_m = 1.0 / back_D
+    front_m = 1.0 / (back_D + relative_D)
+    back = frontoparallel_disc(back_m, diameter_deg, Solid(back_colour), origin_m=origin_m, name="back")
+    noise = NoiseTexture(NoiseKind.WHITE, seed=noise_seed, size_px=32, mean=0.5, contrast=0.25)
+    front = frontoparallel_disc(front_m, diameter_deg, noise, origin_m=origin_m, name="front")
+    return back, front
+
+
+def ordinal_stimulus(
+    rear_D: float,
+    front_D: float,
+    near_side: str,
+    origin_m: Sequence[float] = ORIGIN,
+    field_deg: float = 24.0,
+    amplitude_deg: float = 1.0,
+    cycles: float = 3.0,
+    phase_rad: float = 0.0,
+    seeds: tuple[int, int] = (1, 2),
+) -> tuple[Primitive, Primitive]:
+    """The ordinal-depth stimulus: a rear 1/f-textured surface filling ``field_deg`` and a front
+    surface covering the ``near_side`` half, whose border with the rear one is a vertical
+    sinusoid (``amplitude_deg`` as seen from ``origin_m``). Both subtend the same angle."""
+    if near_side not in ("left", "right"):
+        raise ValueError(f"near_side must be 'left' or 'right', got {near_side!r}")
+    rear_tex = NoiseTexture(NoiseKind.PINK, seed=seeds[0], size_px=256, mean=0.5, contrast=0.2)
+    front_tex = NoiseTexture(NoiseKind.PINK, seed=seeds[1], size_px=256, mean=0.5, contrast=0.2)
+    rear = frontoparallel_rect(1.0 / rear_D, field_deg, field_deg, rear_tex, origin_m=origin_m, name="rear")
+    half = math.tan(math.radians(field_deg) / 2.0)
+    amp = math.tan(math.radians(amplitude_deg)) / half  # in local units of the front plane
+    border = SineBorder(amplitude=amp, cycles=cycles, phase_rad=phase_rad, offset=0.0,
+                        side=-1 if near_side == "left" else 1)
+    front = frontoparallel_rect(1.0 / front_D, field_deg, field_deg, front_tex, origin_m=origin_m,
+                                border=border, name="front")
+    return rear, front
+
+
+def fixation_target(
+    distance_m: float,
+    azimuth_deg: float,
+    elevation_deg: float,
+    origin_m: Sequence[float] = ORIGIN,
+    diameter_deg: float = 0.5,
+) -> tuple[Primitive, Primitive]:
+    """A small red-and-white fixation target: a white disc with a red centre a hair in front."""
+    outer = frontoparallel_disc(distance_m, diameter_deg, Solid((1.0, 1.0, 1.0)), azimuth_deg, elevation_deg,
+                                origin_m, name="fixation_outer")
+    inner = frontoparallel_disc(distance_m * 0.999, diameter_deg * 0.4 / 0.999, Solid((1.0, 0.0, 0.0)),
+                                azimuth_deg, elevation_deg, origin_m, name="fixation_inner")
+    return outer, inner
+
+
+def grid_planes(
+    half_width_m: float = 1.0,
+    half_height_m: float = 1.0,
+    depth_m: float = 12.0,
+    near_m: float = 0.3,
+    material: GridMaterial | None = None,
+) -> tuple[Primitive, ...]:
+    """Four grid planes (floor, ceiling, left and right walls) forming a corridor into the distance."""
+    mat = material or GridMaterial(lines_per_side=12)
+    zc = -(near_m + depth_m / 2.0)
+    hd = depth_m / 2.0
+    return (
+        Primitive(Shape.RECT, (0, -half_height_m, zc), (half_width_m, 0, 0), (0, 0, hd), mat, name="floor"),
+        Primitive(Shape.RECT, (0, half_height_m, zc), (half_width_m, 0, 0), (0, 0, hd), mat, name="ceiling"),
+        Primitive(Shape.RECT, (-half_width_m, 0, zc), (0, half_height_m, 0), (0, 0, hd), mat, name="left_wall"),
+        Primitive(Shape.RECT, (half_width_m, 0, zc), (0, half_height_m, 0), (0, 0, hd), mat, name="right_wall"),
+    )
+
+
+def target_field(
+    seed: int,
+    n_targets: int = 20,
+    near_D: float = 3.5,
+    far_D: float = 0.5,
+    diameter_deg: float = 2.6,
+    field_deg: float = 60.0,
+    origin_m: Sequence[float] = ORIGIN,
+    max_tries: int = 10_000,
+) -> tuple[Primitive, ...]:
+    """Frontoparallel targets at random depths (uniform in diopters between ``far_D`` and
+    ``near_D``), each subtending ``diameter_deg``, placed without angular overlap inside a
+    ``field_deg`` circle. Deterministic for a given seed."""
+    rng = np.random.default_rng(seed)
+    placed: list[tuple[float, float]] = []
+    out: list[Primitive] = []
+    radius = field_deg / 2.0 - diameter_deg / 2.0
+    tries = 0
+    while len(out) < n_targets and tries < max_tries:
+        tries += 1
+        r = radius * math.sqrt(rng.uniform())
+        phi = rng.uniform(0, 2 * math.pi)
+        az, el = r * math.cos(phi), r * math.sin(phi)
+        if any(math.hypot(az - a, el - e) < diameter_deg * 1.1 for a, e in placed):
+            continue
+        placed.append((az, el))
+        depth_D = rng.uniform(far_D, near_D)
+        shade = float(rng.uniform(0.3, 0.9))
+        out.append(frontoparallel_disc(1.0 / depth_D, diameter_deg, Solid((shade, shade * 0.9, 0.4)), az, el,
+                                       origin_m, name=f"target{len(out)}"))
+    return tuple(out)
+
+
+def room_with_pencil(
+    pencil_distance_m: float,
+    pencil_height_m: float = -0.1,
+    room_half_width_m: float = 2.0,
+    room_depth_m: float = 4.0,
+    eye_height_m: float = 1.2,
+) -> tuple[Primitive, ...]:
+    """A simple room (floor, walls, ceiling, back wall, a table and a few objects at other
+    depths) and a pencil-like reach target: a 15 cm x 7 mm yellow bar with a dark tip,
+    floating ``pencil_distance_m`` straight ahead at ``pencil_height_m`` relative to the eyes."""
+    floor_y = -eye_height_m
+    ceil_y = 2.6 - eye_height_m
+    cy = (floor_y + ceil_y) / 2
+    hh = (ceil_y - floor_y) / 2
+    zc = -room_depth_m / 2
+    hd = room_depth_m / 2
+    floor = GridMaterial(background=(0.35, 0.25, 0.15), line_colour=(0.2, 0.12, 0.08), lines_per_side=8)
+    wall = NoiseTexture(NoiseKind.PINK, seed=11, size_px=128, mean=0.7, contrast=0.1, repeats=3.0)
+    prims = [
+        Primitive(Shape.RECT, (0, floor_y, zc), (room_half_width_m, 0, 0), (0, 0, hd), floor, name="floor"),
+        Primitive(Shape.RECT, (0, ceil_y, zc), (room_half_width_m, 0, 0), (0, 0, hd), Solid((0.9, 0.9, 0.88)),
+                  name="ceiling"),
+        Primitive(Shape.RECT, (-room_half_width_m, cy, zc), (0, hh, 0), (0, 0, hd), wall, name="left_wall"),
+        Primitive(Shape.RECT, (room_half_width_m, cy, zc), (0, hh, 0), (0, 0, hd), wall, name="right_wall"),
+        Primitive(Shape.RECT, (0, cy, -room_depth_m), (room_half_width_m, 0, 0), (0, hh, 0),
+                  NoiseTexture(NoiseKind.PINK, seed=12, size_px=128, mean=0.6, contrast=0.15, repeats=2.0),
+                  name="back_wall"),
+        Primitive(Shape.RECT, (0, floor_y + 0.75, -1.2), (0.6, 0, 0), (0, 0, 0.4), Solid((0.45, 0.3, 0.2)),
+                  name="table_top"),
+        Primitive(Shape.DISC, (-0.3, floor_y + 0.9, -1.1), (0.06, 0, 0), (0, 0.06, 0), Solid((0.2, 0.4, 0.8)),
+                  name="plate"),
+        Primitive(Shape.RECT, (0.35, floor_y + 0.9, -1.3), (0.04, 0, 0), (0, 0.15, 0), Solid((0.1, 0.5, 0.2)),
+                  name="bottle"),
+    ]
+    pencil_z = -pencil_distance_m
+    prims += [
+        Primitive(Shape.RECT, (0, pencil_height_m, pencil_z), (0.065, 0, 0), (0, 0.0035, 0),
+                  Solid((0.95, 0.8, 0.1)), name="pencil_body"),
+        Primitive(Shape.RECT, (0.075, pencil_height_m, pencil_z), (0.01, 0, 0), (0, 0.0025, 0),
+                  Solid((0.15, 0.1, 0.05)), name="pencil_tip"),
+    ]
+    return tuple(prims)

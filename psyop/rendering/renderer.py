@@ -1,0 +1,332 @@
+"""The moderngl ray-casting renderer: a :class:`Scene` plus an ``EyeCamera`` -> an image.
+
+Static data (primitive axes, materials, textures, the screen-fixed aperture mask) is uploaded
+once; per frame only uniforms change: the pixel-to-ray matrix and the primitives' centres
+relative to the centre of projection, computed in float64 on the CPU so millimetre shifts of the
+centre survive the float32 GPU arithmetic. One off-screen float framebuffer per eye; monocular
+rendering simply never touches the other eye.
+
+Invalid cameras (``valid`` False, NaN/inf numbers) never reach the GPU: the eye keeps its last
+valid camera (or shows the background if it never had one) and the frame is counted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import moderngl
+import numpy as np
+
+from psyop.rendering.camera_math import camera_is_usable, near_far_m, pixel_rays
+from psyop.rendering.reuse import ReuseDecision, decide_reuse
+from psyop.rendering.scene import GridMaterial, ImageTexture, NoiseTexture, Scene, Shape, Solid
+from psyop.rendering.shaders import (
+    MAX_PRIMITIVES,
+    TEXELS_PER_PRIMITIVE,
+    VERTEX_SHADER,
+    AntiAliasing,
+    fragment_shader,
+)
+from psyop.rendering.textures import pack_layers, texture_pixels
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How to render. ``reuse_tolerance_px`` None disables frame reuse."""
+
+    antialiasing: AntiAliasing = AntiAliasing.ADAPTIVE
+    samples_per_axis: int = 32
+    msaa_samples: int = 4
+    edge_margin_px: float = 1.0
+    reuse_tolerance_px: float | None = 0.01
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "antialiasing", AntiAliasing(self.antialiasing))
+        if not 1 <= self.samples_per_axis <= 64:
+            raise ValueError(f"samples_per_axis must be in [1, 64], got {self.samples_per_axis}")
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """What happened to one requested frame."""
+
+    eye: str
+    rendered: bool
+    camera_usable: bool
+    camera_used: Any
+    reuse: ReuseDecision | None
+
+
+@dataclass
+class RenderStats:
+    """Counters over the renderer's lifetime (per instance)."""
+
+    frames_requested: int = 0
+    frames_rendered: int = 0
+    frames_skipped: int = 0
+    invalid_cameras: int = 0
+    largest_skipped_bound_px: float = 0.0
+
+
+@dataclass
+class _EyeState:
+    width_px: int
+    height_px: int
+    fbo: Any
+    colour: Any
+    msaa_fbo: Any | None
+    aperture: Any
+    last_valid_camera: Any = None
+    last_rendered_camera: Any = None
+    depth_range_m: tuple[float, float] = (0.0, math.inf)
+    released: list[Any] = field(default_factory=list)
+
+
+def _eye_key(camera: Any) -> str:
+    eye = getattr(camera, "eye", "right")
+    return str(getattr(eye, "value", eye))
+
+
+def create_headless_context() -> moderngl.Context:
+    """A standalone OpenGL context via EGL (no display needed)."""
+    return moderngl.create_standalone_context(backend="egl")
+
+
+class Renderer:
+    """Ray-casts a scene for one or two eyes. Use as a context manager or call :meth:`release`."""
+
+    def __init__(self, scene: Scene, settings: RenderSettings | None = None, ctx: moderngl.Context | None = None):
+        self.settings = settings or RenderSettings()
+        self._owns_ctx = ctx is None
+        self.ctx = ctx if ctx is not None else create_headless_context()
+        self.stats = RenderStats()
+        self._eyes: dict[str, _EyeState] = {}
+        self._prog = self.ctx.program(vertex_shader=VERTEX_SHADER,
+                                      fragment_shader=fragment_shader(self.settings.antialiasing))
+        self._vao = self.ctx.vertex_array(self._prog, [])
+        self._centres = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
+        self._prims_tex = None
+        self._layers_tex = None
+        self._scene: Scene | None = None
+        self.set_scene(scene)
+
+    # -- scene upload (once per scene) ----------------------------------------------------------
+    def set_scene(self, scene: Scene) -> None:
+        """Upload a scene's static data; frame reuse restarts."""
+        if len(scene.primitives) > MAX_PRIMITIVES:
+            raise ValueError(f"at most {MAX_PRIMITIVES} primitives, got {len(scene.primitives)}")
+        textures: list[NoiseTexture | ImageTexture] = []
+        layer_of: dict[Any, int] = {}
+        for p in scene.primitives:
+            if isinstance(p.material, (NoiseTexture, ImageTexture)):
+                key = p.material if isinstance(p.material, NoiseTexture) else ("image", p.material.key)
+                if key not in layer_of:
+                    layer_of[key] = len(textures)
+                    textures.append(p.material)
+        layers, sizes = pack_layers([texture_pixels(t) for t in textures])
+        data = np.zeros((max(1, len(scene.primitives)), TEXELS_PER_PRIMITIVE, 4), dtype=np.float32)
+        self._centres_head = np.zeros((len(scene.primitives), 3))
+        for i, p in enumerate(scene.primitives):
+            self._centres_head[i] = p.centre_m
+            data[i, 0, :3] = p.half_u_m
+            data[i, 0, 3] = 0.0 if p.shape is Shape.DISC else 1.0
+            data[i, 1, :3] = p.half_v_m
+            m = p.material
+            if isinstance(m, Solid):
+                data[i, 1, 3] = 0
+                data[i, 2, :3] = m.colour
+            elif isinstance(m, GridMaterial):
+                data[i, 1, 3] = 2
+                data[i, 2, :3] = m.background
+                data[i, 3, :3] = m.line_colour
+                data[i, 3, 3] = m.lines_per_side
+                data[i, 4, 3] = m.line_width_fraction
+            else:
+                layer = layer_of[m if isinstance(m, NoiseTexture) else ("image", m.key)]
+                data[i, 1, 3] = 1
+                data[i, 2, 3] = layer
+                data[i, 4, 0], data[i, 4, 1] = sizes[layer]
+                data[i, 4, 2] = m.repeats
+            if p.border is not None:
+                b = p.border
+                data[i, 5] = (1.0, b.amplitude, b.cycles, b.phase_rad)
+                data[i, 6, :2] = (b.offset, b.side)
+        for tex in (self._prims_tex, self._layers_tex):
+            if tex is not None:
+                tex.release()
+        self._prims_tex = self.ctx.texture((TEXELS_PER_PRIMITIVE, data.shape[0]), 4, data.tobytes(), dtype="f4")
+        self._prims_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        side = layers.shape[1]
+        self._layers_tex = self.ctx.texture_array((side, side, layers.shape[0]), 4, layers.tobytes(), dtype="f4")
+        self._layers_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._scene = scene
+        for state in self._eyes.values():
+            state.last_rendered_camera = None
+            self._release_eye_aperture(state)
+            state.aperture = None
+        self._prog["u_n_prims"].value = len(scene.primitives)
+        self._prog["u_background"].value = scene.background
+        ap_colour = scene.aperture.colour if scene.aperture else (0.0, 0.0, 0.0)
+        self._prog["u_aperture_colour"].value = ap_colour
+        self._set_if_present("u_samples", int(self.settings.samples_per_axis))
+        self._set_if_present("u_edge_margin_px", float(self.settings.edge_margin_px))
+
+    @property
+    def scene(self) -> Scene:
+        assert self._scene is not None
+        return self._scene
+
+    def _set_if_present(self, name: str, value: Any) -> None:
+        if name in self._prog:
+            self._prog[name].value = value
+
+    # -- per-eye targets ------------------------------------------------------------------------
+    def _eye_state(self, eye: str, width_px: int, height_px: int) -> _EyeState:
+        state = self._eyes.get(eye)
+        if state is not None and (state.width_px, state.height_px) == (width_px, height_px):
+            return state
+        if state is not None:
+            self._release_eye(state)
+        colour = self.ctx.texture((width_px, height_px), 4, dtype="f4")
+        fbo = self.ctx.framebuffer(color_attachments=[colour])
+        msaa = None
+        if self.settings.antialiasing is AntiAliasing.MSAA:
+            samples = min(int(self.settings.msaa_samples), int(self.ctx.max_samples))
+            rb = self.ctx.renderbuffer((width_px, height_px), 4, samples=samples, dtype="f4")
+            msaa = self.ctx.framebuffer(color_attachments=[rb])
+        state = _EyeState(width_px, height_px, fbo, colour, msaa, None)
+        self._eyes[eye] = state
+        return state
+
+    def _release_eye_aperture(self, state: _EyeState) -> None:
+        if state.aperture is not None:
+            state.aperture.release()
+
+    def _release_eye(self, state: _EyeState) -> None:
+        self._release_eye_aperture(state)
+        for obj in (state.fbo, state.colour, state.msaa_fbo):
+            if obj is not None:
+                obj.release()
+
+    def _aperture_mask(self, camera: Any) -> np.ndarray:
+        """Screen-fixed aperture coverage per pixel (rows bottom-up, as OpenGL stores them).
+
+        Computed once per eye from the first valid camera's pixel rays: for an image at
+        infinity those directions do not depend on the centre of projection, so the aperture
+        ignores ocular parallax exactly; edges are box-filtered over one pixel's angle.
+        """
+        w, h = camera.width_px, camera.height_px
+        ap = self.scene.aperture
+        if ap is None:
+            return np.ones((h, w), dtype=np.float32)
+        ys, xs = np.mgrid[0:h, 0:w]
+        xy = np.stack([xs.ravel() + 0.5, ys.ravel() + 0.5], axis=-1)
+        d = pixel_rays(camera, xy)
+        dx = pixel_rays(camera, xy + [1.0, 0.0])
+        axis = np.array([math.tan(math.radians(ap.azimuth_deg)), math.tan(math.radians(ap.elevation_deg)), -1.0])
+        axis /= np.linalg.norm(axis)
+        theta = np.arccos(np.clip(d @ axis, -1.0, 1.0))
+        pix = np.arccos(np.clip(np.sum(d * dx, axis=-1), -1.0, 1.0))
+        cov = np.clip(0.5 + (math.radians(ap.radius_deg) - theta) / np.maximum(pix, 1e-12), 0.0, 1.0)
+        return cov.reshape(h, w)[::-1].astype(np.float32)
+
+    # -- rendering ------------------------------------------------------------------------------
+    def render(self, camera: Any) -> FrameResult:
+        """Render (or reuse) the frame for ``camera``'s eye."""
+        eye = _eye_key(camera)
+        self.stats.frames_requested += 1
+        usable = camera_is_usable(camera)
+        state = self._eye_state(eye, int(camera.width_px), int(camera.height_px))
+        if usable:
+            state.last_valid_camera = camera
+        else:
+            self.stats.invalid_cameras += 1
+        use = state.last_valid_camera
+        decision = None
+        if use is not None and self.settings.reuse_tolerance_px is not None:
+            decision = decide_reuse(state.last_rendered_camera, use, state.depth_range_m,
+                                    self.settings.reuse_tolerance_px)
+            if decision.skip:
+                self.stats.frames_skipped += 1
+                self.stats.largest_skipped_bound_px = max(self.stats.largest_skipped_bound_px, decision.bound_px)
+                return FrameResult(eye, False, usable, state.last_rendered_camera, decision)
+        self._draw(state, use)
+        self.stats.frames_rendered += 1
+        return FrameResult(eye, True, usable, use, decision)
+
+    def _draw(self, state: _EyeState, camera: Any) -> None:
+        if state.aperture is None and camera is not None:
+            mask = self._aperture_mask(camera)
+            state.aperture = self.ctx.texture((state.width_px, state.height_px), 1, mask.tobytes(), dtype="f4")
+            state.aperture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        target = state.msaa_fbo if state.msaa_fbo is not None else state.fbo
+        target.use()
+        self.ctx.viewport = (0, 0, state.width_px, state.height_px)
+        if camera is None:
+            bg = self.scene.background
+            target.clear(bg[0], bg[1], bg[2], 1.0)
+            state.last_rendered_camera = None
+        else:
+            cop = np.asarray(camera.centre_of_projection_m, dtype=np.float64)
+            rel = np.zeros((MAX_PRIMITIVES, 4), dtype=np.float32)
+            rel[: len(self._centres_head), :3] = self._centres_head - cop
+            self._centres.write(rel.tobytes())
+            self._centres.bind_to_uniform_block(0)
+            self._prog["Centres"].binding = 0
+            near, far = near_far_m(camera)
+            self._prog["u_ray"].write(np.asarray(camera.pixel_to_ray, dtype=np.float32).T.tobytes())
+            self._prog["u_size_px"].value = (float(state.width_px), float(state.height_px))
+            self._prog["u_near_m"].value = near
+            self._prog["u_far_m"].value = min(far, 3.0e38)
+            self._prims_tex.use(0)
+            self._layers_tex.use(1)
+            state.aperture.use(2)
+            self._prog["u_prims"].value = 0
+            self._prog["u_textures"].value = 1
+            self._prog["u_aperture"].value = 2
+            self._vao.render(moderngl.TRIANGLES, vertices=3)
+            state.last_rendered_camera = camera
+            state.depth_range_m = self.scene.depth_range_m(cop)
+        if state.msaa_fbo is not None:
+            self.ctx.copy_framebuffer(state.fbo, state.msaa_fbo)
+
+    # -- results --------------------------------------------------------------------------------
+    def finish(self) -> None:
+        """Wait for the GPU (for timing)."""
+        self.ctx.finish()
+
+    def framebuffer(self, eye: str) -> Any:
+        """The eye's resolved framebuffer (for presenting in a window)."""
+        return self._eyes[eye].fbo
+
+    def image(self, eye: str = "right") -> np.ndarray:
+        """(H, W, 3) float32 image of the eye's last frame, top row first, values in [0, 1]."""
+        state = self._eyes[eye]
+        raw = state.fbo.read(components=4, dtype="f4")
+        img = np.frombuffer(raw, dtype=np.float32).reshape(state.height_px, state.width_px, 4)
+        return np.ascontiguousarray(img[::-1, :, :3])
+
+    def image_uint8(self, eye: str = "right") -> np.ndarray:
+        """(H, W, 3) uint8 image (rounded) of the eye's last frame."""
+        return np.round(np.clip(self.image(eye), 0.0, 1.0) * 255.0).astype(np.uint8)
+
+    # -- lifetime -------------------------------------------------------------------------------
+    def release(self) -> None:
+        """Free every GPU object (and the context if this renderer created it)."""
+        for state in self._eyes.values():
+            self._release_eye(state)
+        self._eyes.clear()
+        for obj in (self._prims_tex, self._layers_tex, self._centres, self._vao, self._prog):
+            if obj is not None:
+                obj.release()
+        self._prims_tex = self._layers_tex = None
+        if self._owns_ctx:
+            self.ctx.release()
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()

@@ -1,0 +1,230 @@
+"""Typed, immutable scene description for the ray-casting renderer.
+
+A scene is a tuple of analytic planar primitives (discs and parallelograms, optionally clipped
+by a sinusoidal border), a background colour and an optional screen-fixed circular aperture.
+Every position is in head space (metres, x right, y up, -z forward); the renderer makes them
+camera-relative in float64 before anything reaches float32 on the GPU.
+
+Primitives are planar so that a ray through the centre of projection hits each at most once:
+occlusion is resolved exactly by taking the nearest hit per sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+Colour = tuple[float, float, float]
+
+
+def _vec3(value: object, name: str) -> tuple[float, float, float]:
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _colour(value: object, name: str = "colour") -> Colour:
+    rgb = _vec3(value, name)
+    if not all(0.0 <= c <= 1.0 for c in rgb):
+        raise ValueError(f"{name} components must lie in [0, 1], got {value!r}")
+    return rgb
+
+
+@dataclass(frozen=True)
+class Solid:
+    """A uniform colour."""
+
+    colour: Colour
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "colour", _colour(self.colour))
+
+
+class NoiseKind(str, Enum):
+    WHITE = "white"
+    PINK = "pink"  # 1/f amplitude spectrum
+
+
+@dataclass(frozen=True)
+class NoiseTexture:
+    """Grey-level noise with a given mean and RMS contrast, ``size_px`` texels square, seeded.
+
+    ``repeats`` tiles the texture across the primitive (1 = one copy across its full extent).
+    Texels are sampled nearest-neighbour, so white noise keeps its square checks.
+    """
+
+    kind: NoiseKind = NoiseKind.WHITE
+    seed: int = 0
+    size_px: int = 64
+    mean: float = 0.5
+    contrast: float = 0.3
+    repeats: float = 1.0
+    tint: Colour = (1.0, 1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", NoiseKind(self.kind))
+        object.__setattr__(self, "tint", _colour(self.tint, "tint"))
+        if not (4 <= int(self.size_px) <= 1024):
+            raise ValueError(f"size_px must be in [4, 1024], got {self.size_px}")
+
+
+@dataclass(frozen=True)
+class ImageTexture:
+    """An RGB image (H, W, 3) with values in [0, 1]; stored as a tuple-free bytes copy."""
+
+    pixels: np.ndarray = field(compare=False)
+    key: str = "image"
+    repeats: float = 1.0
+
+    def __post_init__(self) -> None:
+        arr = np.asarray(self.pixels, dtype=np.float32)
+        if arr.ndim != 3 or arr.shape[2] != 3 or not np.all(np.isfinite(arr)):
+            raise ValueError("ImageTexture.pixels must be a finite (H, W, 3) array")
+        arr = np.clip(arr, 0.0, 1.0)
+        arr.setflags(write=False)
+        object.__setattr__(self, "pixels", arr)
+
+
+@dataclass(frozen=True)
+class GridMaterial:
+    """Lines of ``line_colour`` every ``spacing`` local units on a ``background`` colour.
+
+    Local units run from -1 to 1 across the primitive; lines are box-filtered over the pixel
+    (or sample) footprint so they do not alias.
+    """
+
+    background: Colour = (0.1, 0.1, 0.1)
+    line_colour: Colour = (0.8, 0.8, 0.8)
+    lines_per_side: int = 10
+    line_width_fraction: float = 0.06
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "background", _colour(self.background, "background"))
+        object.__setattr__(self, "line_colour", _colour(self.line_colour, "line_colour"))
+
+
+Material = Solid | NoiseTexture | ImageTexture | GridMaterial
+
+
+@dataclass(frozen=True)
+class SineBorder:
+    """Clip a primitive to ``side * (a - (offset + amplitude * sin(2 pi cycles * (b+1)/2 + phase))) <= 0``.
+
+    ``a``/``b`` are the primitive's local coordinates (-1..1 along ``half_u``/``half_v``);
+    ``side`` = -1 keeps the part left of the border (smaller a), +1 the part right of it.
+    """
+
+    amplitude: float
+    cycles: float
+    phase_rad: float = 0.0
+    offset: float = 0.0
+    side: int = -1
+
+    def __post_init__(self) -> None:
+        if self.side not in (-1, 1):
+            raise ValueError(f"side must be -1 or +1, got {self.side}")
+
+
+class Shape(str, Enum):
+    DISC = "disc"
+    RECT = "rect"
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """A planar disc (ellipse) or parallelogram: points ``centre + a * half_u + b * half_v``.
+
+    Disc: a^2 + b^2 <= 1. Rect: |a| <= 1 and |b| <= 1. ``half_u`` and ``half_v`` must be
+    orthogonal. ``name`` is free text for debugging and tests.
+    """
+
+    shape: Shape
+    centre_m: tuple[float, float, float]
+    half_u_m: tuple[float, float, float]
+    half_v_m: tuple[float, float, float]
+    material: Material
+    border: SineBorder | None = None
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "shape", Shape(self.shape))
+        for attr in ("centre_m", "half_u_m", "half_v_m"):
+            object.__setattr__(self, attr, _vec3(getattr(self, attr), attr))
+        u = np.array(self.half_u_m)
+        v = np.array(self.half_v_m)
+        nu, nv = np.linalg.norm(u), np.linalg.norm(v)
+        if nu <= 0 or nv <= 0:
+            raise ValueError(f"primitive {self.name!r}: half axes must be non-zero")
+        if abs(float(u @ v)) > 1e-9 * nu * nv:
+            raise ValueError(f"primitive {self.name!r}: half_u_m and half_v_m must be orthogonal")
+
+    def closest_distance_m(self, point_m: np.ndarray) -> float:
+        """Exact distance from ``point_m`` to the primitive (ignoring the sine clip, which only removes area)."""
+        c, u, v = (np.array(x) for x in (self.centre_m, self.half_u_m, self.half_v_m))
+        rel = np.asarray(point_m, dtype=np.float64) - c
+        a = rel @ u / (u @ u)
+        b = rel @ v / (v @ v)
+        if self.shape is Shape.RECT:
+            a, b = np.clip(a, -1, 1), np.clip(b, -1, 1)
+        else:
+            r = np.hypot(a, b)
+            if r > 1:
+                a, b = a / r, b / r
+        return float(np.linalg.norm(rel - a * u - b * v))
+
+    def farthest_distance_m(self, point_m: np.ndarray) -> float:
+        """Distance from ``point_m`` to the primitive's farthest point (corner or rim)."""
+        c, u, v = (np.array(x) for x in (self.centre_m, self.half_u_m, self.half_v_m))
+        if self.shape is Shape.RECT:
+            pts = [c + su * u + sv * v for su in (-1, 1) for sv in (-1, 1)]
+        else:
+            ang = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+            pts = c + np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * v
+        return float(np.max(np.linalg.norm(np.asarray(pts) - np.asarray(point_m), axis=-1)))
+
+
+@dataclass(frozen=True)
+class Aperture:
+    """A screen-fixed circular window (unaffected by ocular parallax).
+
+    Everything whose direction from the eye's *display* (not from the moving centre of
+    projection) lies farther than ``radius_deg`` from (``azimuth_deg``, ``elevation_deg``) is
+    painted ``colour``. Azimuth is positive to the right, elevation positive up.
+    """
+
+    radius_deg: float
+    azimuth_deg: float = 0.0
+    elevation_deg: float = 0.0
+    colour: Colour = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "colour", _colour(self.colour))
+        if not (0.0 < self.radius_deg < 180.0):
+            raise ValueError(f"aperture radius_deg must be in (0, 180), got {self.radius_deg}")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """What to draw: primitives (nearest hit wins), a background and an optional aperture."""
+
+    primitives: tuple[Primitive, ...]
+    background: Colour = (0.5, 0.5, 0.5)
+    aperture: Aperture | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "primitives", tuple(self.primitives))
+        object.__setattr__(self, "background", _colour(self.background, "background"))
+        for p in self.primitives:
+            if not isinstance(p, Primitive):
+                raise TypeError(f"scene primitives must be Primitive, got {type(p).__name__}")
+
+    def depth_range_m(self, point_m: np.ndarray) -> tuple[float, float]:
+        """(nearest, farthest) distance of any primitive point from ``point_m``; (inf, inf) if empty."""
+        if not self.primitives:
+            return (float("inf"), float("inf"))
+        near = min(p.closest_distance_m(point_m) for p in self.primitives)
+        far = max(p.farthest_distance_m(point_m) for p in self.primitives)
+        return (near, far)

@@ -1,0 +1,184 @@
+"""GLSL for the full-screen ray-casting pass (OpenGL 4.5 core is not required: 4.1 suffices).
+
+Every pixel casts rays from the centre of projection (the origin: everything is camera-relative)
+through the analytic primitives; the nearest hit wins per sample. The anti-aliasing variant is
+chosen at compile time with one of the ``AA_*`` defines:
+
+``AA_NONE``        one sample at the pixel centre.
+``AA_SUPERSAMPLE`` a regular SxS grid in every pixel.
+``AA_MSAA``        one ray per MSAA sample (sample-rate shading at ``gl_SamplePosition``), so the
+                   sample pattern is exactly the hardware MSAA pattern; resolved afterwards.
+``AA_ADAPTIVE``    one sample, or an SxS grid where a primitive edge passes within
+                   ``u_edge_margin_px`` of the pixel centre (edge distance from the primitive's
+                   implicit edge function divided by its finite-difference pixel gradient).
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+
+MAX_PRIMITIVES = 128
+TEXELS_PER_PRIMITIVE = 7
+
+
+class AntiAliasing(str, Enum):
+    NONE = "none"
+    MSAA = "msaa"
+    SUPERSAMPLE = "supersample"
+    ADAPTIVE = "adaptive"
+
+
+VERTEX_SHADER = """
+#version 410 core
+void main() {
+    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
+    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
+"""
+
+FRAGMENT_TEMPLATE = """
+#version 410 core
+#define MAX_PRIMS %(max_prims)d
+#define %(aa_define)s
+const float TWO_PI = 6.28318530717958647692;
+
+layout(std140) uniform Centres { vec4 u_centre[MAX_PRIMS]; };
+uniform sampler2D u_prims;          // static per-primitive data, TEXELS_PER_PRIMITIVE x n
+uniform sampler2DArray u_textures;  // texture layers, fetched nearest-neighbour
+uniform sampler2D u_aperture;       // screen-fixed coverage (1 = visible), computed once per eye
+uniform mat3 u_ray;                 // direction = u_ray * (u, v, 1), u right, v down
+uniform vec2 u_size_px;
+uniform int u_n_prims;
+uniform int u_samples;              // per axis, for ADAPTIVE and SUPERSAMPLE
+uniform float u_edge_margin_px;
+uniform float u_near_m;
+uniform float u_far_m;
+uniform vec3 u_background;
+uniform vec3 u_aperture_colour;
+
+out vec4 frag_colour;
+
+struct Hit { bool plane; bool inside; float t; float a; float b; float g; };
+
+vec4 P(int i, int k) { return texelFetch(u_prims, ivec2(k, i), 0); }
+
+vec3 ray_at(vec2 xy_px) { return u_ray * vec3(xy_px / u_size_px, 1.0); }
+
+Hit intersect(int i, vec3 d) {
+    Hit h; h.plane = false; h.inside = false; h.t = 0.0; h.a = 0.0; h.b = 0.0; h.g = 1e30;
+    vec4 p0 = P(i, 0); vec4 p1 = P(i, 1);
+    vec3 hu = p0.xyz; vec3 hv = p1.xyz; vec3 c = u_centre[i].xyz;
+    vec3 n = cross(hu, hv);
+    float denom = dot(d, n);
+    float num = dot(c, n);
+    if (abs(denom) <= 1e-30 * length(n) * length(d)) return h;
+    float t = num / denom;
+    if (!(t > 0.0) || isinf(t)) return h;
+    vec3 x = t * d;
+    float depth = -x.z;
+    if (depth < u_near_m || depth > u_far_m) return h;
+    vec3 r = x - c;
+    float a = dot(r, hu) / dot(hu, hu);
+    float b = dot(r, hv) / dot(hv, hv);
+    float g = (p0.w < 0.5) ? length(vec2(a, b)) - 1.0 : max(abs(a), abs(b)) - 1.0;
+    vec4 p5 = P(i, 5);
+    if (p5.x > 0.5) {
+        vec4 p6 = P(i, 6);
+        float border = p6.x + p5.y * sin(TWO_PI * p5.z * 0.5 * (b + 1.0) + p5.w);
+        g = max(g, p6.y * (a - border));
+    }
+    h.plane = true; h.t = t; h.a = a; h.b = b; h.g = g; h.inside = g <= 0.0;
+    return h;
+}
+
+vec3 shade(int i, float a, float b, float footprint) {
+    vec4 p1 = P(i, 1); vec4 p2 = P(i, 2);
+    int kind = int(p1.w + 0.5);
+    if (kind == 0) return p2.rgb;
+    vec4 p4 = P(i, 4);
+    if (kind == 1) {
+        vec2 st = fract(vec2(a * 0.5 + 0.5, 0.5 - b * 0.5) * p4.z);
+        ivec2 texel = clamp(ivec2(floor(st * p4.xy)), ivec2(0), ivec2(p4.xy) - 1);
+        return texelFetch(u_textures, ivec3(texel, int(p2.w + 0.5)), 0).rgb;
+    }
+    vec4 p3 = P(i, 3);
+    vec2 s = (vec2(a, b) * 0.5 + 0.5) * p3.w;
+    vec2 dist = abs(fract(s + 0.5) - 0.5);
+    float half_w = 0.5 * p4.w;
+    float fw = max(footprint * 0.5 * p3.w, 1e-6);
+    vec2 cov = clamp((half_w - dist) / fw + 0.5, 0.0, 1.0);
+    float line = max(cov.x, cov.y);
+    return mix(p2.rgb, p3.rgb, line);
+}
+
+vec3 sample_colour(vec3 d, float footprint) {
+    int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0;
+    for (int i = 0; i < u_n_prims; ++i) {
+        Hit h = intersect(i, d);
+        if (h.inside && h.t < best_t) { best = i; best_t = h.t; ba = h.a; bb = h.b; }
+    }
+    return best < 0 ? u_background : shade(best, ba, bb, footprint);
+}
+
+vec3 grid_colour(vec2 corner_px) {
+    vec3 acc = vec3(0.0);
+    float inv = 1.0 / float(u_samples);
+    for (int j = 0; j < u_samples; ++j)
+        for (int k = 0; k < u_samples; ++k)
+            acc += sample_colour(ray_at(corner_px + (vec2(k, j) + 0.5) * inv), 0.0);
+    return acc * inv * inv;
+}
+
+void main() {
+    ivec2 fc = ivec2(gl_FragCoord.xy);
+    vec2 corner = vec2(float(fc.x), u_size_px.y - 1.0 - float(fc.y));  // top-left, y down
+    vec3 colour;
+#if defined(AA_NONE)
+    colour = sample_colour(ray_at(corner + 0.5), 0.0);
+#elif defined(AA_SUPERSAMPLE)
+    colour = grid_colour(corner);
+#elif defined(AA_MSAA)
+    vec2 sp = gl_SamplePosition;
+    colour = sample_colour(ray_at(corner + vec2(sp.x, 1.0 - sp.y)), 0.0);
+#else
+    vec3 d0 = ray_at(corner + 0.5);
+    vec3 dx = ray_at(corner + vec2(1.5, 0.5));
+    vec3 dy = ray_at(corner + vec2(0.5, 1.5));
+    bool edge = false;
+    int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0; float fw = 0.0;
+    for (int i = 0; i < u_n_prims; ++i) {
+        Hit h0 = intersect(i, d0);
+        Hit hx = intersect(i, dx);
+        Hit hy = intersect(i, dy);
+        if (h0.plane != hx.plane || h0.plane != hy.plane) { edge = true; }
+        else if (h0.plane) {
+            vec2 grad = vec2(hx.g - h0.g, hy.g - h0.g);
+            float gl = length(grad);
+            if (!(abs(h0.g) > u_edge_margin_px * gl) || h0.inside != hx.inside || h0.inside != hy.inside)
+                edge = true;
+        }
+        if (h0.inside && h0.t < best_t) {
+            best = i; best_t = h0.t; ba = h0.a; bb = h0.b;
+            fw = max(max(abs(hx.a - h0.a), abs(hy.a - h0.a)), max(abs(hx.b - h0.b), abs(hy.b - h0.b)));
+        }
+    }
+    if (edge) colour = grid_colour(corner);
+    else colour = best < 0 ? u_background : shade(best, ba, bb, fw);
+#endif
+    float ap = texelFetch(u_aperture, ivec2(fc.x, fc.y), 0).r;
+    colour = mix(u_aperture_colour, colour, ap);
+    if (any(isnan(colour)) || any(isinf(colour))) colour = u_background;
+    frag_colour = vec4(clamp(colour, 0.0, 1.0), 1.0);
+}
+"""
+
+
+def fragment_shader(antialiasing: AntiAliasing) -> str:
+    """The fragment shader source for one anti-aliasing variant."""
+    define = {
+        AntiAliasing.NONE: "AA_NONE",
+        AntiAliasing.MSAA: "AA_MSAA",
+        AntiAliasing.SUPERSAMPLE: "AA_SUPERSAMPLE",
+        AntiAliasing.ADAPTIVE: "AA_ADAPTIVE",
+    }[AntiAliasing(antialiasing)]
+    return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": define}

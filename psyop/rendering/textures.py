@@ -1,0 +1,60 @@
+"""Texture synthesis (white and 1/f noise) and packing into one RGB texture array.
+
+Each texture occupies one layer of an L x L array (L = the largest texture); its used size
+is stored per primitive and texels are fetched nearest-neighbour in the shader, so textures of
+different sizes share one array without resampling.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from psyop.rendering.scene import ImageTexture, NoiseKind, NoiseTexture
+
+
+def noise_pixels(tex: NoiseTexture) -> np.ndarray:
+    """(size, size, 3) float32 grey noise with the requested mean and RMS contrast (clipped to [0, 1])."""
+    rng = np.random.default_rng(tex.seed)
+    n = int(tex.size_px)
+    white = rng.standard_normal((n, n))
+    if tex.kind is NoiseKind.PINK:
+        fy = np.fft.fftfreq(n)[:, None]
+        fx = np.fft.fftfreq(n)[None, :]
+        f = np.hypot(fx, fy)
+        f[0, 0] = np.inf  # drop the DC term
+        spectrum = np.fft.fft2(white) / np.where(np.isinf(f), np.inf, f)
+        field = np.real(np.fft.ifft2(spectrum))
+    else:
+        field = white
+    field = (field - field.mean()) / max(float(field.std()), 1e-12)
+    grey = np.clip(tex.mean + tex.contrast * tex.mean * field, 0.0, 1.0)
+    rgb = grey[:, :, None] * np.asarray(tex.tint, dtype=np.float64)[None, None, :]
+    return rgb.astype(np.float32)
+
+
+def texture_pixels(tex: NoiseTexture | ImageTexture) -> np.ndarray:
+    """The RGB pixels of a texture material, top row first."""
+    if isinstance(tex, ImageTexture):
+        return np.asarray(tex.pixels, dtype=np.float32)
+    return noise_pixels(tex)
+
+
+def pack_layers(images: list[np.ndarray]) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """Pack RGB images into a (layers, L, L, 4) float32 array (L = the largest side, at least 1).
+
+    Returns the array and each image's (width, height) in texels. Images larger than 1024 texels
+    on a side are decimated by striding (keeps the CI cheap; the studies use small textures).
+    """
+    shrunk = []
+    for img in images:
+        step = max(1, int(np.ceil(max(img.shape[:2]) / 1024)))
+        shrunk.append(img[::step, ::step])
+    side = max([1] + [max(i.shape[:2]) for i in shrunk])
+    out = np.zeros((max(1, len(shrunk)), side, side, 4), dtype=np.float32)
+    sizes = []
+    for k, img in enumerate(shrunk):
+        h, w = img.shape[:2]
+        out[k, :h, :w, :3] = img
+        out[k, :h, :w, 3] = 1.0
+        sizes.append((w, h))
+    return out, sizes
