@@ -1,0 +1,53 @@
+"""``psyop run``: run (or resume) one participant session of a protocol."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from psyop.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "run",
+        help="run or resume one session",
+        description="Run one participant session of PROTOCOL (resumes after the last recorded trial "
+        "if the session exists). Logs go to DATA/<study>/sub-<ID>/ses-<N>/.",
+    )
+    parser.add_argument("protocol", type=Path, help="protocol YAML file")
+    parser.add_argument("--participant", required=True, help="participant ID (letters and digits)")
+    parser.add_argument("--session", type=int, default=1, help="session number (default 1)")
+    parser.add_argument("--seed", type=int, default=None, help="schedule/observer seed (default: from IDs, or the session's)")
+    parser.add_argument("--tracker", default="sim", help="sim | replay:FILE | pupil:HOST:PORT | serial:DEVICE")
+    parser.add_argument("--responses", default="sim", help="sim | keyboard | serial:DEVICE")
+    parser.add_argument("--display", default="headless", choices=["headless", "window"])
+    parser.add_argument("--clock", default="virtual", choices=["virtual", "real"])
+    parser.add_argument("--data", type=Path, default=Path("data"), help="data root (default data/)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    # testing aids (crash-safety tests): hidden from --help
+    parser.add_argument("--phase-delay-s", type=float, default=0.0, help=argparse.SUPPRESS)
+    parser.add_argument("--sim-nan-burst-rate-hz", type=float, default=0.0, help=argparse.SUPPRESS)
+    parser.add_argument("--sim-dropout-rate-hz", type=float, default=0.0, help=argparse.SUPPRESS)
+    parser.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    from psyop.protocol import load_protocol
+    from psyop.schedule import compile_schedule
+    from psyop.session.gaze.simulated import SimulatedTrackerConfig
+    from psyop.session.runner import SessionOptions, print_outcome, run_session
+
+    if not args.protocol.exists():
+        raise UserError("protocol file not found", str(args.protocol))
+    protocol = load_protocol(args.protocol)
+    options = SessionOptions(
+        participant=args.participant, session=args.session, seed=args.seed, tracker=args.tracker,
+        responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
+        progress=not args.no_progress, phase_delay_s=args.phase_delay_s,
+        tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
+                                              dropout_rate_hz=args.sim_dropout_rate_hz),
+    )
+    outcome = run_session(protocol, compile_schedule, options)
+    print_outcome(outcome)
+    return outcome.exit_code

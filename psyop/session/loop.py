@@ -1,0 +1,249 @@
+"""The trial loop: an explicit state machine per trial, driven by the session clock.
+
+Per trial: RECALIBRATE (central cross; single-point drift correction from the gaze at
+its end) -> timed presentation phases (stimulus / blank, per response kind) ->
+RESPONSE (poll the response source) -> RECORD (durable append). A trial counts only
+once its record is fsynced; anything that stops the loop mid-trial (Ctrl-C, tracker
+lost) discards that trial and finalises the log, and the session can be resumed.
+
+Two frame regimes:
+- every frame (a person is watching, or the observer wants images): one frame per
+  refresh period, each logged with its gaze sample time, render start, submit time
+  and sample age at submit;
+- sampled (virtual clock and an observer that needs no images): the clock jumps from
+  phase to phase; only a few frames per session are rendered and checked.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from psyop.session.clock import Clock
+from psyop.session.frames import Display, FrameRecorder, FrameRenderer, latency_summary
+from psyop.session.gaze.filter import GazeConditioner
+from psyop.session.gaze.plan import FixationPlan, circling_target
+from psyop.session.gaze.sample import GazeSample, GazeSource, TrackerLost
+from psyop.session.gaze.simulated import seed_for
+from psyop.session.log.store import SessionStore
+from psyop.session.phases import PhaseSpec, mode_for
+from psyop.session.responses.base import Response, ResponseSource
+
+
+class TrialState(str, Enum):
+    RECALIBRATE = "recalibrate"
+    PRESENT = "present"
+    RESPONSE = "response"
+    RECORD = "record"
+    DONE = "done"
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """How the loop runs (not what the study is)."""
+
+    refresh_hz: float = 90.0
+    every_frame: bool = True
+    sampled_trials: tuple[int, ...] = (0, 1)
+    sample_every_n_trials: int = 50
+    stale_after_s: float = 0.1
+    confidence_threshold: float = 0.6
+    pursuit_eccentricity_deg: float = 16.0
+    pursuit_speed_deg_s: float = 90.0
+    free_radius_deg: float = 10.0
+    fixation_distance_m: float = 1.0
+    phase_delay_s: float = 0.0  # real sleep per phase; only for crash-safety tests
+    progress: bool = True
+
+
+@dataclass
+class SessionOutcome:
+    status: str  # complete | interrupted | tracker_lost | device_error
+    n_recorded: int
+    n_scheduled: int
+    message: str
+    latency: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def exit_code(self) -> int:
+        return {"complete": 0, "interrupted": 130}.get(self.status, 3)
+
+
+class TrialLoop:
+    """Runs the remaining trials of a schedule into a :class:`SessionStore`."""
+
+    def __init__(
+        self,
+        *,
+        identity: Mapping[str, Any],
+        phases: tuple[PhaseSpec, ...],
+        clock: Clock,
+        gaze: GazeSource,
+        responses: ResponseSource,
+        renderer: FrameRenderer | None,
+        display: Display,
+        store: SessionStore,
+        config: LoopConfig,
+    ) -> None:
+        self.identity = dict(identity)  # study, participant, session
+        self.phases = phases
+        self.clock, self.gaze, self.responses = clock, gaze, responses
+        self.renderer, self.display, self.store, self.config = renderer, display, store, config
+        self.conditioner = GazeConditioner(config.confidence_threshold)
+        self.frame_period_s = 1.0 / config.refresh_hz
+        self._ages: list[float] = []  # sample age at submit, frames with fresh valid gaze
+        self._n_held = 0
+        self.state = TrialState.DONE
+
+    # session -------------------------------------------------------------------------
+    def run(self, schedule: pd.DataFrame, completed: set[int]) -> SessionOutcome:
+        rows = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
+        n_total = len(schedule)
+        n_done = len(completed)
+        bar = tqdm(total=n_total, initial=n_done, file=sys.stderr, unit="trial", dynamic_ncols=True,
+                   disable=True if not self.config.progress else None, desc=f"{self.identity['study']} sub-{self.identity['participant']}")
+        status, message = "complete", f"all {n_total} trials recorded"
+        try:
+            for row in rows:
+                bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
+                record, frames = self.run_trial(row)
+                self.state = TrialState.RECORD
+                self.store.append_trial(record, frames.table() if len(frames) else None)
+                self.state = TrialState.DONE
+                n_done += 1
+                bar.update(1)
+        except KeyboardInterrupt:
+            status = "interrupted"
+            message = f"interrupted during trial (state {self.state.value}); that trial was discarded, {n_done}/{n_total} recorded"
+        except TrackerLost as exc:
+            status = "tracker_lost"
+            message = f"{exc}; the trial in progress was discarded, {n_done}/{n_total} recorded"
+        except ConnectionError as exc:
+            status = "device_error"
+            message = f"{exc}; the trial in progress was discarded, {n_done}/{n_total} recorded"
+        finally:
+            bar.close()
+        latency = latency_summary(np.array(self._ages), self.frame_period_s)
+        latency["n_frames_held"] = self._n_held
+        return SessionOutcome(status, n_done, n_total, message, latency)
+
+    # trial ---------------------------------------------------------------------------
+    def run_trial(self, row: dict[str, Any]) -> tuple[dict[str, Any], FrameRecorder]:
+        frames = FrameRecorder()
+        trial = int(row["trial"])
+        sampled = (trial in self.config.sampled_trials) or (trial % max(1, self.config.sample_every_n_trials) == 0)
+        start_s = self.clock.now_s()
+        drift_deg = math.nan
+        valid = total = 0
+        for phase in self.phases:
+            self.state = TrialState.RECALIBRATE if phase.gaze == "cross" else TrialState.PRESENT
+            phase_start = self.clock.now_s()
+            self._set_plan(phase, row, phase_start)
+            if self.config.phase_delay_s > 0:
+                time.sleep(self.config.phase_delay_s)
+            end_s = phase_start + phase.duration_s
+            if self.config.every_frame:
+                v, n = self._frames_until(end_s, row, phase, frames)
+            else:
+                v, n = self._sampled_frame(phase_start + 0.5 * phase.duration_s, row, phase, frames) if sampled and phase.renders else (0, 0)
+                self.clock.sleep_until(end_s)
+            valid, total = valid + v, total + n
+            if self.state is TrialState.RECALIBRATE:
+                sample = self._fresh(self.gaze.latest(self.clock.now_s()))
+                drift_deg = self.conditioner.recalibrate(sample, np.array([0.0, 0.0, -1.0]))
+        self.state = TrialState.RESPONSE
+        response = self._await_response(row, frames)
+        end = self.clock.now_s()
+        record = dict(row)
+        record.update(self.identity)
+        record.update(
+            response=response.response, correct=response.correct, reach_m=response.reach_m,
+            chosen_mode=response.chosen_mode, trial_start_s=start_s, trial_end_s=end,
+            response_time_s=response.response_time_s, drift_correction_deg=drift_deg,
+            gaze_valid_fraction=(valid / total) if total else None, n_frames=len(frames),
+            run=self.store.run_index,
+        )
+        return record, frames
+
+    def _set_plan(self, phase: PhaseSpec, row: Mapping[str, Any], start_s: float) -> None:
+        set_plan = getattr(self.gaze, "set_plan", None)
+        if set_plan is None:
+            return
+        c = self.config
+        seed = int(row.get("trial_seed", 0)) & 0xFFFFFFFF
+        if phase.gaze == "pursuit":
+            # the schedule fixes where the target starts and which way it turns
+            phase_deg = float(row.get("fixation_start_deg", seed_for("pursuit", seed) % 360))
+            direction = -1.0 if float(row.get("fixation_direction", 1)) < 0 else 1.0
+            plan = FixationPlan("pursuit", start_s, c.fixation_distance_m,
+                                target=circling_target(c.pursuit_eccentricity_deg, direction * c.pursuit_speed_deg_s, phase_deg))
+        elif phase.gaze == "free":
+            plan = FixationPlan("free", start_s, c.fixation_distance_m, radius_deg=c.free_radius_deg, seed=seed_for(seed, phase.name))
+        else:
+            plan = FixationPlan("cross", start_s, c.fixation_distance_m)
+        set_plan(plan)
+
+    def _fresh(self, sample: GazeSample | None) -> GazeSample | None:
+        """A sample older than ``stale_after_s`` (tracker dropout) counts as invalid."""
+        if sample is not None and self.clock.now_s() - sample.timestamp_s > self.config.stale_after_s:
+            return GazeSample(sample.timestamp_s, sample.fixation_m, sample.confidence, False)
+        return sample
+
+    def _frame(self, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder, index: int) -> tuple[int, int]:
+        """The software path of one frame: gaze in -> condition -> render -> submit -> log."""
+        sample = self._fresh(self.gaze.latest(self.clock.now_s()))
+        gaze = self.conditioner.condition(sample)
+        render_start = self.clock.now_s()
+        check = None
+        if self.renderer is not None and phase.renders:
+            check = self.renderer.render(row, mode_for(phase, row), phase.show, render_start, gaze.fixation_m)
+        submit = self.display.submit()
+        age = submit - gaze.sample_t_s if math.isfinite(gaze.sample_t_s) else math.nan
+        if gaze.valid and math.isfinite(age):
+            self._ages.append(age)
+        else:
+            self._n_held += 1
+        fx, fy, fz = gaze.fixation_m
+        frames.add(trial=int(row["trial"]), phase=phase.name, frame=len(frames), gaze_sample_t_s=gaze.sample_t_s,
+                   fixation_x_m=fx, fixation_y_m=fy, fixation_z_m=fz, gaze_confidence=gaze.confidence,
+                   gaze_valid=gaze.valid, gaze_held=gaze.held, render_start_s=render_start, submit_s=submit,
+                   sample_age_s=age, image_checked=check.checked if check else False,
+                   image_ok=check.ok if check else None)
+        if check is not None and check.checked and not check.ok:
+            raise RuntimeError(f"trial {row['trial']}: rendered frame failed its check (non-finite or empty)")
+        return int(gaze.valid), 1
+
+    def _frames_until(self, end_s: float, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
+        valid = total = 0
+        t = self.clock.now_s()
+        while t < end_s - 1e-9:
+            v, n = self._frame(row, phase, frames, total)
+            valid, total = valid + v, total + n
+            t = min(t + self.frame_period_s, end_s)
+            self.clock.sleep_until(t)
+        return valid, total
+
+    def _sampled_frame(self, at_s: float, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
+        self.clock.sleep_until(at_s)
+        return self._frame(row, phase, frames, 0)
+
+    def _await_response(self, row: Mapping[str, Any], frames: FrameRecorder) -> Response:
+        prompt = PhaseSpec("response", 0.0, "blank", "none")
+        while True:
+            response = self.responses.collect(row, self.clock.now_s())
+            if response is not None:
+                return response
+            if self.config.every_frame:
+                self._frame(row, prompt, frames, len(frames))
+                self.clock.sleep_until(self.clock.now_s() + self.frame_period_s)
+            else:
+                self.clock.sleep_until(self.clock.now_s() + 0.01)

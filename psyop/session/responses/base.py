@@ -1,0 +1,72 @@
+"""The response record and the interface every response source implements."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any, Protocol
+
+
+class ResponseKind(str, Enum):
+    """What a trial asks for, decided from the schedule's columns (architecture contract)."""
+
+    TWO_INTERVAL = "2afc_interval"  # '1' or '2'
+    NEAR_SIDE = "near_side"  # 'left' or 'right'
+    PREFERENCE = "preference"  # 'a' or 'b'
+    REACH = "reach"  # a distance in metres
+
+
+def response_kind(columns: set[str] | list[str]) -> ResponseKind:
+    cols = set(columns)
+    if "correct_interval" in cols:
+        return ResponseKind.TWO_INTERVAL
+    if "near_side" in cols:
+        return ResponseKind.NEAR_SIDE
+    if {"mode_a", "mode_b"} <= cols:
+        return ResponseKind.PREFERENCE
+    if "target_fraction" in cols:
+        return ResponseKind.REACH
+    raise ValueError(
+        "cannot tell the response type from the schedule: expected one of the columns "
+        "correct_interval, near_side, mode_a/mode_b or target_fraction"
+    )
+
+
+@dataclass(frozen=True)
+class Response:
+    """One trial's answer. ``response`` is the raw answer as text ('1', 'left', 'a', '0.512')."""
+
+    response: str
+    correct: bool | None = None
+    reach_m: float | None = None
+    chosen_mode: str | None = None
+    response_time_s: float = math.nan
+
+
+def score(kind: ResponseKind, row: Mapping[str, Any], answer: str, reach_m: float | None = None) -> Response:
+    """Fill ``correct`` / ``chosen_mode`` / ``reach_m`` from a raw answer."""
+    if kind is ResponseKind.TWO_INTERVAL:
+        return Response(answer, correct=answer == str(int(row["correct_interval"])))
+    if kind is ResponseKind.NEAR_SIDE:
+        return Response(answer, correct=answer == str(row["near_side"]))
+    if kind is ResponseKind.PREFERENCE:
+        chosen = str(row["mode_a"] if answer == "a" else row["mode_b"])
+        return Response(answer, chosen_mode=chosen)
+    return Response(answer, reach_m=reach_m)
+
+
+class ResponseSource(Protocol):
+    """Collects the response to one trial.
+
+    ``needs_images`` says whether the source must see rendered frames (a person does;
+    most simulated observers do not, so headless simulated sessions skip rendering).
+    ``collect`` may block (a person answering) or return at once (simulated).
+    """
+
+    needs_images: bool
+
+    def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None: ...
+
+    def close(self) -> None: ...

@@ -1,0 +1,61 @@
+"""Keyboard responses through a small event interface (a window supplies the events).
+
+Keys per response kind: 2AFC interval '1'/'2' (or left/right arrows); near side
+left/right arrows (or 'l'/'r'); preference '1'/'a' for the first and '2'/'b' for the
+second stimulus; reach: 'space' confirms and the reach is read from the hand pose.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol
+
+from psyop.session.responses.base import Response, ResponseKind, score
+
+KEYMAPS: dict[ResponseKind, dict[str, str]] = {
+    ResponseKind.TWO_INTERVAL: {"1": "1", "2": "2", "left": "1", "right": "2", "kp_1": "1", "kp_2": "2"},
+    ResponseKind.NEAR_SIDE: {"left": "left", "right": "right", "l": "left", "r": "right"},
+    ResponseKind.PREFERENCE: {"1": "a", "2": "b", "a": "a", "b": "b", "left": "a", "right": "b"},
+    ResponseKind.REACH: {"space": "confirm", "enter": "confirm"},
+}
+
+
+class KeyEvents(Protocol):
+    """Source of key presses: ``poll`` returns (key name, time on the session clock) pairs."""
+
+    def poll(self) -> list[tuple[str, float]]: ...
+
+
+class KeyboardResponses:
+    """Maps key presses to answers; ``collect`` returns None until a valid key arrives."""
+
+    needs_images = True
+
+    def __init__(self, events: KeyEvents, kind: ResponseKind, *, reach_m: Callable[[], float] | None = None) -> None:
+        self.events = events
+        self.kind = kind
+        self.keymap = KEYMAPS[kind]
+        self._reach_m = reach_m
+        self._prompt_s: float | None = None
+
+    def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None:
+        if self._prompt_s is None:
+            self._prompt_s = now_s
+        for key, t_s in self.events.poll():
+            answer = self.keymap.get(key.lower())
+            if answer is None:
+                continue
+            rt = t_s - self._prompt_s
+            self._prompt_s = None
+            if self.kind is ResponseKind.REACH:
+                if self._reach_m is None:
+                    raise RuntimeError("reach responses need a hand-pose source")
+                reach = float(self._reach_m())
+                r = score(self.kind, row, f"{reach:.6f}", reach_m=reach)
+            else:
+                r = score(self.kind, row, answer)
+            return Response(r.response, r.correct, r.reach_m, r.chosen_mode, rt)
+        return None
+
+    def close(self) -> None:
+        return None

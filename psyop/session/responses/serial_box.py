@@ -1,0 +1,64 @@
+"""A serial response box: each button press arrives as one line ``B<button>``.
+
+Buttons '1'/'2' (or 'L'/'R', 'A'/'B') map onto the trial's answer the same way as the
+keyboard's keys. Garbage bytes and unknown lines are counted and skipped.
+"""
+
+from __future__ import annotations
+
+import queue
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from psyop.session.responses.base import Response, ResponseKind, score
+from psyop.session.serial_lines import SerialLineReader
+
+BUTTONS: dict[ResponseKind, dict[str, str]] = {
+    ResponseKind.TWO_INTERVAL: {"1": "1", "2": "2", "L": "1", "R": "2"},
+    ResponseKind.NEAR_SIDE: {"L": "left", "R": "right", "1": "left", "2": "right"},
+    ResponseKind.PREFERENCE: {"1": "a", "2": "b", "A": "a", "B": "b", "L": "a", "R": "b"},
+}
+
+
+class SerialResponseBox:
+    needs_images = True
+
+    def __init__(self, url: str, kind: ResponseKind, *, clock: Callable[[], float], baudrate: int = 115200) -> None:
+        if kind not in BUTTONS:
+            raise ValueError(f"a response box cannot give {kind.value} responses")
+        self.kind = kind
+        self._presses: queue.Queue[tuple[str, float]] = queue.Queue()
+        self._reader = SerialLineReader(url, self._on_line, clock, baudrate=baudrate)
+        self._prompt_s: float | None = None
+        self._reader.start()
+
+    def _on_line(self, text: str, arrival_s: float) -> bool:
+        text = text.strip()
+        if len(text) != 2 or text[0] != "B" or text[1] not in BUTTONS[self.kind]:
+            return False
+        self._presses.put((text[1], arrival_s))
+        return True
+
+    def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None:
+        if self._prompt_s is None:
+            self._prompt_s = now_s
+            while not self._presses.empty():  # presses before the prompt do not count
+                self._presses.get_nowait()
+            return None
+        try:
+            button, t_s = self._presses.get_nowait()
+        except queue.Empty:
+            if self._reader.error:
+                raise ConnectionError(self._reader.error) from None
+            return None
+        r = score(self.kind, row, BUTTONS[self.kind][button])
+        rt = t_s - self._prompt_s
+        self._prompt_s = None
+        return Response(r.response, r.correct, r.reach_m, r.chosen_mode, rt)
+
+    def stats(self) -> dict[str, int]:
+        with self._reader.lock:
+            return {"lines": self._reader.lines, "garbage": self._reader.garbage}
+
+    def close(self) -> None:
+        self._reader.close()

@@ -1,0 +1,194 @@
+"""Simulated observers (protocol ``observer:`` section; docs/architecture.md).
+
+Each is deterministic given (session seed, participant, trial_seed): the answer to a
+trial does not depend on which trials ran before it in this process, so a resumed
+session answers exactly as an uninterrupted one. Between-subject variation is drawn
+once per participant from (seed, participant).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from scipy.stats import norm
+
+from psyop.errors import UserError
+from psyop.session.gaze.simulated import seed_for
+from psyop.session.responses.base import Response, ResponseKind, score
+
+
+def _get(params: Mapping[str, Any], key: str, default: Any = None, *, required: bool = False) -> Any:
+    if key in params and params[key] is not None:
+        return params[key]
+    if required:
+        raise UserError(f"observer: missing parameter {key!r}", "protocol observer")
+    return default
+
+
+class SimulatedObserver:
+    """Base: per-trial and per-participant random streams."""
+
+    needs_images = False
+
+    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+        self.params = dict(params)
+        self.seed = int(seed)
+        self.participant = participant
+        self._participant_rng = np.random.default_rng([seed_for("participant", participant), self.seed & 0xFFFFFFFF])
+
+    def trial_rng(self, row: Mapping[str, Any]) -> np.random.Generator:
+        return np.random.default_rng([self.seed & 0xFFFFFFFF, seed_for(self.participant), int(row["trial_seed"]) & 0xFFFFFFFF, 11])
+
+    def close(self) -> None:
+        return None
+
+
+class Psychometric2AFC(SimulatedObserver):
+    """p(correct) = 0.5 + (0.5 - lapse) * Phi((x - threshold) / width) (psignifit's 2AFC form,
+    as psyop.statistics.simulate uses).
+
+    At x = threshold this is 0.75 without lapse: ``threshold_D`` is the 75 % point. The
+    threshold may depend on a row column (``threshold_slope`` x ``threshold_offset_column``)
+    and varies between participants with sd ``between_subject_sd_D``.
+    """
+
+    kind = ResponseKind.TWO_INTERVAL
+
+    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+        super().__init__(params, seed=seed, participant=participant)
+        self.level_column = str(_get(params, "level_column", "level_D"))
+        self.threshold_D = float(_get(params, "threshold_D", required=True))
+        self.width_D = float(_get(params, "width_D", required=True))
+        self.lapse = float(_get(params, "lapse", 0.0))
+        self.slope = float(_get(params, "threshold_slope", 0.0))
+        self.offset_column = _get(params, "threshold_offset_column")
+        sd = float(_get(params, "between_subject_sd_D", 0.0))
+        self.participant_shift_D = float(self._participant_rng.normal(0.0, sd)) if sd > 0 else 0.0
+        if self.width_D <= 0 or not 0 <= self.lapse < 0.5:
+            raise UserError("observer: width_D must be > 0 and lapse in [0, 0.5)", "protocol observer")
+
+    def threshold_for(self, row: Mapping[str, Any]) -> float:
+        offset = float(row[self.offset_column]) if self.offset_column else 0.0
+        return self.threshold_D + self.participant_shift_D + self.slope * offset
+
+    def p_correct(self, row: Mapping[str, Any]) -> float:
+        x = float(row[self.level_column])
+        return 0.5 + (0.5 - self.lapse) * float(norm.cdf((x - self.threshold_for(row)) / self.width_D))
+
+    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+        rng = self.trial_rng(row)
+        correct = bool(rng.uniform() < self.p_correct(row))
+        right = int(row["correct_interval"])
+        answer = right if correct else 3 - right
+        return score(self.kind, row, str(answer))
+
+
+class OrdinalAccuracy(SimulatedObserver):
+    """p(correct) looked up by (mode, separation_D).
+
+    ``p_correct`` is a mapping ``{mode: {separation_D: p}}`` (keys may be strings) or a
+    list of ``{mode, separation_D, p}`` records.
+    """
+
+    kind = ResponseKind.NEAR_SIDE
+
+    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+        super().__init__(params, seed=seed, participant=participant)
+        table = _get(params, "p_correct", required=True)
+        self.table: dict[tuple[str, float], float] = {}
+        if isinstance(table, Mapping):
+            for mode, by_sep in table.items():
+                for sep, p in dict(by_sep).items():
+                    self.table[(str(mode), round(float(sep), 6))] = float(p)
+        else:
+            for record in table:
+                record = dict(record)
+                self.table[(str(record["mode"]), round(float(record["separation_D"]), 6))] = float(record["p"])
+        sd = float(_get(params, "between_subject_sd", 0.0))
+        self.participant_shift = float(self._participant_rng.normal(0.0, sd)) if sd > 0 else 0.0
+
+    def p_correct(self, row: Mapping[str, Any]) -> float:
+        key = (str(row["mode"]), round(float(row["separation_D"]), 6))
+        if key not in self.table:
+            raise UserError(f"observer: no p_correct for mode={key[0]!r}, separation_D={key[1]}", "protocol observer")
+        return float(np.clip(self.table[key] + self.participant_shift, 0.0, 1.0))
+
+    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+        correct = bool(self.trial_rng(row).uniform() < self.p_correct(row))
+        near = str(row["near_side"])
+        other = "left" if near == "right" else "right"
+        return score(self.kind, row, near if correct else other)
+
+
+class PairwisePreference(SimulatedObserver):
+    """Bradley-Terry: p(choose a) = s_a / (s_a + s_b) with a positive strength per mode."""
+
+    kind = ResponseKind.PREFERENCE
+
+    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+        super().__init__(params, seed=seed, participant=participant)
+        strengths = _get(params, "strengths", None) or _get(params, "strength", required=True)
+        self.strengths = {str(k): float(v) for k, v in dict(strengths).items()}
+        if any(not (v > 0 and math.isfinite(v)) for v in self.strengths.values()):
+            raise UserError("observer: Bradley-Terry strengths must be positive", "protocol observer")
+
+    def p_a(self, row: Mapping[str, Any]) -> float:
+        a, b = str(row["mode_a"]), str(row["mode_b"])
+        for mode in (a, b):
+            if mode not in self.strengths:
+                raise UserError(f"observer: no strength for mode {mode!r}", "protocol observer")
+        return self.strengths[a] / (self.strengths[a] + self.strengths[b])
+
+    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+        return score(self.kind, row, "a" if self.trial_rng(row).uniform() < self.p_a(row) else "b")
+
+
+class Reach(SimulatedObserver):
+    """reach_m = intercept_m + slope * target_m + N(0, noise_sd_m), per rendering condition.
+
+    ``target_m = target_fraction * arm_reach_m``. Parameters: ``by_condition: {enabled:
+    {slope, intercept_m, noise_sd_m}, disabled: {...}}`` (or the three keys at top level
+    for every condition), ``arm_reach_m`` (mean) and ``arm_reach_sd_m`` between people.
+    """
+
+    kind = ResponseKind.REACH
+
+    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+        super().__init__(params, seed=seed, participant=participant)
+        arm_mean = float(_get(params, "arm_reach_m", 0.7))
+        arm_sd = float(_get(params, "arm_reach_sd_m", 0.0))
+        self.arm_reach_m = arm_mean + (float(self._participant_rng.normal(0.0, arm_sd)) if arm_sd > 0 else 0.0)
+        self.conditions = {str(k): dict(v) for k, v in dict(_get(params, "by_condition", None) or _get(params, "conditions", {}) or {}).items()}
+
+    def _condition(self, rendering: str) -> Mapping[str, Any]:
+        cond = self.conditions.get(rendering, self.params)
+        for key in ("slope", "intercept_m", "noise_sd_m"):
+            if key not in cond:
+                raise UserError(f"observer: reach condition {rendering!r} lacks {key!r}", "protocol observer")
+        return cond
+
+    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+        cond = self._condition(str(row.get("rendering", "")))
+        target_m = float(row["target_fraction"]) * self.arm_reach_m
+        reach = float(cond["intercept_m"]) + float(cond["slope"]) * target_m
+        reach += float(self.trial_rng(row).normal(0.0, float(cond["noise_sd_m"])))
+        return score(self.kind, row, f"{reach:.6f}", reach_m=reach)
+
+
+OBSERVERS: dict[str, type[SimulatedObserver]] = {
+    "psychometric_2afc": Psychometric2AFC,
+    "ordinal_accuracy": OrdinalAccuracy,
+    "pairwise_preference": PairwisePreference,
+    "reach": Reach,
+}
+
+
+def make_observer(params: Mapping[str, Any], *, seed: int, participant: str) -> SimulatedObserver:
+    """Build the observer named by ``params['kind']`` (or ``type``/``model``)."""
+    name = params.get("kind") or params.get("type") or params.get("model")
+    if name not in OBSERVERS:
+        raise UserError(f"observer: unknown kind {name!r}; expected one of {sorted(OBSERVERS)}", "protocol observer")
+    return OBSERVERS[name](params, seed=seed, participant=participant)

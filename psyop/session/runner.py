@@ -1,0 +1,221 @@
+"""Assemble a session (clock, gaze, responses, renderer, display, store) and run it.
+
+This is what ``psyop run`` and ``psyop simulate`` call. Everything a session used is
+recorded in its session.json: protocol text and hash, seed, package versions, eye
+model, display, tracker clock-sync, host.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import math
+import platform
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from psyop.errors import UserError
+from psyop.session.clock import RealClock, VirtualClock
+from psyop.session.frames import CameraRenderer, HeadlessDisplay
+from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, seed_for
+from psyop.session.log.layout import session_paths, write_dataset_description
+from psyop.session.log.schema import trial_schema
+from psyop.session.log.store import SessionStore, recover_tables
+from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop
+from psyop.session.protocol_adapter import fixation_path, observer_params, phases_from_protocol, study_name
+from psyop.session.responses.base import response_kind
+from psyop.session.responses.simulated import make_observer
+
+DEFAULT_IPD_M = 0.063  # used when the protocol says ipd: tracker and no tracker reports one
+_PACKAGES = ("psyop", "numpy", "scipy", "pandas", "pyarrow", "pydantic", "pyzmq", "pyserial", "msgpack", "moderngl", "tqdm")
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    """Command-line choices of one session (see ``psyop run --help``)."""
+
+    participant: str
+    session: int = 1
+    seed: int | None = None
+    tracker: str = "sim"
+    responses: str = "sim"
+    display: str = "headless"
+    clock: str = "virtual"
+    data_root: Path = Path("data")
+    progress: bool = True
+    phase_delay_s: float = 0.0
+    tracker_faults: SimulatedTrackerConfig = field(default_factory=SimulatedTrackerConfig)
+    write_description: bool = True
+    fsync: bool = True
+
+    @property
+    def simulated(self) -> bool:
+        return self.tracker == "sim" and self.responses == "sim"
+
+
+def package_versions() -> dict[str, str]:
+    versions = {}
+    for name in _PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig) -> Any:
+    kind, _, arg = spec.partition(":")
+    if kind == "sim":
+        return SimulatedTracker(seed_for(seed, "tracker"), faults)
+    if kind == "replay":
+        from psyop.session.gaze.replay import ReplayTracker
+
+        return ReplayTracker.from_path(Path(arg))
+    if clock.virtual:
+        raise UserError(f"--tracker {kind} is a live device; use --clock real with it", "--clock")
+    if kind == "pupil":
+        from psyop.session.gaze.pupil import PupilClient
+
+        host, _, port = arg.rpartition(":")
+        if not host or not port.isdigit():
+            raise UserError(f"expected pupil:HOST:PORT, got {spec!r}", "--tracker")
+        return PupilClient(host, int(port), clock=clock.now_s)
+    if kind == "serial":
+        from psyop.session.gaze.serial_source import SerialGazeSource
+
+        if not arg:
+            raise UserError("expected serial:DEVICE", "--tracker")
+        return SerialGazeSource(arg, clock=clock.now_s)
+    raise UserError(f"unknown tracker {spec!r}; use sim, replay:FILE, pupil:HOST:PORT or serial:DEVICE", "--tracker")
+
+
+def _make_responses(spec: str, protocol: Any, kind: Any, seed: int, participant: str, clock: Any, window: Any) -> Any:
+    name, _, arg = spec.partition(":")
+    if name == "sim":
+        params = observer_params(protocol)
+        if params is None:
+            raise UserError("--responses sim needs an observer: section in the protocol", "protocol")
+        return make_observer(params, seed=seed, participant=participant)
+    if name == "serial":
+        from psyop.session.responses.serial_box import SerialResponseBox
+
+        try:
+            return SerialResponseBox(arg, kind, clock=clock.now_s)
+        except (ValueError, ConnectionError) as exc:
+            raise UserError(str(exc), "--responses") from exc
+    if name == "keyboard":
+        if window is None:
+            raise UserError("--responses keyboard needs --display window", "--responses")
+        from psyop.session.responses.keyboard import KeyboardResponses
+
+        return KeyboardResponses(window, kind)
+    raise UserError(f"unknown response source {spec!r}; use sim, keyboard or serial:DEVICE", "--responses")
+
+
+def run_session(
+    protocol: Any,
+    compile_schedule: Callable[[Any, int], pd.DataFrame],
+    options: SessionOptions,
+) -> SessionOutcome:
+    """Run (or resume) one session to the end of its schedule, or to a clean stop."""
+    from psyop.protocol import resolve_display_profile, resolve_eye_model
+
+    study = study_name(protocol)
+    paths = session_paths(options.data_root, study, options.participant, options.session)
+    seed = options.seed
+    if seed is None and paths.metadata.exists():
+        import json
+
+        seed = int(json.loads(paths.metadata.read_text())["seed"])
+    if seed is None:
+        seed = seed_for(study, options.participant, options.session)
+    schedule = compile_schedule(protocol, seed)
+    kind = response_kind(list(schedule.columns))
+    phases = phases_from_protocol(protocol, kind)
+    display_profile = resolve_display_profile(protocol.display)
+    eye_model = resolve_eye_model(protocol.display)
+    ipd = getattr(protocol.display.ipd, "ipd_m", None) or DEFAULT_IPD_M
+
+    if options.clock == "virtual":
+        clock: Any = VirtualClock()
+    elif options.clock == "real":
+        clock = RealClock()
+    else:
+        raise UserError(f"unknown clock {options.clock!r}; use virtual or real", "--clock")
+
+    store = SessionStore(paths, trial_schema(schedule), fsync=options.fsync)
+    metadata = {
+        "study": study, "participant": options.participant, "session": options.session, "seed": seed,
+        "simulated": options.simulated, "protocol_sha256": protocol.source_sha256,
+        "protocol_text": protocol.source_text, "protocol_file": protocol.source_name,
+        "n_trials_scheduled": int(len(schedule)), "response_kind": kind.value,
+        "phases": [p.__dict__ for p in phases], "packages": package_versions(),
+        "python": platform.python_version(), "host": platform.node(),
+        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m},
+        "display": {k: (v if not isinstance(v, float) or math.isfinite(v) else "inf") for k, v in display_profile.__dict__.items()},
+        "ipd_m": ipd, "tracker": options.tracker, "responses": options.responses,
+        "display_mode": options.display, "clock": options.clock,
+    }
+    gaze = _make_gaze(options.tracker, clock, seed, options.tracker_faults)
+    window = None
+    if options.display == "window":
+        from psyop.session.window import GlfwWindow
+
+        window = GlfwWindow(display_profile, clock)
+        display: Any = window
+    elif options.display == "headless":
+        display = HeadlessDisplay(clock)
+    else:
+        raise UserError(f"unknown display {options.display!r}; use headless or window", "--display")
+    responses = _make_responses(options.responses, protocol, kind, seed, options.participant, clock, window)
+    try:
+        try:
+            gaze.start()
+        except (ConnectionError, OSError) as exc:
+            raise UserError(f"cannot start tracker {options.tracker}: {exc}", "--tracker") from exc
+        sync = getattr(gaze, "sync", None)
+        metadata["clock_sync"] = sync.as_dict() if sync is not None else None
+        completed = store.open(metadata)
+        if isinstance(clock, VirtualClock) and completed:
+            trials, _ = recover_tables(paths)
+            if trials is not None and len(trials):
+                clock.sleep_until(float(trials["trial_end_s"].max()))
+        path = fixation_path(protocol)
+        config = LoopConfig(
+            refresh_hz=float(display_profile.refresh_hz),
+            every_frame=not (clock.virtual and not responses.needs_images),
+            pursuit_eccentricity_deg=path.eccentricity_deg if path else 16.0,
+            pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
+            phase_delay_s=options.phase_delay_s,
+            progress=options.progress,
+        )
+        loop = TrialLoop(
+            identity={"study": study, "participant": options.participant, "session": options.session},
+            phases=phases, clock=clock, gaze=gaze, responses=responses,
+            renderer=CameraRenderer(display_profile, ipd, eye_model.nc_m), display=display, store=store, config=config,
+        )
+        outcome = loop.run(schedule, completed)
+    finally:
+        responses.close()
+        gaze.close()
+        display.close()
+    summary = {"outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
+               "tracker": gaze.stats()}
+    store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
+    if options.write_description:
+        write_dataset_description(options.data_root, simulated=options.simulated)
+    return outcome
+
+
+def print_outcome(outcome: SessionOutcome, stream: Any = sys.stderr) -> None:
+    lat = outcome.latency
+    print(f"psyop run: {outcome.status}: {outcome.message}", file=stream)
+    if lat.get("n_frames"):
+        print(f"  gaze sample age at frame submit over {lat['n_frames']} frames: median "
+              f"{lat['sample_age_median_ms']:.2f} ms, p99 {lat['sample_age_p99_ms']:.2f} ms, "
+              f"max {lat['sample_age_max_ms']:.2f} ms; {lat.get('n_frames_held', 0)} frames held the last valid gaze",
+              file=stream)
