@@ -72,6 +72,7 @@ class ResponsePhase(StrictModel):
     expected_s: Number = Field(default=1.5, gt=0, le=3600)
     timeout_s: Number | None = Field(default=None, gt=0, le=3600)
     prompt: str | None = None
+    display_off: bool = Field(default=False, description="headset image off while answering (blind reaching)")
 
 
 Phase = Annotated[Union[DriftRecalibration, Interval, Blank, ResponsePhase], Field(discriminator="kind")]
