@@ -35,6 +35,7 @@ from psyop.optics.nodal import (
     Eye,
     RenderingMode,
     eye_centre_m,
+    gaze_direction_single,
     gaze_from_fixation,
     parse_eye,
     parse_mode,
@@ -180,17 +181,45 @@ def make_eye_camera(
     fix = np.asarray(fixation_m, dtype=np.float64)
     if fix.shape not in ((3,), (4,)):
         raise ValueError(f"fixation_m must have shape (3,) or (4,), got {fix.shape}")
-    arrays = eye_camera_arrays(display, eye, fix[None, :], ipd_m, nc_m, mode, near_m, far_m, fallback_direction)
+    near, far = float(near_m), float(far_m)
+    if not (math.isfinite(near) and math.isfinite(far) and 0.0 < near < far):
+        raise ValueError(f"need finite 0 < near_m < far_m, got near_m={near_m!r}, far_m={far_m!r}")
+    eye_ = parse_eye(eye)
+    mode_ = parse_mode(mode)
+    # Scalar per-frame path (plain floats); eye_camera_arrays is its vectorised twin and the
+    # tests check that both agree.
+    cx = (-0.5 if eye_ is Eye.LEFT else 0.5) * float(ipd_m)
+    (ux, uy, uz), valid = gaze_direction_single(fix, cx, fallback_direction)
+    if mode_ is RenderingMode.CONVENTIONAL:
+        ox = oy = oz = 0.0
+    elif mode_ is RenderingMode.OCULAR:
+        ox, oy, oz = nc_m * ux, nc_m * uy, nc_m * uz
+    else:
+        ox, oy, oz = -nc_m * ux, -nc_m * uy, nc_m * uz
+    l, r, b, t = display.frustum_tangents(eye_.value)
+    inv_d = 0.0 if math.isinf(display.d_m) else 1.0 / display.d_m
+    scale = 1.0 / (1.0 + oz * inv_d)
+    sx, sy = ox * inv_d, oy * inv_d
+    L, R, B, T = (l - sx) * scale, (r - sx) * scale, (b - sy) * scale, (t - sy) * scale
+    projection = np.array([
+        [2.0 / (R - L), 0.0, (R + L) / (R - L), 0.0],
+        [0.0, 2.0 / (T - B), (T + B) / (T - B), 0.0],
+        [0.0, 0.0, -(far + near) / (far - near), -2.0 * far * near / (far - near)],
+        [0.0, 0.0, -1.0, 0.0],
+    ])
+    px, py, pz = cx + ox, oy, oz
+    view = np.array([[1.0, 0.0, 0.0, -px], [0.0, 1.0, 0.0, -py], [0.0, 0.0, 1.0, -pz], [0.0, 0.0, 0.0, 1.0]])
+    pixel_to_ray = np.array([[r - l, 0.0, l - sx], [0.0, -(t - b), t - sy], [0.0, 0.0, -(1.0 + oz * inv_d)]])
     return EyeCamera(
-        eye=parse_eye(eye),
-        mode=parse_mode(mode),
-        valid=bool(arrays.valid[0]),
-        centre_of_projection_m=arrays.centre_of_projection_m[0],
+        eye=eye_,
+        mode=mode_,
+        valid=valid,
+        centre_of_projection_m=np.array([px, py, pz]),
         width_px=display.width_px,
         height_px=display.height_px,
-        view=arrays.view[0],
-        projection=arrays.projection[0],
-        pixel_to_ray=arrays.pixel_to_ray[0],
+        view=view,
+        projection=projection,
+        pixel_to_ray=pixel_to_ray,
     )
 
 

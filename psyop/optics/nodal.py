@@ -168,3 +168,50 @@ def paper_eye_matrix(eye: Eye | str, ipd_m: float, nodal_offset_m: ArrayLike) ->
     t_n = np.eye(4)
     t_n[:3, 3] = -np.asarray(nodal_offset_m, dtype=np.float64)
     return t_n @ t_ipd
+
+
+def _unit_or_none(x: float, y: float, z: float, min_norm: float, min_cos: float) -> tuple[float, float, float] | None:
+    """(x, y, z) normalised if finite, at least ``min_norm`` long and in front; else None."""
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return None
+    norm = math.sqrt(x * x + y * y + z * z)
+    if not (math.isfinite(norm) and norm > 0.0 and norm >= min_norm):
+        return None
+    ux, uy, uz = x / norm, y / norm, z / norm
+    if not -uz > min_cos:
+        return None
+    return ux, uy, uz
+
+
+def gaze_direction_single(
+    fixation: ArrayLike,
+    eye_centre_x_m: float,
+    fallback_direction: ArrayLike | None = None,
+    min_fixation_distance_m: float = DEFAULT_MIN_FIXATION_DISTANCE_M,
+    max_rotation_deg: float = DEFAULT_MAX_ROTATION_DEG,
+) -> tuple[tuple[float, float, float], bool]:
+    """One fixation's unit gaze direction from the eye centre (-/+ ipd/2, 0, 0) and its validity.
+
+    The scalar twin of :func:`gaze_from_fixation` for the per-frame path (plain floats, no
+    array overhead); the tests check that both agree. Never raises for a bad fixation value.
+    """
+    f = [float(v) for v in np.asarray(fixation, dtype=np.float64).reshape(-1)]
+    min_cos = math.cos(math.radians(max_rotation_deg))
+    unit = None
+    if len(f) == 4 and f[3] == 0.0:
+        unit = _unit_or_none(f[0], f[1], f[2], 0.0, min_cos)
+    elif len(f) in (3, 4):
+        w = f[3] if len(f) == 4 else 1.0
+        px, py, pz = f[0] / w, f[1] / w, f[2] / w  # w != 0 here; NaN/inf propagate to "invalid"
+        unit = _unit_or_none(px - eye_centre_x_m, py, pz, min_fixation_distance_m, min_cos)
+    else:
+        raise ValueError(f"fixation must have 3 (point) or 4 (homogeneous) components, got {len(f)}")
+    if unit is not None:
+        return unit, True
+    if fallback_direction is not None:
+        fb = [float(v) for v in np.asarray(fallback_direction, dtype=np.float64).reshape(-1)]
+        if len(fb) == 3:
+            fb_unit = _unit_or_none(fb[0], fb[1], fb[2], 0.0, min_cos)
+            if fb_unit is not None:
+                return fb_unit, False
+    return (0.0, 0.0, -1.0), False

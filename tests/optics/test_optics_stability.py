@@ -137,3 +137,20 @@ def test_camera_relative_float32_within_a_hundredth_of_a_pixel():
     # absolute coordinates lose the millimetre shift once they are large
     assert naive_far > 0.01 > rel
     assert naive_far > 10 * rel
+
+
+def test_single_frame_path_agrees_with_vectorised_path_on_degenerate_cases():
+    """make_eye_camera (scalar per-frame path) == eye_camera_arrays (batch) case by case."""
+    rng = np.random.default_rng(5)
+    for d_m, eye, mode in ((math.inf, "left", "ocular"), (0.7, "right", "reversed"), (2.0, "left", "conventional")):
+        display = DisplayProfile("x", 1440, 1600, 90.0, -1.4, 1.3, -1.5, 1.45, d_m)
+        centre = np.array([(-0.032 if eye == "left" else 0.032), 0.0, 0.0])
+        fix, expect_valid = _random_fixations(rng, 400, centre)
+        fallback = [0.2, 0.1, -1.0]
+        batch = eye_camera_arrays(display, eye, fix, 0.064, 0.0076916, mode, 0.05, 500.0, fallback_direction=fallback)
+        for i in range(len(fix)):
+            cam = make_eye_camera(display, eye, fix[i], 0.064, 0.0076916, mode, 0.05, 500.0, fallback_direction=fallback)
+            assert cam.valid == bool(batch.valid[i]) == bool(expect_valid[i])
+            np.testing.assert_allclose(cam.projection, batch.projection[i], rtol=1e-13, atol=1e-15)
+            np.testing.assert_allclose(cam.view, batch.view[i], rtol=0, atol=1e-16)
+            np.testing.assert_allclose(cam.pixel_to_ray, batch.pixel_to_ray[i], rtol=1e-13, atol=1e-15)
