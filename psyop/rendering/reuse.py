@@ -72,9 +72,14 @@ def decide_reuse(
     m_new = np.asarray(new_camera.pixel_to_ray, dtype=np.float64)
     if not np.allclose(m_old[:, :2], m_new[:, :2], rtol=1e-12, atol=0.0):
         return ReuseDecision(False, math.inf, "display moved")
-    delta = float(np.linalg.norm(np.asarray(new_camera.centre_of_projection_m) - last_camera.centre_of_projection_m))
-    column_change = float(np.linalg.norm(m_new[:, 2] - m_old[:, 2]))
-    d_m = math.inf if column_change <= 1e-15 or delta == 0.0 else delta / column_change
+    shift = np.asarray(new_camera.centre_of_projection_m, dtype=np.float64) - last_camera.centre_of_projection_m
+    delta = float(np.linalg.norm(shift))
+    column_change = m_new[:, 2] - m_old[:, 2]
+    scale = float(np.max(np.abs(m_old)))
+    inv_d = 0.0 if delta == 0.0 else -float(column_change @ shift) / (delta * delta)
+    if np.linalg.norm(column_change + inv_d * shift) > 1e-12 * scale or inv_d < 0.0:
+        return ReuseDecision(False, math.inf, "pixel grid moved")
+    d_m = math.inf if inv_d * scale <= 1e-15 else 1.0 / inv_d
     bound = shift_bound_px(delta, depth_range_m[0], depth_range_m[1], d_m, max_px_per_rad(new_camera))
     return ReuseDecision(bound <= tolerance_px, bound, "within tolerance" if bound <= tolerance_px else "moved")
 

@@ -111,7 +111,7 @@ Material = Solid | NoiseTexture | ImageTexture | GridMaterial
 
 @dataclass(frozen=True)
 class SineBorder:
-    """Clip a primitive to ``side * (a - (offset + amplitude * sin(2 pi cycles * (b+1)/2 + phase))) <= 0``.
+    """Keep the part of a primitive where ``side * (a - (offset + amplitude * sin(pi cycles (b + 1) + phase))) >= 0``.
 
     ``a``/``b`` are the primitive's local coordinates (-1..1 along ``half_u``/``half_v``);
     ``side`` = -1 keeps the part left of the border (smaller a), +1 the part right of it.

@@ -85,7 +85,7 @@ Hit intersect(int i, vec3 d) {
     if (p5.x > 0.5) {
         vec4 p6 = P(i, 6);
         float border = p6.x + p5.y * sin(TWO_PI * p5.z * 0.5 * (b + 1.0) + p5.w);
-        g = max(g, p6.y * (a - border));
+        g = max(g, -p6.y * (a - border));  // keep side * (a - border) >= 0
     }
     h.plane = true; h.t = t; h.a = a; h.b = b; h.g = g; h.inside = g <= 0.0;
     return h;
