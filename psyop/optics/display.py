@@ -60,9 +60,9 @@ class DisplayProfile:
 
     def frustum_tangents(self, eye: str) -> tuple[float, float, float, float]:
         """(left, right, bottom, top) tangents seen from the eye's centre of rotation."""
-        if str(eye) in ("right", "Eye.RIGHT"):
+        if str(eye) == "right":
             return (self.tan_left, self.tan_right, self.tan_bottom, self.tan_top)
-        if str(eye) in ("left", "Eye.LEFT"):
+        if str(eye) == "left":
             return (-self.tan_right, -self.tan_left, self.tan_bottom, self.tan_top)
         raise ValueError(f"eye must be 'left' or 'right', got {eye!r}")
 
@@ -90,6 +90,9 @@ def symmetric_profile(
 ) -> DisplayProfile:
     """A symmetric frustum from a horizontal FOV. Without ``vertical_fov_deg`` the vertical
     extent is aspect-matched: equal pixel pitch in tangent space (square pixels on the image)."""
+    for key, value in (("horizontal_fov_deg", horizontal_fov_deg), ("vertical_fov_deg", vertical_fov_deg)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise ValueError(f"display profile {name!r}: {key} must be a number, got {value!r}")
     if not 0.0 < horizontal_fov_deg < 180.0:
         raise ValueError(f"display profile {name!r}: horizontal_fov_deg must be in (0, 180), got {horizontal_fov_deg}")
     tx = math.tan(math.radians(horizontal_fov_deg) / 2.0)

@@ -127,3 +127,24 @@ def test_enums_and_eye_centres():
     np.testing.assert_array_equal(eye_centre_m(Eye.RIGHT, 0.064), [0.032, 0, 0])
     with pytest.raises(ValueError, match="conventional"):
         parse_mode("fancy")
+
+
+def test_make_eye_camera_rejects_bad_configuration():
+    from psyop.optics.camera import make_eye_camera
+
+    good = dict(display=VIVE_PRO, eye="left", fixation_m=[0, 0, -1.0], ipd_m=0.064, nc_m=0.0076916, mode="ocular")
+    assert make_eye_camera(**good).valid
+    for change, message in (
+        ({"ipd_m": float("nan")}, "ipd_m"),
+        ({"nc_m": 0.5}, "nc_m"),
+        ({"near_m": 1.0, "far_m": 0.5}, "near_m"),
+        ({"near_m": 0.0}, "near_m"),
+        ({"fixation_m": [0.0, -1.0]}, "shape"),
+        ({"eye": "cyclops"}, "eye"),
+        ({"mode": "inverse"}, "rendering mode"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            make_eye_camera(**{**good, **change})
+    with pytest.raises(ValueError, match="horizontal_fov_deg"):
+        display_profile_from_mapping({"name": "n", "width_px": 10, "height_px": 10, "refresh_hz": 60,
+                                      "horizontal_fov_deg": "wide"})
