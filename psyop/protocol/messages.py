@@ -8,6 +8,7 @@ land on the same place (pydantic tries each member of a union) are merged into o
 from __future__ import annotations
 
 import difflib
+import re
 import types
 import typing
 from typing import Any
@@ -108,18 +109,25 @@ def _describe(root: type[BaseModel], error: dict[str, Any]) -> tuple[str, bool]:
         close = difflib.get_close_matches(str(error.get("input")), options, n=1)
         hint = f" Did you mean '{close[0]}'?" if close else ""
         return f"{_short(error.get('input'))} is not allowed here.{hint} Use one of: {', '.join(options)}", False
-    got = f" (got {_short(error['input'])})" if "input" in error and not isinstance(error["input"], dict) else ""
+    message = re.sub(r"a valid dictionary or instance of (\w+)", r"a mapping of keys (\1)", message)
+    message = message.replace("Input should be", "expected")
+    show_input = "input" in error and not isinstance(error["input"], dict) and kind != "value_error"
+    got = f" (got {_short(error['input'])})" if show_input else ""
     return f"{message}{got}", False
 
 
 def format_validation_error(error: ValidationError, document: YamlDocument, root: type[BaseModel]) -> tuple[str, str]:
     """(location of the first problem, message listing every problem with its own location)."""
     merged: dict[tuple[Path, bool], list[str]] = {}
-    for item in error.errors(include_url=False):
+    # an unknown key usually explains a "missing" one next to it (a typo): report it first
+    items = sorted(error.errors(include_url=False), key=lambda e: e["type"] != "extra_forbidden")
+    for item in items:
         text, at_key = _describe(root, item)
         loc = tuple(item["loc"])
         if item["type"] == "missing":
             loc = loc[:-1]
+        elif item["type"] == "union_tag_invalid":
+            loc = loc + ("kind",)
         found, mark = document.nearest(loc, key=at_key)
         key = (found, at_key)
         bucket = merged.setdefault(key, [])
