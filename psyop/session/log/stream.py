@@ -41,7 +41,8 @@ class DurableStreamWriter:
     def _sync(self) -> None:
         self._file.flush()
         if self._fsync:
-            os.fsync(self._file.fileno())
+            # fdatasync: the appended bytes and the new file size, without atime/mtime
+            getattr(os, "fdatasync", os.fsync)(self._file.fileno())
 
     def close(self) -> None:
         """Write the end-of-stream marker and close. Safe to call twice."""

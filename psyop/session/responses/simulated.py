@@ -13,11 +13,15 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from scipy.stats import norm
 
 from psyop.errors import UserError
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.responses.base import Response, ResponseKind, score
+
+
+def _phi(z: float) -> float:
+    """Standard normal CDF (math.erf; avoids importing scipy in every session process)."""
+    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
 
 
 def _get(params: Mapping[str, Any], key: str, default: Any = None, *, required: bool = False) -> Any:
@@ -76,7 +80,7 @@ class Psychometric2AFC(SimulatedObserver):
 
     def p_correct(self, row: Mapping[str, Any]) -> float:
         x = float(row[self.level_column])
-        return 0.5 + (0.5 - self.lapse) * float(norm.cdf((x - self.threshold_for(row)) / self.width_D))
+        return 0.5 + (0.5 - self.lapse) * _phi((x - self.threshold_for(row)) / self.width_D)
 
     def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
         rng = self.trial_rng(row)

@@ -1,0 +1,136 @@
+"""Crash safety: SIGKILL a running `psyop run` many times; nothing recorded is lost.
+
+Each kill hits a session process at a random moment (a small real delay per phase
+spreads the kills over recalibration, intervals, blank, response and the durable
+append). The child announces every trial on a pipe only *after* its durable append
+returned, so the test knows which trials were recorded before the kill.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from psyop.cli import main as cli_main
+from psyop.session.log.layout import SessionPaths
+from psyop.session.log.schema import TIMING_COLUMNS
+from psyop.session.log.store import finalise_session
+from session_helpers import small_protocol
+
+SEED = 7
+
+
+def _child(argv: list[str], announce_fd: int) -> None:
+    """Run `psyop run` in this (forked) process, announcing each durable trial."""
+    from psyop.session.log import store
+
+    original = store.SessionStore.append_trial
+
+    def append_and_announce(self, row, frames):  # type: ignore[no-untyped-def]
+        original(self, row, frames)
+        os.write(announce_fd, f"{int(row['trial'])}\n".encode())
+
+    store.SessionStore.append_trial = append_and_announce  # instrumentation only, after the real append
+    os._exit(cli_main(argv))
+
+
+def _run_args(protocol: Path, data: Path, participant: str, delay_s: float) -> list[str]:
+    return ["run", str(protocol), "--participant", participant, "--seed", str(SEED), "--data", str(data),
+            "--clock", "virtual", "--no-progress", "--phase-delay-s", str(delay_s)]
+
+
+def _kill_once(argv: list[str], after_s: float) -> set[int]:
+    read_fd, write_fd = os.pipe()
+    process = mp.get_context("fork").Process(target=_child, args=(argv, write_fd))
+    process.start()
+    os.close(write_fd)
+    time.sleep(after_s)
+    if process.is_alive():
+        os.kill(process.pid, signal.SIGKILL)
+    process.join()
+    announced = b""
+    while chunk := os.read(read_fd, 65536):
+        announced += chunk
+    os.close(read_fd)
+    return {int(x) for x in announced.split()}
+
+
+def _comparable(trials: pd.DataFrame) -> pd.DataFrame:
+    return trials.drop(columns=[c for c in TIMING_COLUMNS if c in trials]).reset_index(drop=True)
+
+
+@pytest.mark.slow
+def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
+    rng = random.Random(1234)
+    protocol = small_protocol(tmp_path, "detection", 2)
+    n = 30
+    reference_data = tmp_path / "reference"
+    assert cli_main(_run_args(protocol, reference_data, "R1", 0.0)) == 0
+    reference = pd.read_parquet(reference_data / "detection" / "sub-R1" / "ses-1" / "trials.parquet")
+    assert len(reference) == n
+
+    kills = 0
+    for participant in ("R1", "R2", "R3"):
+        data = tmp_path / f"killed_{participant}"
+        paths = SessionPaths(data, "detection", participant, 1)
+        recorded_before: set[int] = set()
+        while len(recorded_before) < n and kills < 60:
+            announced = _kill_once(_run_args(protocol, data, participant, 0.01), rng.uniform(0.01, 0.3))
+            kills += 1
+            if not paths.metadata.exists():
+                assert not announced
+                continue
+            trials, _ = finalise_session(paths, status="complete")  # what `psyop recover` does
+            got = set(trials["trial"].tolist()) if len(trials) else set()
+            assert announced <= got, "a trial announced as recorded is missing after the kill"
+            assert recorded_before <= got, "a trial recorded by an earlier run disappeared"
+            assert trials["trial"].is_unique
+            assert got == set(range(len(got))), "trials are recorded in schedule order without holes"
+            recorded_before = got
+        if len(recorded_before) < n:
+            assert cli_main(_run_args(protocol, data, participant, 0.0)) == 0
+        final = pd.read_parquet(paths.trials_parquet)
+        assert final["trial"].tolist() == list(range(n)), "no duplicate and no missing trial after resume"
+        if participant == "R1":
+            pd.testing.assert_frame_equal(_comparable(final), _comparable(reference), check_dtype=False)
+        else:
+            assert final["trial_seed"].tolist() == reference["trial_seed"].tolist()  # same seed, same schedule
+    assert kills >= 20
+
+
+@pytest.mark.slow
+def test_sigkill_of_the_psyop_command_then_recover_and_resume(detection_small: Path, tmp_path: Path) -> None:
+    """The real console entry point (`python -m psyop run`), killed, then `psyop recover` and resume."""
+    data = tmp_path / "data"
+    argv = [sys.executable, "-m", "psyop", *_run_args(detection_small, data, "K1", 0.05)]
+    process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    paths = SessionPaths(data, "detection", "K1", 1)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:  # kill once a few trials are durably in the stream
+        segment = paths.trial_segment(0)
+        if segment.exists() and segment.stat().st_size > 6000:
+            break
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    assert process.returncode == -signal.SIGKILL
+    recover = subprocess.run([sys.executable, "-m", "psyop", "recover", str(data)], capture_output=True, text=True)
+    assert recover.returncode == 0, recover.stderr
+    assert "incomplete (resumable)" in recover.stdout
+    partial = pd.read_parquet(paths.trials_parquet)
+    assert 0 < len(partial) < 15
+    resume = subprocess.run([sys.executable, "-m", "psyop", *_run_args(detection_small, data, "K1", 0.0)],
+                            capture_output=True, text=True)
+    assert resume.returncode == 0, resume.stderr
+    final = pd.read_parquet(paths.trials_parquet)
+    assert final["trial"].tolist() == list(range(15))
+    pd.testing.assert_frame_equal(_comparable(final.iloc[: len(partial)]), _comparable(partial), check_dtype=False)
