@@ -51,6 +51,7 @@ class SessionOptions:
     tracker_faults: SimulatedTrackerConfig = field(default_factory=SimulatedTrackerConfig)
     write_description: bool = True
     fsync: bool = True
+    every_frame: bool | None = None  # None: every frame unless virtual clock + observer without images
 
     @property
     def simulated(self) -> bool:
@@ -187,7 +188,8 @@ def run_session(
         path = fixation_path(protocol)
         config = LoopConfig(
             refresh_hz=float(display_profile.refresh_hz),
-            every_frame=not (clock.virtual and not responses.needs_images),
+            every_frame=(not (clock.virtual and not responses.needs_images)) if options.every_frame is None
+            else options.every_frame,
             pursuit_eccentricity_deg=path.eccentricity_deg if path else 16.0,
             pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
             phase_delay_s=options.phase_delay_s,

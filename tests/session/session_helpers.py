@@ -16,3 +16,11 @@ def small_protocol(directory: Path, study: str, repetitions: int = 1) -> Path:
     path = directory / f"{study}_small.yaml"
     path.write_text(text)
     return path
+
+
+def fast_protocol(directory: Path, study: str, repetitions: int = 1, phase_s: float = 0.05) -> Path:
+    """Like :func:`small_protocol`, with every phase shortened to ``phase_s`` (real-clock tests)."""
+    path = small_protocol(directory, study, repetitions)
+    text = re.sub(r"(?m)^(\s*(?:-\s*)?(?:duration_s|expected_s|min_duration_s):)\s*[\d.]+", rf"\g<1> {phase_s}", path.read_text())
+    path.write_text(text)
+    return path

@@ -45,7 +45,7 @@ class GazeConditioner:
 
         Returns the correction magnitude in degrees (nan and no change when unusable).
         """
-        if measured is None or not is_usable(measured.fixation_m, measured.confidence, self.confidence_threshold):
+        if measured is None or not measured.valid or not is_usable(measured.fixation_m, measured.confidence, self.confidence_threshold):
             return math.nan
         m_az, m_el = direction_to_angles_deg(measured.direction())
         t_az, t_el = direction_to_angles_deg(target_direction)
@@ -61,7 +61,7 @@ class GazeConditioner:
 
     def condition(self, sample: GazeSample | None) -> ConditionedGaze:
         """The fixation to render with: this sample corrected, or the last valid one held."""
-        if sample is not None and is_usable(sample.fixation_m, sample.confidence, self.confidence_threshold):
+        if sample is not None and sample.valid and is_usable(sample.fixation_m, sample.confidence, self.confidence_threshold):
             self._last = ConditionedGaze(self.correct(sample.fixation_m), sample.timestamp_s, sample.confidence, True, False)
             return self._last
         t = sample.timestamp_s if sample is not None else math.nan

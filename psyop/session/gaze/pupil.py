@@ -46,19 +46,26 @@ class ClockSync:
                 "round_trip_median_s": self.round_trip_median_s, "n": self.n}
 
 
-def fit_clock_sync(local_mid_s: np.ndarray, remote_s: np.ndarray, round_trips_s: np.ndarray) -> ClockSync:
-    """Least-squares line through (local, remote) time pairs."""
+def fit_clock_sync(local_mid_s: np.ndarray, remote_s: np.ndarray, round_trips_s: np.ndarray, *,
+                   min_span_s: float = 1.0) -> ClockSync:
+    """Least-squares line through (local, remote) time pairs.
+
+    Drift is only estimated once the pairs span ``min_span_s``: over a few milliseconds
+    of round trips the slope is pure noise. Before that the slope is fixed to 1 and the
+    offset is the mean over the faster half of the round trips (least queueing).
+    """
     local_mid_s = np.asarray(local_mid_s, dtype=np.float64)
     remote_s = np.asarray(remote_s, dtype=np.float64)
-    if local_mid_s.size >= 2 and np.ptp(local_mid_s) > 0:
+    trips = np.asarray(round_trips_s, dtype=np.float64)
+    if local_mid_s.size >= 3 and np.ptp(local_mid_s) >= min_span_s:
         x0 = local_mid_s.mean()
         slope, intercept = np.polyfit(local_mid_s - x0, remote_s, 1)
         offset = intercept - slope * x0
-        residual = remote_s - (offset + slope * local_mid_s)
     else:
-        slope, offset = 1.0, float(np.mean(remote_s - local_mid_s))
-        residual = remote_s - (offset + local_mid_s)
-    return ClockSync(float(offset), float(slope - 1.0), float(np.std(residual)), float(np.median(round_trips_s)), int(local_mid_s.size))
+        fast = trips <= np.median(trips)
+        slope, offset = 1.0, float(np.mean((remote_s - local_mid_s)[fast]))
+    residual = remote_s - (offset + slope * local_mid_s)
+    return ClockSync(float(offset), float(slope - 1.0), float(np.std(residual)), float(np.median(trips)), int(local_mid_s.size))
 
 
 def world_mm_to_head_m(point_mm: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -104,6 +111,8 @@ class PupilClient:
         self._last_pupil_t = math.nan
         self._received = self._gaps = self._low_confidence = self._malformed = 0
         self.sync: ClockSync | None = None
+        self.resync_every_s = 1.0
+        self._pairs: list[tuple[float, float, float]] = []  # (local mid, remote, round trip)
 
     # connection ----------------------------------------------------------------------
     def _request(self, message: str) -> str:
@@ -129,20 +138,35 @@ class PupilClient:
         self._thread.start()
 
     def synchronise(self) -> ClockSync:
-        """Repeated 't' round trips -> least-squares offset and drift."""
-        mids, remotes, trips = [], [], []
+        """Repeated 't' round trips -> least-squares offset (and drift, once they span >= 1 s)."""
         for _ in range(self.n_sync):
-            t0 = self._clock()
-            remote = float(self._request("t"))
-            t1 = self._clock()
-            mids.append(0.5 * (t0 + t1))
-            remotes.append(remote)
-            trips.append(t1 - t0)
-        return fit_clock_sync(np.array(mids), np.array(remotes), np.array(trips))
+            self._round_trip()
+        return self._fit()
+
+    def _round_trip(self) -> None:
+        t0 = self._clock()
+        remote = float(self._request("t"))
+        t1 = self._clock()
+        self._pairs.append((0.5 * (t0 + t1), remote, t1 - t0))
+        del self._pairs[:-500]
+
+    def _fit(self) -> ClockSync:
+        pairs = np.array(self._pairs)
+        return fit_clock_sync(pairs[:, 0], pairs[:, 1], pairs[:, 2])
 
     def _receive(self, sub: zmq.Socket) -> None:
+        last_sync = self._clock()
         try:
             while not self._stop.is_set():
+                if self._clock() - last_sync > self.resync_every_s:
+                    last_sync = self._clock()
+                    try:  # this thread owns the REQ socket after start()
+                        self._round_trip()
+                        sync = self._fit()
+                        with self._lock:
+                            self.sync = sync
+                    except TrackerLost:
+                        pass  # the gaze stream going silent is what latest() reports
                 if not sub.poll(50):
                     continue
                 parts = sub.recv_multipart()
