@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from psyop.protocol.base import format_level
-from psyop.protocol.conditions import expand_conditions
+from psyop.protocol.conditions import condition_label, expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.schedule.compile import expected_duration_s, trial_count
 
@@ -46,6 +46,12 @@ def summarise(protocol: Protocol) -> str:
     lines.append(f"  conditions: {len(conditions)} x {design.repetitions} repetitions"
                  + (f" + {design.practice_trials} practice" if design.practice_trials else "")
                  + f" = {trial_count(protocol)} trials")
+    shown = conditions if len(conditions) <= 30 else conditions[:10]
+    per_condition = design.repetitions
+    for condition in shown:
+        lines.append(f"    {condition_label(condition, design) or '(single condition)'}: {per_condition} trials")
+    if len(shown) < len(conditions):
+        lines.append(f"    ... and {len(conditions) - len(shown)} more conditions")
     randomisation = design.randomisation
     order = randomisation.kind + (f" by {', '.join(randomisation.by)} ({randomisation.block_order} block order)"
                                   if randomisation.kind == "blocked" else "")
