@@ -129,6 +129,50 @@ vec3 grid_colour(vec2 corner_px) {
     return acc * inv * inv;
 }
 
+#define MAX_RELEVANT 16
+// Primitive data of the pixel's relevant primitives, cached in registers for the sample loop.
+struct Cached { int index; vec3 c; vec3 n; vec3 hu2; vec3 hv2; float num; float rect; vec4 border; vec2 side; };
+Cached relevant[MAX_RELEVANT];
+int n_relevant = 0;
+
+void cache_primitive(int i) {
+    vec4 p0 = P(i, 0); vec4 p1 = P(i, 1);
+    Cached k;
+    k.index = i; k.c = u_centre[i].xyz; k.n = cross(p0.xyz, p1.xyz);
+    k.hu2 = p0.xyz / dot(p0.xyz, p0.xyz); k.hv2 = p1.xyz / dot(p1.xyz, p1.xyz);
+    k.num = dot(k.c, k.n); k.rect = p0.w; k.border = P(i, 5); k.side = P(i, 6).xy;
+    relevant[n_relevant++] = k;
+}
+
+// Like grid_colour, but only over the primitives that can be hit inside this pixel: those
+// covering its centre or with an edge within the margin (no other one reaches the pixel).
+vec3 grid_colour_relevant(vec2 corner_px) {
+    vec3 acc = vec3(0.0);
+    float inv = 1.0 / float(u_samples);
+    for (int j = 0; j < u_samples; ++j)
+        for (int k = 0; k < u_samples; ++k) {
+            vec3 d = ray_at(corner_px + (vec2(k, j) + 0.5) * inv);
+            int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0;
+            for (int r = 0; r < n_relevant; ++r) {
+                float t = relevant[r].num / dot(d, relevant[r].n);
+                if (!(t > 0.0) || t >= best_t || isinf(t)) continue;
+                vec3 x = t * d;
+                if (-x.z < u_near_m || -x.z > u_far_m) continue;
+                vec3 q = x - relevant[r].c;
+                float a = dot(q, relevant[r].hu2);
+                float b = dot(q, relevant[r].hv2);
+                float g = (relevant[r].rect < 0.5) ? length(vec2(a, b)) - 1.0 : max(abs(a), abs(b)) - 1.0;
+                vec4 bd = relevant[r].border;
+                if (bd.x > 0.5)
+                    g = max(g, -relevant[r].side.y
+                               * (a - (relevant[r].side.x + bd.y * sin(TWO_PI * bd.z * 0.5 * (b + 1.0) + bd.w))));
+                if (g <= 0.0) { best = relevant[r].index; best_t = t; ba = a; bb = b; }
+            }
+            acc += best < 0 ? u_background : shade(best, ba, bb, 0.0);
+        }
+    return acc * inv * inv;
+}
+
 void main() {
     ivec2 fc = ivec2(gl_FragCoord.xy);
     vec2 corner = vec2(float(fc.x), u_size_px.y - 1.0 - float(fc.y));  // top-left, y down
@@ -145,24 +189,30 @@ void main() {
     vec3 dx = ray_at(corner + vec2(1.5, 0.5));
     vec3 dy = ray_at(corner + vec2(0.5, 1.5));
     bool edge = false;
+    bool overflow = false;
     int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0; float fw = 0.0;
     for (int i = 0; i < u_n_prims; ++i) {
         Hit h0 = intersect(i, d0);
         Hit hx = intersect(i, dx);
         Hit hy = intersect(i, dy);
-        if (h0.plane != hx.plane || h0.plane != hy.plane) { edge = true; }
+        bool near_edge = false;
+        if (h0.plane != hx.plane || h0.plane != hy.plane) { near_edge = true; }
         else if (h0.plane) {
             vec2 grad = vec2(hx.g - h0.g, hy.g - h0.g);
             float gl = length(grad);
             if (!(abs(h0.g) > u_edge_margin_px * gl) || h0.inside != hx.inside || h0.inside != hy.inside)
-                edge = true;
+                near_edge = true;
+        }
+        edge = edge || near_edge;
+        if (near_edge || h0.inside) {
+            if (n_relevant < MAX_RELEVANT) cache_primitive(i); else overflow = true;
         }
         if (h0.inside && h0.t < best_t) {
             best = i; best_t = h0.t; ba = h0.a; bb = h0.b;
             fw = max(max(abs(hx.a - h0.a), abs(hy.a - h0.a)), max(abs(hx.b - h0.b), abs(hy.b - h0.b)));
         }
     }
-    if (edge) colour = grid_colour(corner);
+    if (edge) colour = overflow ? grid_colour(corner) : grid_colour_relevant(corner);
     else colour = best < 0 ? u_background : shade(best, ba, bb, fw);
 #endif
     float ap = texelFetch(u_aperture, ivec2(fc.x, fc.y), 0).r;

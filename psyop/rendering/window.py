@@ -1,0 +1,115 @@
+"""A real on-screen window (glfw) that presents the renderer's frames and logs their timing.
+
+Headless EGL stays the default; this is for a desktop or an HMD's mirror window, and for the
+frame-timing test under Xvfb. Xvfb has no vsync, so pacing comes from the caller's clock
+(:func:`run_paced`), never from ``swap_interval``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import moderngl
+import numpy as np
+
+
+class WindowUnavailable(RuntimeError):
+    """No display/window system could be opened (reason in the message)."""
+
+
+@dataclass(frozen=True)
+class FrameTiming:
+    """Per-frame presentation timestamps and the dropped-frame count against the refresh."""
+
+    present_s: np.ndarray
+    slot_start_s: np.ndarray
+    refresh_interval_s: float
+    dropped_frames: int
+    late_frames: int
+
+
+def count_dropped_frames(present_s: np.ndarray, refresh_interval_s: float) -> tuple[int, int]:
+    """(dropped, late): a gap of k refresh intervals (rounded) between presentations drops
+    k - 1 frames; ``late`` counts the gaps longer than 1.5 intervals."""
+    gaps = np.diff(np.asarray(present_s, dtype=np.float64)) / refresh_interval_s
+    late = int(np.sum(gaps > 1.5))
+    dropped = int(np.sum(np.maximum(np.round(gaps) - 1.0, 0.0)))
+    return dropped, late
+
+
+class Window:
+    """A glfw window with an OpenGL 4.1 core context wrapped by moderngl."""
+
+    def __init__(self, width_px: int, height_px: int, title: str = "psyop", swap_interval: int = 1):
+        import glfw  # imported here: headless use never needs it
+
+        self._glfw = glfw
+        if not glfw.init():
+            raise WindowUnavailable("glfw.init() failed (no X display? run under xvfb-run)")
+        glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 4)
+        glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 1)
+        glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+        glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+        glfw.window_hint(glfw.RESIZABLE, False)
+        self._window = glfw.create_window(width_px, height_px, title, None, None)
+        if not self._window:
+            glfw.terminate()
+            raise WindowUnavailable("glfw.create_window failed")
+        glfw.make_context_current(self._window)
+        glfw.swap_interval(swap_interval)
+        self.ctx = moderngl.create_context()
+        self.width_px, self.height_px = width_px, height_px
+
+    def present(self, framebuffer: Any) -> None:
+        """Copy a framebuffer of the window's size to the screen and swap."""
+        self.ctx.copy_framebuffer(self.ctx.screen, framebuffer)
+        self._glfw.swap_buffers(self._window)
+        self._glfw.poll_events()
+
+    def screen_pixels(self) -> np.ndarray:
+        """(H, W, 3) uint8 of the back buffer's current content, top row first."""
+        raw = self.ctx.screen.read(components=3, dtype="f1")
+        return np.frombuffer(raw, dtype=np.uint8).reshape(self.height_px, self.width_px, 3)[::-1]
+
+    def release(self) -> None:
+        if self._window is not None:
+            self.ctx.release()
+            self._glfw.destroy_window(self._window)
+            self._glfw.terminate()
+            self._window = None
+
+    def __enter__(self) -> Window:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def run_paced(
+    n_frames: int,
+    refresh_interval_s: float,
+    draw_and_present: Callable[[int], None],
+    clock: Callable[[], float] = time.perf_counter,
+    sleep: Callable[[float], None] = time.sleep,
+) -> FrameTiming:
+    """Call ``draw_and_present(k)`` once per refresh slot, paced by ``clock``, timestamping
+    each presentation. A frame that finishes after its slot makes the next one wait for the
+    following free slot, which is what a vsynced display does, so the gaps expose drops."""
+    start = clock()
+    stamps = np.empty(n_frames)
+    slots = np.empty(n_frames)
+    slot = 0
+    for k in range(n_frames):
+        deadline = start + slot * refresh_interval_s
+        slots[k] = deadline
+        wait = deadline - clock()
+        if wait > 0:
+            sleep(wait)
+        draw_and_present(k)
+        stamps[k] = clock()
+        slot = max(slot + 1, int(np.ceil((stamps[k] - start) / refresh_interval_s)))
+    dropped, late = count_dropped_frames(stamps, refresh_interval_s)
+    return FrameTiming(stamps, slots, refresh_interval_s, dropped, late)
