@@ -84,6 +84,13 @@ class Factor(StrictModel):
             return [_values(v) for v in self.levels_by.values()]
         return []
 
+    def all_levels(self) -> list[Level]:
+        """Every distinct level this factor can take, in first-seen order ([] when adaptive)."""
+        seen: list[Level] = []
+        for values in self.level_sets():
+            seen += [v for v in values if v not in seen]
+        return seen
+
     def levels_for(self, parent_level: Level | None) -> list[Level]:
         """This factor's levels, given the parent's level when it depends on one."""
         if self.levels is not None:

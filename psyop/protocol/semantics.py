@@ -224,7 +224,7 @@ class _Checker:
             self.factor_exists(response.separation_factor, path + ("separation_factor",), numeric=True)
         elif response.kind == "pairwise_preference":
             if self.factor_exists(response.pair_factor, path + ("pair_factor",), numeric=False):
-                for level in self.factors[response.pair_factor].levels_for(None):
+                for level in self.factors[response.pair_factor].all_levels():
                     parts = str(level).split("|")
                     if len(parts) != 2 or parts[0] == parts[1] or not set(parts) <= set(RENDERING_MODES):
                         self.add(("design", "factors", response.pair_factor, "levels"),
@@ -232,7 +232,7 @@ class _Checker:
                                  f"{', '.join(RENDERING_MODES)}")
         elif response.kind == "reach":
             if self.factor_exists(response.rendering_factor, path + ("rendering_factor",), numeric=False):
-                for level in self.factors[response.rendering_factor].levels_for(None):
+                for level in self.factors[response.rendering_factor].all_levels():
                     if level not in response.modes:
                         self.add(path + ("modes",), f"rendering level '{level}' has no mode; add '{level}: ocular' "
                                                     "(or conventional/reversed) under modes")
@@ -240,7 +240,7 @@ class _Checker:
 
     def mode_factor(self, name: str, path: tuple[Any, ...]) -> None:
         if self.factor_exists(name, path, numeric=False):
-            for level in self.factors[name].levels_for(None) if self.factors[name].levels is not None else []:
+            for level in self.factors[name].all_levels():
                 if level not in RENDERING_MODES:
                     self.add(("design", "factors", name, "levels"),
                              f"'{level}' is not a rendering mode.{_suggest(str(level), list(RENDERING_MODES))} "
@@ -265,7 +265,7 @@ class _Checker:
         elif observer.kind == "reach":
             response = self.p.response
             if response.rendering_factor in self.factors:
-                levels = self.factors[response.rendering_factor].levels_for(None)
+                levels = self.factors[response.rendering_factor].all_levels()
                 for level in levels:
                     if level not in observer.by_condition:
                         self.add(path + ("by_condition",), f"no reach model for rendering '{level}'; add it")

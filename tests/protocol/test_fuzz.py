@@ -136,3 +136,37 @@ def test_binary_files_through_the_cli(tmp_path: Path, raw: bytes) -> None:
     path = tmp_path / "binary.yaml"
     path.write_bytes(raw)
     assert main(["validate", str(path)]) == 2
+
+
+def _paths(node, prefix=()):
+    yield prefix, node
+    if isinstance(node, dict):
+        for key, value in node.items():
+            yield from _paths(value, prefix + (key,))
+    elif isinstance(node, list):
+        for index, value in enumerate(node):
+            yield from _paths(value, prefix + (index,))
+
+
+def test_400_grafted_protocols_fail_cleanly_or_compile() -> None:
+    """Structurally plausible nonsense: replace a subtree by a subtree of any study (factor sets of
+    another study, a scene primitive where a depth belongs, ...). This reaches the cross-section
+    checks and the compiler, which random text rarely does."""
+    import copy
+
+    import yaml
+
+    rng = random.Random(4242)
+    studies = {name: yaml.safe_load(text) for name, text in TEXTS.items()}
+    pool = [node for data in studies.values() for _, node in _paths(data)]
+    outcomes = {"ok": 0, "error": 0}
+    for _ in range(400):
+        data = copy.deepcopy(studies[rng.choice(sorted(studies))])
+        for _ in range(rng.choice([1, 1, 2])):
+            path = rng.choice([p for p, _ in _paths(data) if p])
+            parent = data
+            for key in path[:-1]:
+                parent = parent[key]
+            parent[path[-1]] = copy.deepcopy(rng.choice(pool))
+        outcomes[_check(yaml.safe_dump(data, sort_keys=False))] += 1
+    assert outcomes["error"] > 200 and outcomes["ok"] > 10
