@@ -13,16 +13,22 @@ from psyop.session.gaze.sample import GazeSample
 
 
 class ReplayTracker:
-    """Serves logged gaze samples by their timestamps (shifted by ``time_offset_s``)."""
+    """Serves logged gaze samples as they were available in the logged session.
+
+    A sample becomes available at the render start of the first frame that used it
+    (so the original tracker latency is replayed too); ``time_offset_s`` shifts the log.
+    """
 
     def __init__(self, frames: pd.DataFrame, time_offset_s: float = 0.0) -> None:
         needed = ["gaze_sample_t_s", "fixation_x_m", "fixation_y_m", "fixation_z_m", "gaze_confidence", "gaze_valid"]
         missing = [c for c in needed if c not in frames.columns]
         if missing:
             raise UserError(f"replay: frame log lacks columns {missing}")
-        table = frames[needed].dropna(subset=["gaze_sample_t_s"])
-        table = table.drop_duplicates(subset="gaze_sample_t_s").sort_values("gaze_sample_t_s")
-        self._t = [float(t) + time_offset_s for t in table["gaze_sample_t_s"]]
+        available = "render_start_s" if "render_start_s" in frames.columns else "gaze_sample_t_s"
+        table = frames[needed + ([available] if available not in needed else [])].dropna(subset=["gaze_sample_t_s"])
+        table = table.drop_duplicates(subset="gaze_sample_t_s").sort_values(available)
+        self._t = [float(t) + time_offset_s for t in table[available]]
+        self._sample_t = [float(t) + time_offset_s for t in table["gaze_sample_t_s"]]
         self._rows = list(table.itertuples(index=False))
         self._delivered = 0
 
@@ -53,4 +59,4 @@ class ReplayTracker:
         self._delivered += 1
         fixation = (float(row.fixation_x_m), float(row.fixation_y_m), float(row.fixation_z_m))
         valid = bool(row.gaze_valid) and all(math.isfinite(v) for v in fixation)
-        return GazeSample(self._t[i], fixation, float(row.gaze_confidence), valid)
+        return GazeSample(self._sample_t[i], fixation, float(row.gaze_confidence), valid)

@@ -1,0 +1,68 @@
+"""Simulated observers: deterministic by seed, and their answers follow their parameters."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from psyop.errors import UserError
+from psyop.session.responses.simulated import make_observer
+
+
+def _rows(n: int, **columns: object) -> list[dict]:
+    return [{"trial": i, "trial_seed": 1000 + i, **{k: (v[i] if isinstance(v, (list, np.ndarray)) else v) for k, v in columns.items()}}
+            for i in range(n)]
+
+
+def test_psychometric_answers_follow_the_curve_and_do_not_depend_on_order() -> None:
+    params = {"kind": "psychometric_2afc", "level_column": "level_D", "threshold_D": 0.36, "width_D": 0.2, "lapse": 0.02}
+    levels = np.tile([0.0, 0.36, 1.0], 1500)
+    rows = _rows(levels.size, level_D=levels, correct_interval=np.tile([1, 2], levels.size // 2 + 1)[: levels.size])
+    observer = make_observer(params, seed=5, participant="S01")
+    answers = [observer.collect(r, 0.0) for r in rows]
+    reversed_answers = [make_observer(params, seed=5, participant="S01").collect(r, 0.0) for r in reversed(rows)][::-1]
+    assert answers == reversed_answers  # a resumed session answers exactly like an uninterrupted one
+    table = pd.DataFrame({"level": levels, "correct": [a.correct for a in answers]})
+    pc = table.groupby("level")["correct"].mean()
+    assert pc[0.36] == pytest.approx(0.75, abs=0.04)  # threshold_D is the 75 % point
+    assert pc[0.0] == pytest.approx(0.5 + 0.48 * 0.0359, abs=0.04)
+    assert pc[1.0] == pytest.approx(0.5 + 0.48 * 0.9994, abs=0.03)
+    other = [make_observer(params, seed=6, participant="S01").collect(r, 0.0) for r in rows[:200]]
+    assert other != answers[:200]
+
+
+def test_between_subject_threshold_shift_is_per_participant() -> None:
+    params = {"kind": "psychometric_2afc", "threshold_D": 0.36, "width_D": 0.2, "between_subject_sd_D": 0.1}
+    shifts = [make_observer(params, seed=1, participant=f"S{i:02d}").participant_shift_D for i in range(200)]
+    assert np.std(shifts) == pytest.approx(0.1, rel=0.2)
+    assert make_observer(params, seed=1, participant="S01").participant_shift_D == shifts[1]
+
+
+def test_ordinal_preference_and_reach() -> None:
+    ordinal = make_observer({"kind": "ordinal_accuracy", "p_correct": {"ocular": {1.0: 0.667, 2.0: 0.758}}},
+                            seed=3, participant="S01")
+    rows = _rows(3000, mode="ocular", separation_D=2.0, near_side=np.tile(["left", "right"], 1500))
+    assert np.mean([ordinal.collect(r, 0).correct for r in rows]) == pytest.approx(0.758, abs=0.03)
+    with pytest.raises(UserError, match="no p_correct"):
+        ordinal.collect({**rows[0], "mode": "reversed"}, 0)
+
+    preference = make_observer({"kind": "pairwise_preference", "strength": {"ocular": 3.3, "conventional": 1.0}},
+                               seed=3, participant="S01")
+    rows = _rows(3000, mode_a="ocular", mode_b="conventional")
+    chosen = [preference.collect(r, 0).chosen_mode for r in rows]
+    assert np.mean(np.array(chosen) == "ocular") == pytest.approx(3.3 / 4.3, abs=0.03)
+
+    reach = make_observer({"kind": "reach", "arm_reach_m": 0.7, "by_condition": {
+        "enabled": {"slope": 1.141, "intercept_m": 0.117, "noise_sd_m": 0.03},
+        "disabled": {"slope": 1.128, "intercept_m": 0.116, "noise_sd_m": 0.03}}}, seed=3, participant="S01")
+    fractions = np.tile([0.5, 0.58, 0.67, 0.75, 0.82, 0.9], 300)
+    rows = _rows(fractions.size, rendering="enabled", target_fraction=fractions)
+    reaches = np.array([reach.collect(r, 0).reach_m for r in rows])
+    slope, intercept = np.polyfit(fractions * 0.7, reaches, 1)
+    assert slope == pytest.approx(1.141, abs=0.05) and intercept == pytest.approx(0.117, abs=0.03)
+
+
+def test_unknown_observer_kind_is_a_user_error() -> None:
+    with pytest.raises(UserError, match="unknown kind"):
+        make_observer({"kind": "telepathy"}, seed=1, participant="S01")
