@@ -9,7 +9,6 @@ Columns are described in docs/architecture.md ("the trial table") and docs/proto
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -48,6 +47,16 @@ def _balanced_binary(cond_index: np.ndarray, rep_index: np.ndarray, n_conditions
         table[:, -1] = rng.integers(0, 2, size=n_conditions, dtype=np.int8)
     table = rng.permuted(table, axis=1)
     return table[cond_index, rep_index]
+
+
+def _counterbalance(protocol: Protocol) -> str:
+    """How the response's binary choice (interval order, near side, pair order) is assigned."""
+    response = protocol.response
+    if isinstance(response, (TwoIntervalResponse, PairwisePreferenceResponse)):
+        return response.order
+    if isinstance(response, LeftRightNearerResponse):
+        return response.near_side
+    return "balanced"  # reach: unused
 
 
 def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.ndarray, rep_index: np.ndarray,
@@ -93,7 +102,11 @@ def compile_schedule(protocol: Protocol, seed: int) -> pd.DataFrame:
     rep_main = np.tile(np.arange(repetitions), n_conditions)
 
     order, block_main = _order(protocol, conditions, cond_main, rep_main, _rng(seed, _STREAM_ORDER))
-    binary_main = _balanced_binary(cond_main, rep_main, n_conditions, repetitions, _rng(seed, _STREAM_COUNTERBALANCE))
+    counterbalance_rng = _rng(seed, _STREAM_COUNTERBALANCE)
+    if _counterbalance(protocol) == "balanced":
+        binary_main = _balanced_binary(cond_main, rep_main, n_conditions, repetitions, counterbalance_rng)
+    else:  # an independent fair coin per trial
+        binary_main = counterbalance_rng.integers(0, 2, size=cond_main.size, dtype=np.int8)
     cond_main, binary_main = cond_main[order], binary_main[order]
 
     n_practice = design.practice_trials
@@ -198,5 +211,3 @@ def trial_count(protocol: Protocol) -> int:
     design = protocol.design
     return len(expand_conditions(design)) * design.repetitions + design.practice_trials
 
-
-_ = math

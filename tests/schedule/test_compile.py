@@ -216,3 +216,31 @@ def test_any_design_is_crossed_balanced_and_deterministic(design) -> None:
         ones = int((rows["correct_interval"] == 1).sum())
         assert abs(2 * ones - len(rows)) <= 1
     pd.testing.assert_frame_equal(schedule, compile_schedule(protocol, seed))
+
+
+def test_random_order_is_a_coin_per_trial_not_balanced() -> None:
+    text = DETECTION.replace("order: balanced ", "order: random ").replace("repetitions: 15 ", "repetitions: 400 ")
+    protocol = parse_protocol(text, "coin.yaml")
+    schedule = compile_schedule(protocol, seed=6)
+    first = schedule.groupby("condition")["correct_interval"].apply(lambda s: int((s == 1).sum()))
+    # 15 fair coins x 400: some condition is off balance by more than one; overall still near half
+    assert (abs(2 * first - 400) > 1).any()
+    assert abs((schedule["correct_interval"] == 1).mean() - 0.5) < 0.03
+    pd.testing.assert_frame_equal(schedule, compile_schedule(protocol, seed=6))
+
+
+def test_interval_values_resolve_each_intervals_front_depth(protocols) -> None:
+    from psyop.schedule import interval_values
+
+    protocol = protocols["discrimination"]
+    front = protocol.primitive("front")
+    schedule = compile_schedule(protocol, seed=12)
+    for row in schedule.to_dict("records")[:40]:
+        depths = {k: front.depth.resolve_D(interval_values(row, k)) for k in (1, 2)}
+        modes = {k: interval_values(row, k)["mode"] for k in (1, 2)}
+        test, reference = row["correct_interval"], 3 - row["correct_interval"]
+        assert depths[test] == pytest.approx(row["offset_D"] + row["level_D"])
+        assert depths[reference] == pytest.approx(row["offset_D"])
+        assert modes == {1: "ocular", 2: "ocular"}
+    with pytest.raises(ValueError):
+        interval_values(schedule.iloc[0].to_dict(), 0)

@@ -1,0 +1,24 @@
+"""Reading one trial row the way a stimulus needs it: per-interval values."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+
+def interval_values(row: Mapping[str, Any], interval: int) -> dict[str, Any]:
+    """The row as seen during interval ``interval`` (1-based).
+
+    ``<name>_interval<k>`` columns (factor overrides of a two-interval response, e.g. the
+    discrimination reference's ``level_D = 0``) replace ``<name>``, and ``mode`` is that
+    interval's rendering mode. Depths resolve against the result, e.g.
+    ``primitive.depth.resolve_D(interval_values(row, 2))``.
+    """
+    if interval < 1:
+        raise ValueError(f"intervals are numbered from 1, got {interval}")
+    suffix = f"_interval{interval}"
+    values = {key: value for key, value in row.items() if "_interval" not in str(key)}
+    for key, value in row.items():
+        if str(key).endswith(suffix):
+            values[str(key)[: -len(suffix)]] = value
+    return values
