@@ -11,7 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import pandas as pd
+import statsmodels.api as sm
 import statsmodels.formula.api as smf
 
 
@@ -78,7 +80,11 @@ def linear_fits_by(data: pd.DataFrame, x: str, y: str, by: str) -> pd.DataFrame:
 
 
 def condition_interaction(data: pd.DataFrame, x: str, y: str, condition: str, reference: str | None = None) -> ConditionComparison:
-    """Test whether intercept and slope of ``y`` on ``x`` differ between two conditions."""
+    """Test whether intercept and slope of ``y`` on ``x`` differ between two conditions.
+
+    Fits y = b0 + b1 x + b2 [other] + b3 x [other] (OLS): b2 is the intercept difference,
+    b3 the slope difference; the joint F-test compares it with the pooled line y = a + b x.
+    """
     d = _clean(data, [x, y, condition]).rename(columns={x: "x", y: "y", condition: "cond"})
     d["x"] = d["x"].astype(float)
     d["y"] = d["y"].astype(float)
@@ -87,15 +93,16 @@ def condition_interaction(data: pd.DataFrame, x: str, y: str, condition: str, re
         raise ValueError(f"condition_interaction needs exactly two conditions, have {levels}")
     reference = reference or levels[0]
     other = [lv for lv in levels if lv != reference][0]
-    d["cond"] = pd.Categorical(d["cond"].astype(str), categories=[reference, other])
-    full = smf.ols("y ~ x * C(cond)", data=d).fit()
-    pooled = smf.ols("y ~ x", data=d).fit()
+    is_other = (d["cond"].astype(str) == other).to_numpy(float)
+    x_, y_ = d["x"].to_numpy(float), d["y"].to_numpy(float)
+    ones = np.ones_like(x_)
+    full = sm.OLS(y_, np.column_stack([ones, x_, is_other, x_ * is_other])).fit()
+    pooled = sm.OLS(y_, np.column_stack([ones, x_])).fit()
     f_value, p_value, df_diff = full.compare_f_test(pooled)
-    term = f"C(cond)[T.{other}]"
     return ConditionComparison(
         reference=reference, other=other,
-        intercept_diff=float(full.params[term]), intercept_diff_p=float(full.pvalues[term]),
-        slope_diff=float(full.params[f"x:{term}"]), slope_diff_p=float(full.pvalues[f"x:{term}"]),
+        intercept_diff=float(full.params[2]), intercept_diff_p=float(full.pvalues[2]),
+        slope_diff=float(full.params[3]), slope_diff_p=float(full.pvalues[3]),
         joint_F=float(f_value), joint_df1=int(round(df_diff)), joint_df2=int(round(full.df_resid)),
         joint_p=float(p_value), n=int(full.nobs),
     )

@@ -94,18 +94,17 @@ def simulate_reach(rng: np.random.Generator, n_subjects: int = 13,
     reports 1.141/0.167 (enabled) and 1.128/0.165 (disabled).
     """
     lines = lines or {"enabled": (1.141, 0.167), "disabled": (1.128, 0.165)}
-    rows = []
+    frames = []
     for participant in _participants(n_subjects):
         arm_m = rng.uniform(0.6, 0.8)
         bias = rng.normal(0.0, subject_sd)
         for rendering, (slope, intercept) in lines.items():
-            for target in REACH_TARGETS:
-                for _ in range(n_repeats):
-                    reach = intercept + slope * target + bias + rng.normal(0.0, noise_sd)
-                    rows.append({"study": "egocentric", "participant": participant, "session": 1,
-                                 "rendering": rendering, "target_fraction": target, "arm_reach_m": arm_m,
-                                 "reach_m": reach * arm_m})
-    return pd.DataFrame(rows)
+            target = np.repeat(np.asarray(REACH_TARGETS, float), n_repeats)
+            reach = intercept + slope * target + bias + rng.normal(0.0, noise_sd, target.size)
+            frames.append(pd.DataFrame({"study": "egocentric", "participant": participant, "session": 1,
+                                        "rendering": rendering, "target_fraction": target, "arm_reach_m": arm_m,
+                                        "reach_m": reach * arm_m}))
+    return pd.concat(frames, ignore_index=True)
 
 
 def simulate_realism(rng: np.random.Generator, n_subjects: int = 19,
@@ -113,12 +112,16 @@ def simulate_realism(rng: np.random.Generator, n_subjects: int = 19,
     """Pairwise-preference trials; ``p_first`` maps (first, second) -> P(first chosen)."""
     p_first = p_first or {("ocular", "conventional"): 0.768, ("reversed", "conventional"): 0.751,
                           ("ocular", "reversed"): 0.491}
-    rows = []
+    frames = []
     for participant in _participants(n_subjects):
         for (first, second), p in p_first.items():
-            for i in range(n_per_pair):
-                a, b = (first, second) if i % 2 == 0 else (second, first)
-                chosen = first if rng.random() < p else second
-                rows.append({"study": "realism", "participant": participant, "session": 1, "mode_a": a,
-                             "mode_b": b, "pair": f"{a}|{b}", "chosen_mode": chosen, "response": chosen})
-    return pd.DataFrame(rows)
+            order = np.arange(n_per_pair) % 2 == 0
+            chose_first = rng.random(n_per_pair) < p
+            chosen = np.where(chose_first, first, second)
+            frames.append(pd.DataFrame({
+                "study": "realism", "participant": participant, "session": 1,
+                "mode_a": np.where(order, first, second), "mode_b": np.where(order, second, first),
+                "chosen_mode": chosen, "response": chosen}))
+    out = pd.concat(frames, ignore_index=True)
+    out["pair"] = out["mode_a"] + "|" + out["mode_b"]
+    return out

@@ -1,0 +1,80 @@
+"""Paper-form strings, the dataset loader, and post-hoc tables."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from psyop.errors import UserError
+from psyop.statistics.anova import cell_means, posthoc_paired, significance_stars
+from psyop.statistics.dataset import load_dataset, load_trials, write_dataset
+from psyop.statistics.formatting import format_anova, format_binomial, format_p
+from psyop.statistics.goodness import binomial_deviance
+from psyop.statistics.simulate import simulate_detection, simulate_ordinal
+
+
+def test_format_anova_paper_examples():
+    mode = {"F": 17.98, "df1": 2, "df2": 36, "df1_gg": 1.70, "df2_gg": 30.65, "eps_gg": 0.85,
+            "p_gg": 2e-6, "p_unc": 1e-7}
+    assert format_anova(mode) == "F(1.70, 30.65) = 17.98, p < 0.0001, eps = 0.85"
+    dist = {"F": 8.14, "df1": 1, "df2": 18, "df1_gg": 1, "df2_gg": 18, "eps_gg": 1.0, "p_gg": 0.0106, "p_unc": 0.0106}
+    assert format_anova(dist) == "F(1, 18) = 8.14, p = 0.011"
+    inter = {"F": 0.42, "df1": 2, "df2": 36, "df1_gg": 1.78, "df2_gg": 31.96, "eps_gg": 0.89, "p_gg": 0.64, "p_unc": 0.66}
+    assert format_anova(inter) == "F(1.78, 31.96) = 0.42, p = 0.64, eps = 0.89"
+
+
+def test_format_binomial_and_p():
+    row = {"proportion": 0.768, "k": 219, "n": 285, "p": 1e-20}
+    assert format_binomial(row) == "76.8% (219/285), p < 0.0001, one-tailed binomial test"
+    assert format_p(0.0005) == "p < 0.001" and format_p(float("nan")) == "p = n/a"
+
+
+@settings(max_examples=40)
+@given(st.lists(st.tuples(st.integers(1, 30), st.floats(0.01, 0.99)), min_size=1, max_size=6))
+def test_deviance_is_nonnegative_and_zero_at_saturation(cells):
+    n = np.array([c[0] for c in cells])
+    p = np.array([c[1] for c in cells])
+    k = np.round(n * p)
+    assert binomial_deviance(k, n, p) >= -1e-9
+    saturated = np.clip(k / n, 1e-12, 1 - 1e-12)
+    assert binomial_deviance(k, n, saturated) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_stars_thresholds():
+    assert [significance_stars(p) for p in (0.0005, 0.001, 0.005, 0.05, 0.051)] == ["***", "***", "**", "*", ""]
+
+
+def test_dataset_round_trip_and_simulated_flag(tmp_path):
+    rng = np.random.default_rng(0)
+    det = simulate_detection(rng, n_subjects=3)
+    det.loc[det["participant"] == "02", "session"] = 2
+    write_dataset(tmp_path, {"detection": det}, simulated=True)
+    ds = load_dataset(tmp_path, "detection")
+    assert ds.simulated and ds.n_sessions == 3
+    trials = load_trials(tmp_path, "detection")
+    assert len(trials) == len(det) and trials["participant"].dtype == object or str(trials["participant"].dtype) == "str"
+    assert set(trials["participant"]) == {"01", "02", "03"}
+    assert json.loads((tmp_path / "dataset_description.json").read_text())["simulated"] is True
+
+
+def test_missing_study_is_a_user_error(tmp_path):
+    with pytest.raises(UserError, match="no sessions"):
+        load_trials(tmp_path, "ordinal")
+
+
+def test_posthoc_per_separation_bonferroni_and_dropping():
+    rng = np.random.default_rng(2)
+    cm = cell_means(simulate_ordinal(rng), "correct", ["mode", "separation_D"])
+    cm = cm[~((cm["participant"] == "03") & (cm["mode"] == "ocular") & (cm["separation_D"] == 2.0))]
+    ph = posthoc_paired(cm, "correct", "mode", by="separation_D")
+    assert len(ph) == 6 and (ph["m"] == 3).all()
+    assert (ph["n_subjects"] == 18).all()  # subject 03 dropped listwise
+    np.testing.assert_allclose(ph["p_bonf"], np.minimum(ph["p_unc"] * 3, 1))
+    row = ph[(ph["separation_D"] == 2.0) & (ph["A"] == "conventional") & (ph["B"] == "ocular")].iloc[0]
+    assert row["p_bonf"] < 0.001 and row["stars"] == "***"
+    assert isinstance(ph, pd.DataFrame)
