@@ -1,22 +1,36 @@
-"""``psyop validate PROTOCOL``: check a protocol file; errors at file:line:column, exit 2."""
+"""``psyop validate PROTOCOL...``: check protocol files; errors at file:line:column, exit 2."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 
+from psyop.errors import UserError
 from psyop.protocol import load_protocol
 from psyop.schedule import trial_count
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("validate", help="check a protocol YAML file",
-                                   description="Check a protocol file. Problems are reported as "
+    parser = subparsers.add_parser("validate", help="check protocol YAML files",
+                                   description="Check protocol files. Problems are reported as "
                                                "file:line:column with the key and what to change (exit code 2).")
-    parser.add_argument("protocol", help="protocol YAML file, e.g. protocols/detection.yaml")
+    parser.add_argument("protocol", nargs="+", help="protocol YAML file(s), e.g. protocols/*.yaml")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    protocol = load_protocol(args.protocol)
-    print(f"{args.protocol}: ok ({protocol.study.name}: {trial_count(protocol)} trials)")
-    return 0
+    paths = args.protocol if isinstance(args.protocol, list) else [args.protocol]
+    if len(paths) == 1:  # a single file: let the CLI report the error as usual
+        protocol = load_protocol(paths[0])
+        print(f"{paths[0]}: ok ({protocol.study.name}: {trial_count(protocol)} trials)")
+        return 0
+    failed = 0
+    for path in paths:
+        try:
+            protocol = load_protocol(path)
+        except UserError as error:
+            failed += 1
+            print(f"psyop validate: error: {error}", file=sys.stderr)
+            continue
+        print(f"{path}: ok ({protocol.study.name}: {trial_count(protocol)} trials)")
+    return 2 if failed else 0

@@ -136,3 +136,14 @@ def test_cli_subprocess_reports_and_exits_2(tmp_path: Path) -> None:
         assert result.returncode == 2, result.stderr
         assert "Traceback" not in result.stderr
         assert f"{path}:{_line_of(path.read_text(), 'duration_s: -0.5')}:" in result.stderr
+
+
+def test_validate_many_files_reports_each_and_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(_replace(DETECTION, "size_deg: 2 ", "size_deg: x "))
+    paths = [str(p) for p in sorted(PROTOCOLS.glob("*.yaml"))]
+    assert main(["validate", *paths]) == 0
+    assert main(["validate", paths[0], str(bad), paths[1]]) == 2
+    captured = capsys.readouterr()
+    assert f"{bad}:{_line_of(bad.read_text(), 'size_deg: x')}:" in captured.err
+    assert captured.out.count(": ok (") == len(paths) + 2
