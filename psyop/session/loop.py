@@ -16,9 +16,13 @@ Two frame regimes:
 
 from __future__ import annotations
 
+import contextlib
 import math
+import signal
 import sys
+import threading
 import time
+from collections.abc import Iterator
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
@@ -78,6 +82,22 @@ class SessionOutcome:
         return {"complete": 0, "interrupted": 130}.get(self.status, 3)
 
 
+@contextlib.contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """Hold SIGINT until the block ends, then raise KeyboardInterrupt (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if received:
+        raise KeyboardInterrupt
+
+
 class TrialLoop:
     """Runs the remaining trials of a schedule into a :class:`SessionStore`."""
 
@@ -117,7 +137,8 @@ class TrialLoop:
                 bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
                 record, frames = self.run_trial(row)
                 self.state = TrialState.RECORD
-                self.store.append_trial(record, frames.table() if len(frames) else None)
+                with _sigint_deferred():  # Ctrl-C never tears a record half-written
+                    self.store.append_trial(record, frames.table() if len(frames) else None)
                 self.state = TrialState.DONE
                 n_done += 1
                 bar.update(1)

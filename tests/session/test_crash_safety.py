@@ -134,3 +134,25 @@ def test_sigkill_of_the_psyop_command_then_recover_and_resume(detection_small: P
     final = pd.read_parquet(paths.trials_parquet)
     assert final["trial"].tolist() == list(range(15))
     pd.testing.assert_frame_equal(_comparable(final.iloc[: len(partial)]), _comparable(partial), check_dtype=False)
+
+
+def test_ctrl_c_discards_the_current_trial_and_finalises(detection_small: Path, tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    argv = [sys.executable, "-m", "psyop", *_run_args(detection_small, data, "C1", 0.05)]
+    process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    paths = SessionPaths(data, "detection", "C1", 1)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        segment = paths.trial_segment(0)
+        if segment.exists() and segment.stat().st_size > 6000:
+            break
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130
+    assert "interrupted" in stderr and "discarded" in stderr
+    trials = pd.read_parquet(paths.trials_parquet)  # finalised without `psyop recover`
+    assert 0 < len(trials) < 15 and trials["trial"].tolist() == list(range(len(trials)))
+    import json
+
+    assert json.loads(paths.metadata.read_text())["status"] == "incomplete"
