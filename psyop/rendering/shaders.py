@@ -129,6 +129,7 @@ vec3 grid_colour(vec2 corner_px) {
     return acc * inv * inv;
 }
 
+#if defined(AA_ADAPTIVE)
 #define MAX_RELEVANT 16
 // Primitive data of the pixel's relevant primitives, cached in registers for the sample loop.
 struct Cached { int index; vec3 c; vec3 n; vec3 hu2; vec3 hv2; float num; float rect; vec4 border; vec2 side; };
@@ -172,6 +173,8 @@ vec3 grid_colour_relevant(vec2 corner_px) {
         }
     return acc * inv * inv;
 }
+
+#endif
 
 void main() {
     ivec2 fc = ivec2(gl_FragCoord.xy);
