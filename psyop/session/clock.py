@@ -93,7 +93,10 @@ class FlipSync:
         if len(self.times_s) < 8:
             return nominal_period_s, (self.times_s[-1] if self.times_s else 0.0)
         t = np.asarray(self.times_s, dtype=np.float64)
-        index = np.rint((t - t[0]) / nominal_period_s)
+        # number flips by successive gaps (a missed flip is a gap of ~2 periods), so a small
+        # error in the nominal period cannot accumulate into a wrong index
+        steps = np.maximum(1.0, np.rint(np.diff(t) / nominal_period_s))
+        index = np.concatenate([[0.0], np.cumsum(steps)])
         slope, intercept = np.polyfit(index, t, 1)
         return float(slope), float(intercept)
 
