@@ -18,6 +18,8 @@ from pydantic import BaseModel, ValidationError
 from psyop.protocol.source import Path, YamlDocument, format_path
 
 MAX_REPORTED = 8
+_BOUNDS = {"greater_than": "greater than", "greater_than_equal": "at least", "less_than": "less than",
+           "less_than_equal": "at most"}
 
 
 def _candidates(tp: Any) -> list[Any]:
@@ -93,7 +95,17 @@ def _describe(root: type[BaseModel], error: dict[str, Any]) -> tuple[str, bool]:
         listing = f" Allowed keys here: {', '.join(allowed)}." if allowed else ""
         return f"unknown key '{key}'.{hint}{listing} Remove or rename it.", True
     if kind == "missing":
-        return f"missing required key '{loc[-1]}'; add '{loc[-1]}: ...' here (see docs/protocols.md)", False
+        described = ""
+        for model in models_at(root, loc[:-1]):
+            field = model.model_fields.get(str(loc[-1]))
+            if field is not None and field.description:
+                described = f" ({field.description})"
+                break
+        return f"missing required key '{loc[-1]}'{described}; add '{loc[-1]}: ...' here (see docs/protocols.md)", False
+    if kind in _BOUNDS:
+        limit = (error.get("ctx") or {}).get(kind.replace("_than_equal", "").replace("_than", "").replace(
+            "greater", "gt").replace("less", "lt") + ("e" if kind.endswith("equal") else ""))
+        return f"must be {_BOUNDS[kind]} {limit} (got {_short(error.get('input'))}); change the value", False
     if kind in ("union_tag_invalid", "union_tag_not_found"):
         ctx = error.get("ctx") or {}
         expected = [t.strip().strip("'") for t in str(ctx.get("expected_tags", "")).split(",") if t.strip()]

@@ -89,4 +89,3 @@ Response = Annotated[
 #: Number of interval phases each response kind needs.
 INTERVALS_NEEDED: dict[str, int] = {"two_interval": 2, "left_right_nearer": 1, "pairwise_preference": 2, "reach": 1}
 
-_ = Number  # re-exported for observers' convenience

@@ -25,8 +25,6 @@ from psyop.protocol.trial import Blank, Interval
 #: 1.3k tries, 45 % about 3.3k, 50 % about 15k. Above 40 % a per-trial placement gets slow.
 MAX_RANDOM_COVERAGE = 0.4
 
-#: Schedule columns every study has (observers may read them).
-BASE_COLUMNS = ("trial", "block", "condition", "trial_seed", "practice")
 
 
 @dataclass(frozen=True)

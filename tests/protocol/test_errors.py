@@ -44,7 +44,7 @@ CASES = [
     ("missing field", DETECTION, "  repetitions: 15", "  # no repetitions", "design:", "design",
      ["missing required key 'repetitions'", "add 'repetitions: ...'"]),
     ("negative duration", DETECTION, "duration_s: 0.5", "duration_s: -0.5", "duration_s: -0.5",
-     "trial.phases[2].duration_s", ["greater than 0", "-0.5"]),
+     "trial.phases[2].duration_s", ["must be greater than 0", "-0.5", "change the value"]),
     ("unknown kind", DETECTION, "kind: disc", "kind: disk", "kind: disk", "scene[0].kind", ["Did you mean 'disc'"]),
     ("unknown mode", DETECTION, "test: {mode: ocular}", "test: {mode: oculr}", "oculr", "response.test.mode",
      ["Did you mean 'ocular'"]),
