@@ -1,0 +1,49 @@
+"""Egocentric blind reaching: reach against target (fractions of arm reach) per rendering
+condition, one linear fit each, and the multiple regression testing slope/intercept differences.
+
+Reach fraction = ``reach_m / arm_reach_m`` (or a ``reach_fraction`` column if the log has one).
+Writes results/egocentric_fits.csv and results/egocentric.json.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from _common import parser, write_json
+
+from psyop.errors import UserError
+from psyop.figures.study_figures import plot_reach, save_figure
+from psyop.statistics.dataset import load_dataset
+from psyop.statistics.formatting import format_condition_comparison, format_linear_fit
+from psyop.statistics.regression import condition_interaction, linear_fits_by
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = parser(__doc__, "figures/fig_egocentric_reach.png")
+    p.add_argument("--reference", default="disabled", help="reference rendering condition")
+    args = p.parse_args(argv)
+    ds = load_dataset(args.data, "egocentric")
+    t = ds.trials.copy()
+    if "reach_fraction" not in t:
+        if "arm_reach_m" not in t:
+            raise UserError("egocentric trials need reach_fraction or arm_reach_m to express reach as a fraction",
+                            str(args.data / "egocentric"))
+        t["reach_fraction"] = t["reach_m"] / t["arm_reach_m"]
+    t = t[t["reach_fraction"].notna()]
+    fits = linear_fits_by(t, "target_fraction", "reach_fraction", "rendering")
+    comparison = condition_interaction(t, "target_fraction", "reach_fraction", "rendering", args.reference)
+    args.results.mkdir(parents=True, exist_ok=True)
+    fits.to_csv(args.results / "egocentric_fits.csv", index=False)
+    summary = {f"reach vs target, {r['rendering']}": f"slope = {r['slope']:.3f}, intercept = {r['intercept']:.3f}, "
+               f"R^2 = {r['r2']:.2f}" for _, r in fits.iterrows()}
+    summary["reach: condition difference (multiple regression)"] = format_condition_comparison(comparison)
+    write_json(args.results / "egocentric.json", {
+        "study": "egocentric", "simulated": ds.simulated, "n_subjects": int(t["participant"].nunique()),
+        "fits": fits.to_dict("records"), "comparison": comparison.__dict__, "summary": summary,
+    })
+    save_figure(plot_reach(t, fits, simulated=ds.simulated), args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
