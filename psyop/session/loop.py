@@ -193,6 +193,7 @@ class TrialLoop:
             gaze_valid_fraction=(valid / total) if total else None, n_frames=len(frames),
             run=self.store.run_index,
         )
+        record.update(dict(response.extras))
         return record, frames
 
     def _set_plan(self, phase: PhaseSpec, row: Mapping[str, Any], start_s: float) -> None:

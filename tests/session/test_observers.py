@@ -58,9 +58,15 @@ def test_ordinal_preference_and_reach() -> None:
         "disabled": {"slope": 1.128, "intercept_m": 0.116, "noise_sd_m": 0.03}}}, seed=3, participant="S01")
     fractions = np.tile([0.5, 0.58, 0.67, 0.75, 0.82, 0.9], 300)
     rows = _rows(fractions.size, rendering="enabled", target_fraction=fractions)
-    reaches = np.array([reach.collect(r, 0).reach_m for r in rows])
+    responses = [reach.collect(r, 0) for r in rows]
+    reaches = np.array([r.reach_m for r in responses])
     slope, intercept = np.polyfit(fractions * 0.7, reaches, 1)
     assert slope == pytest.approx(1.141, abs=0.05) and intercept == pytest.approx(0.117, abs=0.03)
+    # reach_m is measured from the simulated hand tracker: |mean of the last 10 hand samples|
+    extras = dict(responses[0].extras)
+    hand = np.array([extras["hand_x_m"], extras["hand_y_m"], extras["hand_z_m"]])
+    assert np.linalg.norm(hand) == pytest.approx(responses[0].reach_m, abs=1e-9)
+    assert extras["arm_reach_m"] == 0.7 and extras["target_m"] == pytest.approx(0.5 * 0.7)
 
 
 def test_unknown_observer_kind_is_a_user_error() -> None:

@@ -21,6 +21,13 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
     pa.field("gaze_valid_fraction", pa.float64()),
     pa.field("n_frames", pa.int64()),
     pa.field("run", pa.int64()),
+    # egocentric (reach) trials: the participant's arm reach, the target distance and the
+    # mean hand position (head space) over the samples the reach was taken from
+    pa.field("arm_reach_m", pa.float64()),
+    pa.field("target_m", pa.float64()),
+    pa.field("hand_x_m", pa.float64()),
+    pa.field("hand_y_m", pa.float64()),
+    pa.field("hand_z_m", pa.float64()),
 )
 
 #: Columns that depend on wall/virtual time or on where a crash split the session;

@@ -43,6 +43,7 @@ class Response:
     reach_m: float | None = None
     chosen_mode: str | None = None
     response_time_s: float = math.nan
+    extras: tuple[tuple[str, float], ...] = ()  # extra trial-log values, e.g. hand position
 
 
 def score(kind: ResponseKind, row: Mapping[str, Any], answer: str, reach_m: float | None = None) -> Response:
