@@ -33,8 +33,11 @@ def main(argv: list[str] | None = None) -> int:
         "per_back": per_back.to_dict("records"),
         "summary": {"detection threshold (mean over subjects and back distances)": f"{clean['threshold_D'].mean():.2f} D"},
     }
-    if clean["participant"].nunique() >= 2 and clean["back_D"].nunique() >= 2:
+    try:
         aov = rm_anova(clean, "threshold_D", "back_D")
+    except ValueError as exc:  # too few complete subjects: say so instead of a number
+        payload["summary"]["effect of back distance on threshold (rm-ANOVA)"] = f"not computed: {exc}"
+    else:
         payload["anova_back_D"] = aov.table.to_dict("records")
         payload["anova_dropped"] = aov.dropped.to_dict("records")
         payload["summary"]["effect of back distance on threshold (rm-ANOVA)"] = format_anova(aov.table.iloc[0])

@@ -90,8 +90,10 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
     kept = data[~data[subject].isin(dropped["subject"])].copy()
     kept[dv] = kept[dv].astype(float)
     n = int(kept[subject].nunique())
-    if n < 2:
-        raise ValueError(f"fewer than two complete subjects (dropped: {list(dropped['subject'])})")
+    max_levels = max(kept[w].nunique() for w in within)
+    if n < max(2, max_levels):
+        raise ValueError(f"{n} complete subject(s) cannot test sphericity of {max_levels} levels "
+                         f"(dropped: {list(dropped['subject'])})")
     with _quiet_pingouin():
         aov = pg.rm_anova(kept, dv=dv, within=within if len(within) > 1 else within[0],
                           subject=subject, correction=True, detailed=True)

@@ -1,0 +1,99 @@
+"""End-to-end: the study analysis scripts on a small simulated dataset (in-process, one run)."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from psyop.figures.study_figures import SIMULATED_LABEL, plot_preferences
+from psyop.statistics import simulate as sim
+from psyop.statistics.binomial import pairwise_preferences
+from psyop.statistics.dataset import write_dataset
+
+ANALYSIS = Path(__file__).resolve().parents[2] / "analysis"
+
+
+def _script(name: str):
+    if str(ANALYSIS) not in sys.path:
+        sys.path.insert(0, str(ANALYSIS))
+    return importlib.import_module(name)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    root = tmp_path_factory.mktemp("study")
+    rng = np.random.default_rng(0)
+    det = sim.simulate_detection(rng, n_subjects=3)
+    det.loc[(det["participant"] == "03") & (det["back_D"] == 3.0), "correct"] = True  # degenerate: all correct
+    tables = {"detection": det, "discrimination": sim.simulate_discrimination(rng, n_subjects=3),
+              "ordinal": sim.simulate_ordinal(rng, n_subjects=6), "egocentric": sim.simulate_reach(rng, n_subjects=4),
+              "realism": sim.simulate_realism(rng, n_subjects=5)}
+    ordinal = tables["ordinal"]
+    tables["ordinal"] = ordinal[~((ordinal["participant"] == "02") & (ordinal["mode"] == "reversed")
+                                  & (ordinal["separation_D"] == 2.0))]
+    data, res, fig = root / "data", root / "results", root / "figures"
+    write_dataset(data, tables, simulated=True)
+    common = ["--data", str(data), "--results", str(res)]
+    for study in ("detection", "discrimination"):
+        assert _script("fit_psychometric").main(
+            ["--study", study, "--data", str(data), "--out", str(res / f"{study}_fits.csv"),
+             "--n-jobs", "1", "--n-bootstrap", "100"]) == 0
+        assert _script("supp_psychometric_functions").main(
+            ["--study", study, "--data", str(data), "--fits", str(res / f"{study}_fits.csv"),
+             "--out", str(fig / f"supp_psychometric_{study}.png")]) == 0
+    assert _script("fig_detection_thresholds").main(common + ["--fits", str(res / "detection_fits.csv"),
+                                                              "--out", str(fig / "det.png")]) == 0
+    assert _script("fig_discrimination_thresholds").main(common + ["--fits", str(res / "discrimination_fits.csv"),
+                                                                   "--out", str(fig / "dis.png")]) == 0
+    for name in ("fig_ordinal_depth", "fig_egocentric_reach", "fig_realism"):
+        assert _script(name).main(common + ["--out", str(fig / f"{name}.png")]) == 0
+    assert _script("results_table").main(["--results", str(res), "--out", str(res / "summary.md")]) == 0
+    return root
+
+
+def test_every_figure_has_png_and_pdf(built):
+    pngs = sorted(p.stem for p in (built / "figures").glob("*.png"))
+    assert len(pngs) == 7
+    for stem in pngs:
+        assert (built / "figures" / f"{stem}.pdf").stat().st_size > 1000
+
+
+def test_fit_cache_flags_the_degenerate_subject(built):
+    fits = pd.read_csv(built / "results" / "detection_fits.csv", dtype={"participant": str})
+    row = fits[(fits["participant"] == "03") & (fits["back_D"] == 3.0)].iloc[0]
+    assert "all_correct" in row["flags"]
+    assert fits["simulated"].all()
+    payload = json.loads((built / "results" / "detection_thresholds.json").read_text())
+    assert payload["n_flagged"] >= 1 and payload["flagged"][0]["participant"] == "03"
+
+
+def test_summary_collects_every_study_and_says_simulated(built):
+    md = (built / "results" / "summary.md").read_text()
+    summary = json.loads((built / "results" / "summary.json").read_text())
+    assert "SIMULATED DATA" in md and summary["simulated"] is True
+    assert set(summary["summary"]) == {"detection_thresholds", "discrimination_fit", "ordinal", "egocentric", "realism"}
+    assert "eps = " in md or "F(1, " in md
+    assert "one-tailed binomial test" in md and "joint F(2, " in md
+
+
+def test_ordinal_listwise_deletion_is_reported(built):
+    payload = json.loads((built / "results" / "ordinal.json").read_text())
+    assert payload["n_subjects"] == 5
+    assert payload["dropped"][0]["subject"] == "02" and "mode=reversed" in payload["dropped"][0]["reason"]
+    anova = pd.read_csv(built / "results" / "ordinal_anova.csv")
+    assert list(anova["effect"]) == ["mode", "separation_D", "mode * separation_D"]
+
+
+@pytest.mark.parametrize("simulated", [True, False])
+def test_simulated_mark_only_when_simulated(simulated):
+    rng = np.random.default_rng(1)
+    prefs = pairwise_preferences(sim.simulate_realism(rng, n_subjects=4), [("ocular", "conventional")])
+    fig = plot_preferences(prefs, simulated=simulated)
+    texts = [t.get_text() for t in fig.texts]
+    assert (SIMULATED_LABEL in texts) is simulated
