@@ -167,10 +167,13 @@ def target_field(
     field_deg: float = 60.0,
     origin_m: Sequence[float] = ORIGIN,
     max_tries: int = 10_000,
+    material: Material | None = None,
+    min_gap_deg: float = 0.0,
 ) -> tuple[Primitive, ...]:
     """Frontoparallel targets at random depths (uniform in diopters between ``far_D`` and
-    ``near_D``), each subtending ``diameter_deg``, placed without angular overlap inside a
-    ``field_deg`` circle. Deterministic for a given seed."""
+    ``near_D``), each subtending ``diameter_deg``, placed without angular overlap (plus
+    ``min_gap_deg``) inside a ``field_deg`` circle. Deterministic for a given seed. Without a
+    ``material`` each target gets a random solid shade."""
     rng = np.random.default_rng(seed)
     placed: list[tuple[float, float]] = []
     out: list[Primitive] = []
@@ -181,13 +184,13 @@ def target_field(
         r = radius * math.sqrt(rng.uniform())
         phi = rng.uniform(0, 2 * math.pi)
         az, el = r * math.cos(phi), r * math.sin(phi)
-        if any(math.hypot(az - a, el - e) < diameter_deg * 1.1 for a, e in placed):
+        if any(math.hypot(az - a, el - e) < diameter_deg * 1.05 + min_gap_deg for a, e in placed):
             continue
         placed.append((az, el))
         depth_D = rng.uniform(far_D, near_D)
         shade = float(rng.uniform(0.3, 0.9))
-        out.append(frontoparallel_disc(1.0 / depth_D, diameter_deg, Solid((shade, shade * 0.9, 0.4)), az, el,
-                                       origin_m, name=f"target{len(out)}"))
+        mat = material if material is not None else Solid((shade, shade * 0.9, 0.4))
+        out.append(frontoparallel_disc(1.0 / depth_D, diameter_deg, mat, az, el, origin_m, name=f"target{len(out)}"))
     return tuple(out)
 
 

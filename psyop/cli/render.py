@@ -1,0 +1,137 @@
+"""``psyop render PROTOCOL``: render one frame of one trial to an 8-bit PNG plus a JSON sidecar.
+
+The sidecar records what the frame is: centre of projection in head space, frustum tangents
+seen from it, resolution, eye model, eye, mode, gaze, trial and interval.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from psyop.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "render", help="render one frame of a trial to PNG (+ JSON sidecar)",
+        description="Render the stimulus of trial N, interval K, for a given gaze direction, to an 8-bit PNG. "
+                    "Headless (EGL); no display needed.")
+    parser.add_argument("protocol", help="protocol YAML file")
+    parser.add_argument("--trial", type=int, default=0, help="trial number (0-based, execution order)")
+    parser.add_argument("--interval", type=int, default=1, help="interval phase of the trial (1-based)")
+    parser.add_argument("--gaze-deg", default="0,0", metavar="AZ,EL",
+                        help="gaze direction from the rendered eye's centre of rotation, degrees "
+                             "(azimuth right-positive, elevation up-positive)")
+    parser.add_argument("--fixation-m", type=float, default=1.0, help="distance of the fixated point (m)")
+    parser.add_argument("--eye", choices=("right", "left"), default=None,
+                        help="eye to render (default: the protocol's eye; right for stereo)")
+    parser.add_argument("--mode", choices=("conventional", "ocular", "reversed"), default=None,
+                        help="rendering mode (default: the interval's mode from the schedule)")
+    parser.add_argument("--time-s", type=float, default=0.0, help="time into the interval (moving targets)")
+    parser.add_argument("--seed", type=int, default=0, help="schedule seed")
+    parser.add_argument("--ipd-mm", type=float, default=64.0, help="interpupillary distance when the protocol "
+                                                                   "takes it from the tracker")
+    parser.add_argument("--antialiasing", choices=("adaptive", "none", "msaa", "supersample"), default="adaptive")
+    parser.add_argument("--crop", default=None, metavar="X0,Y0,W,H",
+                        help="render only this pixel window of the full frame (same rays as the full frame)")
+    parser.add_argument("--out", required=True, help="output PNG path (the sidecar is PATH.json)")
+    parser.set_defaults(func=run)
+
+
+def _parse_gaze(text: str) -> tuple[float, float]:
+    try:
+        az, el = (float(x) for x in text.split(","))
+    except ValueError:
+        raise UserError(f"--gaze-deg must be AZ,EL in degrees, got {text!r}") from None
+    if not (math.isfinite(az) and math.isfinite(el) and abs(az) < 89 and abs(el) < 89):
+        raise UserError(f"--gaze-deg must be finite and within +-89 deg, got {text!r}")
+    return az, el
+
+
+def _parse_crop(text: str, width_px: int, height_px: int) -> tuple[int, int, int, int]:
+    try:
+        x0, y0, w, h = (int(x) for x in text.split(","))
+    except ValueError:
+        raise UserError(f"--crop must be X0,Y0,W,H in whole pixels, got {text!r}") from None
+    if not (0 <= x0 and 0 <= y0 and w > 0 and h > 0 and x0 + w <= width_px and y0 + h <= height_px):
+        raise UserError(f"--crop {text} does not fit the {width_px}x{height_px} frame")
+    return x0, y0, w, h
+
+
+def frustum_tangents(pixel_to_ray: np.ndarray) -> dict[str, float]:
+    """Left/right/bottom/top tangents of the image seen from the centre of projection."""
+    m = np.asarray(pixel_to_ray, dtype=np.float64)
+    corner = lambda u, v: m @ np.array([u, v, 1.0])  # noqa: E731
+    tl, br = corner(0.0, 0.0), corner(1.0, 1.0)
+    return {"left": tl[0] / -tl[2], "right": br[0] / -br[2], "bottom": br[1] / -br[2], "top": tl[1] / -tl[2]}
+
+
+def write_png(path: Path, image_uint8: np.ndarray) -> None:
+    """8-bit RGB PNG via matplotlib (already a dependency)."""
+    import matplotlib.image as mpimg
+
+    mpimg.imsave(path, image_uint8, format="png")
+
+
+def run(args: argparse.Namespace) -> int:
+    from psyop.optics.camera import make_eye_camera
+    from psyop.protocol import load_protocol, resolve_display_profile, resolve_eye_model
+    from psyop.rendering import Renderer, RenderSettings
+    from psyop.rendering.builders import direction_from_angles
+    from psyop.schedule import compile_schedule
+    from psyop.stimulus import build_scene, interval_mode, interval_phases
+
+    protocol_path = Path(args.protocol)
+    protocol = load_protocol(protocol_path)
+    schedule = compile_schedule(protocol, args.seed)
+    if not 0 <= args.trial < len(schedule):
+        raise UserError(f"--trial must be in 0..{len(schedule) - 1}, got {args.trial}")
+    n_intervals = len(interval_phases(protocol))
+    if not 1 <= args.interval <= max(1, n_intervals):
+        raise UserError(f"--interval must be in 1..{n_intervals}, got {args.interval}")
+    if not (math.isfinite(args.fixation_m) and args.fixation_m > 0.02):
+        raise UserError(f"--fixation-m must be more than 0.02 m, got {args.fixation_m}")
+    az, el = _parse_gaze(args.gaze_deg)
+    row = schedule.iloc[args.trial].to_dict()
+    eye = args.eye or (protocol.eyes if protocol.eyes in ("right", "left") else "right")
+    mode = args.mode or interval_mode(protocol, row, args.interval)
+    display = resolve_display_profile(protocol.display)
+    eye_model = resolve_eye_model(protocol.display)
+    ipd_spec = protocol.display.ipd
+    ipd_m = float(ipd_spec.mm) / 1000.0 if hasattr(ipd_spec, "mm") else args.ipd_mm / 1000.0
+    centre = np.array([ipd_m / 2.0 if eye == "right" else -ipd_m / 2.0, 0.0, 0.0])
+    fixation = centre + direction_from_angles(az, el) * args.fixation_m
+    camera = make_eye_camera(display, eye, fixation, ipd_m, eye_model.nc_m, mode)
+    if args.crop:
+        from psyop.rendering.camera_math import crop_camera
+
+        x0, y0, w, h = _parse_crop(args.crop, camera.width_px, camera.height_px)
+        camera = crop_camera(camera, x0, y0, w, h)
+    scene = build_scene(protocol, row, args.time_s, centre, interval=args.interval, base_dir=protocol_path.parent)
+    with Renderer(scene, RenderSettings(antialiasing=args.antialiasing, reuse_tolerance_px=None)) as renderer:
+        renderer.render(camera)
+        image = renderer.image_uint8(eye)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_png(out, image)
+    sidecar = {
+        "protocol": str(protocol_path), "protocol_sha256": protocol.source_sha256, "seed": args.seed,
+        "trial": args.trial, "interval": args.interval, "time_s": args.time_s,
+        "eye": eye, "mode": mode, "gaze_deg": [az, el], "fixation_m": fixation.tolist(),
+        "camera_valid": bool(camera.valid),
+        "centre_of_projection_m": np.asarray(camera.centre_of_projection_m).tolist(),
+        "eye_centre_m": centre.tolist(), "ipd_m": ipd_m,
+        "frustum_tangents": frustum_tangents(camera.pixel_to_ray),
+        "resolution_px": [camera.width_px, camera.height_px],
+        "display_profile": display.name, "image_distance_m": None if math.isinf(display.d_m) else display.d_m,
+        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m},
+        "crop_px": args.crop, "antialiasing": args.antialiasing, "primitives": [p.name for p in scene.primitives],
+    }
+    Path(str(out) + ".json").write_text(json.dumps(sidecar, indent=2) + "\n")
+    print(f"wrote {out} ({camera.width_px}x{camera.height_px}, {eye} eye, {mode}) and {out}.json")
+    return 0

@@ -1,0 +1,256 @@
+"""Map a protocol's scene (psyop.protocol.scene models) for one trial row and time to the
+renderer's typed scene.
+
+Conventions (docs/rendering.md): angular sizes and positions are seen from the eye's centre of
+rotation C (the conventional centre of projection), so with ocular parallax off every element
+subtends exactly its nominal angle. A depth of 0 D (optical infinity) is placed at
+:data:`INFINITY_M`, far enough that no parallax of it can be rendered (a 10 mm shift moves it
+by 1e-6 rad, under 0.001 px on the Vive Pro).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psyop.errors import UserError
+from psyop.protocol import scene as ps
+from psyop.rendering import builders
+from psyop.rendering.scene import (
+    Aperture,
+    GridMaterial,
+    ImageTexture,
+    Material,
+    NoiseKind,
+    NoiseTexture,
+    Primitive,
+    Scene,
+    Shape,
+    SineBorder,
+    Solid,
+)
+from psyop.schedule import interval_values
+
+INFINITY_M = 1.0e4
+DEFAULT_ARM_REACH_M = 0.70
+
+
+def _distance_m(depth: ps.Depth, values: Mapping[str, Any]) -> float:
+    depth_D = depth.resolve_D(values)
+    if not math.isfinite(depth_D) or depth_D < 0:
+        raise UserError(f"depth resolves to {depth_D} D for this trial")
+    return INFINITY_M if depth_D <= 1.0 / INFINITY_M else 1.0 / depth_D
+
+
+def _trial_seed(values: Mapping[str, Any]) -> int:
+    return int(values.get("trial_seed", 0)) % (2**31)
+
+
+def _material(surface: Any, values: Mapping[str, Any], size_deg: float, base_dir: Path | None) -> Material:
+    """A rendering material for a protocol surface (noise seeded from the trial seed)."""
+    if isinstance(surface, ps.SolidSurface):
+        return Solid(tuple(float(c) for c in surface.rgb))
+    seed = _trial_seed(values) + int(getattr(surface, "seed", 0))
+    if isinstance(surface, ps.WhiteNoiseSurface):
+        size = int(min(1024, max(4, round(size_deg / float(surface.grain_deg)))))
+        # peak contrast c around the mean: grey = mean * (1 + c z), z ~ N(0, 1) clipped; RMS c/2
+        return NoiseTexture(NoiseKind.WHITE, seed=seed, size_px=size, mean=float(surface.mean),
+                            contrast=float(surface.contrast) / 2.0)
+    if isinstance(surface, ps.PinkNoiseSurface):
+        return NoiseTexture(NoiseKind.PINK, seed=seed, size_px=256, mean=float(surface.mean),
+                            contrast=float(surface.contrast) / 2.0)
+    if isinstance(surface, ps.ImageSurface):
+        path = (base_dir or Path(".")) / surface.path
+        try:
+            import matplotlib.image as mpimg
+
+            pixels = np.asarray(mpimg.imread(path), dtype=np.float64)
+        except (OSError, ValueError) as error:
+            raise UserError(f"cannot read image {path}: {error}") from None
+        if pixels.max() > 1.0:
+            pixels = pixels / 255.0
+        if pixels.ndim == 2:
+            pixels = np.repeat(pixels[:, :, None], 3, axis=2)
+        repeats = size_deg / float(surface.tile_deg) if surface.tile_deg else 1.0
+        return ImageTexture(pixels[:, :, :3], key=str(path), repeats=repeats)
+    raise UserError(f"unsupported surface kind {getattr(surface, 'kind', surface)!r}")
+
+
+def _rotate_axes(prim: Primitive, angle_deg: float) -> Primitive:
+    if angle_deg == 0.0:
+        return prim
+    a = math.radians(angle_deg)
+    rot = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    return Primitive(prim.shape, prim.centre_m, rot @ np.array(prim.half_u_m), rot @ np.array(prim.half_v_m),
+                     prim.material, prim.border, prim.name)
+
+
+def _sinusoidal_border(item: ps.SinusoidalBorder, values: Mapping[str, Any], origin: np.ndarray,
+                       base_dir: Path | None) -> list[Primitive]:
+    near_side = item.near_side if item.near_side != "schedule" else str(values.get("near_side", "left"))
+    if near_side not in ("left", "right"):
+        raise UserError(f"near_side must be left or right, got {near_side!r}")
+    phase_deg = float(values.get(f"{item.id}_phase_deg", 0.0 if item.phase == "random" else item.phase))
+    near_m = _distance_m(item.near_depth, values)
+    far_m = _distance_m(item.far_depth, values)
+    size = float(item.size_deg)
+    near_surface = item.left if near_side == "left" else item.right
+    far_surface = item.right if near_side == "left" else item.left
+    half_tan = math.tan(math.radians(size) / 2.0)
+    border = SineBorder(amplitude=math.tan(math.radians(float(item.amplitude_deg))) / half_tan,
+                        cycles=size / float(item.period_deg), phase_rad=math.radians(phase_deg), offset=0.0,
+                        side=-1 if near_side == "left" else 1)
+    far = builders.frontoparallel_rect(far_m, size, size, _material(far_surface, values, size, base_dir),
+                                       origin_m=origin, name=f"{item.id}_far")
+    near = builders.frontoparallel_rect(near_m, size, size, _material(near_surface, values, size, base_dir),
+                                        origin_m=origin, border=border, name=f"{item.id}_near")
+    return [_rotate_axes(far, float(item.orientation_deg)), _rotate_axes(near, float(item.orientation_deg))]
+
+
+def _grid_planes(item: ps.GridPlanes) -> list[Primitive]:
+    depth = float(item.far_m) - float(item.near_m)
+    zc = -(float(item.near_m) + depth / 2.0)
+    hw, hh, hd = float(item.half_width_m), float(item.half_height_m), depth / 2.0
+    out = []
+    for plane in item.planes:
+        if plane in ("floor", "ceiling"):
+            extent_u, extent_v = 2 * hw, 2 * hd
+            centre, u, v = (0.0, -hh if plane == "floor" else hh, zc), (hw, 0.0, 0.0), (0.0, 0.0, hd)
+        else:
+            extent_u, extent_v = 2 * hh, 2 * hd
+            centre, u, v = (-hw if plane == "left" else hw, 0.0, zc), (0.0, hh, 0.0), (0.0, 0.0, hd)
+        # square cells of spacing_m: lines_per_side along the longer axis, fraction of a cell per line
+        n_lines = max(1, round(max(extent_u, extent_v) / float(item.spacing_m)))
+        # a line subtends line_width_deg at 1 m: its width in cells of spacing_m
+        width_fraction = min(0.5, math.tan(math.radians(float(item.line_width_deg))) / float(item.spacing_m))
+        mat = GridMaterial(background=tuple(item.background_rgb), line_colour=tuple(item.rgb),
+                           lines_per_side=int(n_lines), line_width_fraction=width_fraction)
+        out.append(Primitive(Shape.RECT, centre, u, v, mat, name=f"{item.id}_{plane}"))
+    return out
+
+
+def _fixation(item: ps.FixationTarget, values: Mapping[str, Any], time_s: float, origin: np.ndarray) -> list[Primitive]:
+    az, el = (float(c) for c in item.centre_deg)
+    if item.path is not None:
+        start = float(values.get(f"{item.id}_start_deg", 0.0 if item.path.start == "random" else item.path.start))
+        direction = int(values.get(f"{item.id}_direction", 1))
+        phi = math.radians(start + direction * float(item.path.speed_deg_s) * time_s)
+        ecc = float(item.path.eccentricity_deg)
+        az, el = az + ecc * math.cos(phi), el + ecc * math.sin(phi)
+    dist = _distance_m(item.depth, values)
+    size = float(item.size_deg)
+    outer = builders.frontoparallel_disc(dist, size, Solid(tuple(item.rgb)), az, el, origin, f"{item.id}_outer")
+    inner = builders.frontoparallel_disc(dist * 0.999, size * 0.4 / 0.999, Solid(tuple(item.centre_rgb)), az, el,
+                                         origin, f"{item.id}_inner")
+    return [outer, inner]
+
+
+def _room(item: ps.Room) -> list[Primitive]:
+    prims = builders.room_with_pencil(pencil_distance_m=1.0, room_half_width_m=float(item.width_m) / 2.0,
+                                      room_depth_m=float(item.depth_m), eye_height_m=float(item.eye_height_m))
+    return [p for p in prims if not p.name.startswith("pencil")]
+
+
+def _reach_target(item: ps.ReachTarget, values: Mapping[str, Any], arm_reach_m: float) -> list[Primitive]:
+    if isinstance(item.distance_fraction, ps.FactorRef):
+        fraction = float(values[item.distance_fraction.factor])
+    else:
+        fraction = float(item.distance_fraction)
+    distance = fraction * float(values.get("arm_reach_m", arm_reach_m))
+    size = float(item.size_m)
+    height = float(item.height_m)
+    if item.object == "pencil":
+        body = Primitive(Shape.RECT, (0.0, height, -distance), (size * 0.43, 0, 0), (0, size * 0.023, 0),
+                         Solid((0.95, 0.8, 0.1)), name=f"{item.id}_body")
+        tip = Primitive(Shape.RECT, (size * 0.5, height, -distance), (size * 0.07, 0, 0), (0, size * 0.016, 0),
+                        Solid((0.15, 0.1, 0.05)), name=f"{item.id}_tip")
+        return [body, tip]
+    shape = Shape.DISC if item.object == "sphere" else Shape.RECT
+    return [Primitive(shape, (0.0, height, -distance), (size / 2, 0, 0), (0, size / 2, 0), Solid((0.9, 0.3, 0.1)),
+                      name=item.id)]
+
+
+def interval_phases(protocol: Any) -> list[Any]:
+    """The protocol's ``interval`` phases in order (interval K is element K - 1)."""
+    return [phase for phase in protocol.trial.phases if getattr(phase, "kind", None) == "interval"]
+
+
+def interval_mode(protocol: Any, row: Mapping[str, Any], interval: int) -> str:
+    """The rendering mode of interval ``interval`` (1-based) of a trial row."""
+    values = interval_values(row, interval)
+    if "mode" in values and str(values["mode"]) in ps.RENDERING_MODES:
+        return str(values["mode"])
+    for key in (("mode_a", "mode_b")[interval - 1:interval] if interval in (1, 2) else ()):
+        if key in row:
+            return str(row[key])
+    if "rendering" in row:
+        modes = getattr(protocol.response, "modes", {}) or {}
+        if str(row["rendering"]) in modes:
+            return str(modes[str(row["rendering"])])
+    raise UserError(f"cannot tell the rendering mode of interval {interval} from the trial row; pass --mode")
+
+
+def build_scene(
+    protocol: Any,
+    row: Mapping[str, Any],
+    time_s: float,
+    eye_centre_m: Any,
+    interval: int = 1,
+    base_dir: Path | None = None,
+    arm_reach_m: float = DEFAULT_ARM_REACH_M,
+    background: tuple[float, float, float] = (0.5, 0.5, 0.5),
+) -> Scene:
+    """The rendering scene of one trial during interval ``interval`` at ``time_s`` into it.
+
+    ``eye_centre_m``: the rendered eye's centre of rotation in head space; angular sizes and
+    positions are measured from it. Only the primitives the interval's ``show:`` lists are built.
+    """
+    values = interval_values(row, interval)
+    values = {**values, "trial_seed": row.get("trial_seed", 0)}
+    origin = np.asarray(eye_centre_m, dtype=np.float64)
+    phases = interval_phases(protocol)
+    show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
+    prims: list[Primitive] = []
+    aperture = None
+    for item in protocol.scene:
+        if show != "all" and item.id not in show:
+            continue
+        if isinstance(item, ps.Disc):
+            mat = _material(item.surface, values, float(item.size_deg), base_dir)
+            prims.append(builders.frontoparallel_disc(_distance_m(item.depth, values), float(item.size_deg), mat,
+                                                      float(item.centre_deg[0]), float(item.centre_deg[1]), origin,
+                                                      item.id))
+        elif isinstance(item, ps.Quad):
+            size = max(float(item.width_deg), float(item.height_deg))
+            prims.append(builders.frontoparallel_rect(_distance_m(item.depth, values), float(item.width_deg),
+                                                      float(item.height_deg),
+                                                      _material(item.surface, values, size, base_dir),
+                                                      float(item.centre_deg[0]), float(item.centre_deg[1]), origin,
+                                                      name=item.id))
+        elif isinstance(item, ps.SinusoidalBorder):
+            prims += _sinusoidal_border(item, values, origin, base_dir)
+        elif isinstance(item, ps.Aperture):
+            aperture = Aperture(radius_deg=float(item.diameter_deg) / 2.0, colour=tuple(item.surround_rgb))
+        elif isinstance(item, ps.GridPlanes):
+            prims += _grid_planes(item)
+        elif isinstance(item, ps.TargetField):
+            near_D = item.near.resolve_D(values)
+            far_D = item.far.resolve_D(values)
+            mat = _material(item.surface, values, float(item.size_deg), base_dir)
+            field = builders.target_field(_trial_seed(values), int(item.count), near_D, far_D, float(item.size_deg),
+                                          float(item.field_deg), origin, material=mat,
+                                          min_gap_deg=float(item.min_gap_deg))
+            prims += list(field)
+        elif isinstance(item, ps.FixationTarget):
+            prims += _fixation(item, values, time_s, origin)
+        elif isinstance(item, ps.Room):
+            prims += _room(item)
+        elif isinstance(item, ps.ReachTarget):
+            prims += _reach_target(item, values, arm_reach_m)
+        else:  # pragma: no cover - the protocol model is a closed union
+            raise UserError(f"unsupported scene element kind {getattr(item, 'kind', item)!r}")
+    return Scene(tuple(prims), background=background, aperture=aperture)

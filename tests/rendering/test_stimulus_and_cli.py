@@ -1,0 +1,96 @@
+"""Protocol scene -> rendering scene, and the ``psyop render`` command."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from psyop.cli import main
+from psyop.protocol import load_protocol
+from psyop.schedule import compile_schedule
+from psyop.stimulus import build_scene, interval_mode
+
+REPO = Path(__file__).resolve().parents[2]
+PROTOCOLS = REPO / "protocols"
+CENTRE = np.array([0.032, 0.0, 0.0])
+
+
+def _angle_deg(p, q) -> float:
+    p, q = np.asarray(p) / np.linalg.norm(p), np.asarray(q) / np.linalg.norm(q)
+    return math.degrees(math.atan2(np.linalg.norm(np.cross(p, q)), p @ q))
+
+
+def test_detection_scene_follows_the_trial_row():
+    protocol = load_protocol(PROTOCOLS / "detection.yaml")
+    row = compile_schedule(protocol, 5).iloc[7].to_dict()
+    scene = build_scene(protocol, row, 0.25, CENTRE, interval=1)
+    by_name = {p.name: p for p in scene.primitives}
+    back, front = by_name["back"], by_name["front"]
+    assert -back.centre_m[2] == pytest.approx(1.0 / row["back_D"])
+    assert -front.centre_m[2] == pytest.approx(1.0 / (row["back_D"] + row["level_D"]))
+    for disc in (back, front):  # 2 deg seen from the eye's centre of rotation
+        rel = np.array(disc.centre_m) - CENTRE
+        assert 2 * math.degrees(math.atan(disc.half_u_m[0] / np.linalg.norm(rel))) == pytest.approx(2.0)
+    # the fixation target circles at 16 deg, 90 deg/s, from the row's start and direction
+    target = np.array(by_name["fixation_outer"].centre_m) - CENTRE
+    phi = math.radians(row["fixation_start_deg"] + row["fixation_direction"] * 90.0 * 0.25)
+    expected = np.array([math.tan(math.radians(16 * math.cos(phi))), math.tan(math.radians(16 * math.sin(phi))), -1])
+    assert _angle_deg(target, expected) < 1e-9
+    assert interval_mode(protocol, row, 1) in ("conventional", "ocular")
+    assert {interval_mode(protocol, row, 1), interval_mode(protocol, row, 2)} == {"conventional", "ocular"}
+
+
+def test_ordinal_scene_puts_the_near_surface_on_the_scheduled_side():
+    protocol = load_protocol(PROTOCOLS / "ordinal.yaml")
+    schedule = compile_schedule(protocol, 2)
+    for side in ("left", "right"):
+        row = schedule[schedule["near_side"] == side].iloc[0].to_dict()
+        scene = build_scene(protocol, row, 0.0, CENTRE)
+        near = next(p for p in scene.primitives if p.border is not None)
+        far = next(p for p in scene.primitives if p.border is None)
+        assert near.border.side == (-1 if side == "left" else 1)
+        assert -near.centre_m[2] == pytest.approx(1.0 / (0.5 + row["separation_D"]))
+        assert -far.centre_m[2] == pytest.approx(2.0)
+        assert scene.aperture is not None and scene.aperture.radius_deg == pytest.approx(10.0)
+
+
+@pytest.mark.parametrize("name", ["realism", "egocentric", "discrimination"])
+def test_every_study_scene_builds(name):
+    protocol = load_protocol(PROTOCOLS / f"{name}.yaml")
+    row = compile_schedule(protocol, 0).iloc[0].to_dict()
+    scene = build_scene(protocol, row, 0.5, CENTRE)
+    assert len(scene.primitives) >= 2
+    near, far = scene.depth_range_m(CENTRE)
+    assert 0.0 < near < far < math.inf
+
+
+def test_render_command_writes_png_and_sidecar(tmp_path):
+    out = tmp_path / "frame.png"
+    rc = main(["render", str(PROTOCOLS / "detection.yaml"), "--trial", "2", "--interval", "1", "--gaze-deg",
+               "16,0", "--mode", "ocular", "--crop", "688,768,64,64", "--out", str(out)])
+    assert rc == 0
+    img = mpimg.imread(out)
+    assert img.shape[:2] == (64, 64)
+    assert np.allclose(img * 255, np.round(img * 255), atol=1e-3)  # 8-bit values
+    side = json.loads(Path(str(out) + ".json").read_text())
+    cop = np.array(side["centre_of_projection_m"])
+    centre = np.array(side["eye_centre_m"])
+    assert np.linalg.norm(cop - centre) == pytest.approx(side["eye_model"]["nc_m"], rel=1e-9)
+    assert side["mode"] == "ocular" and side["eye"] == "right" and side["resolution_px"] == [64, 64]
+    tan = side["frustum_tangents"]
+    assert tan["left"] < 0 < tan["right"] and tan["bottom"] < 0 < tan["top"]
+    # the stimulus discs sit at the centre of the display: the noise disc fills the middle of the crop
+    assert img[32, 32, :3].std() < 0.05  # grey noise: R = G = B, no red in the centre
+
+
+def test_render_command_rejects_bad_input(tmp_path, capsys):
+    rc = main(["render", str(PROTOCOLS / "detection.yaml"), "--trial", "100000", "--out", str(tmp_path / "x.png")])
+    assert rc == 2
+    assert "--trial" in capsys.readouterr().err
+    rc = main(["render", str(PROTOCOLS / "detection.yaml"), "--gaze-deg", "nan,0", "--out", str(tmp_path / "x.png")])
+    assert rc == 2
