@@ -109,12 +109,21 @@ class Renderer:
         self._centres = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
         self._prims_tex = None
         self._layers_tex = None
+        self._texture_keys: tuple = ()
+        self._texture_sizes: list[tuple[int, int]] = []
         self._scene: Scene | None = None
         self.set_scene(scene)
 
     # -- scene upload (once per scene) ----------------------------------------------------------
     def set_scene(self, scene: Scene) -> None:
-        """Upload a scene's static data; frame reuse restarts."""
+        """Upload a scene's static data; frame reuse restarts.
+
+        An equal scene is a no-op (reuse continues), and textures are re-synthesised and
+        re-uploaded only when the set of texture materials changes, so a session can call this
+        every frame (e.g. for a moving fixation target) at the cost of a few hundred bytes.
+        """
+        if scene == self._scene:
+            return
         if len(scene.primitives) > MAX_PRIMITIVES:
             raise ValueError(f"at most {MAX_PRIMITIVES} primitives, got {len(scene.primitives)}")
         textures: list[NoiseTexture | ImageTexture] = []
@@ -125,7 +134,16 @@ class Renderer:
                 if key not in layer_of:
                     layer_of[key] = len(textures)
                     textures.append(p.material)
-        layers, sizes = pack_layers([texture_pixels(t) for t in textures])
+        texture_keys = tuple(layer_of)
+        if texture_keys != self._texture_keys or self._layers_tex is None:
+            layers, sizes = pack_layers([texture_pixels(t) for t in textures])
+            if self._layers_tex is not None:
+                self._layers_tex.release()
+            side = layers.shape[1]
+            self._layers_tex = self.ctx.texture_array((side, side, layers.shape[0]), 4, layers.tobytes(), dtype="f4")
+            self._layers_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._texture_keys, self._texture_sizes = texture_keys, sizes
+        sizes = self._texture_sizes
         data = np.zeros((max(1, len(scene.primitives)), TEXELS_PER_PRIMITIVE, 4), dtype=np.float32)
         self._centres_head = np.zeros((len(scene.primitives), 3))
         for i, p in enumerate(scene.primitives):
@@ -153,19 +171,20 @@ class Renderer:
                 b = p.border
                 data[i, 5] = (1.0, b.amplitude, b.cycles, b.phase_rad)
                 data[i, 6, :2] = (b.offset, b.side)
-        for tex in (self._prims_tex, self._layers_tex):
-            if tex is not None:
-                tex.release()
-        self._prims_tex = self.ctx.texture((TEXELS_PER_PRIMITIVE, data.shape[0]), 4, data.tobytes(), dtype="f4")
-        self._prims_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        side = layers.shape[1]
-        self._layers_tex = self.ctx.texture_array((side, side, layers.shape[0]), 4, layers.tobytes(), dtype="f4")
-        self._layers_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        if self._prims_tex is not None and self._prims_tex.size == (TEXELS_PER_PRIMITIVE, data.shape[0]):
+            self._prims_tex.write(data.tobytes())
+        else:
+            if self._prims_tex is not None:
+                self._prims_tex.release()
+            self._prims_tex = self.ctx.texture((TEXELS_PER_PRIMITIVE, data.shape[0]), 4, data.tobytes(), dtype="f4")
+            self._prims_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        aperture_changed = self._scene is None or scene.aperture != self._scene.aperture
         self._scene = scene
         for state in self._eyes.values():
             state.last_rendered_camera = None
-            self._release_eye_aperture(state)
-            state.aperture = None
+            if aperture_changed:  # the aperture is screen-fixed: recomputed only when it changes
+                self._release_eye_aperture(state)
+                state.aperture = None
         self._prog["u_n_prims"].value = len(scene.primitives)
         self._prog["u_background"].value = scene.background
         ap_colour = scene.aperture.colour if scene.aperture else (0.0, 0.0, 0.0)
@@ -238,7 +257,16 @@ class Renderer:
         eye = _eye_key(camera)
         self.stats.frames_requested += 1
         usable = camera_is_usable(camera)
-        state = self._eye_state(eye, int(camera.width_px), int(camera.height_px))
+        try:
+            size = (int(camera.width_px), int(camera.height_px))
+        except (TypeError, ValueError, AttributeError, OverflowError):
+            size = (0, 0)
+        if not (size[0] > 0 and size[1] > 0):
+            if eye not in self._eyes:
+                raise ValueError("a camera without a valid image size before any valid camera for this eye")
+            size = (self._eyes[eye].width_px, self._eyes[eye].height_px)
+            usable = False
+        state = self._eye_state(eye, *size)
         if usable:
             state.last_valid_camera = camera
         else:

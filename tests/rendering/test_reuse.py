@@ -102,3 +102,15 @@ def test_stereo_renders_each_eye_separately(gl_context):
     col_r = np.nonzero(img_r[..., 0].max(axis=0) > 0.55)[0].mean()
     col_l = np.nonzero(img_l[..., 0].max(axis=0) > 0.55)[0].mean()
     assert col_r < col_l - 5
+
+
+def test_equal_scene_keeps_reuse_and_a_changed_scene_renders(gl_context):
+    back, front = detection_stimulus(1.0, 0.5, origin_m=RIGHT_EYE_CENTRE_M)
+    camera = crop_camera(gaze_camera(16.0, 0.0, "ocular"), 700, 780, 40, 40)
+    with Renderer(Scene((back, front)), ctx=gl_context) as renderer:
+        renderer.render(camera)
+        renderer.set_scene(Scene(detection_stimulus(1.0, 0.5, origin_m=RIGHT_EYE_CENTRE_M)))  # equal, new object
+        assert not renderer.render(camera).rendered
+        renderer.set_scene(Scene(detection_stimulus(1.0, 0.75, origin_m=RIGHT_EYE_CENTRE_M)))
+        assert renderer.render(camera).rendered
+        assert renderer.stats.frames_skipped == 1
