@@ -24,6 +24,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--display", default="headless", choices=["headless", "window"])
     parser.add_argument("--clock", default="virtual", choices=["virtual", "real"])
     parser.add_argument("--data", type=Path, default=Path("data"), help="data root (default data/)")
+    parser.add_argument("--render", default="auto", choices=["auto", "images", "cameras"],
+                        help="images: ray-cast the stimulus; cameras: eye cameras only; auto: images if OpenGL works")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     # testing aids (crash-safety tests): hidden from --help
     parser.add_argument("--phase-delay-s", type=float, default=0.0, help=argparse.SUPPRESS)
@@ -44,7 +46,7 @@ def main(args: argparse.Namespace) -> int:
     options = SessionOptions(
         participant=args.participant, session=args.session, seed=args.seed, tracker=args.tracker,
         responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
-        progress=not args.no_progress, phase_delay_s=args.phase_delay_s,
+        progress=not args.no_progress, phase_delay_s=args.phase_delay_s, render=args.render,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),
     )

@@ -19,16 +19,22 @@ from psyop.session.log.schema import FRAME_SCHEMA
 
 @dataclass(frozen=True)
 class FrameCheck:
-    """What a renderer reports: whether the frame was checked, and if it was fine."""
+    """What a renderer reports: whether an image was rendered and checked (finite, not
+    blank), and whether the frame (image and cameras) was fine."""
 
     checked: bool
     ok: bool
 
 
 class FrameRenderer(Protocol):
-    """Renders one frame for a fixation; returns a check of the result."""
+    """Renders one frame for a fixation; returns a check of the result.
 
-    def render(self, row: Mapping[str, Any], mode: str, show: str, t_s: float, fixation_m: tuple[float, float, float]) -> FrameCheck: ...
+    ``phase`` says what is shown (its ``name``: 'interval1', 'blank', ...; ``show``),
+    ``mode`` the loop's rendering mode for it, ``t_in_phase_s`` the time since the phase began.
+    """
+
+    def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
+               fixation_m: tuple[float, float, float]) -> FrameCheck: ...
 
 
 class Display(Protocol):
@@ -52,12 +58,14 @@ class CameraRenderer:
         self._make = make_eye_camera
         self.display, self.ipd_m, self.nc_m = display, ipd_m, nc_m
 
-    def render(self, row: Mapping[str, Any], mode: str, show: str, t_s: float, fixation_m: tuple[float, float, float]) -> FrameCheck:
+    def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
+               fixation_m: tuple[float, float, float]) -> FrameCheck:
         ok = True
         for eye in ("left", "right"):
-            camera = self._make(self.display, eye, fixation_m, self.ipd_m, self.nc_m, mode if show == "stimulus" else "conventional")
+            camera = self._make(self.display, eye, fixation_m, self.ipd_m, self.nc_m,
+                                mode if phase.show == "stimulus" else "conventional")
             ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
-        return FrameCheck(True, ok)
+        return FrameCheck(False, ok)  # no image was made
 
 
 class HeadlessDisplay:

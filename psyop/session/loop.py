@@ -122,6 +122,7 @@ class TrialLoop:
         self.frame_period_s = 1.0 / config.refresh_hz
         self._ages: list[float] = []  # sample age at submit, frames with fresh valid gaze
         self._n_held = 0
+        self._phase_start_s = 0.0
         self.state = TrialState.DONE
 
     # session -------------------------------------------------------------------------
@@ -167,7 +168,7 @@ class TrialLoop:
         valid = total = 0
         for phase in self.phases:
             self.state = TrialState.RECALIBRATE if phase.gaze == "cross" else TrialState.PRESENT
-            phase_start = self.clock.now_s()
+            phase_start = self._phase_start_s = self.clock.now_s()
             self._set_plan(phase, row, phase_start)
             if self.config.phase_delay_s > 0:
                 time.sleep(self.config.phase_delay_s)
@@ -227,7 +228,8 @@ class TrialLoop:
         render_start = self.clock.now_s()
         check = None
         if self.renderer is not None and phase.renders:
-            check = self.renderer.render(row, mode_for(phase, row), phase.show, render_start, gaze.fixation_m)
+            check = self.renderer.render(row, phase, mode_for(phase, row), render_start - self._phase_start_s,
+                                         gaze.fixation_m)
         submit = self.display.submit()
         age = submit - gaze.sample_t_s if math.isfinite(gaze.sample_t_s) else math.nan
         if gaze.valid and math.isfinite(age):

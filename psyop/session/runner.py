@@ -52,6 +52,9 @@ class SessionOptions:
     write_description: bool = True
     fsync: bool = True
     every_frame: bool | None = None  # None: every frame unless virtual clock + observer without images
+    render: str = "auto"  # auto | images | cameras (see docs/sessions.md)
+    check_scale: float = 0.25  # resolution of the sampled check frames of headless simulated sessions
+    check_images: int = 2  # images rendered and checked per headless simulated session
 
     @property
     def simulated(self) -> bool:
@@ -120,6 +123,32 @@ def _make_responses(spec: str, protocol: Any, kind: Any, seed: int, participant:
     raise UserError(f"unknown response source {spec!r}; use sim, keyboard or serial:DEVICE", "--responses")
 
 
+def _make_renderer(mode: str, protocol: Any, display_profile: Any, ipd_m: float, nc_m: float,
+                   scale: float, max_images: int | None) -> tuple[Any, str]:
+    """The frame renderer and a description of it for session.json.
+
+    'images': the protocol's stimulus ray-cast by psyop.rendering (needs OpenGL/EGL);
+    'cameras': only the gaze-dependent eye cameras; 'auto': images if a context can be
+    created, else cameras (recorded, never silent).
+    """
+    if mode not in ("auto", "images", "cameras"):
+        raise UserError(f"unknown render mode {mode!r}; use auto, images or cameras", "--render")
+    if mode == "cameras":
+        return CameraRenderer(display_profile, ipd_m, nc_m), "cameras only"
+    try:
+        from psyop.rendering.renderer import create_headless_context
+        from psyop.session.scene_renderer import SceneRenderer
+
+        ctx = create_headless_context()
+    except Exception as exc:  # noqa: BLE001 - any OpenGL/EGL failure
+        if mode == "images":
+            raise UserError(f"cannot create an OpenGL context for rendering: {exc}", "--render") from exc
+        return CameraRenderer(display_profile, ipd_m, nc_m), f"cameras only (no OpenGL context: {exc})"
+    limit = "every stimulus frame" if max_images is None else f"first {max_images} stimulus frames checked"
+    return (SceneRenderer(protocol, display_profile, ipd_m, nc_m, scale=scale, ctx=ctx, max_images=max_images),
+            f"images at scale {scale:g}, {limit}")
+
+
 def run_session(
     protocol: Any,
     compile_schedule: Callable[[Any, int], pd.DataFrame],
@@ -164,6 +193,7 @@ def run_session(
         "ipd_m": ipd, "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,
     }
+    renderer: Any = None
     gaze = _make_gaze(options.tracker, clock, seed, options.tracker_faults)
     window = None
     if options.display == "window":
@@ -189,10 +219,15 @@ def run_session(
             if trials is not None and len(trials):
                 clock.sleep_until(float(trials["trial_end_s"].max()))
         path = fixation_path(protocol)
+        every_frame = (not (clock.virtual and not responses.needs_images)) if options.every_frame is None \
+            else options.every_frame
+        renderer, rendering = _make_renderer(options.render, protocol, display_profile, ipd, eye_model.nc_m,
+                                             1.0 if every_frame else options.check_scale,
+                                             None if every_frame else options.check_images)
+        store.update_metadata(rendering=rendering)
         config = LoopConfig(
             refresh_hz=float(display_profile.refresh_hz),
-            every_frame=(not (clock.virtual and not responses.needs_images)) if options.every_frame is None
-            else options.every_frame,
+            every_frame=every_frame,
             pursuit_eccentricity_deg=path.eccentricity_deg if path else 16.0,
             pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
             phase_delay_s=options.phase_delay_s,
@@ -201,10 +236,12 @@ def run_session(
         loop = TrialLoop(
             identity={"study": study, "participant": options.participant, "session": options.session},
             phases=phases, clock=clock, gaze=gaze, responses=responses,
-            renderer=CameraRenderer(display_profile, ipd, eye_model.nc_m), display=display, store=store, config=config,
+            renderer=renderer, display=display, store=store, config=config,
         )
         outcome = loop.run(schedule, completed)
     finally:
+        if renderer is not None and hasattr(renderer, "close"):
+            renderer.close()
         responses.close()
         gaze.close()
         display.close()

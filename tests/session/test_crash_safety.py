@@ -45,7 +45,7 @@ def _child(argv: list[str], announce_fd: int) -> None:
 
 def _run_args(protocol: Path, data: Path, participant: str, delay_s: float) -> list[str]:
     return ["run", str(protocol), "--participant", participant, "--seed", str(SEED), "--data", str(data),
-            "--clock", "virtual", "--no-progress", "--phase-delay-s", str(delay_s)]
+            "--clock", "virtual", "--no-progress", "--phase-delay-s", str(delay_s), "--render", "cameras"]
 
 
 def _kill_once(argv: list[str], after_s: float) -> set[int]:

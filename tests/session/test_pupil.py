@@ -67,7 +67,7 @@ def test_session_stops_cleanly_when_pupil_disconnects_mid_trial(tmp_path: Path) 
     server = FakePupilCapture()
     data = tmp_path / "data"
     options = SessionOptions(participant="P1", seed=3, tracker=f"pupil:127.0.0.1:{server.port}", clock="real",
-                             data_root=data, progress=False)
+                             data_root=data, progress=False, render="cameras")
     import threading
 
     threading.Timer(1.0, server.stop).start()  # about 4 trials in, mid-trial
@@ -98,7 +98,7 @@ def test_session_stops_cleanly_when_pupil_disconnects_mid_trial(tmp_path: Path) 
     server2 = FakePupilCapture()
     try:
         options2 = SessionOptions(participant="P1", seed=3, tracker=f"pupil:127.0.0.1:{server2.port}", clock="real",
-                                  data_root=data, progress=False)
+                                  data_root=data, progress=False, render="cameras")
         outcome2 = run_session(protocol, compile_schedule, options2)
     finally:
         server2.stop()

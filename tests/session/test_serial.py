@@ -98,7 +98,7 @@ def test_session_with_serial_tracker_and_garbage_completes(tmp_path: Path) -> No
     device.stream_gaze(garbage_every=3)
     try:
         options = SessionOptions(participant="P1", seed=5, tracker=f"serial:{device.path}", clock="real",
-                                 data_root=tmp_path / "data", progress=False)
+                                 data_root=tmp_path / "data", progress=False, render="cameras")
         outcome = run_session(protocol, compile_schedule, options)
     finally:
         device.close()

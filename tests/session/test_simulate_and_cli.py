@@ -34,6 +34,8 @@ def test_simulate_all_five_studies_reduced(tmp_path: Path) -> None:
         frames = pd.read_parquet(session / "frames.parquet")
         assert 0 < len(frames) < len(trials) * 5  # a sampled few, not every frame
         assert frames["image_ok"].all()
+        assert 1 <= frames["image_checked"].sum() <= 2  # two images (one stereo frame or two mono) per session
+        assert meta["rendering"].startswith("images")
     # 5 sessions of 45-225 trials each; the full paper-size run is in benchmarks/bench_session_latency.py
     assert elapsed < 60
     # running it again finds everything complete and does no work
@@ -42,10 +44,10 @@ def test_simulate_all_five_studies_reduced(tmp_path: Path) -> None:
 
 def test_replayed_gaze_reproduces_the_logged_frames(tmp_path: Path) -> None:
     protocol = load_protocol(fast_protocol(tmp_path, "ordinal", 1, phase_s=0.2))
-    original = SessionOptions(participant="A1", seed=4, data_root=tmp_path / "a", progress=False, every_frame=True)
+    original = SessionOptions(participant="A1", seed=4, data_root=tmp_path / "a", progress=False, every_frame=True, render="cameras")
     assert run_session(protocol, compile_schedule, original).status == "complete"
     frames_a = pd.read_parquet(tmp_path / "a" / "ordinal" / "sub-A1" / "ses-1" / "frames.parquet")
-    replay = SessionOptions(participant="A1", seed=4, data_root=tmp_path / "b", progress=False, every_frame=True,
+    replay = SessionOptions(participant="A1", seed=4, data_root=tmp_path / "b", progress=False, every_frame=True, render="cameras",
                             tracker=f"replay:{tmp_path / 'a' / 'ordinal' / 'sub-A1' / 'ses-1'}")
     assert run_session(protocol, compile_schedule, replay).status == "complete"
     frames_b = pd.read_parquet(tmp_path / "b" / "ordinal" / "sub-A1" / "ses-1" / "frames.parquet")

@@ -43,7 +43,7 @@ def test_session_continues_through_nan_bursts_and_dropouts(tmp_path: Path) -> No
     protocol = load_protocol(fast_protocol(tmp_path, "detection", 1, phase_s=0.5))  # 2 s per trial
     faults = SimulatedTrackerConfig(nan_burst_rate_hz=1.0, nan_burst_s=0.1, dropout_rate_hz=0.3, dropout_s=0.5)
     options = SessionOptions(participant="F1", seed=9, data_root=tmp_path / "data", progress=False,
-                             tracker_faults=faults, every_frame=True)
+                             tracker_faults=faults, every_frame=True, render="cameras")
     outcome = run_session(protocol, compile_schedule, options)
     assert outcome.status == "complete"
     session = tmp_path / "data" / "detection" / "sub-F1" / "ses-1"

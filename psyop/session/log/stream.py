@@ -33,7 +33,8 @@ class DurableStreamWriter:
         """Write ``table`` (cast to the stream schema) and make it durable before returning."""
         if isinstance(table, pa.RecordBatch):
             table = pa.Table.from_batches([table])
-        table = table.select(self.schema.names).cast(self.schema)
+        if table.schema != self.schema:
+            table = table.select(self.schema.names).cast(self.schema)
         for batch in table.to_batches():
             self._writer.write_batch(batch)
         self._sync()
