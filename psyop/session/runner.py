@@ -55,6 +55,7 @@ class SessionOptions:
     render: str = "auto"  # auto | images | cameras (see docs/sessions.md)
     check_scale: float = 0.25  # resolution of the sampled check frames of headless simulated sessions
     check_images: int = 2  # images rendered and checked per headless simulated session
+    window_scale: float = 0.25  # window size as a fraction of the display profile's pixels
 
     @property
     def simulated(self) -> bool:
@@ -199,7 +200,7 @@ def run_session(
     if options.display == "window":
         from psyop.session.window import GlfwWindow
 
-        window = GlfwWindow(display_profile, clock)
+        window = GlfwWindow(display_profile, clock, scale=options.window_scale)
         display: Any = window
     elif options.display == "headless":
         display = HeadlessDisplay(clock)
@@ -221,9 +222,17 @@ def run_session(
         path = fixation_path(protocol)
         every_frame = (not (clock.virtual and not responses.needs_images)) if options.every_frame is None \
             else options.every_frame
-        renderer, rendering = _make_renderer(options.render, protocol, display_profile, ipd, eye_model.nc_m,
-                                             1.0 if every_frame else options.check_scale,
-                                             None if every_frame else options.check_images)
+        if window is not None and options.render != "cameras":
+            from psyop.session.scene_renderer import SceneRenderer
+
+            renderer = SceneRenderer(protocol, display_profile, ipd, eye_model.nc_m, scale=window.scale,
+                                     ctx=window.ctx, owns_ctx=False)
+            window.source = renderer
+            rendering = f"images at scale {window.scale:g} in the window"
+        else:
+            renderer, rendering = _make_renderer(options.render, protocol, display_profile, ipd, eye_model.nc_m,
+                                                 1.0 if every_frame else options.check_scale,
+                                                 None if every_frame else options.check_images)
         store.update_metadata(rendering=rendering)
         config = LoopConfig(
             refresh_hz=float(display_profile.refresh_hz),

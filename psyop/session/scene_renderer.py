@@ -27,7 +27,7 @@ class SceneRenderer:
     """
 
     def __init__(self, protocol: Any, display_profile: Any, ipd_m: float, nc_m: float, *, scale: float = 1.0,
-                 ctx: Any = None, max_images: int | None = None) -> None:
+                 ctx: Any = None, max_images: int | None = None, owns_ctx: bool = True) -> None:
         from psyop.optics import make_eye_camera
 
         self.protocol = protocol
@@ -40,6 +40,8 @@ class SceneRenderer:
         self.eyes = ("left", "right") if eyes == "stereo" else (str(eyes),)
         self._make_camera = make_eye_camera
         self._ctx = ctx
+        self._owns_ctx = owns_ctx
+        self.last_eye: str | None = None
         self._renderer: Any = None
         self._base_dir = Path(protocol.source_name).parent if getattr(protocol, "source_name", "") else None
         self.images_rendered = 0
@@ -83,6 +85,7 @@ class SceneRenderer:
             self._renderer.render(camera)
             image = self._renderer.image(eye)
             self.images_rendered += 1
+            self.last_eye = eye
             images += 1
             ok &= bool(image.size > 0 and np.isfinite(image).all() and np.ptp(image) > 0)
         return FrameCheck(images > 0, ok and cameras_ok)
@@ -91,6 +94,12 @@ class SceneRenderer:
         if self._renderer is not None:
             self._renderer.release()
             self._renderer = None
-        if self._ctx is not None:
+        if self._ctx is not None and self._owns_ctx:
             self._ctx.release()
-            self._ctx = None
+        self._ctx = None
+
+    def last_framebuffer(self) -> Any:
+        """The framebuffer of the last rendered eye (for a window to present), or None."""
+        if self._renderer is None or self.last_eye is None:
+            return None
+        return self._renderer.framebuffer(self.last_eye)

@@ -1,9 +1,9 @@
 """A real window for sessions (``--display window``): presents frames, delivers key presses.
 
-Built on :class:`psyop.rendering.window.Window` (glfw + moderngl). Until psyop.stimulus
-turns trial rows into scenes, the window shows the phase as a flat screen (grey during
-stimulus, dark during blanks, a mid-grey prompt), so that the loop, keyboard and flip
-timing can be run and tested end to end. Flip times are recorded on the real clock
+Built on :class:`psyop.rendering.window.Window` (glfw + moderngl). With a
+:class:`~psyop.session.scene_renderer.SceneRenderer` sharing the window's context
+(``source``), each submit presents the newest rendered eye image; outside stimulus phases
+(cross, blank, prompt) the screen is flat grey. Flip times are recorded on the real clock
 (:meth:`RealClock.on_flip`), which estimates the display's refresh period.
 """
 
@@ -31,6 +31,13 @@ class GlfwWindow:
         self._keys: list[tuple[str, float]] = []
         glfw.set_key_callback(self._window._window, self._on_key)
         self.shade = 0.5
+        self.scale = scale
+        self.source: Any = None  # a SceneRenderer sharing this window's context
+        self._presented: Any = None
+
+    @property
+    def ctx(self) -> Any:
+        return self._window.ctx
 
     def _on_key(self, window: Any, key: int, scancode: int, action: int, mods: int) -> None:
         if action != self._glfw.PRESS:
@@ -54,10 +61,15 @@ class GlfwWindow:
         return keys
 
     def submit(self) -> float:
+        """Present the renderer's newest image (or a flat grey screen outside stimuli) and flip."""
         ctx = self._window.ctx
-        ctx.screen.use()
-        ctx.clear(self.shade, self.shade, self.shade)
-        self._glfw.swap_buffers(self._window._window)
+        framebuffer = self.source.last_framebuffer() if self.source is not None else None
+        if framebuffer is not None and framebuffer.size == (self._window.width_px, self._window.height_px):
+            self._window.present(framebuffer)
+        else:
+            ctx.screen.use()
+            ctx.clear(self.shade, self.shade, self.shade)
+            self._glfw.swap_buffers(self._window._window)
         on_flip = getattr(self._clock, "on_flip", None)
         return on_flip() if on_flip is not None else self._clock.now_s()
 
