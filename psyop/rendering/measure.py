@@ -30,10 +30,12 @@ RIGHT_CENTRE_M = np.array([IPD_M / 2.0, 0.0, 0.0])
 GAZE_DEG = (16.0 * math.cos(0.7), 16.0 * math.sin(0.7))
 
 
-def right_eye_camera(az_deg: float, el_deg: float, mode: str, display: DisplayProfile = VIVE_PRO) -> Any:
-    """Right-eye camera fixating 0.5 m away in direction (az, el) from the eye's centre."""
+def right_eye_camera(az_deg: float, el_deg: float, mode: str, display: DisplayProfile = VIVE_PRO,
+                     eye: str = "right", near_m: float = 0.01, far_m: float = 100.0) -> Any:
+    """Camera of ``eye`` fixating 0.5 m away in direction (az, el) from the *right* eye's centre
+    (64 mm IPD, Gullstrand-Emsley NC)."""
     fixation = RIGHT_CENTRE_M + direction_from_angles(az_deg, el_deg) * 0.5
-    return make_eye_camera(display, "right", fixation, IPD_M, NC_M, mode)
+    return make_eye_camera(display, eye, fixation, IPD_M, NC_M, mode, near_m, far_m)
 
 
 @dataclass(frozen=True)

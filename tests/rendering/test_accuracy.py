@@ -12,7 +12,8 @@ from psyop.rendering import AntiAliasing, Renderer, RenderSettings, Scene, Solid
 from psyop.rendering.builders import detection_stimulus, ordinal_stimulus
 from psyop.rendering.camera_math import crop_camera, project_points_px
 from psyop.rendering.exact import border_x_px, visible_back_area_px
-from tests.rendering.conftest import RIGHT_EYE_CENTRE_M, gaze_camera
+from psyop.rendering.measure import RIGHT_CENTRE_M as RIGHT_EYE_CENTRE_M
+from psyop.rendering.measure import right_eye_camera as gaze_camera
 
 GAZE_AZ_EL_DEG = (16.0 * math.cos(0.7), 16.0 * math.sin(0.7))  # 16 deg eccentricity, oblique
 

@@ -14,7 +14,8 @@ from psyop.rendering import Renderer, Scene
 from psyop.rendering.builders import detection_stimulus, target_field
 from psyop.rendering.camera_math import crop_camera, project_points_px
 from psyop.rendering.reuse import decide_reuse
-from tests.rendering.conftest import RIGHT_EYE_CENTRE_M, gaze_camera
+from psyop.rendering.measure import RIGHT_CENTRE_M as RIGHT_EYE_CENTRE_M
+from psyop.rendering.measure import right_eye_camera as gaze_camera
 
 NEAR_DISPLAY = symmetric_profile("near_display", 1440, 1600, 90.0, 110.0, d_m=1.5)
 SCENE = Scene(target_field(seed=3, n_targets=12, origin_m=RIGHT_EYE_CENTRE_M) +

@@ -13,7 +13,8 @@ from psyop.rendering import Renderer, RenderSettings, Scene, Solid
 from psyop.rendering.builders import frontoparallel_disc
 from psyop.rendering.camera_math import crop_camera
 from psyop.rendering.window import Window, WindowUnavailable, run_paced
-from tests.rendering.conftest import RIGHT_EYE_CENTRE_M, gaze_camera
+from psyop.rendering.measure import RIGHT_CENTRE_M as RIGHT_EYE_CENTRE_M
+from psyop.rendering.measure import right_eye_camera as gaze_camera
 
 REFRESH_S = 1.0 / 90.0
 STALL_FRAME = 10
@@ -47,6 +48,8 @@ def main() -> int:
         "centre_rgb": screen[32, 32].tolist(),
         "corner_rgb": screen[2, 2].tolist(),
         "renderer": renderer_name,
+        "refresh_s": REFRESH_S,
+        "stall_frame": STALL_FRAME,
     }))
     return 0
 
