@@ -256,6 +256,10 @@ def run_session(
         display.close()
     summary = {"outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
                "tracker": gaze.stats()}
+    flips = getattr(clock, "flips", None)
+    if flips is not None and len(flips.times_s) >= 8:
+        period, _ = flips.estimate(1.0 / float(display_profile.refresh_hz))
+        summary["display_flip_period_s"] = period  # from the flip timestamps (least squares)
     store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
     if options.write_description:
         write_dataset_description(options.data_root, simulated=options.simulated)
