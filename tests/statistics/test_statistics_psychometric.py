@@ -24,7 +24,7 @@ def test_parameter_recovery_detection_design():
     """200 simulated observers, 5 levels x 15 trials: bias < 0.02 D, 95 % CI coverage in [0.90, 0.99]."""
     rng = np.random.default_rng(12345)
     truth = true_t75(0.36, 0.2, 0.0)
-    fits = fit_many(_datasets(rng, 200), FitOptions(n_bootstrap=200), n_jobs=2)
+    fits = fit_many(_datasets(rng, 200), FitOptions(n_bootstrap=200, estimate_eta=False), n_jobs=2)
     est = np.array([f.threshold_D for f in fits])
     lo = np.array([f.threshold_ci_low_D for f in fits])
     hi = np.array([f.threshold_ci_high_D for f in fits])
@@ -38,7 +38,7 @@ def test_parameter_recovery_detection_design():
 def test_recovery_with_lapses_uses_the_75_percent_point():
     rng = np.random.default_rng(7)
     truth = true_t75(0.4, 0.15, 0.04)  # the 75 % point moves right when the observer lapses
-    fits = fit_many(_datasets(rng, 40, 0.4, 0.15, 0.04, n_per_level=60), FitOptions(n_bootstrap=0), n_jobs=2)
+    fits = fit_many(_datasets(rng, 40, 0.4, 0.15, 0.04, n_per_level=60), FitOptions(n_bootstrap=0, estimate_eta=False), n_jobs=2)
     est = np.array([f.threshold_D for f in fits])
     assert abs(np.median(est) - truth) < 0.03
     assert np.mean([f.lapse for f in fits]) < 0.15
@@ -51,6 +51,9 @@ def test_agrees_with_public_psignifit_threshold():
     theirs = float(res.threshold(0.75, return_ci=False))
     assert ours.threshold_D == pytest.approx(theirs, abs=0.02)
     assert ours.lapse == pytest.approx(res.parameter_estimate["lambda"], abs=0.03)
+    free = fit_psychometric(data, FitOptions(n_bootstrap=0, fixed_eta=None))  # psignifit's own setting
+    assert free.threshold_D == pytest.approx(theirs, abs=0.01)
+    assert 0.0 <= ours.eta <= 1.0
 
 
 def test_all_correct_is_flagged():
