@@ -336,6 +336,13 @@ class Renderer:
         img = np.frombuffer(raw, dtype=np.float32).reshape(state.height_px, state.width_px, 4)
         return np.ascontiguousarray(img[::-1, :, :3])
 
+    def edge_pixel_count(self, eye: str = "right") -> int:
+        """How many pixels of the eye's last frame took the adaptive edge path (32x32 samples)."""
+        state = self._eyes[eye]
+        raw = state.fbo.read(components=4, dtype="f4")
+        alpha = np.frombuffer(raw, dtype=np.float32).reshape(state.height_px, state.width_px, 4)[..., 3]
+        return int(np.count_nonzero(alpha < 0.75))
+
     def image_uint8(self, eye: str = "right") -> np.ndarray:
         """(H, W, 3) uint8 image (rounded) of the eye's last frame."""
         return np.round(np.clip(self.image(eye), 0.0, 1.0) * 255.0).astype(np.uint8)

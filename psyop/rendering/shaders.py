@@ -180,6 +180,7 @@ void main() {
     ivec2 fc = ivec2(gl_FragCoord.xy);
     vec2 corner = vec2(float(fc.x), u_size_px.y - 1.0 - float(fc.y));  // top-left, y down
     vec3 colour;
+    float alpha = 1.0;  // 0.5 marks an adaptively supersampled (edge) pixel, for work accounting
 #if defined(AA_NONE)
     colour = sample_colour(ray_at(corner + 0.5), 0.0);
 #elif defined(AA_SUPERSAMPLE)
@@ -215,13 +216,13 @@ void main() {
             fw = max(max(abs(hx.a - h0.a), abs(hy.a - h0.a)), max(abs(hx.b - h0.b), abs(hy.b - h0.b)));
         }
     }
-    if (edge) colour = overflow ? grid_colour(corner) : grid_colour_relevant(corner);
+    if (edge) { colour = overflow ? grid_colour(corner) : grid_colour_relevant(corner); alpha = 0.5; }
     else colour = best < 0 ? u_background : shade(best, ba, bb, fw);
 #endif
     float ap = texelFetch(u_aperture, ivec2(fc.x, fc.y), 0).r;
     colour = mix(u_aperture_colour, colour, ap);
     if (any(isnan(colour)) || any(isinf(colour))) colour = u_background;
-    frag_colour = vec4(clamp(colour, 0.0, 1.0), 1.0);
+    frag_colour = vec4(clamp(colour, 0.0, 1.0), alpha);
 }
 """
 

@@ -11,7 +11,7 @@ import pytest
 from psyop.rendering import AntiAliasing, Renderer, RenderSettings, Scene, Solid
 from psyop.rendering.builders import detection_stimulus, ordinal_stimulus
 from psyop.rendering.camera_math import crop_camera, project_points_px
-from psyop.rendering.exact import border_x_px, visible_back_area_px
+from psyop.rendering.exact import border_x_px, projected_disc, visible_back_area_px
 from psyop.rendering.measure import RIGHT_CENTRE_M as RIGHT_EYE_CENTRE_M
 from psyop.rendering.measure import right_eye_camera as gaze_camera
 
@@ -100,3 +100,17 @@ def test_ordinal_border_without_antialiasing_is_visibly_quantised(gl_context):
     # The same measurement is sensitive: one sample per pixel misplaces edges by tenths of a pixel.
     errors = _ordinal_edge_case(gl_context, AntiAliasing.NONE)
     assert errors.max() > 0.1
+
+
+def test_adaptive_sampling_is_confined_to_edges(gl_context):
+    # Work accounting: only pixels whose centre lies within ~1 px of a primitive edge take the
+    # 32x32 path; every such pixel lies in a band of +-1.75 px around the two projected rims.
+    back, front = detection_stimulus(2.0, 0.5, origin_m=RIGHT_EYE_CENTRE_M)
+    camera = _crop_around(gaze_camera(*GAZE_AZ_EL_DEG, "ocular"), back.centre_m, 24)
+    with Renderer(Scene((back, front)), ctx=gl_context) as renderer:
+        renderer.render(camera)
+        n_edge = renderer.edge_pixel_count()
+    rims = [projected_disc(camera, disc) for disc in (back, front)]
+    band_area = sum(math.pi * ((r.radii_px[0] + 1.75) ** 2 - (r.radii_px[0] - 1.75) ** 2) for r in rims)
+    inner_band = sum(math.pi * ((r.radii_px[0] + 0.5) ** 2 - (r.radii_px[0] - 0.5) ** 2) for r in rims)
+    assert inner_band * 0.9 < n_edge < band_area
