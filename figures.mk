@@ -1,15 +1,94 @@
 # Figure and table rules for `make figures` (included by Makefile).
-# Every figure is one analysis/ script; make's dependencies rebuild only what changed.
+#
+# `make figures` first makes sure data/ holds sessions (simulating all five studies
+# headless when it holds none), then runs a second make over the figure graph, so that
+# the session files it lists exist when make reads them. Every figure or table is one
+# analysis/ script; make's dependencies rebuild only what changed (new sessions, changed
+# statistics or drawing code). The slow psychometric fits are cached in results/*_fits.csv.
 
-OPTICS_SRC := $(wildcard psyop/optics/*.py)
-MODEL_FIGURES := figures/fig03_parallax_vs_eccentricity.png figures/supp_linearity.png
+DATA ?= data
+RESULTS := results
+FIGDIR := figures
 
-figures: $(MODEL_FIGURES)
+OPTICS_SRC := $(wildcard psyop/optics/*.py) psyop/figures/optics_figures.py
+STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py
+DRAW_SRC := $(STATS_SRC) psyop/figures/study_figures.py
+trials_of = $(wildcard $(DATA)/$(1)/sub-*/ses-*/trials.parquet)
 
-figures/fig03_parallax_vs_eccentricity.png: analysis/fig03_parallax_vs_eccentricity.py $(OPTICS_SRC) | $(STAMP)
-	@mkdir -p figures
-	$(PY) $< --out $@
+MODEL_FIGURES := $(FIGDIR)/fig03_parallax_vs_eccentricity.png $(FIGDIR)/supp_linearity.png
+STUDY_FIGURES := $(FIGDIR)/detection_thresholds.png $(FIGDIR)/discrimination_thresholds.png \
+	$(FIGDIR)/supp_psychometric_detection.png $(FIGDIR)/supp_psychometric_discrimination.png \
+	$(FIGDIR)/ordinal_depth.png $(FIGDIR)/egocentric_reach.png $(FIGDIR)/realism_preferences.png
+TABLES := $(RESULTS)/summary.md
 
-figures/supp_linearity.png: analysis/supp_linearity.py $(OPTICS_SRC) | $(STAMP)
-	@mkdir -p figures
-	$(PY) $< --out $@
+.PHONY: figures figures-data figures-build
+
+figures: $(STAMP)
+	@$(MAKE) --no-print-directory figures-data
+	@$(MAKE) --no-print-directory figures-build
+	@echo "[psyop] figures in $(FIGDIR)/, statistics in $(RESULTS)/ (summary: $(RESULTS)/summary.md)"
+
+# Simulate only when no session has been logged yet; real data is never overwritten.
+figures-data: $(STAMP)
+	@if find $(DATA) -name trials.parquet -print -quit 2>/dev/null | grep -q .; then \
+	  echo "[psyop] using the sessions in $(DATA)/"; \
+	else \
+	  echo "[psyop] $(DATA)/ holds no sessions: simulating all five studies (marked simulated)"; \
+	  $(VENV)/bin/psyop simulate --data $(DATA) --protocols protocols --jobs $(JOBS); \
+	fi
+
+figures-build: $(MODEL_FIGURES) $(STUDY_FIGURES) $(TABLES)
+
+$(FIGDIR)/fig03_parallax_vs_eccentricity.png: analysis/fig03_parallax_vs_eccentricity.py $(OPTICS_SRC)
+	@mkdir -p $(FIGDIR)
+	@echo "[psyop] $@"
+	@$(PY) $< --out $@
+
+$(FIGDIR)/supp_linearity.png: analysis/supp_linearity.py $(OPTICS_SRC)
+	@mkdir -p $(FIGDIR)
+	@echo "[psyop] $@"
+	@$(PY) $< --out $@
+
+# Psychometric fit caches (the slow step), one per threshold study.
+$(RESULTS)/%_fits.csv: analysis/fit_psychometric.py $(STATS_SRC) $(DATA)/dataset_description.json
+	@mkdir -p $(RESULTS)
+	@echo "[psyop] fitting psychometric functions: $*"
+	@$(PY) $< --study $* --data $(DATA) --out $@ --n-jobs $(JOBS)
+
+$(RESULTS)/detection_fits.csv: $(call trials_of,detection)
+$(RESULTS)/discrimination_fits.csv: $(call trials_of,discrimination)
+
+$(FIGDIR)/detection_thresholds.png: analysis/fig_detection_thresholds.py $(RESULTS)/detection_fits.csv $(DRAW_SRC)
+	@mkdir -p $(FIGDIR)
+	@echo "[psyop] $@"
+	@$(PY) $< --data $(DATA) --fits $(RESULTS)/detection_fits.csv --results $(RESULTS) --out $@
+
+$(FIGDIR)/discrimination_thresholds.png: analysis/fig_discrimination_thresholds.py $(RESULTS)/discrimination_fits.csv $(DRAW_SRC)
+	@mkdir -p $(FIGDIR)
+	@echo "[psyop] $@"
+	@$(PY) $< --data $(DATA) --fits $(RESULTS)/discrimination_fits.csv --results $(RESULTS) --out $@
+
+$(FIGDIR)/supp_psychometric_%.png: analysis/supp_psychometric_functions.py $(RESULTS)/%_fits.csv $(DRAW_SRC)
+	@mkdir -p $(FIGDIR)
+	@echo "[psyop] $@"
+	@$(PY) $< --study $* --data $(DATA) --fits $(RESULTS)/$*_fits.csv --results $(RESULTS) --out $@
+
+$(FIGDIR)/ordinal_depth.png: analysis/fig_ordinal_depth.py $(call trials_of,ordinal) $(DRAW_SRC)
+	@mkdir -p $(FIGDIR)
+	@echo "[psyop] $@"
+	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
+
+$(FIGDIR)/egocentric_reach.png: analysis/fig_egocentric_reach.py $(call trials_of,egocentric) $(DRAW_SRC)
+	@mkdir -p $(FIGDIR)
+	@echo "[psyop] $@"
+	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
+
+$(FIGDIR)/realism_preferences.png: analysis/fig_realism.py $(call trials_of,realism) $(DRAW_SRC)
+	@mkdir -p $(FIGDIR)
+	@echo "[psyop] $@"
+	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
+
+# The results table collects the JSON each figure script writes beside its figure.
+$(RESULTS)/summary.md: analysis/results_table.py $(STUDY_FIGURES) $(STATS_SRC)
+	@echo "[psyop] $@"
+	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
