@@ -111,7 +111,7 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
 def test_sigkill_of_the_psyop_command_then_recover_and_resume(detection_small: Path, tmp_path: Path) -> None:
     """The real console entry point (`python -m psyop run`), killed, then `psyop recover` and resume."""
     data = tmp_path / "data"
-    argv = [sys.executable, "-m", "psyop", *_run_args(detection_small, data, "K1", 0.05)]
+    argv = [sys.executable, "-m", "psyop", *_run_args(detection_small, data, "K1", 0.25)]
     process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     paths = SessionPaths(data, "detection", "K1", 1)
     deadline = time.monotonic() + 60
@@ -138,8 +138,10 @@ def test_sigkill_of_the_psyop_command_then_recover_and_resume(detection_small: P
 
 def test_ctrl_c_discards_the_current_trial_and_finalises(detection_small: Path, tmp_path: Path) -> None:
     data = tmp_path / "data"
-    argv = [sys.executable, "-m", "psyop", *_run_args(detection_small, data, "C1", 0.05)]
-    process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    argv = [sys.executable, "-m", "psyop", *_run_args(detection_small, data, "C1", 0.25)]
+    # a parent started in the background may have SIGINT ignored; a terminal's Ctrl-C is not
+    process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     paths = SessionPaths(data, "detection", "C1", 1)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:

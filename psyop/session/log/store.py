@@ -122,7 +122,7 @@ def recover_tables(paths: SessionPaths) -> tuple[pd.DataFrame | None, pd.DataFra
         pa.concat_tables(frame_tables, promote_options="permissive").to_pandas()
         if frame_tables else FRAME_SCHEMA.empty_table().to_pandas()
     )
-    if not trial_tables:
+    if not trial_tables:  # no segment even holds a schema yet (killed while opening)
         return None, frames.iloc[0:0]
     trials = pa.concat_tables(trial_tables, promote_options="permissive").to_pandas()
     trials = trials.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
@@ -148,7 +148,7 @@ def finalise_session(
         raise UserError("no session.json here: not a psyop session directory", str(paths.directory))
     trials, frames = recover_tables(paths)
     if trials is None:
-        trials = pd.DataFrame()
+        trials = pd.DataFrame({"trial": pd.Series([], dtype="int64")})
     meta = json.loads(paths.metadata.read_text())
     expected = expected_trials if expected_trials is not None else meta.get("n_trials_scheduled")
     if status == "complete" and expected is not None and len(trials) < int(expected):
