@@ -190,30 +190,28 @@ void main() {
     colour = sample_colour(ray_at(corner + vec2(sp.x, 1.0 - sp.y)), 0.0);
 #else
     vec3 d0 = ray_at(corner + 0.5);
-    vec3 dx = ray_at(corner + vec2(1.5, 0.5));
-    vec3 dy = ray_at(corner + vec2(0.5, 1.5));
     bool edge = false;
     bool overflow = false;
     int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0; float fw = 0.0;
     for (int i = 0; i < u_n_prims; ++i) {
+        // One ray per pixel; the neighbours' values come from the 2x2 pixel quad's screen-space
+        // derivatives (uniform control flow: the loop bound is a uniform).
         Hit h0 = intersect(i, d0);
-        Hit hx = intersect(i, dx);
-        Hit hy = intersect(i, dy);
-        bool near_edge = false;
-        if (h0.plane != hx.plane || h0.plane != hy.plane) { near_edge = true; }
-        else if (h0.plane) {
-            vec2 grad = vec2(hx.g - h0.g, hy.g - h0.g);
-            float gl = length(grad);
-            if (!(abs(h0.g) > u_edge_margin_px * gl) || h0.inside != hx.inside || h0.inside != hy.inside)
-                near_edge = true;
-        }
+        float plane = h0.plane ? 1.0 : 0.0;
+        float inside = h0.inside ? 1.0 : 0.0;
+        float g = h0.plane ? clamp(h0.g, -1e6, 1e6) : 1e6;
+        float gl = length(vec2(dFdx(g), dFdy(g)));
+        float a = h0.plane ? clamp(h0.a, -1e6, 1e6) : 0.0;
+        float b = h0.plane ? clamp(h0.b, -1e6, 1e6) : 0.0;
+        vec2 dab = vec2(max(abs(dFdx(a)), abs(dFdy(a))), max(abs(dFdx(b)), abs(dFdy(b))));
+        bool near_edge = fwidth(plane) > 0.0 || fwidth(inside) > 0.0
+                         || (h0.plane && !(abs(h0.g) > u_edge_margin_px * gl));
         edge = edge || near_edge;
         if (near_edge || h0.inside) {
             if (n_relevant < MAX_RELEVANT) cache_primitive(i); else overflow = true;
         }
         if (h0.inside && h0.t < best_t) {
-            best = i; best_t = h0.t; ba = h0.a; bb = h0.b;
-            fw = max(max(abs(hx.a - h0.a), abs(hy.a - h0.a)), max(abs(hx.b - h0.b), abs(hy.b - h0.b)));
+            best = i; best_t = h0.t; ba = h0.a; bb = h0.b; fw = max(dab.x, dab.y);
         }
     }
     if (edge) { colour = overflow ? grid_colour(corner) : grid_colour_relevant(corner); alpha = 0.5; }
