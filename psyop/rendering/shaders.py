@@ -9,8 +9,9 @@ chosen at compile time with one of the ``AA_*`` defines:
 ``AA_MSAA``        one ray per MSAA sample (sample-rate shading at ``gl_SamplePosition``), so the
                    sample pattern is exactly the hardware MSAA pattern; resolved afterwards.
 ``AA_ADAPTIVE``    one sample, or an SxS grid where a primitive edge passes within
-                   ``u_edge_margin_px`` of the pixel centre (edge distance from the primitive's
-                   implicit edge function divided by its finite-difference pixel gradient).
+                   ``u_edge_margin_px`` of the pixel centre (edge distance = the primitive's
+                   implicit edge function divided by its screen-space gradient, from the 2x2
+                   quad's dFdx/dFdy, so detecting edges costs no extra rays).
 """
 
 from __future__ import annotations
