@@ -78,3 +78,19 @@ def test_posthoc_per_separation_bonferroni_and_dropping():
     row = ph[(ph["separation_D"] == 2.0) & (ph["A"] == "conventional") & (ph["B"] == "ocular")].iloc[0]
     assert row["p_bonf"] < 0.001 and row["stars"] == "***"
     assert isinstance(ph, pd.DataFrame)
+
+
+def test_rm_anova_refuses_too_few_complete_subjects():
+    from psyop.statistics.anova import rm_anova
+
+    data = pd.DataFrame({"participant": ["a"] * 3 + ["b"] * 3, "m": ["x", "y", "z"] * 2, "v": [1.0, 2, 3, 2, 2, 5]})
+    with pytest.raises(ValueError, match="2 complete subject"):
+        rm_anova(data, "v", "m")
+
+
+def test_posthoc_family_all_corrects_over_every_comparison():
+    rng = np.random.default_rng(4)
+    cm = cell_means(simulate_ordinal(rng, n_subjects=8), "correct", ["mode", "separation_D"])
+    ph = posthoc_paired(cm, "correct", "mode", by="separation_D", family="all")
+    assert (ph["m"] == 6).all()
+    np.testing.assert_allclose(ph["p_bonf"], np.minimum(ph["p_unc"] * 6, 1))
