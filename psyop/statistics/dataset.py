@@ -43,18 +43,22 @@ def session_files(data_root: Path, study: str) -> list[Path]:
     return sorted((Path(data_root) / study).glob("sub-*/ses-*/trials.parquet"))
 
 
-def load_trials(data_root: Path, study: str) -> pd.DataFrame:
+def load_trials(data_root: Path, study: str, include_practice: bool = False) -> pd.DataFrame:
     """Concatenate every session's trials of ``study`` into one tidy table.
 
     ``participant`` is returned as str and ``session`` as int so that groupings are
     stable across sessions written by different versions. The result's ``attrs``
     carry ``simulated`` (bool) and ``n_sessions``.
     """
-    return load_dataset(data_root, study).trials
+    return load_dataset(data_root, study, include_practice).trials
 
 
-def load_dataset(data_root: Path, study: str) -> Dataset:
-    """Like :func:`load_trials` but returns a :class:`Dataset` with the simulated flag."""
+def load_dataset(data_root: Path, study: str, include_practice: bool = False) -> Dataset:
+    """Like :func:`load_trials` but returns a :class:`Dataset` with the simulated flag.
+
+    Practice trials (a true ``practice`` column) are left out unless ``include_practice``;
+    how many were left out is in ``trials.attrs["n_practice_dropped"]``.
+    """
     files = session_files(data_root, study)
     if not files:
         raise UserError(
@@ -67,7 +71,13 @@ def load_dataset(data_root: Path, study: str) -> Dataset:
         trials["participant"] = trials["participant"].astype(str)
     if "session" in trials:
         trials["session"] = trials["session"].astype(int)
+    n_practice = 0
+    if not include_practice and "practice" in trials:
+        is_practice = trials["practice"].fillna(False).astype(bool)
+        n_practice = int(is_practice.sum())
+        trials = trials[~is_practice].reset_index(drop=True)
     simulated = is_simulated(data_root)
+    trials.attrs["n_practice_dropped"] = n_practice
     trials.attrs["simulated"] = simulated
     trials.attrs["n_sessions"] = len(files)
     return Dataset(study=study, trials=trials, simulated=simulated, n_sessions=len(files))

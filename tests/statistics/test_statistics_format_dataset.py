@@ -53,11 +53,15 @@ def test_dataset_round_trip_and_simulated_flag(tmp_path):
     rng = np.random.default_rng(0)
     det = simulate_detection(rng, n_subjects=3)
     det.loc[det["participant"] == "02", "session"] = 2
+    det["practice"] = False
+    det.loc[det.index[:4], "practice"] = True
     write_dataset(tmp_path, {"detection": det}, simulated=True)
     ds = load_dataset(tmp_path, "detection")
     assert ds.simulated and ds.n_sessions == 3
     trials = load_trials(tmp_path, "detection")
-    assert len(trials) == len(det) and trials["participant"].dtype == object or str(trials["participant"].dtype) == "str"
+    assert len(trials) == len(det) - 4 and trials.attrs["n_practice_dropped"] == 4
+    assert len(load_trials(tmp_path, "detection", include_practice=True)) == len(det)
+    assert trials["participant"].dtype == object or str(trials["participant"].dtype) == "str"
     assert set(trials["participant"]) == {"01", "02", "03"}
     assert json.loads((tmp_path / "dataset_description.json").read_text())["simulated"] is True
 
