@@ -7,8 +7,8 @@
 # statistics or drawing code). The slow psychometric fits are cached in results/*_fits.csv.
 
 DATA ?= data
-RESULTS := results
-FIGDIR := figures
+RESULTS ?= results
+FIGDIR ?= figures
 
 OPTICS_SRC := $(wildcard psyop/optics/*.py) psyop/figures/optics_figures.py
 STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py

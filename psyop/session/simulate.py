@@ -7,6 +7,7 @@ analysis and checking that the analysis recovers the observers' known parameters
 from __future__ import annotations
 
 import json
+import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -17,6 +18,10 @@ from psyop.session.gaze.simulated import seed_for
 #: Participants analysed in the paper (Sec. 5-6): detection 6, discrimination 6, ordinal 19,
 #: egocentric 13 (16 minus 3 excluded), realism 19.
 PAPER_PARTICIPANTS: dict[str, int] = {"detection": 6, "discrimination": 6, "ordinal": 19, "egocentric": 13, "realism": 19}
+
+# Workers are spawned, not forked: a forked child inherits a parent's OpenGL (llvmpipe)
+# context without its threads and hangs (seen in the test suite: Framebuffer.read never returned).
+_SPAWN = multiprocessing.get_context("spawn")
 
 
 @dataclass(frozen=True)
@@ -72,7 +77,7 @@ def simulate_dataset(protocol_paths: list[Path], data_root: Path, *, jobs: int =
     if jobs <= 1:
         results = [run_job(job, data_root) for job in planned]
     else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=_SPAWN) as pool:
             results = list(pool.map(run_job, planned, [data_root] * len(planned)))
     write_dataset_description(data_root, simulated=True, studies=sorted({j.study for j in planned}))
     _ = time.perf_counter() - start
