@@ -27,8 +27,10 @@ from psyop.rendering.shaders import (
     TEXELS_PER_PRIMITIVE,
     VERTEX_SHADER,
     AntiAliasing,
+    edge_pass_shader,
     fragment_shader,
 )
+from psyop.rendering.screen_bounds import screen_bounds_px
 from psyop.rendering.textures import pack_layers, texture_pixels
 
 
@@ -41,6 +43,9 @@ class RenderSettings:
     msaa_samples: int = 4
     edge_margin_px: float = 1.0
     reuse_tolerance_px: float | None = 0.01
+    # Adaptive only: supersample edge pixels in a second, depth-tested pass (default) rather than
+    # in place (the original single-pass form, kept for the side-by-side benchmark).
+    adaptive_two_pass: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "antialiasing", AntiAliasing(self.antialiasing))
@@ -78,6 +83,7 @@ class _EyeState:
     colour: Any
     msaa_fbo: Any | None
     aperture: Any
+    depth: Any | None = None
     last_valid_camera: Any = None
     last_rendered_camera: Any = None
     depth_range_m: tuple[float, float] = (0.0, math.inf)
@@ -103,10 +109,16 @@ class Renderer:
         self.ctx = ctx if ctx is not None else create_headless_context()
         self.stats = RenderStats()
         self._eyes: dict[str, _EyeState] = {}
+        self._two_pass = (self.settings.antialiasing is AntiAliasing.ADAPTIVE and self.settings.adaptive_two_pass)
         self._prog = self.ctx.program(vertex_shader=VERTEX_SHADER,
-                                      fragment_shader=fragment_shader(self.settings.antialiasing))
+                                      fragment_shader=fragment_shader(self.settings.antialiasing, self._two_pass))
         self._vao = self.ctx.vertex_array(self._prog, [])
         self._centres = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
+        self._edge_prog = self._edge_vao = self._bounds = None
+        if self._two_pass:
+            self._edge_prog = self.ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=edge_pass_shader())
+            self._edge_vao = self.ctx.vertex_array(self._edge_prog, [])
+            self._bounds = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
         self._prims_tex = None
         self._layers_tex = None
         self._texture_keys: tuple = ()
@@ -146,8 +158,10 @@ class Renderer:
         sizes = self._texture_sizes
         data = np.zeros((max(1, len(scene.primitives)), TEXELS_PER_PRIMITIVE, 4), dtype=np.float32)
         self._centres_head = np.zeros((len(scene.primitives), 3))
+        self._half_axes_m = np.zeros((2, len(scene.primitives), 3))
         for i, p in enumerate(scene.primitives):
             self._centres_head[i] = p.centre_m
+            self._half_axes_m[:, i] = (p.half_u_m, p.half_v_m)
             data[i, 0, :3] = p.half_u_m
             data[i, 0, 3] = 0.0 if p.shape is Shape.DISC else 1.0
             data[i, 1, :3] = p.half_v_m
@@ -185,10 +199,10 @@ class Renderer:
             if aperture_changed:  # the aperture is screen-fixed: recomputed only when it changes
                 self._release_eye_aperture(state)
                 state.aperture = None
-        self._prog["u_n_prims"].value = len(scene.primitives)
-        self._prog["u_background"].value = scene.background
         ap_colour = scene.aperture.colour if scene.aperture else (0.0, 0.0, 0.0)
-        self._prog["u_aperture_colour"].value = ap_colour
+        self._set_if_present("u_n_prims", len(scene.primitives))
+        self._set_if_present("u_background", scene.background)
+        self._set_if_present("u_aperture_colour", ap_colour)
         self._set_if_present("u_samples", int(self.settings.samples_per_axis))
         self._set_if_present("u_edge_margin_px", float(self.settings.edge_margin_px))
 
@@ -197,9 +211,13 @@ class Renderer:
         assert self._scene is not None
         return self._scene
 
+    def _programs(self) -> list[Any]:
+        return [p for p in (self._prog, self._edge_prog) if p is not None]
+
     def _set_if_present(self, name: str, value: Any) -> None:
-        if name in self._prog:
-            self._prog[name].value = value
+        for prog in self._programs():
+            if name in prog:
+                prog[name].value = value
 
     # -- per-eye targets ------------------------------------------------------------------------
     def _eye_state(self, eye: str, width_px: int, height_px: int) -> _EyeState:
@@ -209,13 +227,14 @@ class Renderer:
         if state is not None:
             self._release_eye(state)
         colour = self.ctx.texture((width_px, height_px), 4, dtype="f4")
-        fbo = self.ctx.framebuffer(color_attachments=[colour])
+        depth = self.ctx.depth_renderbuffer((width_px, height_px)) if self._two_pass else None
+        fbo = self.ctx.framebuffer(color_attachments=[colour], depth_attachment=depth)
         msaa = None
         if self.settings.antialiasing is AntiAliasing.MSAA:
             samples = min(int(self.settings.msaa_samples), int(self.ctx.max_samples))
             rb = self.ctx.renderbuffer((width_px, height_px), 4, samples=samples, dtype="f4")
             msaa = self.ctx.framebuffer(color_attachments=[rb])
-        state = _EyeState(width_px, height_px, fbo, colour, msaa, None)
+        state = _EyeState(width_px, height_px, fbo, colour, msaa, None, depth)
         self._eyes[eye] = state
         return state
 
@@ -225,7 +244,7 @@ class Renderer:
 
     def _release_eye(self, state: _EyeState) -> None:
         self._release_eye_aperture(state)
-        for obj in (state.fbo, state.colour, state.msaa_fbo):
+        for obj in (state.fbo, state.colour, state.msaa_fbo, state.depth):
             if obj is not None:
                 obj.release()
 
@@ -298,27 +317,52 @@ class Renderer:
             state.last_rendered_camera = None
         else:
             cop = np.asarray(camera.centre_of_projection_m, dtype=np.float64)
+            rel_m = self._centres_head - cop
             rel = np.zeros((MAX_PRIMITIVES, 4), dtype=np.float32)
-            rel[: len(self._centres_head), :3] = self._centres_head - cop
+            rel[: len(self._centres_head), :3] = rel_m
             self._centres.write(rel.tobytes())
             self._centres.bind_to_uniform_block(0)
-            self._prog["Centres"].binding = 0
             near, far = near_far_m(camera)
-            self._prog["u_ray"].write(np.asarray(camera.pixel_to_ray, dtype=np.float32).T.tobytes())
-            self._prog["u_size_px"].value = (float(state.width_px), float(state.height_px))
-            self._prog["u_near_m"].value = near
-            self._prog["u_far_m"].value = min(far, 3.0e38)
+            ray = np.asarray(camera.pixel_to_ray, dtype=np.float32).T.tobytes()
+            for prog in self._programs():
+                prog["Centres"].binding = 0
+                prog["u_ray"].write(ray)
+                prog["u_size_px"].value = (float(state.width_px), float(state.height_px))
+                prog["u_near_m"].value = near
+                prog["u_far_m"].value = min(far, 3.0e38)
+                prog["u_prims"].value = 0
+                prog["u_textures"].value = 1
+                prog["u_aperture"].value = 2
             self._prims_tex.use(0)
             self._layers_tex.use(1)
             state.aperture.use(2)
-            self._prog["u_prims"].value = 0
-            self._prog["u_textures"].value = 1
-            self._prog["u_aperture"].value = 2
-            self._vao.render(moderngl.TRIANGLES, vertices=3)
+            if self._two_pass:
+                self._draw_two_pass(state, camera, rel_m)
+            else:
+                self._vao.render(moderngl.TRIANGLES, vertices=3)
             state.last_rendered_camera = camera
             state.depth_range_m = self.scene.depth_range_m(cop)
         if state.msaa_fbo is not None:
             self.ctx.copy_framebuffer(state.fbo, state.msaa_fbo)
+
+    def _draw_two_pass(self, state: _EyeState, camera: Any, rel_m: np.ndarray) -> None:
+        """Adaptive sampling in two passes: one ray everywhere (edge pixels get depth 0), then
+        the SxS grid only where the depth test (GREATER than 0) lets a fragment through."""
+        bounds = np.zeros((MAX_PRIMITIVES, 4), dtype=np.float32)
+        bounds[: len(rel_m)] = screen_bounds_px(rel_m, self._half_axes_m[0], self._half_axes_m[1],
+                                                camera.pixel_to_ray, state.width_px, state.height_px)
+        self._bounds.write(bounds.tobytes())
+        self._bounds.bind_to_uniform_block(1)
+        self._edge_prog["Bounds"].binding = 1
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        try:
+            self.ctx.depth_func = "1"  # always: the first pass writes every pixel's edge mark
+            self._vao.render(moderngl.TRIANGLES, vertices=3)
+            self.ctx.depth_func = ">"  # the full-screen triangle sits at depth 0.5
+            self._edge_vao.render(moderngl.TRIANGLES, vertices=3)
+        finally:
+            self.ctx.depth_func = "<"
+            self.ctx.disable(moderngl.DEPTH_TEST)
 
     # -- results --------------------------------------------------------------------------------
     def finish(self) -> None:
@@ -353,7 +397,8 @@ class Renderer:
         for state in self._eyes.values():
             self._release_eye(state)
         self._eyes.clear()
-        for obj in (self._prims_tex, self._layers_tex, self._centres, self._vao, self._prog):
+        for obj in (self._prims_tex, self._layers_tex, self._centres, self._vao, self._prog,
+                    self._bounds, self._edge_vao, self._edge_prog):
             if obj is not None:
                 obj.release()
         self._prims_tex = self._layers_tex = None

@@ -12,6 +12,13 @@ chosen at compile time with one of the ``AA_*`` defines:
                    ``u_edge_margin_px`` of the pixel centre (edge distance = the primitive's
                    implicit edge function divided by its screen-space gradient, from the 2x2
                    quad's dFdx/dFdy, so detecting edges costs no extra rays).
+                   Two-pass form (the default, ``RenderSettings.adaptive_two_pass``): the first
+                   pass shades every pixel with one ray and writes depth 0 at edge pixels; the
+                   second, ``AA_EDGE_PASS``, is drawn with depth test GREATER so only those
+                   pixels are shaded, on the SxS grid, testing only the primitives whose
+                   CPU-computed screen box overlaps the pixel. Non-edge pixels thus never pay for
+                   the supersampling code (which a SIMD rasteriser such as llvmpipe would
+                   otherwise execute masked in every pixel).
 """
 
 from __future__ import annotations
@@ -44,6 +51,9 @@ FRAGMENT_TEMPLATE = """
 const float TWO_PI = 6.28318530717958647692;
 
 layout(std140) uniform Centres { vec4 u_centre[MAX_PRIMS]; };
+#if defined(AA_EDGE_PASS)
+layout(std140) uniform Bounds { vec4 u_bound[MAX_PRIMS]; };  // screen boxes (x0, y0, x1, y1), px, y down
+#endif
 uniform sampler2D u_prims;          // static per-primitive data, TEXELS_PER_PRIMITIVE x n
 uniform sampler2DArray u_textures;  // texture layers, fetched nearest-neighbour
 uniform sampler2D u_aperture;       // screen-fixed coverage (1 = visible), computed once per eye
@@ -130,7 +140,7 @@ vec3 grid_colour(vec2 corner_px) {
     return acc * inv * inv;
 }
 
-#if defined(AA_ADAPTIVE)
+#if defined(AA_ADAPTIVE) || defined(AA_EDGE_PASS)
 #define MAX_RELEVANT 16
 // Primitive data of the pixel's relevant primitives, cached in registers for the sample loop.
 struct Cached { int index; vec3 c; vec3 n; vec3 hu2; vec3 hv2; float num; float rect; vec4 border; vec2 side; };
@@ -189,6 +199,19 @@ void main() {
 #elif defined(AA_MSAA)
     vec2 sp = gl_SamplePosition;
     colour = sample_colour(ray_at(corner + vec2(sp.x, 1.0 - sp.y)), 0.0);
+#elif defined(AA_EDGE_PASS)
+    // Second pass of the two-pass adaptive sampler: only edge pixels get here (the depth test
+    // rejects the others before shading). The primitives that can be hit inside the pixel are
+    // those whose conservative screen box (CPU, per frame) overlaps the pixel, padded by 1 px.
+    bool overflow = false;
+    for (int i = 0; i < u_n_prims; ++i) {
+        vec4 bd = u_bound[i];
+        if (bd.x <= corner.x + 2.0 && bd.z >= corner.x - 1.0 && bd.y <= corner.y + 2.0 && bd.w >= corner.y - 1.0) {
+            if (n_relevant < MAX_RELEVANT) cache_primitive(i); else overflow = true;
+        }
+    }
+    colour = overflow ? grid_colour(corner) : grid_colour_relevant(corner);
+    alpha = 0.5;
 #else
     vec3 d0 = ray_at(corner + 0.5);
     bool edge = false;
@@ -208,15 +231,22 @@ void main() {
         bool near_edge = fwidth(plane) > 0.0 || fwidth(inside) > 0.0
                          || (h0.plane && !(abs(h0.g) > u_edge_margin_px * gl));
         edge = edge || near_edge;
+#if !defined(ADAPTIVE_TWO_PASS)
         if (near_edge || h0.inside) {
             if (n_relevant < MAX_RELEVANT) cache_primitive(i); else overflow = true;
         }
+#endif
         if (h0.inside && h0.t < best_t) {
             best = i; best_t = h0.t; ba = h0.a; bb = h0.b; fw = max(dab.x, dab.y);
         }
     }
+    colour = best < 0 ? u_background : shade(best, ba, bb, fw);
+#if defined(ADAPTIVE_TWO_PASS)
+    // First pass: one ray per pixel; edge pixels are marked in the depth buffer for the second.
+    gl_FragDepth = edge ? 0.0 : 1.0;
+#else
     if (edge) { colour = overflow ? grid_colour(corner) : grid_colour_relevant(corner); alpha = 0.5; }
-    else colour = best < 0 ? u_background : shade(best, ba, bb, fw);
+#endif
 #endif
     float ap = texelFetch(u_aperture, ivec2(fc.x, fc.y), 0).r;
     colour = mix(u_aperture_colour, colour, ap);
@@ -226,12 +256,24 @@ void main() {
 """
 
 
-def fragment_shader(antialiasing: AntiAliasing) -> str:
-    """The fragment shader source for one anti-aliasing variant."""
+def fragment_shader(antialiasing: AntiAliasing, two_pass: bool = False) -> str:
+    """The fragment shader source for one anti-aliasing variant.
+
+    ``two_pass`` (adaptive only): the source of the first pass, which shades one ray per pixel
+    and marks edge pixels in the depth buffer (0 = edge) instead of supersampling them in place;
+    :func:`edge_pass_shader` is the second pass.
+    """
     define = {
         AntiAliasing.NONE: "AA_NONE",
         AntiAliasing.MSAA: "AA_MSAA",
         AntiAliasing.SUPERSAMPLE: "AA_SUPERSAMPLE",
         AntiAliasing.ADAPTIVE: "AA_ADAPTIVE",
     }[AntiAliasing(antialiasing)]
+    if two_pass and define == "AA_ADAPTIVE":
+        define = "AA_ADAPTIVE\n#define ADAPTIVE_TWO_PASS"
     return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": define}
+
+
+def edge_pass_shader() -> str:
+    """Second pass of the two-pass adaptive sampler: SxS rays in the pixels the first pass marked."""
+    return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": "AA_EDGE_PASS"}
