@@ -20,6 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--session", type=int, default=1, help="session number (default 1)")
     parser.add_argument("--seed", type=int, default=None, help="schedule/observer seed (default: from IDs, or the session's)")
     parser.add_argument("--tracker", default="sim", help="sim | replay:FILE | pupil:HOST:PORT | serial:DEVICE")
+    parser.add_argument("--pose", default="sim",
+                        help="head/hand pose: sim (simulated from the seed) | replay:SESSION_DIR (a logged session)")
     parser.add_argument("--responses", default="sim", help="sim | keyboard | serial:DEVICE")
     parser.add_argument("--display", default="headless", choices=["headless", "window"])
     parser.add_argument("--clock", default="virtual", choices=["virtual", "real"])
@@ -46,7 +48,7 @@ def main(args: argparse.Namespace) -> int:
     options = SessionOptions(
         participant=args.participant, session=args.session, seed=args.seed, tracker=args.tracker,
         responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
-        progress=not args.no_progress, phase_delay_s=args.phase_delay_s, render=args.render,
+        progress=not args.no_progress, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),
     )

@@ -17,6 +17,7 @@ Two frame regimes:
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import signal
 import sys
@@ -39,6 +40,7 @@ from psyop.session.gaze.plan import FixationPlan, circling_target
 from psyop.session.gaze.sample import GazeSample, GazeSource, TrackerLost
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.log.store import SessionStore
+from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.session.responses.base import Response, ResponseSource
 
@@ -67,6 +69,7 @@ class LoopConfig:
     fixation_distance_m: float = 1.0
     phase_delay_s: float = 0.0  # real sleep per phase; only for crash-safety tests
     progress: bool = True
+    hand_last_n: int = 10  # reach = mean of the last N hand samples (protocol response.average_last_samples)
 
 
 @dataclass
@@ -113,12 +116,16 @@ class TrialLoop:
         display: Display,
         store: SessionStore,
         config: LoopConfig,
+        pose: PoseSource | None = None,
     ) -> None:
         self.identity = dict(identity)  # study, participant, session
         self.phases = phases
         self.clock, self.gaze, self.responses = clock, gaze, responses
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
         self.conditioner = GazeConditioner(config.confidence_threshold)
+        self.pose = pose  # None: no head/hand tracking (logged as the origin, held)
+        self.head_conditioner, self.hand_conditioner = PoseConditioner(), PoseConditioner()
+        self.n_hand_held = 0
         self.frame_period_s = 1.0 / config.refresh_hz
         self._ages: list[float] = []  # sample age at submit, frames with fresh valid gaze
         self._n_held = 0
@@ -185,6 +192,7 @@ class TrialLoop:
         self.state = TrialState.RESPONSE
         response = self._await_response(row, frames)
         end = self.clock.now_s()
+        response, hand_columns = self._track_reach(row, response, end)
         record = dict(row)
         record.update(self.identity)
         record.update(
@@ -195,7 +203,27 @@ class TrialLoop:
             run=self.store.run_index,
         )
         record.update(dict(response.extras))
+        record.update(hand_columns)
         return record, frames
+
+    def _track_reach(self, row: Mapping[str, Any], response: Response, end_s: float) -> tuple[Response, dict[str, Any]]:
+        """A reach: take the pose source's last N hand samples (hold last valid), recompute
+        the reach from them and log them with the trial (``hand_sample_*`` columns)."""
+        if response.reach_m is None or self.pose is None:
+            return response, {}
+        extras = dict(response.extras)
+        endpoint = tuple(extras[k] for k in ("hand_x_m", "hand_y_m", "hand_z_m")) if "hand_x_m" in extras else None
+        samples = self.pose.hand(row, end_s, self.config.hand_last_n, endpoint)
+        if not samples:
+            return response, {}
+        hands = [self.hand_conditioner.condition(s) for s in samples]
+        self.n_hand_held += sum(h.held for h in hands)
+        reach, mean = reach_from_positions(np.array([h.position_m for h in hands]), self.config.hand_last_n)
+        extras.update(hand_x_m=float(mean[0]), hand_y_m=float(mean[1]), hand_z_m=float(mean[2]))
+        columns = dict(hand_sample_t_s=[h.sample_t_s for h in hands],
+                       **{f"hand_sample_{a}_m": [h.position_m[i] for h in hands] for i, a in enumerate("xyz")},
+                       hand_sample_valid=[h.valid for h in hands], hand_sample_held=[h.held for h in hands])
+        return dataclasses.replace(response, response=f"{reach:.6f}", reach_m=reach, extras=tuple(extras.items())), columns
 
     def _set_plan(self, phase: PhaseSpec, row: Mapping[str, Any], start_s: float) -> None:
         set_plan = getattr(self.gaze, "set_plan", None)
@@ -225,6 +253,7 @@ class TrialLoop:
         """The software path of one frame: gaze in -> condition -> render -> submit -> log."""
         sample = self._fresh(self.gaze.latest(self.clock.now_s()))
         gaze = self.conditioner.condition(sample)
+        head = self.head_conditioner.condition(self.pose.head(self.clock.now_s()) if self.pose is not None else None)
         render_start = self.clock.now_s()
         check = None
         if self.renderer is not None and phase.renders:
@@ -241,7 +270,7 @@ class TrialLoop:
                    fixation_x_m=fx, fixation_y_m=fy, fixation_z_m=fz, gaze_confidence=gaze.confidence,
                    gaze_valid=gaze.valid, gaze_held=gaze.held, render_start_s=render_start, submit_s=submit,
                    sample_age_s=age, image_checked=check.checked if check else False,
-                   image_ok=check.ok if check else None)
+                   image_ok=check.ok if check else None, **_pose_columns("head", head))
         if check is not None and check.checked and not check.ok:
             raise RuntimeError(f"trial {row['trial']}: rendered frame failed its check (non-finite or empty)")
         return int(gaze.valid), 1
@@ -271,3 +300,11 @@ class TrialLoop:
                 self.clock.sleep_until(self.clock.now_s() + self.frame_period_s)
             else:
                 self.clock.sleep_until(self.clock.now_s() + 0.01)
+
+
+def _pose_columns(prefix: str, pose: ConditionedPose) -> dict[str, Any]:
+    """Frame-log columns of one conditioned pose (see psyop.session.log.schema.pose_fields)."""
+    (x, y, z), (qw, qx, qy, qz) = pose.position_m, pose.orientation_wxyz
+    return {f"{prefix}_sample_t_s": pose.sample_t_s, f"{prefix}_x_m": x, f"{prefix}_y_m": y, f"{prefix}_z_m": z,
+            f"{prefix}_qw": qw, f"{prefix}_qx": qx, f"{prefix}_qy": qy, f"{prefix}_qz": qz,
+            f"{prefix}_valid": pose.valid, f"{prefix}_held": pose.held}

@@ -1,19 +1,100 @@
-"""Hand (and head) pose for the egocentric study: simulated hand-tracker samples.
+"""Head and hand pose: typed samples, a source protocol, hold-last-valid, and the simulation.
+
+Head pose is logged with every frame (``head_*`` columns of frames.parquet); the hand
+pose samples that determine an egocentric reach are logged as frame-log rows of phase
+``hand``, so a reach can be recomputed from the log and replayed
+(:mod:`psyop.session.pose_replay`).
 
 The paper tracked the hand with an HTC Vive Tracker at 120 Hz (1.9 mm RMSE accuracy,
 1.5 mm precision) and took the reach as the mean of the last 10 samples (protocol
 ``response.average_last_samples``). The simulated hand ends its reach at the observer's
 intended distance along the direction of the target and jitters with that precision.
+Positions are in head space at the start of the session (metres); orientations are unit
+quaternions (w, x, y, z).
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
+from psyop.session.gaze.simulated import seed_for
+
 #: Direction from the eyes' mid-point to the reach target: straight ahead, a little low.
 REACH_DIRECTION = np.array([0.0, -0.15, -1.0]) / np.linalg.norm([0.0, -0.15, -1.0])
+IDENTITY_WXYZ: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+ORIGIN_M: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class PoseSample:
+    """One tracked pose on the session clock: position (m) and unit quaternion (w, x, y, z)."""
+
+    timestamp_s: float
+    position_m: tuple[float, float, float]
+    orientation_wxyz: tuple[float, float, float, float] = IDENTITY_WXYZ
+    valid: bool = True
+
+    def usable(self) -> bool:
+        """Valid, finite, and the quaternion has unit norm (within 1e-6)."""
+        values = self.position_m + self.orientation_wxyz
+        return (self.valid and all(math.isfinite(v) for v in values)
+                and abs(math.fsum(q * q for q in self.orientation_wxyz) - 1.0) < 1e-6)
+
+
+@dataclass(frozen=True)
+class ConditionedPose:
+    """A pose after hold-last-valid: what the session uses and logs."""
+
+    sample_t_s: float
+    position_m: tuple[float, float, float]
+    orientation_wxyz: tuple[float, float, float, float]
+    valid: bool  # the sample itself was usable
+    held: bool  # the last usable pose was used instead (or the origin, before any)
+
+
+class PoseConditioner:
+    """Hold the last valid pose on an invalid, missing or non-finite sample (like gaze).
+
+    Before any valid sample the origin with identity orientation is used (and flagged held).
+    """
+
+    def __init__(self) -> None:
+        self._last = ConditionedPose(math.nan, ORIGIN_M, IDENTITY_WXYZ, False, True)
+
+    def condition(self, sample: PoseSample | None) -> ConditionedPose:
+        if sample is not None and sample.usable():
+            self._last = ConditionedPose(sample.timestamp_s, sample.position_m, sample.orientation_wxyz, True, False)
+            return self._last
+        t = sample.timestamp_s if sample is not None else math.nan
+        return ConditionedPose(t, self._last.position_m, self._last.orientation_wxyz, False, True)
+
+
+class PoseSource(Protocol):
+    """Head and hand poses for a session (simulated, replayed, or a live tracker).
+
+    ``head(now_s)``: the newest head pose at ``now_s`` (None before the first).
+    ``hand(row, end_s, n, endpoint_m)``: the ``n`` hand samples up to ``end_s`` that
+    determine trial ``row``'s reach, oldest first; ``endpoint_m`` is where a simulated
+    observer holds its hand (None when the source must know it itself). Empty when the
+    source has no hand data for the trial.
+    """
+
+    def head(self, now_s: float) -> PoseSample | None: ...
+
+    def hand(self, row: Mapping[str, Any], end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]: ...
+
+    def close(self) -> None: ...
+
+
+def reach_from_positions(positions_m: np.ndarray, last_n: int) -> tuple[float, np.ndarray]:
+    """Distance from the eyes' mid-point (head-space origin) to the mean of the last ``last_n`` positions."""
+    mean = np.asarray(positions_m, dtype=np.float64)[-last_n:].mean(axis=0)
+    return float(np.linalg.norm(mean)), mean
 
 
 @dataclass(frozen=True)
@@ -25,8 +106,7 @@ class HandSamples:
 
     def reach_m(self, last_n: int) -> tuple[float, np.ndarray]:
         """Distance from the eyes' mid-point to the mean of the last ``last_n`` positions."""
-        mean = self.positions_m[-last_n:].mean(axis=0)
-        return float(np.linalg.norm(mean)), mean
+        return reach_from_positions(self.positions_m, last_n)
 
 
 def simulated_reach(intended_m: float, rng: np.random.Generator, *, n: int = 30, rate_hz: float = 120.0,
@@ -37,3 +117,79 @@ def simulated_reach(intended_m: float, rng: np.random.Generator, *, n: int = 30,
     positions = endpoint + rng.normal(0.0, precision_m / np.sqrt(3.0), (n, 3))
     times = end_s - (n - 1 - np.arange(n)) / rate_hz
     return HandSamples(times, positions)
+
+
+def quaternion_from_yaw_pitch_roll(yaw_rad: float, pitch_rad: float, roll_rad: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of yaw about +y, then pitch about +x, then roll about -z."""
+    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
+    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
+    # q = q_yaw(y) * q_pitch(x) * q_roll(z)
+    w = cy * cp * cr + sy * sp * sr
+    x = cy * sp * cr + sy * cp * sr
+    y = sy * cp * cr - cy * sp * sr
+    z = cy * cp * sr - sy * sp * cr
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    return (w / norm, x / norm, y / norm, z / norm)
+
+
+@dataclass(frozen=True)
+class SimulatedPoseConfig:
+    """Seated head sway and a slow drift (a few mm, a fraction of a degree); Vive Tracker hand.
+
+    ``hand_dropout_p`` / ``head_dropout_p``: probability that a sample is invalid (tests).
+    """
+
+    sway_amplitude_m: float = 0.004
+    drift_m_per_min: float = 0.003
+    rotation_amplitude_deg: float = 0.5
+    hand_rate_hz: float = 120.0
+    hand_precision_m: float = 0.0015
+    head_dropout_p: float = 0.0
+    hand_dropout_p: float = 0.0
+
+
+class SimulatedPose:
+    """Stateless in time (a function of seed and time, or seed and trial): resumed sessions see
+    the same poses as uninterrupted ones.
+
+    Head: three incommensurate sinusoids per axis (0.05-0.4 Hz, breathing and postural sway)
+    plus a linear drift, and small yaw/pitch/roll oscillations. Hand: the observer's endpoint
+    tracked at 120 Hz with the tracker's precision (the observer already applied the
+    per-reach accuracy error), drawn from (seed, trial_seed).
+    """
+
+    def __init__(self, seed: int, config: SimulatedPoseConfig | None = None) -> None:
+        self.seed = int(seed)
+        self.config = config or SimulatedPoseConfig()
+        rng = np.random.default_rng(seed_for(self.seed, "head"))
+        self._freq_hz = rng.uniform(0.05, 0.4, (6, 3))
+        self._phase = rng.uniform(0.0, 2 * math.pi, (6, 3))
+        self._drift_dir = rng.normal(size=3)
+        self._drift_dir /= np.linalg.norm(self._drift_dir)
+
+    def head(self, now_s: float) -> PoseSample:
+        c = self.config
+        waves = np.sin(2 * math.pi * self._freq_hz * now_s + self._phase)  # (6, 3)
+        position = c.sway_amplitude_m / 3.0 * waves[:3].sum(axis=0) + self._drift_dir * c.drift_m_per_min * now_s / 60.0
+        angles = np.radians(c.rotation_amplitude_deg) / 3.0 * waves[3:].sum(axis=0)
+        valid = True
+        if c.head_dropout_p > 0:
+            u = np.random.default_rng(seed_for(self.seed, "head-dropout", int(round(now_s * 1e6)))).uniform()
+            valid = bool(u >= c.head_dropout_p)
+        return PoseSample(float(now_s), (float(position[0]), float(position[1]), float(position[2])),
+                          quaternion_from_yaw_pitch_roll(*(float(a) for a in angles)), valid)
+
+    def hand(self, row: Mapping[str, Any], end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
+        if endpoint_m is None:
+            return []
+        c = self.config
+        rng = np.random.default_rng(seed_for(self.seed, "hand", int(row.get("trial_seed", row.get("trial", 0))) & 0xFFFFFFFF))
+        positions = np.asarray(endpoint_m, dtype=np.float64) + rng.normal(0.0, c.hand_precision_m / math.sqrt(3.0), (n, 3))
+        valid = rng.uniform(size=n) >= c.hand_dropout_p
+        times = end_s - (n - 1 - np.arange(n)) / c.hand_rate_hz
+        return [PoseSample(float(t), (float(p[0]), float(p[1]), float(p[2])), IDENTITY_WXYZ, bool(v))
+                for t, p, v in zip(times, positions, valid, strict=True)]
+
+    def close(self) -> None:
+        return None

@@ -56,6 +56,7 @@ class SessionOptions:
     check_scale: float = 0.25  # resolution of the sampled check frames of headless simulated sessions
     check_images: int = 2  # images rendered and checked per headless simulated session
     window_scale: float = 0.25  # window size as a fraction of the display profile's pixels
+    pose: str = "sim"  # sim | replay:SESSION_DIR (head and hand pose; docs/sessions.md)
 
     @property
     def simulated(self) -> bool:
@@ -96,6 +97,22 @@ def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig)
             raise UserError("expected serial:DEVICE", "--tracker")
         return SerialGazeSource(arg, clock=clock.now_s)
     raise UserError(f"unknown tracker {spec!r}; use sim, replay:FILE, pupil:HOST:PORT or serial:DEVICE", "--tracker")
+
+
+def _make_pose(spec: str, seed: int) -> Any:
+    """The head/hand pose source: simulated (from the seed) or replayed from a logged session."""
+    kind, _, arg = spec.partition(":")
+    if kind == "sim" and not arg:
+        from psyop.session.pose import SimulatedPose
+
+        return SimulatedPose(seed_for(seed, "pose"))
+    if kind == "replay":
+        from psyop.session.pose_replay import ReplayPose
+
+        if not arg:
+            raise UserError("expected replay:SESSION_DIR", "--pose")
+        return ReplayPose.from_path(Path(arg))
+    raise UserError(f"unknown pose source {spec!r}; use sim or replay:SESSION_DIR", "--pose")
 
 
 def _make_responses(spec: str, protocol: Any, kind: Any, seed: int, participant: str, clock: Any, window: Any) -> Any:
@@ -194,7 +211,9 @@ def run_session(
         "ipd_m": ipd, "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,
     }
+    metadata["pose"] = options.pose
     renderer: Any = None
+    pose = _make_pose(options.pose, seed)
     gaze = _make_gaze(options.tracker, clock, seed, options.tracker_faults)
     window = None
     if options.display == "window":
@@ -241,11 +260,12 @@ def run_session(
             pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
             phase_delay_s=options.phase_delay_s,
             progress=options.progress,
+            hand_last_n=int(getattr(getattr(protocol, "response", None), "average_last_samples", None) or 10),
         )
         loop = TrialLoop(
             identity={"study": study, "participant": options.participant, "session": options.session},
             phases=phases, clock=clock, gaze=gaze, responses=responses,
-            renderer=renderer, display=display, store=store, config=config,
+            renderer=renderer, display=display, store=store, config=config, pose=pose,
         )
         outcome = loop.run(schedule, completed)
     finally:
@@ -253,9 +273,10 @@ def run_session(
             renderer.close()
         responses.close()
         gaze.close()
+        pose.close()
         display.close()
     summary = {"outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
-               "tracker": gaze.stats()}
+               "tracker": gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held}}
     flips = getattr(clock, "flips", None)
     if flips is not None and len(flips.times_s) >= 8:
         period, _ = flips.estimate(1.0 / float(display_profile.refresh_hz))

@@ -28,13 +28,32 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
     pa.field("hand_x_m", pa.float64()),
     pa.field("hand_y_m", pa.float64()),
     pa.field("hand_z_m", pa.float64()),
+    # ... and the hand samples (after hold-last-valid) the reach was computed from, oldest
+    # first, so that it can be recomputed from the log and replayed (psyop.session.pose_replay)
+    pa.field("hand_sample_t_s", pa.list_(pa.float64())),
+    pa.field("hand_sample_x_m", pa.list_(pa.float64())),
+    pa.field("hand_sample_y_m", pa.list_(pa.float64())),
+    pa.field("hand_sample_z_m", pa.list_(pa.float64())),
+    pa.field("hand_sample_valid", pa.list_(pa.bool_())),
+    pa.field("hand_sample_held", pa.list_(pa.bool_())),
 )
 
 #: Columns that depend on wall/virtual time or on where a crash split the session;
 #: everything else in trials.parquet is a pure function of (protocol, seed, participant).
 TIMING_COLUMNS: tuple[str, ...] = (
     "trial_start_s", "trial_end_s", "response_time_s", "n_frames", "run", "gaze_valid_fraction",
+    "hand_sample_t_s",
 )
+
+def pose_fields(prefix: str) -> list[pa.Field]:
+    """Pose columns of the frame log: sample time, position (m), quaternion, valid, held."""
+    return [
+        pa.field(f"{prefix}_sample_t_s", pa.float64()),
+        *(pa.field(f"{prefix}_{axis}_m", pa.float64()) for axis in "xyz"),
+        *(pa.field(f"{prefix}_q{c}", pa.float64()) for c in "wxyz"),
+        pa.field(f"{prefix}_valid", pa.bool_()),
+        pa.field(f"{prefix}_held", pa.bool_()),
+    ]
 
 FRAME_SCHEMA = pa.schema(
     [
@@ -53,6 +72,8 @@ FRAME_SCHEMA = pa.schema(
         pa.field("sample_age_s", pa.float64()),
         pa.field("image_checked", pa.bool_()),
         pa.field("image_ok", pa.bool_()),
+        # head pose the frame used (head space at session start; unit quaternion w, x, y, z)
+        *pose_fields("head"),
     ]
 )
 
