@@ -46,6 +46,9 @@ class RenderSettings:
     # Adaptive only: supersample edge pixels in a second, depth-tested pass (default) rather than
     # in place (the original single-pass form, kept for the side-by-side benchmark).
     adaptive_two_pass: bool = True
+    # Two-pass only: the first pass skips primitives whose conservative screen box misses the
+    # pixel's 4x4 block (same image; kept switchable to measure what it saves).
+    adaptive_cull: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "antialiasing", AntiAliasing(self.antialiasing))
@@ -111,7 +114,8 @@ class Renderer:
         self._eyes: dict[str, _EyeState] = {}
         self._two_pass = (self.settings.antialiasing is AntiAliasing.ADAPTIVE and self.settings.adaptive_two_pass)
         self._prog = self.ctx.program(vertex_shader=VERTEX_SHADER,
-                                      fragment_shader=fragment_shader(self.settings.antialiasing, self._two_pass))
+                                      fragment_shader=fragment_shader(self.settings.antialiasing, self._two_pass,
+                                                                      self.settings.adaptive_cull))
         self._vao = self.ctx.vertex_array(self._prog, [])
         self._centres = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
         self._edge_prog = self._edge_vao = self._bounds = None
@@ -354,6 +358,8 @@ class Renderer:
         self._bounds.write(bounds.tobytes())
         self._bounds.bind_to_uniform_block(1)
         self._edge_prog["Bounds"].binding = 1
+        if "Bounds" in self._prog:
+            self._prog["Bounds"].binding = 1
         self.ctx.enable(moderngl.DEPTH_TEST)
         try:
             self.ctx.depth_func = "1"  # always: the first pass writes every pixel's edge mark

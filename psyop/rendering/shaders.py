@@ -51,7 +51,7 @@ FRAGMENT_TEMPLATE = """
 const float TWO_PI = 6.28318530717958647692;
 
 layout(std140) uniform Centres { vec4 u_centre[MAX_PRIMS]; };
-#if defined(AA_EDGE_PASS)
+#if defined(AA_EDGE_PASS) || defined(ADAPTIVE_CULL)
 layout(std140) uniform Bounds { vec4 u_bound[MAX_PRIMS]; };  // screen boxes (x0, y0, x1, y1), px, y down
 #endif
 uniform sampler2D u_prims;          // static per-primitive data, TEXELS_PER_PRIMITIVE x n
@@ -217,7 +217,24 @@ void main() {
     bool edge = false;
     bool overflow = false;
     int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0; float fw = 0.0;
+#if defined(ADAPTIVE_CULL)
+    // Cull per aligned 4x4 pixel block (it holds whole 2x2 quads, so derivatives stay valid and
+    // a SIMD rasteriser's lanes agree): a primitive whose screen box, padded by the margin and
+    // 2 px of float32 slack, misses the block can neither cover nor have an edge near its pixels.
+    ivec2 block = fc & ~3;
+    vec2 block_lo = vec2(float(block.x), u_size_px.y - float(block.y) - 4.0);  // y down
+    float pad = u_edge_margin_px + 2.0;
+    int i = -1;
+    while (true) {
+        for (++i; i < u_n_prims; ++i) {
+            vec4 bd = u_bound[i];
+            if (bd.x <= block_lo.x + 4.0 + pad && bd.z >= block_lo.x - pad
+                && bd.y <= block_lo.y + 4.0 + pad && bd.w >= block_lo.y - pad) break;
+        }
+        if (i >= u_n_prims) break;
+#else
     for (int i = 0; i < u_n_prims; ++i) {
+#endif
         // One ray per pixel; the neighbours' values come from the 2x2 pixel quad's screen-space
         // derivatives (uniform control flow: the loop bound is a uniform).
         Hit h0 = intersect(i, d0);
@@ -256,12 +273,14 @@ void main() {
 """
 
 
-def fragment_shader(antialiasing: AntiAliasing, two_pass: bool = False) -> str:
+def fragment_shader(antialiasing: AntiAliasing, two_pass: bool = False, cull: bool = False) -> str:
     """The fragment shader source for one anti-aliasing variant.
 
     ``two_pass`` (adaptive only): the source of the first pass, which shades one ray per pixel
     and marks edge pixels in the depth buffer (0 = edge) instead of supersampling them in place;
-    :func:`edge_pass_shader` is the second pass.
+    :func:`edge_pass_shader` is the second pass. ``cull`` (two-pass only): the first pass skips,
+    per aligned 4x4 pixel block, the primitives whose screen box (uniform block ``Bounds``)
+    cannot reach the block.
     """
     define = {
         AntiAliasing.NONE: "AA_NONE",
@@ -270,7 +289,7 @@ def fragment_shader(antialiasing: AntiAliasing, two_pass: bool = False) -> str:
         AntiAliasing.ADAPTIVE: "AA_ADAPTIVE",
     }[AntiAliasing(antialiasing)]
     if two_pass and define == "AA_ADAPTIVE":
-        define = "AA_ADAPTIVE\n#define ADAPTIVE_TWO_PASS"
+        define = "AA_ADAPTIVE\n#define ADAPTIVE_TWO_PASS" + ("\n#define ADAPTIVE_CULL" if cull else "")
     return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": define}
 
 

@@ -1,4 +1,5 @@
-"""The two-pass adaptive sampler gives the same image as the single-pass one, and its screen
+"""The two-pass adaptive sampler (with and without screen-box culling) gives the same image
+as the single-pass one, and its screen
 boxes are conservative (every point of a primitive projects inside its box)."""
 
 from __future__ import annotations
@@ -28,13 +29,14 @@ def test_two_pass_image_equals_single_pass_and_marks_the_same_pixels(gl_context)
         c = project_points_px(full, [scene.primitives[-1].centre_m])[0]
         cam = crop_camera(full, int(c[0]) - 40, int(c[1]) - 40, 80, 80)
         images, edges = [], []
-        for two_pass in (False, True):
-            with Renderer(scene, RenderSettings(adaptive_two_pass=two_pass), ctx=gl_context) as renderer:
+        for two_pass, cull in ((False, False), (True, False), (True, True)):
+            with Renderer(scene, RenderSettings(adaptive_two_pass=two_pass, adaptive_cull=cull),
+                          ctx=gl_context) as renderer:
                 renderer.render(cam)
                 images.append(renderer.image())
                 edges.append(renderer.edge_pixel_count())
-        assert edges[0] == edges[1] > 0
-        assert np.array_equal(images[0], images[1])
+        assert edges[0] == edges[1] == edges[2] > 0
+        assert np.array_equal(images[0], images[1]) and np.array_equal(images[0], images[2])
 
 
 @settings(max_examples=25, deadline=None)
