@@ -124,7 +124,8 @@ class TrialLoop:
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
         self.conditioner = GazeConditioner(config.confidence_threshold)
         self.pose = pose  # None: no head/hand tracking (logged as the origin, held)
-        self.head_conditioner, self.hand_conditioner = PoseConditioner(), PoseConditioner()
+        self.head_conditioner = PoseConditioner()
+        self.hand_conditioner = PoseConditioner((math.nan, math.nan, math.nan))
         self.n_hand_held = 0
         self.frame_period_s = 1.0 / config.refresh_hz
         self._ages: list[float] = []  # sample age at submit, frames with fresh valid gaze

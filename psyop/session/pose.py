@@ -60,11 +60,13 @@ class ConditionedPose:
 class PoseConditioner:
     """Hold the last valid pose on an invalid, missing or non-finite sample (like gaze).
 
-    Before any valid sample the origin with identity orientation is used (and flagged held).
+    Before any valid sample ``initial_m`` with identity orientation is used (flagged held):
+    the origin for the head (its reference pose), NaN for the hand (a reach with no valid
+    hand sample at all is unknown, not zero).
     """
 
-    def __init__(self) -> None:
-        self._last = ConditionedPose(math.nan, ORIGIN_M, IDENTITY_WXYZ, False, True)
+    def __init__(self, initial_m: tuple[float, float, float] = ORIGIN_M) -> None:
+        self._last = ConditionedPose(math.nan, initial_m, IDENTITY_WXYZ, False, True)
 
     def condition(self, sample: PoseSample | None) -> ConditionedPose:
         if sample is not None and sample.usable():
@@ -120,7 +122,7 @@ def simulated_reach(intended_m: float, rng: np.random.Generator, *, n: int = 30,
 
 
 def quaternion_from_yaw_pitch_roll(yaw_rad: float, pitch_rad: float, roll_rad: float) -> tuple[float, float, float, float]:
-    """Unit quaternion (w, x, y, z) of yaw about +y, then pitch about +x, then roll about -z."""
+    """Unit quaternion (w, x, y, z) of R_y(yaw) R_x(pitch) R_z(roll) (scipy's intrinsic 'YXZ')."""
     cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
     cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
     cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
