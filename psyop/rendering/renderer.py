@@ -386,12 +386,28 @@ class Renderer:
         img = np.frombuffer(raw, dtype=np.float32).reshape(state.height_px, state.width_px, 4)
         return np.ascontiguousarray(img[::-1, :, :3])
 
-    def edge_pixel_count(self, eye: str = "right") -> int:
-        """How many pixels of the eye's last frame took the adaptive edge path (32x32 samples)."""
+    def edge_mask(self, eye: str = "right") -> np.ndarray:
+        """(H, W) bool, top row first: the pixels of the eye's last frame that took the adaptive
+        edge path (SxS samples)."""
         state = self._eyes[eye]
         raw = state.fbo.read(components=4, dtype="f4")
         alpha = np.frombuffer(raw, dtype=np.float32).reshape(state.height_px, state.width_px, 4)[..., 3]
-        return int(np.count_nonzero(alpha < 0.75))
+        return np.ascontiguousarray(alpha[::-1] < 0.75)
+
+    def edge_pixel_count(self, eye: str = "right") -> int:
+        """How many pixels of the eye's last frame took the adaptive edge path (32x32 samples)."""
+        return int(np.count_nonzero(self.edge_mask(eye)))
+
+    def edge_block_count(self, eye: str = "right", block_px: int = 4) -> int:
+        """How many aligned ``block_px`` squares (window coordinates, origin bottom-left) hold at
+        least one edge pixel: the work unit of a SIMD rasteriser (llvmpipe shades 4x4 blocks; GPU
+        warps are similar), which pays for a block's samples when any of its pixels needs them."""
+        mask = self.edge_mask(eye)[::-1]
+        h, w = mask.shape
+        padded = np.zeros((-(-h // block_px) * block_px, -(-w // block_px) * block_px), dtype=bool)
+        padded[:h, :w] = mask
+        blocks = padded.reshape(padded.shape[0] // block_px, block_px, padded.shape[1] // block_px, block_px)
+        return int(np.count_nonzero(blocks.any(axis=(1, 3))))
 
     def image_uint8(self, eye: str = "right") -> np.ndarray:
         """(H, W, 3) uint8 image (rounded) of the eye's last frame."""

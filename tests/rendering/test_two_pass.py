@@ -70,3 +70,19 @@ def test_a_primitive_behind_the_centre_of_projection_is_unbounded():
     box = screen_bounds_px(behind, np.array([[0.1, 0, 0]]), np.array([[0, 0.1, 0]]), cam.pixel_to_ray,
                            cam.width_px, cam.height_px)
     assert np.all(box[0, :2] <= -UNBOUNDED_PX) and np.all(box[0, 2:] >= UNBOUNDED_PX)
+
+
+def test_edge_block_count_groups_edge_pixels_into_aligned_blocks(gl_context):
+    back, front = detection_stimulus(2.0, 0.5, origin_m=RIGHT_CENTRE_M)
+    full = right_eye_camera(12.0, 5.0, "ocular")
+    c = project_points_px(full, [back.centre_m])[0]
+    cam = crop_camera(full, int(c[0]) - 30, int(c[1]) - 30, 61, 58)  # sizes not multiples of 4
+    with Renderer(Scene((back, front)), ctx=gl_context) as renderer:
+        renderer.render(cam)
+        mask = renderer.edge_mask()
+        n_px, n_blocks = renderer.edge_pixel_count(), renderer.edge_block_count()
+        assert renderer.edge_block_count(block_px=1) == n_px == int(mask.sum()) > 0
+    assert n_px / 16 <= n_blocks <= n_px
+    # direct count over window-coordinate blocks (rows counted from the bottom)
+    rows, cols = np.nonzero(mask[::-1])
+    assert n_blocks == len({(r // 4, q // 4) for r, q in zip(rows, cols)})
