@@ -54,14 +54,16 @@ class _LiveSource:
         return {}
 
 
-def _frame_path_ms(with_camera: bool, n: int) -> np.ndarray:
+def _frame_path_ms(with_camera: bool, n: int, with_pose: bool = False) -> np.ndarray:
     from psyop.optics import VIVE_PRO, get_eye_model
+    from psyop.session.pose import SimulatedPose
 
     clock = RealClock()
     renderer = CameraRenderer(VIVE_PRO, 0.063, get_eye_model("gullstrand_emsley_relaxed").nc_m) if with_camera else None
     loop = TrialLoop(identity={"study": "bench", "participant": "B", "session": 1}, phases=(), clock=clock,
                      gaze=_LiveSource(clock), responses=None, renderer=renderer, display=HeadlessDisplay(clock),
-                     store=None, config=LoopConfig(progress=False))  # type: ignore[arg-type]
+                     store=None, config=LoopConfig(progress=False),  # type: ignore[arg-type]
+                     pose=SimulatedPose(seed=0) if with_pose else None)
     phase = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1")
     row = {"trial": 0, "mode_interval1": "ocular"}
     frames = FrameRecorder()
@@ -103,6 +105,7 @@ def _stats(ms: np.ndarray) -> tuple[float, float]:
 def run(out_dir: Path, quick: bool) -> str:
     n_frames = 2000 if quick else 20000
     cam = _frame_path_ms(True, n_frames)
+    cam_pose = _frame_path_ms(True, n_frames, with_pose=True)
     bare = _frame_path_ms(False, n_frames)
     tmp = Path(tempfile.mkdtemp(prefix="bench_session_"))
     try:
@@ -125,6 +128,7 @@ def run(out_dir: Path, quick: bool) -> str:
 
     cam_med, cam_p99 = _stats(cam)
     bare_med, bare_p99 = _stats(bare)
+    pose_med, pose_p99 = _stats(cam_pose)
     lines = [
         "## Session: per-frame software latency, durable append, simulated dataset",
         "",
@@ -133,6 +137,7 @@ def run(out_dir: Path, quick: bool) -> str:
         "| path | median ms | p99 ms | median / 11.1 ms frame | p99 / frame |",
         "|---|---|---|---|---|",
         f"| filter + both eyes' cameras + log + submit | {cam_med:.4f} | {cam_p99:.4f} | {cam_med / FRAME_BUDGET_MS:.2%} | {cam_p99 / FRAME_BUDGET_MS:.2%} |",
+        f"| as above + simulated head pose per frame | {pose_med:.4f} | {pose_p99:.4f} | {pose_med / FRAME_BUDGET_MS:.2%} | {pose_p99 / FRAME_BUDGET_MS:.2%} |",
         f"| filter + log + submit (no camera) | {bare_med:.4f} | {bare_p99:.4f} | {bare_med / FRAME_BUDGET_MS:.2%} | {bare_p99 / FRAME_BUDGET_MS:.2%} |",
         "",
         f"Camera computation share of the path: {cam_med / bare_med:.1f}x the bare path (median).",
