@@ -71,7 +71,7 @@ def _adaptive_cost(ctx, quick: bool) -> list[str]:
     reps = 3 if quick else 9
     lines = [f"Adaptive anti-aliasing cost: {reps} interleaved repetitions (each times every variant once, "
              "order rotating); ratio = variant frame / one-ray frame of the same repetition.", "",
-             "| scene | variant | ratio to one ray: median [min, max] | median frame (ms) | edge pixels |",
+             "| scene | variant | ratio to one ray: median [min, max] | median frame (ms) | edge pixels (last frame) |",
              "|---|---|---|---|---|"]
     for scene_label, make_scene in (("detection discs + fixation target", _scene),
                                     ("ordinal 24 deg textured surfaces + fixation target", _ordinal_scene)):
