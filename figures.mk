@@ -50,7 +50,7 @@ $(FIGDIR)/supp_linearity.png: analysis/supp_linearity.py $(OPTICS_SRC)
 	@$(PY) $< --out $@
 
 # Psychometric fit caches (the slow step), one per threshold study.
-$(RESULTS)/%_fits.csv: analysis/fit_psychometric.py $(STATS_SRC) $(DATA)/dataset_description.json
+$(RESULTS)/%_fits.csv: analysis/fit_psychometric.py $(STATS_SRC)
 	@mkdir -p $(RESULTS)
 	@echo "[psyop] fitting psychometric functions: $*"
 	@$(PY) $< --study $* --data $(DATA) --out $@ --n-jobs $(JOBS)

@@ -1,0 +1,66 @@
+"""`make figures` is incremental: a new session of one study rebuilds only that study's
+fits, its figures and the summary (checked with make's dry run on a scratch tree)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+STUDIES = ["detection", "discrimination", "ordinal", "egocentric", "realism"]
+OUTPUTS = [  # in build order: each is written after the ones before it
+    "results/detection_fits.csv", "results/discrimination_fits.csv",
+    "figures/fig03_parallax_vs_eccentricity.png", "figures/supp_linearity.png",
+    "figures/detection_thresholds.png", "figures/discrimination_thresholds.png",
+    "figures/supp_psychometric_detection.png", "figures/supp_psychometric_discrimination.png",
+    "figures/ordinal_depth.png", "figures/egocentric_reach.png", "figures/realism_preferences.png",
+    "results/summary.md",
+]
+
+
+def dry_run(tmp: Path) -> str:
+    cmd = ["make", "--no-print-directory", "-n", "-C", str(REPO), "figures-build",
+           f"DATA={tmp / 'data'}", f"RESULTS={tmp / 'results'}", f"FIGDIR={tmp / 'figures'}"]
+    return subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+
+
+@pytest.fixture()
+def built_tree(tmp_path: Path) -> Path:
+    newest_source = max(p.stat().st_mtime for p in [*REPO.glob("psyop/**/*.py"), *REPO.glob("analysis/*.py")])
+    t = newest_source + 10
+    for study in STUDIES:
+        f = tmp_path / "data" / study / "sub-S01" / "ses-1" / "trials.parquet"
+        f.parent.mkdir(parents=True)
+        f.write_bytes(b"")
+        os.utime(f, (t, t))
+    for i, rel in enumerate(OUTPUTS, start=1):
+        f = tmp_path / rel
+        f.parent.mkdir(parents=True, exist_ok=True)
+        f.write_bytes(b"")
+        os.utime(f, (t + i, t + i))
+    return tmp_path
+
+
+def test_up_to_date_tree_rebuilds_nothing(built_tree: Path) -> None:
+    assert "analysis/" not in dry_run(built_tree)
+
+
+def test_new_detection_session_rebuilds_only_detection_and_summary(built_tree: Path) -> None:
+    new = built_tree / "data" / "detection" / "sub-S02" / "ses-1" / "trials.parquet"
+    new.parent.mkdir(parents=True)
+    new.write_bytes(b"")
+    later = (built_tree / "results" / "summary.md").stat().st_mtime + 10
+    os.utime(new, (later, later))
+    commands = [line for line in dry_run(built_tree).splitlines() if "analysis/" in line]
+    scripts = " ".join(commands)
+    assert "fit_psychometric.py --study detection" in scripts
+    assert "fig_detection_thresholds.py" in scripts
+    assert "supp_psychometric_functions.py --study detection" in scripts
+    assert "results_table.py" in scripts
+    for other in ["--study discrimination", "fig_discrimination", "fig_ordinal", "fig_egocentric", "fig_realism",
+                  "fig03_parallax", "supp_linearity"]:
+        assert other not in scripts, f"{other} rebuilt for a detection session"
+    assert len(commands) == 4
