@@ -6,14 +6,15 @@ import argparse
 import sys
 from pathlib import Path
 
-from psyop.figures.optics_figures import plot_parallax_vs_eccentricity, save_png_and_pdf
+from psyop.figures.optics_figures import plot_parallax_vs_eccentricity
+from psyop.figures.output import save_figure
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", type=Path, default=Path("figures/fig03_parallax_vs_eccentricity.png"))
     args = parser.parse_args(argv)
-    save_png_and_pdf(plot_parallax_vs_eccentricity(), args.out)
+    save_figure(plot_parallax_vs_eccentricity(), args.out)
     return 0
 
 

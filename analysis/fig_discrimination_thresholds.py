@@ -10,7 +10,8 @@ from pathlib import Path
 
 from _common import parser, read_fits, write_json
 
-from psyop.figures.study_figures import plot_thresholds, save_figure
+from psyop.figures.output import save_figure
+from psyop.figures.study_figures import plot_thresholds
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_linear_fit
 from psyop.statistics.regression import linear_fit

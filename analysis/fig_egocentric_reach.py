@@ -12,7 +12,8 @@ import sys
 from _common import parser, write_json
 
 from psyop.errors import UserError
-from psyop.figures.study_figures import plot_reach, save_figure
+from psyop.figures.output import save_figure
+from psyop.figures.study_figures import plot_reach
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.formatting import format_condition_comparison
 from psyop.statistics.regression import condition_interaction, linear_fits_by

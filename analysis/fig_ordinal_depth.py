@@ -10,7 +10,8 @@ import sys
 
 from _common import parser, write_json
 
-from psyop.figures.study_figures import plot_ordinal, save_figure
+from psyop.figures.output import save_figure
+from psyop.figures.study_figures import plot_ordinal
 from psyop.statistics.anova import cell_means, posthoc_paired, rm_anova
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.formatting import format_anova, format_ttest

@@ -8,7 +8,8 @@ import sys
 
 from _common import parser, write_json
 
-from psyop.figures.study_figures import plot_preferences, save_figure
+from psyop.figures.output import save_figure
+from psyop.figures.study_figures import plot_preferences
 from psyop.statistics.binomial import pairwise_preferences
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.formatting import format_binomial

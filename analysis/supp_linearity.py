@@ -6,14 +6,15 @@ import argparse
 import sys
 from pathlib import Path
 
-from psyop.figures.optics_figures import plot_linearity, save_png_and_pdf
+from psyop.figures.optics_figures import plot_linearity
+from psyop.figures.output import save_figure
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", type=Path, default=Path("figures/supp_linearity.png"))
     args = parser.parse_args(argv)
-    save_png_and_pdf(plot_linearity(), args.out)
+    save_figure(plot_linearity(), args.out)
     return 0
 
 

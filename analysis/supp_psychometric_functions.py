@@ -11,7 +11,8 @@ from pathlib import Path
 
 from _common import parser, read_fits
 
-from psyop.figures.study_figures import plot_psychometric_grid, save_figure
+from psyop.figures.output import save_figure
+from psyop.figures.study_figures import plot_psychometric_grid
 from psyop.statistics.dataset import load_dataset
 
 CONDITION = {"detection": "back_D", "discrimination": "offset_D"}

@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from psyop.protocol import load_protocol
 from psyop.session.clock import RealClock
 from psyop.session.frames import CameraRenderer, FrameRecorder, HeadlessDisplay
 from psyop.session.gaze.sample import GazeSample

@@ -1,13 +1,12 @@
 """Figures drawn from the analytic optics models: paper Fig. 3 and supplement Fig. 1.
 
-Each ``plot_*`` function returns a matplotlib Figure and does no I/O; :func:`save_png_and_pdf`
+Each ``plot_*`` function returns a matplotlib Figure and does no I/O; :func:`psyop.figures.output.save_figure`
 writes a figure as PNG plus a PDF beside it. Uses the Agg backend through
 ``matplotlib.figure.Figure`` (no pyplot state).
 """
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -22,16 +21,6 @@ from psyop.optics.parallax import (
 )
 
 ARCMIN_PER_RAD = 180.0 / np.pi * 60.0
-
-
-def save_png_and_pdf(fig: Figure, out_png: Path, dpi: int = 150) -> tuple[Path, Path]:
-    """Write ``out_png`` and the same figure as a PDF beside it; returns both paths."""
-    out_png = Path(out_png)
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    out_pdf = out_png.with_suffix(".pdf")
-    fig.savefig(out_png, dpi=dpi)
-    fig.savefig(out_pdf)
-    return out_png, out_pdf
 
 
 def plot_parallax_vs_eccentricity(

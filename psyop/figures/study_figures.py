@@ -1,21 +1,16 @@
 """Drawing code for the paper's study figures. Takes statistics tables, returns matplotlib figures.
 
 No file reading here: ``analysis/`` scripts load data, call :mod:`psyop.statistics`, and pass
-the tidy tables in. :func:`save_figure` writes the PNG and a PDF beside it.
+the tidy tables in. :func:`psyop.figures.output.save_figure` writes the PNG and a PDF beside it.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from psyop.statistics.psychometric import predicted_pc  # noqa: E402
+from psyop.statistics.psychometric import predicted_pc
 
 MODE_COLOURS = {"conventional": "#7f7f7f", "ocular": "#1f77b4", "reversed": "#ff7f0e",
                 "enabled": "#1f77b4", "disabled": "#7f7f7f"}
@@ -30,17 +25,6 @@ def mark_simulated(fig: plt.Figure, simulated: bool) -> None:
              fontweight="bold", alpha=0.9)
     title = fig._suptitle.get_text() if fig._suptitle is not None else ""
     fig.suptitle(f"{title} ({SIMULATED_LABEL.lower()})" if title else SIMULATED_LABEL.lower(), fontsize=10)
-
-
-def save_figure(fig: plt.Figure, out_png: Path) -> list[Path]:
-    """Write ``out_png`` and a PDF with the same stem; close the figure."""
-    out_png = Path(out_png)
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    pdf = out_png.with_suffix(".pdf")
-    fig.savefig(out_png, dpi=150, bbox_inches="tight")
-    fig.savefig(pdf, bbox_inches="tight")
-    plt.close(fig)
-    return [out_png, pdf]
 
 
 def _sem(values: pd.Series) -> float:

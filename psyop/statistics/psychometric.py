@@ -264,7 +264,7 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions()) -> Ps
     if len(np.unique(data[:, 0])) < 2:
         return _no_fit(data, ("fewer_than_two_levels",))
     post_ = grid_posterior(data, options)
-    mesh, post, t75, grid, bounds, names = post_.mesh, post_.posterior, post_.t75_D, post_.grid, post_.bounds, post_.names
+    post, t75, grid, bounds, names = post_.posterior, post_.t75_D, post_.grid, post_.bounds, post_.names
     grid_max = post_.grid_max
     levels = data[:, 0]
     weights = post.ravel()

@@ -7,7 +7,6 @@ import json
 import sys
 import time
 
-import numpy as np
 
 from psyop.rendering import Renderer, RenderSettings, Scene, Solid
 from psyop.rendering.builders import frontoparallel_disc

@@ -8,7 +8,6 @@ sync has something to find. ``skip_every`` drops messages to create gaps.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 

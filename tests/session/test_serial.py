@@ -48,7 +48,7 @@ class PtyDevice:
                     os.write(self.master, GARBAGE[k % len(GARBAGE)])
                     self.garbage_sent += 1
                 else:
-                    os.write(self.master, f"G 0.05 -0.02 -0.9 0.97\r\n".encode())
+                    os.write(self.master, "G 0.05 -0.02 -0.9 0.97\r\n".encode())
                     self.lines_sent += 1
                 time.sleep(1.0 / rate_hz)
 
