@@ -23,7 +23,7 @@ TABLES := $(RESULTS)/summary.md
 
 .PHONY: figures figures-data figures-build
 
-figures: $(STAMP)
+figures: $(STAMP) $(SYSDEPS_STAMP)
 	@$(MAKE) --no-print-directory figures-data
 	@$(MAKE) --no-print-directory figures-build
 	@echo "[psyop] figures in $(FIGDIR)/, statistics in $(RESULTS)/ (summary: $(RESULTS)/summary.md)"
