@@ -91,7 +91,7 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
                 ax.plot([r["threshold_ci_low_D"], r["threshold_ci_high_D"]], [0.75, 0.75], color="#d62728", lw=0.8)
                 if r["flags"]:
                     ax.text(0.02, 0.95, r["flags"], transform=ax.transAxes, fontsize=5, va="top", color="#b00020")
-            ax.set_ylim(0.4, 1.02)
+            ax.set_ylim(0.0, 1.02)  # below-chance points must stay visible
             ax.tick_params(labelsize=6)
             if i == 0:
                 ax.set_title(f"{condition_column} = {c:g}", fontsize=7)
