@@ -82,8 +82,12 @@ def test_session_stops_cleanly_when_pupil_disconnects_mid_trial(tmp_path: Path) 
     assert trials["trial"].tolist() == list(range(len(trials)))
     assert set(frames["trial"]) == set(trials["trial"])  # every frame of every recorded trial, none of the lost one
     fresh = frames[frames["gaze_valid"]]
-    # gaze counts as live up to the 0.1 s staleness limit; while the server runs it is a few ms old
-    assert len(fresh) > 50 and fresh["sample_age_s"].between(0, 0.1).all()
+    # gaze counts as live up to the 0.1 s staleness limit, applied when the frame takes the sample;
+    # sample_age_s is measured later, at flip, so it may exceed the limit by that frame's own time
+    frame_time_s = fresh["submit_s"] - fresh["render_start_s"]
+    assert len(fresh) > 50 and (fresh["sample_age_s"] >= 0).all()
+    assert (fresh["sample_age_s"] <= 0.1 + frame_time_s + 0.002).all()
+    assert fresh["sample_age_s"].median() < 0.05  # while the server runs, a few ms old
     assert fresh["sample_age_s"].median() < 0.02
     # trials finished after the server went silent (before the 1 s loss limit) hold the last gaze, flagged
     held = frames[frames["gaze_held"]]
