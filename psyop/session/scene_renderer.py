@@ -21,9 +21,10 @@ from psyop.session.phases import PhaseSpec
 class SceneRenderer:
     """Implements the loop's FrameRenderer with real images for interval phases.
 
-    Cross, blank and prompt phases compute the cameras only (their content is not a
-    stimulus of the protocol); intervals build the trial's scene at the time into the
-    interval and render it for the protocol's eye(s).
+    Intervals build the trial's scene at the time into the interval and render it for the
+    protocol's eye(s). When a person watches (``max_images`` None), the recalibration phase
+    shows the central cross and the blank phase the background; headless sampled checks
+    (``max_images`` set) render stimulus frames only. Other phases compute cameras only.
     """
 
     def __init__(self, protocol: Any, display_profile: Any, ipd_m: float, nc_m: float, *, scale: float = 1.0,
@@ -57,7 +58,7 @@ class SceneRenderer:
     def render(self, row: Mapping[str, Any], phase: PhaseSpec, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float]) -> FrameCheck:
         from psyop.rendering import Renderer
-        from psyop.stimulus import build_scene, interval_mode
+        from psyop.stimulus import blank_scene, build_scene, interval_mode, recalibration_cross_scene
 
         cameras_ok = True
         interval = int(phase.name.removeprefix("interval")) if phase.name.startswith("interval") else 0
@@ -72,12 +73,15 @@ class SceneRenderer:
             camera = self._make_camera(self.display, eye, fixation_m, self.ipd_m, self.nc_m,
                                        mode if phase.show == "stimulus" else "conventional")
             cameras_ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
-            if not interval or phase.show != "stimulus":
+            if phase.show in ("cross", "blank") and self.max_images is None:
+                scene = (recalibration_cross_scene(self._centre(eye)) if phase.show == "cross" else blank_scene())
+            elif interval and phase.show == "stimulus":
+                if self.max_images is not None and self.images_rendered >= self.max_images:
+                    return FrameCheck(False, cameras_ok)
+                scene = build_scene(self.protocol, row, t_in_phase_s, self._centre(eye), interval=interval,
+                                    base_dir=self._base_dir)
+            else:
                 continue
-            if self.max_images is not None and self.images_rendered >= self.max_images:
-                return FrameCheck(False, cameras_ok)
-            scene = build_scene(self.protocol, row, t_in_phase_s, self._centre(eye), interval=interval,
-                                base_dir=self._base_dir)
             if self._renderer is None:
                 self._renderer = Renderer(scene, settings=self.settings, ctx=self._ctx)
             else:
@@ -87,7 +91,8 @@ class SceneRenderer:
             self.images_rendered += 1
             self.last_eye = eye
             images += 1
-            ok &= bool(image.size > 0 and np.isfinite(image).all() and np.ptp(image) > 0)
+            has_content = phase.show == "blank" or np.ptp(image) > 0  # a blank frame is uniform by design
+            ok &= bool(image.size > 0 and np.isfinite(image).all() and has_content)
         return FrameCheck(images > 0, ok and cameras_ok)
 
     def close(self) -> None:

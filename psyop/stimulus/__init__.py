@@ -1,5 +1,14 @@
 """Protocol scene + trial row + time -> :mod:`psyop.rendering` scene (see docs/rendering.md)."""
 
-from psyop.stimulus.build import INFINITY_M, build_scene, interval_mode, interval_phases
+from psyop.stimulus.build import (
+    INFINITY_M,
+    blank_scene,
+    build_scene,
+    interval_mode,
+    interval_phases,
+    recalibration_cross_scene,
+)
 
-__all__ = ["INFINITY_M", "build_scene", "interval_mode", "interval_phases"]
+__all__ = [
+    "INFINITY_M", "blank_scene", "build_scene", "interval_mode", "interval_phases", "recalibration_cross_scene",
+]

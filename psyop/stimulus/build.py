@@ -254,3 +254,27 @@ def build_scene(
         else:  # pragma: no cover - the protocol model is a closed union
             raise UserError(f"unsupported scene element kind {getattr(item, 'kind', item)!r}")
     return Scene(tuple(prims), background=background, aperture=aperture)
+
+
+def recalibration_cross_scene(
+    eye_centre_m: Any,
+    distance_m: float = 1.0,
+    arm_deg: float = 1.0,
+    thickness_deg: float = 0.12,
+    colour: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    background: tuple[float, float, float] = (0.5, 0.5, 0.5),
+) -> Scene:
+    """The single-point drift recalibration target (paper sec. 5.1): a cross straight ahead of
+    the eye, ``arm_deg`` across, at ``distance_m``. Shown with the conventional camera."""
+    origin = np.asarray(eye_centre_m, dtype=np.float64)
+    ink = Solid(colour)
+    bars = (
+        builders.frontoparallel_rect(distance_m, arm_deg, thickness_deg, ink, origin_m=origin, name="cross_h"),
+        builders.frontoparallel_rect(distance_m, thickness_deg, arm_deg, ink, origin_m=origin, name="cross_v"),
+    )
+    return Scene(bars, background=background)
+
+
+def blank_scene(background: tuple[float, float, float] = (0.5, 0.5, 0.5)) -> Scene:
+    """The blank frame between intervals: background only."""
+    return Scene((), background=background)
