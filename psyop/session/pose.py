@@ -1,14 +1,15 @@
 """Head and hand pose: typed samples, a source protocol, hold-last-valid, and the simulation.
 
 Head pose is logged with every frame (``head_*`` columns of frames.parquet); the hand
-pose samples that determine an egocentric reach are logged as frame-log rows of phase
-``hand``, so a reach can be recomputed from the log and replayed
+pose samples that determine an egocentric reach are logged with the trial (``hand_sample_*``
+list columns of trials.parquet), so a reach can be recomputed from the log and replayed
 (:mod:`psyop.session.pose_replay`).
 
 The paper tracked the hand with an HTC Vive Tracker at 120 Hz (1.9 mm RMSE accuracy,
 1.5 mm precision) and took the reach as the mean of the last 10 samples (protocol
-``response.average_last_samples``). The simulated hand ends its reach at the observer's
-intended distance along the direction of the target and jitters with that precision.
+``response.average_last_samples``). The simulated observer decides where the hand ends
+(along the direction of the target); the simulated tracker measures that endpoint with one
+accuracy error per reach and a precision error per sample.
 Positions are in head space at the start of the session (metres); orientations are unit
 quaternions (w, x, y, z).
 """
@@ -99,28 +100,6 @@ def reach_from_positions(positions_m: np.ndarray, last_n: int) -> tuple[float, n
     return float(np.linalg.norm(mean)), mean
 
 
-@dataclass(frozen=True)
-class HandSamples:
-    """Hand positions (head space, m) at the end of a reach, oldest first, and their times."""
-
-    timestamps_s: np.ndarray
-    positions_m: np.ndarray  # (n, 3)
-
-    def reach_m(self, last_n: int) -> tuple[float, np.ndarray]:
-        """Distance from the eyes' mid-point to the mean of the last ``last_n`` positions."""
-        return reach_from_positions(self.positions_m, last_n)
-
-
-def simulated_reach(intended_m: float, rng: np.random.Generator, *, n: int = 30, rate_hz: float = 120.0,
-                    precision_m: float = 0.0015, accuracy_m: float = 0.0019, end_s: float = 0.0) -> HandSamples:
-    """Samples of a hand held still at ``intended_m`` along :data:`REACH_DIRECTION`."""
-    bias = rng.normal(0.0, accuracy_m / np.sqrt(3.0), 3)  # per-reach tracker accuracy error
-    endpoint = REACH_DIRECTION * intended_m + bias
-    positions = endpoint + rng.normal(0.0, precision_m / np.sqrt(3.0), (n, 3))
-    times = end_s - (n - 1 - np.arange(n)) / rate_hz
-    return HandSamples(times, positions)
-
-
 def quaternion_from_yaw_pitch_roll(yaw_rad: float, pitch_rad: float, roll_rad: float) -> tuple[float, float, float, float]:
     """Unit quaternion (w, x, y, z) of R_y(yaw) R_x(pitch) R_z(roll) (scipy's intrinsic 'YXZ')."""
     cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
@@ -146,7 +125,8 @@ class SimulatedPoseConfig:
     drift_m_per_min: float = 0.003
     rotation_amplitude_deg: float = 0.5
     hand_rate_hz: float = 120.0
-    hand_precision_m: float = 0.0015
+    hand_precision_m: float = 0.0015  # Vive Tracker precision, RMSE (paper sec. 4.3)
+    hand_accuracy_m: float = 0.0019  # Vive Tracker accuracy, RMSE: one error per reach (sec. 4.3)
     head_dropout_p: float = 0.0
     hand_dropout_p: float = 0.0
 
@@ -156,9 +136,9 @@ class SimulatedPose:
     the same poses as uninterrupted ones.
 
     Head: three incommensurate sinusoids per axis (0.05-0.4 Hz, breathing and postural sway)
-    plus a linear drift, and small yaw/pitch/roll oscillations. Hand: the observer's endpoint
-    tracked at 120 Hz with the tracker's precision (the observer already applied the
-    per-reach accuracy error), drawn from (seed, trial_seed).
+    plus a linear drift, and small yaw/pitch/roll oscillations. Hand: the observer's true
+    endpoint tracked at 120 Hz with the tracker's accuracy (one error per reach) and precision
+    (per sample), drawn from (seed, trial_seed).
     """
 
     def __init__(self, seed: int, config: SimulatedPoseConfig | None = None) -> None:
@@ -193,7 +173,8 @@ class SimulatedPose:
             return []
         c = self.config
         rng = np.random.default_rng(seed_for(self.seed, "hand", int(row.get("trial_seed", row.get("trial", 0))) & 0xFFFFFFFF))
-        positions = np.asarray(endpoint_m, dtype=np.float64) + rng.normal(0.0, c.hand_precision_m / math.sqrt(3.0), (n, 3))
+        bias = rng.normal(0.0, c.hand_accuracy_m / math.sqrt(3.0), 3)
+        positions = np.asarray(endpoint_m, dtype=np.float64) + bias + rng.normal(0.0, c.hand_precision_m / math.sqrt(3.0), (n, 3))
         valid = rng.uniform(size=n) >= c.hand_dropout_p
         times = end_s - (n - 1 - np.arange(n)) / c.hand_rate_hz
         return [PoseSample(float(t), (float(p[0]), float(p[1]), float(p[2])), IDENTITY_WXYZ, bool(v))

@@ -121,9 +121,6 @@ def _make_responses(spec: str, protocol: Any, kind: Any, seed: int, participant:
         params = observer_params(protocol)
         if params is None:
             raise UserError("--responses sim needs an observer: section in the protocol", "protocol")
-        last_n = getattr(getattr(protocol, "response", None), "average_last_samples", None)
-        if last_n is not None:
-            params.setdefault("average_last_samples", int(last_n))
         return make_observer(params, seed=seed, participant=participant)
     if name == "serial":
         from psyop.session.responses.serial_box import SerialResponseBox

@@ -62,7 +62,7 @@ def test_ordinal_preference_and_reach() -> None:
     reaches = np.array([r.reach_m for r in responses])
     slope, intercept = np.polyfit(fractions * 0.7, reaches, 1)
     assert slope == pytest.approx(1.141, abs=0.05) and intercept == pytest.approx(0.117, abs=0.03)
-    # reach_m is measured from the simulated hand tracker: |mean of the last 10 hand samples|
+    # the observer reports where its hand truly ends; reach_m is that endpoint's distance
     extras = dict(responses[0].extras)
     hand = np.array([extras["hand_x_m"], extras["hand_y_m"], extras["hand_z_m"]])
     assert np.linalg.norm(hand) == pytest.approx(responses[0].reach_m, abs=1e-9)

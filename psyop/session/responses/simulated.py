@@ -16,7 +16,7 @@ import numpy as np
 
 from psyop.errors import UserError
 from psyop.session.gaze.simulated import seed_for
-from psyop.session.pose import simulated_reach
+from psyop.session.pose import REACH_DIRECTION
 from psyop.session.responses.base import Response, ResponseKind, score
 
 
@@ -166,7 +166,6 @@ class Reach(SimulatedObserver):
         arm_mean = float(_get(params, "arm_reach_m", 0.7))
         arm_sd = float(_get(params, "arm_reach_sd_m", 0.0))
         self.arm_reach_m = arm_mean + (float(self._participant_rng.normal(0.0, arm_sd)) if arm_sd > 0 else 0.0)
-        self.average_last_samples = int(_get(params, "average_last_samples", 10))
         self.conditions = {str(k): dict(v) for k, v in dict(_get(params, "by_condition", None) or _get(params, "conditions", {}) or {}).items()}
 
     def _condition(self, rendering: str) -> Mapping[str, Any]:
@@ -177,16 +176,16 @@ class Reach(SimulatedObserver):
         return cond
 
     def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
-        """The intended reach, executed by a simulated hand; reach_m from the tracked samples."""
+        """Where the hand really ends (the observer's motor output, ``reach_m`` = its distance).
+        A hand tracker (the session's pose source) then measures it with its own error."""
         cond = self._condition(str(row.get("rendering", "")))
         target_m = float(row["target_fraction"]) * self.arm_reach_m
         rng = self.trial_rng(row)
-        intended = float(cond["intercept_m"]) + float(cond["slope"]) * target_m + float(rng.normal(0.0, float(cond["noise_sd_m"])))
-        hand = simulated_reach(intended, rng, end_s=now_s)
-        reach, mean = hand.reach_m(self.average_last_samples)
+        reach = float(cond["intercept_m"]) + float(cond["slope"]) * target_m + float(rng.normal(0.0, float(cond["noise_sd_m"])))
+        endpoint = REACH_DIRECTION * reach
         r = score(self.kind, row, f"{reach:.6f}", reach_m=reach)
         extras = (("arm_reach_m", self.arm_reach_m), ("target_m", target_m),
-                  ("hand_x_m", float(mean[0])), ("hand_y_m", float(mean[1])), ("hand_z_m", float(mean[2])))
+                  ("hand_x_m", float(endpoint[0])), ("hand_y_m", float(endpoint[1])), ("hand_z_m", float(endpoint[2])))
         return Response(r.response, r.correct, r.reach_m, r.chosen_mode, r.response_time_s, extras)
 
 
