@@ -17,6 +17,9 @@ import pyarrow as pa
 from psyop.session.log.schema import FRAME_SCHEMA
 
 
+#: A head pose: position (m) and unit quaternion (w, x, y, z), head -> world (session start).
+HeadPose = tuple[tuple[float, float, float], tuple[float, float, float, float]]
+
 @dataclass(frozen=True)
 class FrameCheck:
     """What a renderer reports: whether an image was rendered and checked (finite, not
@@ -34,7 +37,7 @@ class FrameRenderer(Protocol):
     """
 
     def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
-               fixation_m: tuple[float, float, float]) -> FrameCheck: ...
+               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None) -> FrameCheck: ...
 
 
 class Display(Protocol):
@@ -59,8 +62,8 @@ class CameraRenderer:
         self.display, self.ipd_m, self.nc_m = display, ipd_m, nc_m
 
     def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
-               fixation_m: tuple[float, float, float]) -> FrameCheck:
-        ok = True
+               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None) -> FrameCheck:
+        ok = True  # cameras are in head space: the head pose changes no camera
         for eye in ("left", "right"):
             camera = self._make(self.display, eye, fixation_m, self.ipd_m, self.nc_m,
                                 mode if phase.show == "stimulus" else "conventional")

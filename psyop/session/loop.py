@@ -259,7 +259,7 @@ class TrialLoop:
         check = None
         if self.renderer is not None and phase.renders:
             check = self.renderer.render(row, phase, mode_for(phase, row), render_start - self._phase_start_s,
-                                         gaze.fixation_m)
+                                         gaze.fixation_m, head_pose=(head.position_m, head.orientation_wxyz))
         submit = self.display.submit()
         age = submit - gaze.sample_t_s if math.isfinite(gaze.sample_t_s) else math.nan
         if gaze.valid and math.isfinite(age):

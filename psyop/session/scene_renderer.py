@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from psyop.session.frames import FrameCheck
+from psyop.session.frames import FrameCheck, HeadPose
 from psyop.session.phases import PhaseSpec
 
 
@@ -56,8 +56,11 @@ class SceneRenderer:
         return np.array([(-0.5 if eye == "left" else 0.5) * self.ipd_m, 0.0, 0.0])
 
     def render(self, row: Mapping[str, Any], phase: PhaseSpec, mode: str, t_in_phase_s: float,
-               fixation_m: tuple[float, float, float]) -> FrameCheck:
+               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None) -> FrameCheck:
+        """Render this frame for the protocol's eye(s). ``head_pose`` (tracked, head -> world)
+        moves the eyes through the world-fixed stimulus; the recalibration cross stays head-fixed."""
         from psyop.rendering import Renderer
+        from psyop.rendering.transform import scene_in_head
         from psyop.stimulus import blank_scene, build_scene, interval_mode, recalibration_cross_scene
 
         cameras_ok = True
@@ -80,6 +83,8 @@ class SceneRenderer:
                     return FrameCheck(False, cameras_ok)
                 scene = build_scene(self.protocol, row, t_in_phase_s, self._centre(eye), interval=interval,
                                     base_dir=self._base_dir)
+                if head_pose is not None:
+                    scene = scene_in_head(scene, *head_pose)
             else:
                 continue
             if self._renderer is None:

@@ -61,3 +61,18 @@ def test_headless_sampled_checks_skip_cross_and_blank() -> None:
         assert not check.checked and renderer.images_rendered == 0
     finally:
         renderer.close()
+
+
+def test_stimulus_follows_the_tracked_head_and_the_cross_does_not(watched: SceneRenderer) -> None:
+    row = compile_schedule(watched.protocol, 1).iloc[0].to_dict()
+    interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1")
+    turned = ((0.0, 0.0, 0.0), (np.cos(np.radians(1.0)), 0.0, np.sin(np.radians(1.0)), 0.0))  # 2 deg yaw
+    still = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
+
+    def image(phase: PhaseSpec, pose) -> np.ndarray:
+        watched.render(row, phase, "conventional", 0.5, STRAIGHT_AHEAD_M, head_pose=pose)
+        return watched._renderer.image(watched.last_eye).copy()  # noqa: SLF001
+
+    assert not np.array_equal(image(interval, still), image(interval, turned))
+    cross = PhaseSpec("recalibration", 0.5, "cross", "cross")
+    assert np.array_equal(image(cross, still), image(cross, turned))

@@ -1,0 +1,51 @@
+"""Rigid transforms of a scene: a world-fixed scene seen from a moving head.
+
+Scenes are built in the head space of the session's start ("world"). A tracked head pose
+(position ``t`` in metres and unit quaternion ``q`` = (w, x, y, z), head -> world) moves the
+eyes through that world; rendering needs the scene in the current head space:
+``p_head = R(q)^T (p_world - t)``, with the half axes rotated alike. The aperture is
+display-fixed and is left alone.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+
+from psyop.rendering.scene import Scene
+
+IDENTITY_WXYZ = (1.0, 0.0, 0.0, 0.0)
+
+
+def rotation_matrix(orientation_wxyz: Sequence[float]) -> np.ndarray:
+    """3x3 rotation of a unit quaternion (w, x, y, z); normalised first."""
+    w, x, y, z = np.asarray(orientation_wxyz, dtype=np.float64) / np.linalg.norm(orientation_wxyz)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def scene_in_head(scene: Scene, head_position_m: Sequence[float], head_orientation_wxyz: Sequence[float]) -> Scene:
+    """``scene`` (world coordinates) expressed in the head space of the given head pose.
+
+    The identity pose returns ``scene`` itself, so a still head keeps frame reuse and
+    uploads nothing new.
+    """
+    t = np.asarray(head_position_m, dtype=np.float64)
+    if not np.any(t) and tuple(float(c) for c in head_orientation_wxyz) == IDENTITY_WXYZ:
+        return scene
+    r_t = rotation_matrix(head_orientation_wxyz).T
+    primitives = tuple(
+        dataclasses.replace(
+            p,
+            centre_m=tuple(r_t @ (np.asarray(p.centre_m) - t)),
+            half_u_m=tuple(r_t @ np.asarray(p.half_u_m)),
+            half_v_m=tuple(r_t @ np.asarray(p.half_v_m)),
+        )
+        for p in scene.primitives
+    )
+    return dataclasses.replace(scene, primitives=primitives)
