@@ -18,10 +18,10 @@ SIMULATED_LABEL = "SIMULATED DATA"
 
 
 def mark_simulated(fig: plt.Figure, simulated: bool) -> None:
-    """Say so in the corner and the title when the data came from simulated sessions."""
+    """Say so above the title and in it when the data came from simulated sessions."""
     if not simulated:
         return
-    fig.text(0.995, 0.005, SIMULATED_LABEL, ha="right", va="bottom", fontsize=8, color="#b00020",
+    fig.text(0.5, 1.0, SIMULATED_LABEL, ha="center", va="bottom", fontsize=8, color="#b00020",  # the tight bbox grows to fit
              fontweight="bold", alpha=0.9)
     title = fig._suptitle.get_text() if fig._suptitle is not None else ""
     fig.suptitle(f"{title} ({SIMULATED_LABEL.lower()})" if title else SIMULATED_LABEL.lower(), fontsize=10)
