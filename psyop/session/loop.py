@@ -101,6 +101,20 @@ def _sigint_deferred() -> Iterator[None]:
         raise KeyboardInterrupt
 
 
+class _NoProgress:
+    """Stands in for the progress bar when it is off. A disabled tqdm still takes tqdm's
+    process-shared lock; a session killed (SIGKILL) while holding it would block every later
+    bar in any process forked from the same parent (seen in the crash-safety test)."""
+
+    def set_postfix(self, **_: Any) -> None:
+        return None
+
+    def update(self, _: int = 1) -> None:
+        return None
+
+    def close(self) -> None:
+        return None
+
 class TrialLoop:
     """Runs the remaining trials of a schedule into a :class:`SessionStore`."""
 
@@ -138,8 +152,9 @@ class TrialLoop:
         rows = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
         n_total = len(schedule)
         n_done = len(completed)
-        bar = tqdm(total=n_total, initial=n_done, file=sys.stderr, unit="trial", dynamic_ncols=True,
-                   disable=True if not self.config.progress else None, desc=f"{self.identity['study']} sub-{self.identity['participant']}")
+        bar = (tqdm(total=n_total, initial=n_done, file=sys.stderr, unit="trial", dynamic_ncols=True,
+                    desc=f"{self.identity['study']} sub-{self.identity['participant']}")
+               if self.config.progress else _NoProgress())
         status, message = "complete", f"all {n_total} trials recorded"
         try:
             for row in rows:
