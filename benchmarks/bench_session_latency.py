@@ -55,10 +55,12 @@ class _LiveSource:
 
 def _frame_path_ms(with_camera: bool, n: int, with_pose: bool = False) -> np.ndarray:
     from psyop.optics import VIVE_PRO, get_eye_model
+    from psyop.optics.rig import EyeRig
     from psyop.session.pose import SimulatedPose
 
     clock = RealClock()
-    renderer = CameraRenderer(VIVE_PRO, 0.063, get_eye_model("gullstrand_emsley_relaxed").nc_m) if with_camera else None
+    rig = EyeRig(get_eye_model("gullstrand_emsley_relaxed"), 0.063, ("left", "right"))
+    renderer = CameraRenderer(VIVE_PRO, rig) if with_camera else None
     loop = TrialLoop(identity={"study": "bench", "participant": "B", "session": 1}, phases=(), clock=clock,
                      gaze=_LiveSource(clock), responses=None, renderer=renderer, display=HeadlessDisplay(clock),
                      store=None, config=LoopConfig(progress=False),  # type: ignore[arg-type]

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from psyop.optics.ranges import IPD_M, NC_M
 from psyop.optics.display import DisplayProfile
 from psyop.optics.nodal import (
     DEFAULT_MAX_ROTATION_DEG,
@@ -174,10 +175,8 @@ def make_eye_camera(
     default straight ahead. ``ipd_m``, ``nc_m``, ``near_m``, ``far_m`` are configuration and
     are validated (``ValueError``); the fixation never raises.
     """
-    if not (math.isfinite(ipd_m) and 0.0 <= ipd_m < 0.2):
-        raise ValueError(f"ipd_m must be in [0, 0.2) m, got {ipd_m!r}")
-    if not (math.isfinite(nc_m) and 0.0 <= nc_m < 0.03):
-        raise ValueError(f"nc_m must be in [0, 0.03) m, got {nc_m!r}")
+    IPD_M.check(ipd_m)
+    NC_M.check(nc_m)
     fix = np.asarray(fixation_m, dtype=np.float64)
     if fix.shape not in ((3,), (4,)):
         raise ValueError(f"fixation_m must have shape (3,) or (4,), got {fix.shape}")

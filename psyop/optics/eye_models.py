@@ -90,9 +90,10 @@ def user_eye_model(nc_m: float, name: str = "user") -> EyeModel:
     """A model with a calibrated NC (metres) for one participant.
 
     VN is derived as ``VC - NC`` with the Fry & Hill centre of rotation, so ``nc_m`` round-trips
-    exactly in mm. NC must be in (0, 30 mm]; a larger value is almost certainly a unit error.
+    exactly in mm. NC must be in psyop.optics.ranges.NC_M ((0, 30) mm); a larger value is almost certainly a unit error.
     """
-    if not (isinstance(nc_m, (int, float)) and math.isfinite(nc_m) and 0.0 < nc_m <= 0.03):
-        raise ValueError(f"user eye model {name!r}: nc_m must be in (0, 0.03] metres, got {nc_m!r}")
+    from psyop.optics.ranges import NC_M
+
+    NC_M.check(nc_m, f"user eye model {name!r}: nc_m")
     vn_mm = CENTRE_OF_ROTATION_MM - nc_m * 1000.0
     return EyeModel(name, vn_mm, vn_mm, description=f"user-calibrated, NC = {nc_m * 1000.0:.4f} mm")

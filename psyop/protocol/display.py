@@ -12,6 +12,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from psyop.optics.ranges import IPD_M, NC_M
 from psyop.protocol.base import Integer, Number, StrictModel
 
 #: Built-in display profiles (``psyop.optics.display.DISPLAY_PROFILES``).
@@ -84,14 +85,20 @@ class InlineDisplayProfile(StrictModel):
 class InlineEyeModel(StrictModel):
     """A calibrated eye: distance NC from the centre of rotation to the front nodal point."""
 
-    nc_mm: Number = Field(gt=0, le=30, description="centre of rotation to front nodal point, mm (paper: 7.6916)")
+    nc_mm: Number = Field(gt=NC_M.low * 1000, lt=NC_M.high * 1000,
+                          description="centre of rotation to front nodal point, mm (paper: 7.6916); "
+                                      "range psyop.optics.ranges.NC_M")
     name: str = "user"
 
 
 class FixedIpd(StrictModel):
     """Inter-pupillary distance fixed for the session, mm."""
 
-    mm: Number = Field(ge=40, le=90)
+    mm: Number = Field(ge=IPD_M.low * 1000, le=IPD_M.high * 1000, description="range psyop.optics.ranges.IPD_M")
+
+    @property
+    def ipd_m(self) -> float:
+        return self.mm / 1000.0
 
 
 class DisplaySpec(StrictModel):

@@ -13,6 +13,7 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
+from psyop.optics.ranges import DEPTH_D
 from psyop.protocol.base import Integer, Number, StrictModel
 
 RenderingMode = Literal["conventional", "ocular", "reversed"]
@@ -27,8 +28,9 @@ class Depth(StrictModel):
     ``{D: 0.5, factor: separation_D}`` or ``{factor: [back_D, level_D]}``: the sum, in dioptres.
     """
 
-    D: Number | None = Field(default=None, ge=0, le=100, description="dioptres (1/m); 0 = optical infinity")
-    m: Number | None = Field(default=None, gt=0, description="metres")
+    D: Number | None = Field(default=None, ge=DEPTH_D.low, le=DEPTH_D.high,
+                             description="dioptres (1/m); 0 = optical infinity; range psyop.optics.ranges.DEPTH_D")
+    m: Number | None = Field(default=None, ge=1.0 / DEPTH_D.high, description="metres (at least 1 / the largest depth in D)")
     factor: str | list[str] | None = Field(default=None, description="factor column(s) to add, by name")
 
     @model_validator(mode="after")

@@ -12,18 +12,27 @@ from dataclasses import dataclass
 from pathlib import Path as FsPath
 from typing import Any
 
+from psyop.optics.ranges import DEPTH_D
 from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, ReachTarget,
                                   SinusoidalBorder, TargetField)
-from psyop.protocol.trial import Blank, Interval
+from psyop.protocol.trial import Blank, Interval, ResponsePhase
 
 #: Random sequential placement of equal discs jams at about 54.7 % area coverage. Measured for
 #: 2.6 deg targets in a 60 deg field (centres within field/2 - size/2): 40 % coverage needs about
 #: 1.3k tries, 45 % about 3.3k, 50 % about 15k. Above 40 % a per-trial placement gets slow.
 MAX_RANDOM_COVERAGE = 0.4
+
+# ---- ADAPTIVE LEVELS: REFUSED HERE, AND ONLY HERE ---------------------------------------------
+#: Names of the adaptive procedures the session can run (``level_D: {adaptive: {procedure: ...}}``).
+#: None exists yet, so every adaptive factor is refused at validation with its file:line (a
+#: session would otherwise stop mid-run on a NaN level). The adaptive models in
+#: psyop.protocol.design stay; registering a procedure's name here (and running it in the session
+#: plan) re-enables them.
+ADAPTIVE_PROCEDURES: frozenset[str] = frozenset()
 
 
 
@@ -65,6 +74,11 @@ class _Checker:
     def check_factors(self) -> None:
         for name, factor in self.factors.items():
             path = ("design", "factors", name)
+            if factor.adaptive is not None and factor.adaptive.procedure not in ADAPTIVE_PROCEDURES:
+                known = ", ".join(sorted(ADAPTIVE_PROCEDURES)) or "none in this version of psyop"
+                self.add(path + ("adaptive", "procedure"),
+                         f"adaptive procedure '{factor.adaptive.procedure}' is not available (available: {known}); "
+                         "give fixed levels instead, e.g. levels: {start: 0, step: 0.25, count: 7}")
             if factor.is_numeric and not has_unit_suffix(name):
                 self.add(path, f"numeric factor '{name}' must say its unit in its name: end it with one of "
                                f"{', '.join(UNIT_SUFFIXES)} (e.g. '{name}_D')")
@@ -160,9 +174,9 @@ class _Checker:
                 value = math.nan
             if math.isnan(value) and any(math.isnan(float(condition[n])) for n in depth.factor_names):
                 continue  # adaptive: known only at run time
-            if not (math.isfinite(value) and value >= 0):
-                self.add(path, f"this depth is {value} D for condition {condition}; depths must be >= 0 D "
-                               "(0 D = optical infinity)")
+            if not DEPTH_D.contains(value):
+                self.add(path, f"this depth is {value} D for condition {condition}; depths must be in "
+                               f"{DEPTH_D.describe()} (0 D = optical infinity)")
                 return
 
     def check_order(self, near: Depth, far: Depth, path: tuple[Any, ...], conditions: list[dict[str, Any]],
@@ -201,7 +215,19 @@ class _Checker:
                            "to the protocol file. Fix the path or add the file.")
 
     # -- trial, response, observer ----------------------------------------------------------
+    def check_phase_order(self) -> None:
+        """One response phase, last: the session runs the phases up to it, then waits for the answer."""
+        phases = self.p.trial.phases
+        responses = [i for i, phase in enumerate(phases) if isinstance(phase, ResponsePhase)]
+        if len(responses) != 1:
+            self.add(("trial", "phases"), f"trial.phases needs exactly one '- kind: response' phase, found "
+                                          f"{len(responses)}; add or remove one")
+        elif responses[0] != len(phases) - 1:
+            self.add(("trial", "phases", responses[0] + 1), "phases after the response phase would never run; "
+                                                           "move the response phase to the end")
+
     def check_response(self) -> None:
+        self.check_phase_order()
         response = self.p.response
         needed = INTERVALS_NEEDED[response.kind]
         intervals = len(self.p.trial.intervals)

@@ -14,6 +14,8 @@ from typing import Any, Protocol
 import numpy as np
 import pyarrow as pa
 
+from psyop.optics.display import DisplayProfile
+from psyop.optics.rig import EyeRig
 from psyop.session.log.schema import FRAME_SCHEMA
 
 
@@ -49,24 +51,17 @@ class Display(Protocol):
 
 
 class CameraRenderer:
-    """Computes both eyes' cameras (psyop.optics) for each frame; checks they are finite.
+    """Computes the cameras of the rig's eye(s) (psyop.optics.rig) for each frame; checks they
+    are finite. This is the gaze-dependent part of every frame, without an image."""
 
-    This is the gaze-dependent part of every frame; the image itself comes from
-    psyop.stimulus/psyop.rendering when those are wired in (see docs/sessions.md).
-    """
-
-    def __init__(self, display: Any, ipd_m: float, nc_m: float) -> None:
-        from psyop.optics import make_eye_camera
-
-        self._make = make_eye_camera
-        self.display, self.ipd_m, self.nc_m = display, ipd_m, nc_m
+    def __init__(self, display: DisplayProfile, rig: EyeRig) -> None:
+        self.display, self.rig = display, rig
 
     def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None) -> FrameCheck:
         ok = True  # cameras are in head space: the head pose changes no camera
-        for eye in ("left", "right"):
-            camera = self._make(self.display, eye, fixation_m, self.ipd_m, self.nc_m,
-                                mode if phase.show == "stimulus" else "conventional")
+        for eye in self.rig.eyes:
+            camera = self.rig.camera(self.display, eye, fixation_m, mode)
             ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
         return FrameCheck(False, ok)  # no image was made
 

@@ -23,7 +23,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
@@ -42,6 +42,7 @@ from psyop.session.gaze.simulated import seed_for
 from psyop.session.log.store import SessionStore
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.phases import PhaseSpec, mode_for
+from psyop.session.plan import TIMEOUT_RESPONSE, ResponsePlan
 from psyop.session.responses.base import Response, ResponseSource
 
 
@@ -131,9 +132,14 @@ class TrialLoop:
         store: SessionStore,
         config: LoopConfig,
         pose: PoseSource | None = None,
+        response: ResponsePlan | None = None,
+        announce: Callable[[str], None] | None = None,
     ) -> None:
         self.identity = dict(identity)  # study, participant, session
         self.phases = phases
+        # the plan's response phase (timeout, display off); None: wait, blank display
+        self.response_plan = response
+        self.announce = announce  # where a live session shows the response prompt (experimenter console)
         self.clock, self.gaze, self.responses = clock, gaze, responses
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
         self.conditioner = GazeConditioner(config.confidence_threshold)
@@ -306,16 +312,25 @@ class TrialLoop:
         return self._frame(row, phase, frames, 0)
 
     def _await_response(self, row: Mapping[str, Any], frames: FrameRecorder) -> Response:
-        prompt = PhaseSpec("response", 0.0, "blank", "none")
+        plan = self.response_plan
+        prompt = plan.phase if plan is not None else PhaseSpec("response", 0.0, "blank", "none")
+        timeout_s = plan.timeout_s if plan is not None else None
+        if plan is not None and plan.prompt and self.announce is not None:
+            self.announce(plan.prompt)
+        start_s = self.clock.now_s()
         while True:
             response = self.responses.collect(row, self.clock.now_s())
             if response is not None:
                 return response
+            if timeout_s is not None and self.clock.now_s() - start_s >= timeout_s - 1e-9:
+                self.responses.timed_out()
+                return Response(TIMEOUT_RESPONSE, correct=None, response_time_s=math.nan)
             if self.config.every_frame:
                 self._frame(row, prompt, frames, len(frames))
-                self.clock.sleep_until(self.clock.now_s() + self.frame_period_s)
+                wake_s = self.clock.now_s() + self.frame_period_s
             else:
-                self.clock.sleep_until(self.clock.now_s() + 0.01)
+                wake_s = self.clock.now_s() + 0.01
+            self.clock.sleep_until(wake_s if timeout_s is None else min(wake_s, start_s + timeout_s))
 
 
 def _pose_columns(prefix: str, pose: ConditionedPose) -> dict[str, Any]:

@@ -1,8 +1,7 @@
-"""The phases of a trial per response kind, and what each phase shows and asks of gaze.
+"""One timed phase of a trial: what it shows, in which rendering mode, and what gaze does.
 
-Durations follow the paper (section 5-6): 2IFC 2 s / 0.5 s blank / 2 s; ordinal 3 s;
-realism 3 s / 1 s / 3 s; reaching >= 5 s viewing then a blind reach. Each trial starts
-with a single-point drift recalibration on a central cross.
+The session plan (psyop.session.plan) compiles a protocol's ``trial.phases`` into a tuple of
+these; the loop runs them in order and then the response phase.
 """
 
 from __future__ import annotations
@@ -11,16 +10,21 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from psyop.session.responses.base import ResponseKind
+from psyop.optics.nodal import RenderingMode
+
+RENDERING_MODES: tuple[str, ...] = tuple(m.value for m in RenderingMode)
 
 
 @dataclass(frozen=True)
 class PhaseSpec:
     """One timed phase.
 
-    ``show``: 'cross' | 'stimulus' | 'blank' | 'off'. ``mode_column``: the schedule
-    column naming the rendering mode shown (None: conventional). ``gaze``: 'cross',
-    'pursuit', 'free' or 'none' (what the observer looks at; drives simulated gaze).
+    ``show``: 'cross' (drift recalibration target) | 'stimulus' (an interval) | 'blank' | 'off'
+    (display off). ``gaze``: 'cross', 'pursuit', 'free' or 'none' (what the observer looks at;
+    drives simulated gaze). The rendering mode is the trial row's ``mode_column`` when given
+    (intervals: ``mode_interval<k>``), else the fixed ``mode``. ``primitives``: the scene ids
+    drawn (None: all of them). ``interval``: which interval's factor values the scene uses
+    (1-based; 0: none). ``target_size_deg``: the recalibration cross's size.
     """
 
     name: str
@@ -28,50 +32,38 @@ class PhaseSpec:
     show: str
     gaze: str
     mode_column: str | None = None
+    mode: str = "conventional"
+    primitives: tuple[str, ...] | None = None
+    interval: int = 0
+    target_size_deg: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.show not in ("cross", "stimulus", "blank", "off"):
+            raise ValueError(f"phase {self.name!r}: show must be cross, stimulus, blank or off, got {self.show!r}")
+        if self.mode not in RENDERING_MODES:
+            raise ValueError(f"phase {self.name!r}: unknown rendering mode {self.mode!r}")
 
     @property
     def renders(self) -> bool:
         return self.show in ("cross", "stimulus", "blank")
 
-
-DEFAULT_DURATIONS_S: dict[ResponseKind, dict[str, float]] = {
-    ResponseKind.TWO_INTERVAL: {"recalibration": 0.5, "interval1": 2.0, "blank": 0.5, "interval2": 2.0},
-    ResponseKind.NEAR_SIDE: {"recalibration": 0.5, "stimulus": 3.0},
-    ResponseKind.PREFERENCE: {"recalibration": 0.5, "stimulus_a": 3.0, "blank": 1.0, "stimulus_b": 3.0},
-    ResponseKind.REACH: {"recalibration": 0.5, "stimulus": 5.0},
-}
-
-
-def trial_phases(kind: ResponseKind, durations_s: Mapping[str, Any] | None = None) -> tuple[PhaseSpec, ...]:
-    """The timed phases before the response, with protocol overrides of their durations."""
-    d = dict(DEFAULT_DURATIONS_S[kind])
-    for key, value in dict(durations_s or {}).items():
-        name = key.removesuffix("_s")
-        if name in d and value is not None:
-            d[name] = float(value)
-    recal = PhaseSpec("recalibration", d["recalibration"], "cross", "cross")
-    if kind is ResponseKind.TWO_INTERVAL:
-        return (
-            recal,
-            PhaseSpec("interval1", d["interval1"], "stimulus", "pursuit", "mode_interval1"),
-            PhaseSpec("blank", d["blank"], "blank", "pursuit"),
-            PhaseSpec("interval2", d["interval2"], "stimulus", "pursuit", "mode_interval2"),
-        )
-    if kind is ResponseKind.NEAR_SIDE:
-        return (recal, PhaseSpec("stimulus", d["stimulus"], "stimulus", "free", "mode"))
-    if kind is ResponseKind.PREFERENCE:
-        return (
-            recal,
-            PhaseSpec("stimulus_a", d["stimulus_a"], "stimulus", "free", "mode_a"),
-            PhaseSpec("blank", d["blank"], "blank", "free"),
-            PhaseSpec("stimulus_b", d["stimulus_b"], "stimulus", "free", "mode_b"),
-        )
-    return (recal, PhaseSpec("stimulus", d["stimulus"], "stimulus", "free", "rendering"))
+    @property
+    def shows_scene(self) -> bool:
+        """True when the phase draws scene primitives (an interval, or a blank with ``show:``)."""
+        return self.show == "stimulus" or (self.show == "blank" and bool(self.primitives))
 
 
 def mode_for(phase: PhaseSpec, row: Mapping[str, Any]) -> str:
-    """Rendering mode of a phase for this trial ('enabled'/'disabled' map to ocular/conventional)."""
-    if phase.mode_column is None or phase.mode_column not in row:
-        return "conventional"
+    """The rendering mode of ``phase`` in this trial: the one interval-to-mode rule.
+
+    An interval's mode is the schedule's ``mode_interval<k>`` column, which the schedule
+    compiler fills for every response kind (a reach study's ``modes:`` mapping is applied there);
+    every other phase has its fixed ``mode``.
+    """
+    if phase.mode_column is None:
+        return phase.mode
     value = str(row[phase.mode_column])
-    return {"enabled": "ocular", "disabled": "conventional"}.get(value, value)
+    if value not in RENDERING_MODES:
+        raise ValueError(f"trial {row.get('trial')}: column {phase.mode_column} is {value!r}, not a rendering mode "
+                         f"({', '.join(RENDERING_MODES)})")
+    return value

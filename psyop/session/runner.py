@@ -8,7 +8,6 @@ model, display, tracker clock-sync, host.
 from __future__ import annotations
 
 import importlib.metadata
-import math
 import platform
 import sys
 from collections.abc import Callable
@@ -19,6 +18,7 @@ from typing import Any
 import pandas as pd
 
 from psyop.errors import UserError
+from psyop.protocol.model import Protocol
 from psyop.session.clock import RealClock, VirtualClock
 from psyop.session.frames import CameraRenderer, HeadlessDisplay
 from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, seed_for
@@ -26,11 +26,10 @@ from psyop.session.log.layout import session_paths, write_dataset_description
 from psyop.session.log.schema import trial_schema
 from psyop.session.log.store import SessionStore, recover_tables
 from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop
-from psyop.session.protocol_adapter import fixation_path, observer_params, phases_from_protocol, study_name
-from psyop.session.responses.base import response_kind
+from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.responses.simulated import make_observer
 
-DEFAULT_IPD_M = 0.063  # used when the protocol says ipd: tracker and no tracker reports one
+__all__ = ["DEFAULT_IPD_M", "SessionOptions", "print_outcome", "run_session"]
 _PACKAGES = ("psyop", "numpy", "scipy", "pandas", "pyarrow", "pydantic", "pyzmq", "pyserial", "msgpack", "moderngl", "tqdm")
 
 
@@ -115,10 +114,11 @@ def _make_pose(spec: str, seed: int) -> Any:
     raise UserError(f"unknown pose source {spec!r}; use sim or replay:SESSION_DIR", "--pose")
 
 
-def _make_responses(spec: str, protocol: Any, kind: Any, seed: int, participant: str, clock: Any, window: Any) -> Any:
+def _make_responses(spec: str, plan: SessionPlan, seed: int, participant: str, clock: Any, window: Any) -> Any:
     name, _, arg = spec.partition(":")
+    kind = plan.kind
     if name == "sim":
-        params = observer_params(protocol)
+        params = plan.observer_params()
         if params is None:
             raise UserError("--responses sim needs an observer: section in the protocol", "protocol")
         return make_observer(params, seed=seed, participant=participant)
@@ -138,8 +138,7 @@ def _make_responses(spec: str, protocol: Any, kind: Any, seed: int, participant:
     raise UserError(f"unknown response source {spec!r}; use sim, keyboard or serial:DEVICE", "--responses")
 
 
-def _make_renderer(mode: str, protocol: Any, display_profile: Any, ipd_m: float, nc_m: float,
-                   scale: float, max_images: int | None) -> tuple[Any, str]:
+def _make_renderer(mode: str, plan: SessionPlan, scale: float, max_images: int | None) -> tuple[Any, str]:
     """The frame renderer and a description of it for session.json.
 
     'images': the protocol's stimulus ray-cast by psyop.rendering (needs OpenGL/EGL);
@@ -149,7 +148,7 @@ def _make_renderer(mode: str, protocol: Any, display_profile: Any, ipd_m: float,
     if mode not in ("auto", "images", "cameras"):
         raise UserError(f"unknown render mode {mode!r}; use auto, images or cameras", "--render")
     if mode == "cameras":
-        return CameraRenderer(display_profile, ipd_m, nc_m), "cameras only"
+        return CameraRenderer(plan.display, plan.rig), "cameras only"
     try:
         from psyop.rendering.renderer import create_headless_context
         from psyop.session.scene_renderer import SceneRenderer
@@ -158,21 +157,23 @@ def _make_renderer(mode: str, protocol: Any, display_profile: Any, ipd_m: float,
     except Exception as exc:  # noqa: BLE001 - any OpenGL/EGL failure
         if mode == "images":
             raise UserError(f"cannot create an OpenGL context for rendering: {exc}", "--render") from exc
-        return CameraRenderer(display_profile, ipd_m, nc_m), f"cameras only (no OpenGL context: {exc})"
+        return CameraRenderer(plan.display, plan.rig), f"cameras only (no OpenGL context: {exc})"
     limit = "every stimulus frame" if max_images is None else f"first {max_images} stimulus frames checked"
-    return (SceneRenderer(protocol, display_profile, ipd_m, nc_m, scale=scale, ctx=ctx, max_images=max_images),
+    return (SceneRenderer(plan, scale=scale, ctx=ctx, max_images=max_images),
             f"images at scale {scale:g}, {limit}")
 
 
 def run_session(
-    protocol: Any,
-    compile_schedule: Callable[[Any, int], pd.DataFrame],
+    protocol: Protocol,
+    compile_schedule: Callable[[Protocol, int], pd.DataFrame],
     options: SessionOptions,
 ) -> SessionOutcome:
-    """Run (or resume) one session to the end of its schedule, or to a clean stop."""
-    from psyop.protocol import resolve_display_profile, resolve_eye_model
+    """Run (or resume) one session to the end of its schedule, or to a clean stop.
 
-    study = study_name(protocol)
+    The protocol is compiled into a :class:`~psyop.session.plan.SessionPlan` first; everything
+    below runs from the plan."""
+    plan = compile_plan(protocol)
+    study = plan.study
     paths = session_paths(options.data_root, study, options.participant, options.session)
     seed = options.seed
     if seed is None and paths.metadata.exists():
@@ -182,11 +183,7 @@ def run_session(
     if seed is None:
         seed = seed_for(study, options.participant, options.session)
     schedule = compile_schedule(protocol, seed)
-    kind = response_kind(list(schedule.columns))
-    phases = phases_from_protocol(protocol, kind)
-    display_profile = resolve_display_profile(protocol.display)
-    eye_model = resolve_eye_model(protocol.display)
-    ipd = getattr(protocol.display.ipd, "ipd_m", None) or DEFAULT_IPD_M
+    display_profile = plan.display
 
     if options.clock == "virtual":
         clock: Any = VirtualClock()
@@ -200,12 +197,9 @@ def run_session(
         "study": study, "participant": options.participant, "session": options.session, "seed": seed,
         "simulated": options.simulated, "protocol_sha256": protocol.source_sha256,
         "protocol_text": protocol.source_text, "protocol_file": protocol.source_name,
-        "n_trials_scheduled": int(len(schedule)), "response_kind": kind.value,
-        "phases": [p.__dict__ for p in phases], "packages": package_versions(),
+        "n_trials_scheduled": int(len(schedule)), **plan.metadata(), "packages": package_versions(),
         "python": platform.python_version(), "host": platform.node(),
-        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m},
-        "display": {k: (v if not isinstance(v, float) or math.isfinite(v) else "inf") for k, v in display_profile.__dict__.items()},
-        "ipd_m": ipd, "tracker": options.tracker, "responses": options.responses,
+        "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,
     }
     metadata["pose"] = options.pose
@@ -222,7 +216,13 @@ def run_session(
         display = HeadlessDisplay(clock)
     else:
         raise UserError(f"unknown display {options.display!r}; use headless or window", "--display")
-    responses = _make_responses(options.responses, protocol, kind, seed, options.participant, clock, window)
+    responses = _make_responses(options.responses, plan, seed, options.participant, clock, window)
+    announce = None
+    if options.responses != "sim":  # a person answers: the experimenter reads the question and prompts
+        print(f"psyop run: question for the participant: {plan.response.question}", file=sys.stderr)
+
+        def announce(text: str) -> None:
+            print(f"psyop run: prompt: {text}", file=sys.stderr)
     try:
         try:
             gaze.start()
@@ -235,19 +235,17 @@ def run_session(
             trials, _ = recover_tables(paths)
             if trials is not None and len(trials):
                 clock.sleep_until(float(trials["trial_end_s"].max()))
-        path = fixation_path(protocol)
+        path = plan.fixation
         every_frame = (not (clock.virtual and not responses.needs_images)) if options.every_frame is None \
             else options.every_frame
         if window is not None and options.render != "cameras":
             from psyop.session.scene_renderer import SceneRenderer
 
-            renderer = SceneRenderer(protocol, display_profile, ipd, eye_model.nc_m, scale=window.scale,
-                                     ctx=window.ctx, owns_ctx=False)
+            renderer = SceneRenderer(plan, scale=window.scale, ctx=window.ctx, owns_ctx=False)
             window.source = renderer
             rendering = f"images at scale {window.scale:g} in the window"
         else:
-            renderer, rendering = _make_renderer(options.render, protocol, display_profile, ipd, eye_model.nc_m,
-                                                 1.0 if every_frame else options.check_scale,
+            renderer, rendering = _make_renderer(options.render, plan, 1.0 if every_frame else options.check_scale,
                                                  None if every_frame else options.check_images)
         store.update_metadata(rendering=rendering)
         config = LoopConfig(
@@ -257,12 +255,13 @@ def run_session(
             pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
             phase_delay_s=options.phase_delay_s,
             progress=options.progress,
-            hand_last_n=int(getattr(getattr(protocol, "response", None), "average_last_samples", None) or 10),
+            hand_last_n=plan.response.average_last_samples,
         )
         loop = TrialLoop(
             identity={"study": study, "participant": options.participant, "session": options.session},
-            phases=phases, clock=clock, gaze=gaze, responses=responses,
+            phases=plan.phases, clock=clock, gaze=gaze, responses=responses,
             renderer=renderer, display=display, store=store, config=config, pose=pose,
+            response=plan.response, announce=announce,
         )
         outcome = loop.run(schedule, completed)
     finally:

@@ -16,35 +16,35 @@ import numpy as np
 
 from psyop.session.frames import FrameCheck, HeadPose
 from psyop.session.phases import PhaseSpec
+from psyop.session.plan import SessionPlan
 
 
 class SceneRenderer:
-    """Implements the loop's FrameRenderer with real images for interval phases.
+    """Implements the loop's FrameRenderer with real images, for the plan's eye(s).
 
-    Intervals build the trial's scene at the time into the interval and render it for the
-    protocol's eye(s). When a person watches (``max_images`` None), the recalibration phase
-    shows the central cross and the blank phase the background; headless sampled checks
-    (``max_images`` set) render stimulus frames only. Other phases compute cameras only.
+    Intervals build the trial's scene at the time into the interval. When a person watches
+    (``max_images`` None), the recalibration phase shows the central cross (its
+    ``target_size_deg``) and a blank phase its ``show:`` primitives (or the background);
+    headless sampled checks (``max_images`` set) render interval frames only. Other phases
+    compute cameras only. Cameras and eye centres come from the plan's eye rig.
     """
 
-    def __init__(self, protocol: Any, display_profile: Any, ipd_m: float, nc_m: float, *, scale: float = 1.0,
-                 ctx: Any = None, max_images: int | None = None, owns_ctx: bool = True) -> None:
-        from psyop.optics import make_eye_camera
-
-        self.protocol = protocol
+    def __init__(self, plan: SessionPlan, *, scale: float = 1.0, ctx: Any = None, max_images: int | None = None,
+                 owns_ctx: bool = True) -> None:
+        self.plan = plan
+        self.protocol = plan.protocol
+        display_profile = plan.display
         if scale != 1.0:
             display_profile = dataclasses.replace(display_profile, width_px=max(16, round(display_profile.width_px * scale)),
                                                   height_px=max(16, round(display_profile.height_px * scale)))
         self.display = display_profile
-        self.ipd_m, self.nc_m = ipd_m, nc_m
-        eyes = getattr(protocol, "eyes", "right")
-        self.eyes = ("left", "right") if eyes == "stereo" else (str(eyes),)
-        self._make_camera = make_eye_camera
+        self.rig = plan.rig
+        self.eyes = plan.rig.eyes
         self._ctx = ctx
         self._owns_ctx = owns_ctx
         self.last_eye: str | None = None
         self._renderer: Any = None
-        self._base_dir = Path(protocol.source_name).parent if getattr(protocol, "source_name", "") else None
+        self._base_dir = Path(plan.protocol.source_name).parent if plan.protocol.source_name else None
         self.images_rendered = 0
         self.max_images = max_images  # None: every stimulus frame; n: only the first n (sampled checks)
         from psyop.rendering import AntiAliasing, RenderSettings
@@ -52,40 +52,43 @@ class SceneRenderer:
         # a check of finiteness and content needs no anti-aliasing; a watched session gets the default
         self.settings = RenderSettings(antialiasing=AntiAliasing.NONE) if max_images is not None else RenderSettings()
 
-    def _centre(self, eye: str) -> np.ndarray:
-        return np.array([(-0.5 if eye == "left" else 0.5) * self.ipd_m, 0.0, 0.0])
+    def _scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str,
+               head_pose: HeadPose | None) -> Any:
+        """The scene this eye sees in this phase, or None when nothing is drawn (cameras only)."""
+        from psyop.rendering.transform import scene_in_head
+        from psyop.stimulus import blank_scene, build_scene, recalibration_cross_scene
+
+        centre = self.rig.centre_m(eye)
+        watched = self.max_images is None
+        if phase.show == "cross":
+            return recalibration_cross_scene(centre, arm_deg=phase.target_size_deg) if watched else None
+        if phase.show == "blank" and not phase.primitives:
+            return blank_scene() if watched else None
+        if phase.show == "blank" and not watched:
+            return None
+        if phase.show not in ("stimulus", "blank"):
+            return None
+        scene = build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
+                            base_dir=self._base_dir, show=phase.primitives)
+        return scene_in_head(scene, *head_pose) if head_pose is not None else scene
 
     def render(self, row: Mapping[str, Any], phase: PhaseSpec, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None) -> FrameCheck:
-        """Render this frame for the protocol's eye(s). ``head_pose`` (tracked, head -> world)
-        moves the eyes through the world-fixed stimulus; the recalibration cross stays head-fixed."""
+        """Render this frame for the plan's eye(s) in ``mode`` (the plan's mode of this phase).
+        ``head_pose`` (tracked, head -> world) moves the eyes through the world-fixed stimulus;
+        the recalibration cross stays head-fixed."""
         from psyop.rendering import Renderer
-        from psyop.rendering.transform import scene_in_head
-        from psyop.stimulus import blank_scene, build_scene, interval_mode, recalibration_cross_scene
 
         cameras_ok = True
-        interval = int(phase.name.removeprefix("interval")) if phase.name.startswith("interval") else 0
-        if interval:
-            try:
-                mode = interval_mode(self.protocol, row, interval)
-            except Exception:  # noqa: BLE001 - fall back to the loop's mode mapping
-                pass
         ok = True
         images = 0
         for eye in self.eyes:
-            camera = self._make_camera(self.display, eye, fixation_m, self.ipd_m, self.nc_m,
-                                       mode if phase.show == "stimulus" else "conventional")
+            camera = self.rig.camera(self.display, eye, fixation_m, mode)
             cameras_ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
-            if phase.show in ("cross", "blank") and self.max_images is None:
-                scene = (recalibration_cross_scene(self._centre(eye)) if phase.show == "cross" else blank_scene())
-            elif interval and phase.show == "stimulus":
-                if self.max_images is not None and self.images_rendered >= self.max_images:
-                    return FrameCheck(False, cameras_ok)
-                scene = build_scene(self.protocol, row, t_in_phase_s, self._centre(eye), interval=interval,
-                                    base_dir=self._base_dir)
-                if head_pose is not None:
-                    scene = scene_in_head(scene, *head_pose)
-            else:
+            if phase.show == "stimulus" and self.max_images is not None and self.images_rendered >= self.max_images:
+                return FrameCheck(False, cameras_ok)
+            scene = self._scene(row, phase, t_in_phase_s, eye, head_pose)
+            if scene is None:
                 continue
             if self._renderer is None:
                 self._renderer = Renderer(scene, settings=self.settings, ctx=self._ctx)
@@ -96,7 +99,7 @@ class SceneRenderer:
             self.images_rendered += 1
             self.last_eye = eye
             images += 1
-            has_content = phase.show == "blank" or np.ptp(image) > 0  # a blank frame is uniform by design
+            has_content = (phase.show == "blank" and not phase.primitives) or np.ptp(image) > 0  # a bare blank is uniform
             ok &= bool(image.size > 0 and np.isfinite(image).all() and has_content)
         return FrameCheck(images > 0, ok and cameras_ok)
 

@@ -11,7 +11,7 @@ by 1e-6 rad, under 0.001 px on the Vive Pro).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -203,17 +203,21 @@ def build_scene(
     base_dir: Path | None = None,
     arm_reach_m: float = DEFAULT_ARM_REACH_M,
     background: tuple[float, float, float] = (0.5, 0.5, 0.5),
+    show: Sequence[str] | None = None,
 ) -> Scene:
     """The rendering scene of one trial during interval ``interval`` at ``time_s`` into it.
 
     ``eye_centre_m``: the rendered eye's centre of rotation in head space; angular sizes and
-    positions are measured from it. Only the primitives the interval's ``show:`` lists are built.
+    positions are measured from it. Only the primitives the interval's ``show:`` lists are built,
+    or those ``show`` lists when given (a blank phase's ``show:``, with interval ``interval``'s
+    factor values).
     """
     values = interval_values(row, interval)
     values = {**values, "trial_seed": row.get("trial_seed", 0)}
     origin = np.asarray(eye_centre_m, dtype=np.float64)
     phases = interval_phases(protocol)
-    show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
+    if show is None:
+        show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
     prims: list[Primitive] = []
     aperture = None
     for item in protocol.scene:

@@ -24,8 +24,8 @@ def test_new_study_in_docs_is_valid_and_compiles() -> None:
     protocol = parse_protocol(full[0], "docs/protocols.md")
     assert protocol.eyes == "stereo" and protocol.display.eye_model.nc_mm == 7.4
     schedule = compile_schedule(protocol, seed=1)
-    assert len(schedule) == 2 * 40
-    assert schedule["level_D"].isna().all()
+    assert len(schedule) == 2 * 6 * 40  # back_D x level_D x repetitions
+    assert sorted(schedule["level_D"].unique()) == [0, 0.3, 0.6, 0.9, 1.2, 1.5]
     assert schedule.groupby("block")["back_D"].nunique().eq(1).all()
     assert set(schedule["mode_interval1"]) | set(schedule["mode_interval2"]) == {"ocular", "reversed"}
 

@@ -181,7 +181,13 @@ def test_sequential_order_runs_conditions_in_protocol_order() -> None:
 def test_adaptive_level_is_left_for_the_session() -> None:
     text = DETECTION.replace("      levels: [0, 0.25, 0.5, 0.75, 1]",
                              "      adaptive: {procedure: quest_plus, start: 0.5, min: 0, max: 1.5}")
-    protocol = parse_protocol(text, "adaptive.yaml")
+    # validation refuses adaptive levels until a procedure exists (tests/session/test_plan_fields.py);
+    # the schedule compiler's handling of them is tested on the structurally valid model
+    import yaml
+
+    from psyop.protocol import Protocol
+
+    protocol = Protocol.model_validate(yaml.safe_load(text))
     schedule = compile_schedule(protocol, seed=1)
     assert len(schedule) == 3 * 15
     assert schedule["level_D"].isna().all() and schedule["adaptive"].all()

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from psyop.optics import VIVE_PRO, get_eye_model
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.phases import PhaseSpec
+from psyop.session.plan import compile_plan
 from psyop.session.scene_renderer import SceneRenderer
 
 REPO = Path(__file__).resolve().parents[2]
@@ -21,7 +21,7 @@ STRAIGHT_AHEAD_M = (0.032, 0.0, -1.0)
 @pytest.fixture(scope="module")
 def watched() -> SceneRenderer:
     protocol = load_protocol(REPO / "protocols" / "detection.yaml")
-    renderer = SceneRenderer(protocol, VIVE_PRO, 0.064, get_eye_model("gullstrand_emsley_relaxed").nc_m, scale=0.5)
+    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=0.064), scale=0.5)
     yield renderer
     renderer.close()
 
@@ -53,7 +53,7 @@ def test_blank_phase_is_uniform_background(watched: SceneRenderer) -> None:
 
 def test_headless_sampled_checks_skip_cross_and_blank() -> None:
     protocol = load_protocol(REPO / "protocols" / "detection.yaml")
-    renderer = SceneRenderer(protocol, VIVE_PRO, 0.064, 0.0076916, scale=0.1, max_images=2)
+    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=0.064), scale=0.1, max_images=2)
     try:
         row = compile_schedule(protocol, 1).iloc[0].to_dict()
         check = renderer.render(row, PhaseSpec("recalibration", 0.5, "cross", "cross"), "conventional", 0.0,
@@ -65,7 +65,7 @@ def test_headless_sampled_checks_skip_cross_and_blank() -> None:
 
 def test_stimulus_follows_the_tracked_head_and_the_cross_does_not(watched: SceneRenderer) -> None:
     row = compile_schedule(watched.protocol, 1).iloc[0].to_dict()
-    interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1")
+    interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)
     turned = ((0.0, 0.0, 0.0), (np.cos(np.radians(1.0)), 0.0, np.sin(np.radians(1.0)), 0.0))  # 2 deg yaw
     still = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
 

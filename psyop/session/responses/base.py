@@ -70,4 +70,9 @@ class ResponseSource(Protocol):
 
     def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None: ...
 
+    def timed_out(self) -> None:
+        """The response phase ended without an answer (the plan's ``timeout_s``): forget this
+        trial's prompt time so that the next trial's response time starts afresh."""
+        ...
+
     def close(self) -> None: ...

@@ -57,5 +57,8 @@ class KeyboardResponses:
             return Response(r.response, r.correct, r.reach_m, r.chosen_mode, rt)
         return None
 
+    def timed_out(self) -> None:
+        self._prompt_s = None
+
     def close(self) -> None:
         return None

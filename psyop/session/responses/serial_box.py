@@ -60,5 +60,8 @@ class SerialResponseBox:
         with self._reader.lock:
             return {"lines": self._reader.lines, "garbage": self._reader.garbage}
 
+    def timed_out(self) -> None:
+        self._prompt_s = None
+
     def close(self) -> None:
         self._reader.close()

@@ -47,6 +47,9 @@ class SimulatedObserver:
     def trial_rng(self, row: Mapping[str, Any]) -> np.random.Generator:
         return np.random.default_rng([self.seed & 0xFFFFFFFF, seed_for(self.participant), int(row["trial_seed"]) & 0xFFFFFFFF, 11])
 
+    def timed_out(self) -> None:
+        return None
+
     def close(self) -> None:
         return None
 

@@ -1,0 +1,67 @@
+"""The eye rig: which eye(s) see the stimulus, the eye model (NC) and the ipd, together.
+
+It is the one place that says where each eye's centre of rotation C is in head space
+(``(-ipd/2, 0, 0)`` left, ``(+ipd/2, 0, 0)`` right; docs/architecture.md) and that builds an
+eye's camera for a fixation and a rendering mode. The session plan (psyop.session.plan) holds
+one; the renderers take their eye centres and cameras from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from psyop.optics.camera import EyeCamera, make_eye_camera
+from psyop.optics.display import DisplayProfile
+from psyop.optics.eye_models import EyeModel
+from psyop.optics.ranges import IPD_M, NC_M
+
+EYE_NAMES: tuple[str, ...] = ("left", "right")
+
+
+@dataclass(frozen=True)
+class EyeRig:
+    """``eyes``: the eyes that see the stimulus (``("right",)``, ``("left",)`` or both, stereo).
+    ``ipd_source``: where ``ipd_m`` came from (``protocol``, ``tracker`` or ``default``)."""
+
+    eye_model: EyeModel
+    ipd_m: float
+    eyes: tuple[str, ...] = ("right",)
+    ipd_source: str = "protocol"
+
+    def __post_init__(self) -> None:
+        IPD_M.check(self.ipd_m)
+        NC_M.check(self.eye_model.nc_m, f"NC of eye model {self.eye_model.name!r}")
+        if not self.eyes or any(e not in EYE_NAMES for e in self.eyes) or len(set(self.eyes)) != len(self.eyes):
+            raise ValueError(f"eyes must be left and/or right, got {self.eyes!r}")
+
+    @classmethod
+    def for_protocol_eyes(cls, eyes: str, eye_model: EyeModel, ipd_m: float, ipd_source: str) -> "EyeRig":
+        """``eyes``: the protocol's ``eyes:`` value (``right``, ``left`` or ``stereo``)."""
+        return cls(eye_model, float(ipd_m), EYE_NAMES if eyes == "stereo" else (eyes,), ipd_source)
+
+    @property
+    def nc_m(self) -> float:
+        return self.eye_model.nc_m
+
+    @property
+    def stereo(self) -> bool:
+        return len(self.eyes) == 2
+
+    def centre_m(self, eye: str) -> np.ndarray:
+        """This eye's centre of rotation C in head space, metres."""
+        if eye not in EYE_NAMES:
+            raise ValueError(f"eye must be left or right, got {eye!r}")
+        return np.array([(-0.5 if eye == "left" else 0.5) * self.ipd_m, 0.0, 0.0])
+
+    def camera(self, display: DisplayProfile, eye: str, fixation_m: ArrayLike, mode: str,
+               **kwargs: float) -> EyeCamera:
+        """The camera of ``eye`` for this frame (``psyop.optics.camera.make_eye_camera``)."""
+        return make_eye_camera(display, eye, fixation_m, self.ipd_m, self.nc_m, mode, **kwargs)
+
+    def as_dict(self) -> dict[str, object]:
+        """What session.json records."""
+        return {"eyes": list(self.eyes), "ipd_m": self.ipd_m, "ipd_source": self.ipd_source,
+                "eye_model": self.eye_model.name, "nc_m": self.nc_m}

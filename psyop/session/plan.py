@@ -1,0 +1,200 @@
+"""The session plan: a validated Protocol (plus the session's choices) compiled into one frozen,
+typed value that the session runs.
+
+Everything the session takes from a protocol is decided here, once: the phases (what each
+shows, in which rendering mode, for how long, what gaze does), the response kind and its
+parameters (timeout, prompt, question, whether the display is off), the simulated observer,
+the display profile, and the eye rig (eye model + ipd + which eyes). The loop, the renderers and
+the response sources see only this plan, never the protocol model (the stimulus builder gets
+the protocol's scene through ``plan.protocol``).
+
+:func:`compile_plan` reads every field of the protocol that the session needs; the fields it
+does not read belong to other compilers (the schedule compiler's design and response columns,
+the stimulus builder's scene) -- ``PLAN_FIELDS`` lists which, and a test walks the protocol
+schema to check that every field is claimed by one of them or refused at validation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from psyop.optics.display import DisplayProfile
+from psyop.optics.rig import EyeRig
+from psyop.protocol.model import Protocol
+from psyop.protocol.observer import Observer
+from psyop.protocol.response import ReachResponse
+from psyop.protocol.scene import FixationTarget
+from psyop.protocol.trial import Blank, DriftRecalibration, Interval, ResponsePhase
+from psyop.session.phases import PhaseSpec, mode_for
+from psyop.session.responses.base import ResponseKind
+
+#: ipd used when the protocol says ``ipd: tracker`` and the tracker reports none (recorded as such).
+DEFAULT_IPD_M = 0.063
+
+#: The protocol's response kind -> the session's response kind.
+RESPONSE_KINDS: dict[str, ResponseKind] = {
+    "two_interval": ResponseKind.TWO_INTERVAL,
+    "left_right_nearer": ResponseKind.NEAR_SIDE,
+    "pairwise_preference": ResponseKind.PREFERENCE,
+    "reach": ResponseKind.REACH,
+}
+
+#: The response value logged for a trial whose response phase timed out (``correct`` is null).
+TIMEOUT_RESPONSE = "timeout"
+
+
+@dataclass(frozen=True)
+class FixationPath:
+    """The circling fixation target of the threshold studies (drives pursuit gaze)."""
+
+    eccentricity_deg: float = 16.0
+    speed_deg_s: float = 90.0
+    distance_m: float = 1.0
+
+
+@dataclass(frozen=True)
+class ResponsePlan:
+    """What the participant answers and how the response phase runs.
+
+    ``timeout_s`` None: wait for the answer; else a trial without an answer by then is logged
+    with response :data:`TIMEOUT_RESPONSE` and ``correct`` null. ``question``: what the study
+    asks (said by the experimenter / printed at the session start); ``prompt``: the response
+    phase's own line (printed on the experimenter's console at each response phase of a live
+    session). Both are recorded in session.json. ``phase``: what the display shows while
+    waiting (blank, or off for blind reaching)."""
+
+    kind: ResponseKind
+    protocol_kind: str
+    question: str
+    prompt: str | None = None
+    timeout_s: float | None = None
+    display_off: bool = False
+    average_last_samples: int = 10
+    phase: PhaseSpec = field(default_factory=lambda: PhaseSpec("response", 0.0, "blank", "none"))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind.value, "protocol_kind": self.protocol_kind, "question": self.question,
+                "prompt": self.prompt, "timeout_s": self.timeout_s, "display_off": self.display_off,
+                "average_last_samples": self.average_last_samples}
+
+
+@dataclass(frozen=True)
+class SessionPlan:
+    """Everything a session runs, typed and frozen (see the module docstring)."""
+
+    study: str
+    protocol: Protocol
+    phases: tuple[PhaseSpec, ...]
+    response: ResponsePlan
+    observer: Observer | None
+    display: DisplayProfile
+    rig: EyeRig
+    fixation: FixationPath | None
+
+    @property
+    def kind(self) -> ResponseKind:
+        return self.response.kind
+
+    @property
+    def eyes(self) -> tuple[str, ...]:
+        return self.rig.eyes
+
+    def mode_for(self, phase: PhaseSpec, row: dict[str, Any]) -> str:
+        """The rendering mode of ``phase`` in trial ``row`` (:func:`psyop.session.phases.mode_for`)."""
+        return mode_for(phase, row)
+
+    def observer_params(self) -> dict[str, Any] | None:
+        return None if self.observer is None else self.observer.model_dump()
+
+    def metadata(self) -> dict[str, Any]:
+        """The plan as session.json records it."""
+        return {
+            "response_kind": self.kind.value,
+            "response": self.response.as_dict(),
+            "phases": [dict(p.__dict__, primitives=None if p.primitives is None else list(p.primitives))
+                       for p in self.phases],
+            "eye_model": {"name": self.rig.eye_model.name, "nc_m": self.rig.nc_m},
+            "ipd_m": self.rig.ipd_m,
+            "rig": self.rig.as_dict(),
+            "display": {k: (v if not isinstance(v, float) or math.isfinite(v) else "inf")
+                        for k, v in self.display.__dict__.items()},
+            "fixation_path": None if self.fixation is None else dict(self.fixation.__dict__),
+        }
+
+
+def _duration_s(phase: Interval | Blank | DriftRecalibration) -> float:
+    """A fixed phase's duration; a participant-paced one runs for its minimum, else expected, time
+    (a simulated participant ends it then; a live one by the clock, see docs/protocols.md)."""
+    if isinstance(phase, DriftRecalibration):
+        return float(phase.expected_s)
+    if phase.duration_s is not None:
+        return float(phase.duration_s)
+    if isinstance(phase, Interval) and phase.min_duration_s:
+        return float(phase.min_duration_s)
+    return float(phase.expected_s or 0.0)
+
+
+def fixation_path(protocol: Protocol) -> FixationPath | None:
+    """The circling fixation target, if the scene has one."""
+    for item in protocol.scene:
+        if isinstance(item, FixationTarget) and item.path is not None:
+            return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s))
+    return None
+
+
+def compile_phases(protocol: Protocol, gaze: str) -> tuple[tuple[PhaseSpec, ...], ResponsePhase | None]:
+    """The timed phases before the (first) response phase, and that response phase."""
+    out: list[PhaseSpec] = []
+    n_interval = 0
+    for phase in protocol.trial.phases:
+        if isinstance(phase, DriftRecalibration):
+            out.append(PhaseSpec(f"recalibration{'' if not out else len(out)}", _duration_s(phase), "cross", "cross",
+                                 target_size_deg=float(phase.target_size_deg)))
+        elif isinstance(phase, Interval):
+            n_interval += 1
+            primitives = None if phase.show == "all" else tuple(phase.show)
+            out.append(PhaseSpec(f"interval{n_interval}", _duration_s(phase), "stimulus", gaze,
+                                 mode_column=f"mode_interval{n_interval}", primitives=primitives, interval=n_interval))
+        elif isinstance(phase, Blank):
+            if phase.display_off:
+                out.append(PhaseSpec("display_off", _duration_s(phase), "off", "none", mode=phase.mode))
+            else:
+                out.append(PhaseSpec("blank", _duration_s(phase), "blank", gaze, mode=phase.mode,
+                                     primitives=tuple(phase.show), interval=max(1, n_interval)))
+        elif isinstance(phase, ResponsePhase):
+            return tuple(out), phase
+    return tuple(out), None
+
+
+def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> SessionPlan:
+    """The plan of a session of ``protocol``. ``tracker_ipd_m``: the ipd the tracker measured
+    (used when the protocol says ``ipd: tracker``; None: :data:`DEFAULT_IPD_M`, recorded as
+    the default)."""
+    from psyop.protocol.display import FixedIpd, resolve_display_profile, resolve_eye_model
+
+    spec = protocol.display
+    if isinstance(spec.ipd, FixedIpd):
+        ipd_m, source = spec.ipd.ipd_m, "protocol"
+    elif tracker_ipd_m is not None:
+        ipd_m, source = float(tracker_ipd_m), "tracker"
+    else:
+        ipd_m, source = DEFAULT_IPD_M, "default (ipd: tracker, none reported)"
+    rig = EyeRig.for_protocol_eyes(protocol.eyes, resolve_eye_model(spec), ipd_m, source)
+    path = fixation_path(protocol)
+    phases, response_phase = compile_phases(protocol, "pursuit" if path is not None else "free")
+    r = protocol.response
+    display_off = bool(response_phase.display_off) if response_phase is not None else False
+    response = ResponsePlan(
+        kind=RESPONSE_KINDS[r.kind],
+        protocol_kind=r.kind,
+        question=r.question,
+        prompt=response_phase.prompt if response_phase is not None else None,
+        timeout_s=float(response_phase.timeout_s) if response_phase is not None and response_phase.timeout_s else None,
+        display_off=display_off,
+        average_last_samples=int(r.average_last_samples) if isinstance(r, ReachResponse) else 10,
+        phase=PhaseSpec("response", 0.0, "off" if display_off else "blank", "none"),
+    )
+    return SessionPlan(study=protocol.study.name, protocol=protocol, phases=phases, response=response,
+                       observer=protocol.observer, display=resolve_display_profile(spec), rig=rig, fixation=path)
