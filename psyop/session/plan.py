@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from psyop.datacontract import TIMEOUT_RESPONSE
 from psyop.optics.display import DisplayProfile
 from psyop.optics.rig import EyeRig
 from psyop.protocol.model import Protocol
@@ -33,6 +34,9 @@ from psyop.session.responses.base import ResponseKind
 #: ipd used when the protocol says ``ipd: tracker`` and the tracker reports none (recorded as such).
 DEFAULT_IPD_M = 0.063
 
+__all__ = ["DEFAULT_IPD_M", "RESPONSE_KINDS", "TIMEOUT_RESPONSE", "FixationPath", "ResponsePlan", "SessionPlan",
+           "compile_phases", "compile_plan", "fixation_path"]
+
 #: The protocol's response kind -> the session's response kind.
 RESPONSE_KINDS: dict[str, ResponseKind] = {
     "two_interval": ResponseKind.TWO_INTERVAL,
@@ -41,8 +45,6 @@ RESPONSE_KINDS: dict[str, ResponseKind] = {
     "reach": ResponseKind.REACH,
 }
 
-#: The response value logged for a trial whose response phase timed out (``correct`` is null).
-TIMEOUT_RESPONSE = "timeout"
 
 
 @dataclass(frozen=True)

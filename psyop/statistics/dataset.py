@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from psyop import datacontract as dc
 from psyop.errors import UserError
 
 
@@ -28,19 +29,19 @@ def is_simulated(data_root: Path) -> bool:
     so; an absent description is treated as simulated=False but never silently: callers
     show "simulated" in figures only when this returns True.
     """
-    path = Path(data_root) / "dataset_description.json"
+    path = Path(data_root) / dc.DATASET_DESCRIPTION_FILE
     if not path.exists():
         return False
     try:
         description = json.loads(path.read_text())
     except json.JSONDecodeError as exc:
         raise UserError(f"not valid JSON: {exc.msg}", f"{path}:{exc.lineno}:{exc.colno}") from exc
-    return bool(description.get("simulated", False))
+    return bool(description.get(dc.SIMULATED_KEY, False))
 
 
 def session_files(data_root: Path, study: str) -> list[Path]:
     """Sorted paths of every session log of ``study``."""
-    return sorted((Path(data_root) / study).glob("sub-*/ses-*/trials.parquet"))
+    return dc.trials_files(data_root, study)
 
 
 def load_trials(data_root: Path, study: str, include_practice: bool = False) -> pd.DataFrame:
@@ -53,11 +54,14 @@ def load_trials(data_root: Path, study: str, include_practice: bool = False) -> 
     return load_dataset(data_root, study, include_practice).trials
 
 
-def load_dataset(data_root: Path, study: str, include_practice: bool = False) -> Dataset:
+def load_dataset(data_root: Path, study: str, include_practice: bool = False,
+                 include_timeouts: bool = False) -> Dataset:
     """Like :func:`load_trials` but returns a :class:`Dataset` with the simulated flag.
 
     Practice trials (a true ``practice`` column) are left out unless ``include_practice``;
-    how many were left out is in ``trials.attrs["n_practice_dropped"]``.
+    how many were left out is in ``trials.attrs["n_practice_dropped"]``. Timed-out trials
+    (response ``timeout``, psyop.datacontract) are left out unless ``include_timeouts``;
+    how many in ``trials.attrs["n_timeout_dropped"]``.
     """
     files = session_files(data_root, study)
     if not files:
@@ -76,7 +80,12 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False) ->
         is_practice = trials["practice"].fillna(False).astype(bool)
         n_practice = int(is_practice.sum())
         trials = trials[~is_practice].reset_index(drop=True)
+    n_timeout = 0
+    if not include_timeouts:
+        trials = dc.drop_timeouts(trials)
+        n_timeout = trials.attrs["n_timeout_dropped"]
     simulated = is_simulated(data_root)
+    trials.attrs["n_timeout_dropped"] = n_timeout
     trials.attrs["n_practice_dropped"] = n_practice
     trials.attrs["simulated"] = simulated
     trials.attrs["n_sessions"] = len(files)
@@ -95,10 +104,10 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
     written = []
     for study, table in tables.items():
         for (participant, session), part in table.groupby(["participant", "session"], sort=True):
-            path = root / study / f"sub-{participant}" / f"ses-{session}" / "trials.parquet"
+            path = dc.session_dir(root, study, participant, session) / dc.TRIALS_FILE
             path.parent.mkdir(parents=True, exist_ok=True)
             part.reset_index(drop=True).to_parquet(path, index=False)
             written.append(path)
-    (root / "dataset_description.json").write_text(
-        json.dumps({"Name": "psyop dataset", "simulated": bool(simulated)}, indent=2) + "\n")
+    (root / dc.DATASET_DESCRIPTION_FILE).write_text(
+        json.dumps(dc.dataset_description(simulated=simulated, studies=sorted(tables)), indent=2) + "\n")
     return written

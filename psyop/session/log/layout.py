@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import json
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from psyop import datacontract as dc
 from psyop.errors import UserError
 
-_ID_PATTERN = re.compile(r"^[A-Za-z0-9]+$")
+_ID_PATTERN = dc.PARTICIPANT_PATTERN
 
 
 @dataclass(frozen=True)
@@ -25,23 +25,23 @@ class SessionPaths:
 
     @property
     def directory(self) -> Path:
-        return self.data_root / self.study / f"sub-{self.participant}" / f"ses-{self.session}"
+        return dc.session_dir(self.data_root, self.study, self.participant, self.session)
 
     @property
     def metadata(self) -> Path:
-        return self.directory / "session.json"
+        return self.directory / dc.SESSION_METADATA_FILE
 
     @property
     def log_dir(self) -> Path:
-        return self.directory / "log"
+        return self.directory / dc.LOG_DIR
 
     @property
     def trials_parquet(self) -> Path:
-        return self.directory / "trials.parquet"
+        return self.directory / dc.TRIALS_FILE
 
     @property
     def frames_parquet(self) -> Path:
-        return self.directory / "frames.parquet"
+        return self.directory / dc.FRAMES_FILE
 
     def trial_segment(self, index: int) -> Path:
         return self.log_dir / f"trials-{index:03d}.arrows"
@@ -62,7 +62,7 @@ def session_paths(data_root: Path, study: str, participant: str, session: int) -
         raise UserError(f"participant ID {participant!r} must be letters and digits only", "--participant")
     if session < 1:
         raise UserError(f"session number must be 1 or more, got {session}", "--session")
-    if not re.match(r"^[A-Za-z0-9_-]+$", study):
+    if not dc.STUDY_PATTERN.match(study):
         raise UserError(f"study name {study!r} must be letters, digits, '-' or '_'", "protocol")
     return SessionPaths(Path(data_root), study, participant, session)
 
@@ -86,8 +86,8 @@ def write_dataset_description(data_root: Path, *, simulated: bool, studies: list
     session added to a simulated dataset turns the flag false (and is listed).
     """
     data_root = Path(data_root)
-    path = data_root / "dataset_description.json"
-    sessions = sorted(data_root.glob("*/sub-*/ses-*/session.json"))
+    path = data_root / dc.DATASET_DESCRIPTION_FILE
+    sessions = dc.session_metadata_files(data_root)
     n_sim = n_real = 0
     found_studies: set[str] = set(studies or [])
     for meta_path in sessions:
@@ -96,7 +96,7 @@ def write_dataset_description(data_root: Path, *, simulated: bool, studies: list
         except (OSError, json.JSONDecodeError):
             continue
         found_studies.add(str(meta.get("study", meta_path.parents[2].name)))
-        if meta.get("simulated"):
+        if meta.get(dc.SIMULATED_KEY):
             n_sim += 1
         else:
             n_real += 1
@@ -104,23 +104,7 @@ def write_dataset_description(data_root: Path, *, simulated: bool, studies: list
         all_simulated = simulated
     else:
         all_simulated = n_real == 0
-    description = {
-        "@context": "https://schema.org/",
-        "@type": "Dataset",
-        "name": "psyop sessions",
-        "description": (
-            "Trial and frame logs of gaze-contingent VR psychophysics sessions recorded by psyop. "
-            "Layout: <study>/sub-<ID>/ses-<N>/{trials,frames}.parquet with session.json metadata."
-        ),
-        "schemaVersion": "Psych-DS 0.1.0",
-        "simulated": bool(all_simulated),
-        "n_sessions_simulated": n_sim,
-        "n_sessions_real": n_real,
-        "studies": sorted(found_studies),
-        "variableMeasured": [
-            "trial", "block", "condition", "trial_seed", "study", "participant", "session",
-            "response", "correct", "reach_m", "chosen_mode", "trial_start_s", "trial_end_s",
-        ],
-    }
+    description = dc.dataset_description(simulated=all_simulated, studies=sorted(found_studies),
+                                         n_simulated=n_sim, n_real=n_real)
     write_json_atomic(path, description)
     return path

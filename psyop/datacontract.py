@@ -1,0 +1,99 @@
+"""The session -> data/ contract: where sessions are written, what dataset_description.json
+says, and the names of the trial-log columns the analysis reads.
+
+Both sides import this module: the session's log layout (psyop.session.log.layout) writes by it
+and the statistics loader (psyop.statistics.dataset) reads by it, so a renamed file or column
+changes in one place. docs/architecture.md ("session -> data/") describes the same contract.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+# ---- layout: data/<study>/sub-<ID>/ses-<N>/ (Psych-DS spirit) -------------------------------------
+DATASET_DESCRIPTION_FILE = "dataset_description.json"
+SESSION_METADATA_FILE = "session.json"
+TRIALS_FILE = "trials.parquet"
+FRAMES_FILE = "frames.parquet"
+LOG_DIR = "log"
+#: Participant IDs are Psych-DS keys: letters and digits only.
+PARTICIPANT_PATTERN = re.compile(r"^[A-Za-z0-9]+$")
+STUDY_PATTERN = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def session_dir(data_root: Path, study: str, participant: str, session: int) -> Path:
+    """``data_root/<study>/sub-<participant>/ses-<session>``."""
+    return Path(data_root) / study / f"sub-{participant}" / f"ses-{int(session)}"
+
+
+def trials_files(data_root: Path, study: str) -> list[Path]:
+    """Every session's trial log of ``study``, sorted."""
+    return sorted((Path(data_root) / study).glob(f"sub-*/ses-*/{TRIALS_FILE}"))
+
+
+def session_metadata_files(data_root: Path) -> list[Path]:
+    """Every session.json under ``data_root`` (all studies), sorted."""
+    return sorted(Path(data_root).glob(f"*/sub-*/ses-*/{SESSION_METADATA_FILE}"))
+
+
+# ---- trial-log columns -----------------------------------------------------------------------------
+#: Schedule columns every trial has (psyop.schedule.compile_schedule).
+SCHEDULE_COLUMNS: tuple[str, ...] = ("trial", "block", "condition", "trial_seed")
+PRACTICE = "practice"
+#: Who: added by the session to every row.
+IDENTITY_COLUMNS: tuple[str, ...] = ("study", "participant", "session")
+RESPONSE = "response"
+CORRECT = "correct"
+REACH_M = "reach_m"
+CHOSEN_MODE = "chosen_mode"
+#: What the session measured per trial (``correct``: 2AFC and left/right; ``reach_m``: reach;
+#: ``chosen_mode``: preference).
+MEASURED_COLUMNS: tuple[str, ...] = (RESPONSE, CORRECT, REACH_M, CHOSEN_MODE, "trial_start_s", "trial_end_s")
+#: Every column dataset_description.json lists as measured (schedule + identity + measured).
+DESCRIBED_COLUMNS: tuple[str, ...] = SCHEDULE_COLUMNS + IDENTITY_COLUMNS + MEASURED_COLUMNS
+
+#: ``response`` of a trial whose response phase timed out (protocol ``timeout_s``); its
+#: ``correct``, ``reach_m`` and ``chosen_mode`` are null.
+TIMEOUT_RESPONSE = "timeout"
+
+
+def drop_timeouts(trials: pd.DataFrame) -> pd.DataFrame:
+    """The answered trials: rows whose response is :data:`TIMEOUT_RESPONSE` are left out and
+    counted in ``attrs["n_timeout_dropped"]`` (documented in docs/protocols.md)."""
+    if RESPONSE not in trials:
+        out = trials.copy()
+        out.attrs["n_timeout_dropped"] = 0
+        return out
+    timed_out = trials[RESPONSE].astype(str).eq(TIMEOUT_RESPONSE)
+    out = trials[~timed_out].reset_index(drop=True)
+    out.attrs.update(trials.attrs)
+    out.attrs["n_timeout_dropped"] = int(timed_out.sum())
+    return out
+
+
+# ---- dataset_description.json -------------------------------------------------------------------------
+SIMULATED_KEY = "simulated"
+
+
+def dataset_description(*, simulated: bool, studies: list[str], n_simulated: int = 0, n_real: int = 0) -> dict[str, Any]:
+    """The content of ``dataset_description.json``; ``simulated`` is what figures and the loader read."""
+    return {
+        "@context": "https://schema.org/",
+        "@type": "Dataset",
+        "name": "psyop sessions",
+        "description": (
+            "Trial and frame logs of gaze-contingent VR psychophysics sessions recorded by psyop. "
+            f"Layout: <study>/sub-<ID>/ses-<N>/{{{TRIALS_FILE.split('.')[0]},{FRAMES_FILE.split('.')[0]}}}.parquet "
+            f"with {SESSION_METADATA_FILE} metadata."
+        ),
+        "schemaVersion": "Psych-DS 0.1.0",
+        SIMULATED_KEY: bool(simulated),
+        "n_sessions_simulated": int(n_simulated),
+        "n_sessions_real": int(n_real),
+        "studies": sorted(studies),
+        "variableMeasured": list(DESCRIBED_COLUMNS),
+    }
