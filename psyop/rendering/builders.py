@@ -7,6 +7,7 @@ Each builder is pure: geometry in, :class:`~psyop.rendering.scene.Primitive` tup
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -47,7 +48,13 @@ def frontoparallel_disc(
     name: str = "",
 ) -> Primitive:
     """A disc facing the viewer whose centre lies ``distance_m`` along the given direction
-    (measured along -z from ``origin_m``) and that subtends ``diameter_deg`` from ``origin_m``."""
+    (measured along -z from ``origin_m``) and that subtends ``diameter_deg`` from ``origin_m``.
+
+    ``distance_m`` = inf (0 D): a disc at optical infinity (``at_infinity``), the same angles
+    from every origin."""
+    if math.isinf(distance_m) and distance_m > 0:
+        unit = frontoparallel_disc(1.0, diameter_deg, material, azimuth_deg, elevation_deg, ORIGIN, name)
+        return dataclasses.replace(unit, at_infinity=True)
     o = np.asarray(origin_m, dtype=np.float64)
     d = direction_from_angles(azimuth_deg, elevation_deg)
     centre = o + d * (distance_m / -d[2])
@@ -67,7 +74,12 @@ def frontoparallel_rect(
     name: str = "",
 ) -> Primitive:
     """A frontoparallel rectangle at plane depth ``distance_m`` spanning the given angles
-    (tangent extents measured from ``origin_m``), optionally clipped by a sinusoidal border."""
+    (tangent extents measured from ``origin_m``), optionally clipped by a sinusoidal border.
+    ``distance_m`` = inf (0 D): a rectangle at optical infinity (``at_infinity``)."""
+    if math.isinf(distance_m) and distance_m > 0:
+        unit = frontoparallel_rect(1.0, width_deg, height_deg, material, azimuth_deg, elevation_deg, ORIGIN, border,
+                                   name)
+        return dataclasses.replace(unit, at_infinity=True)
     o = np.asarray(origin_m, dtype=np.float64)
     d = direction_from_angles(azimuth_deg, elevation_deg)
     centre = o + d * (distance_m / -d[2])
@@ -190,7 +202,7 @@ def target_field(
         depth_D = rng.uniform(far_D, near_D)
         shade = float(rng.uniform(0.3, 0.9))
         mat = material if material is not None else Solid((shade, shade * 0.9, 0.4))
-        out.append(frontoparallel_disc(1.0 / depth_D, diameter_deg, mat, az, el, origin_m, name=f"target{len(out)}"))
+        out.append(frontoparallel_disc(1.0 / depth_D if depth_D > 0 else math.inf, diameter_deg, mat, az, el, origin_m, name=f"target{len(out)}"))
     return tuple(out)
 
 

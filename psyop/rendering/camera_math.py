@@ -55,6 +55,13 @@ def project_points_px(camera: Any, points_head_m: np.ndarray) -> np.ndarray:
     return out
 
 
+def project_directions_px(camera: Any, directions_head: np.ndarray) -> np.ndarray:
+    """(n, 3) head-space directions (points at infinity, w = 0) -> (n, 2) pixel positions; the
+    centre of projection does not enter (zero parallax). NaN for directions pointing backwards."""
+    d = np.atleast_2d(np.asarray(directions_head, dtype=np.float64))
+    return project_points_px(camera, d + np.asarray(camera.centre_of_projection_m, dtype=np.float64))
+
+
 def pixel_rays(camera: Any, xy_px: np.ndarray) -> np.ndarray:
     """(n, 2) pixel positions -> (n, 3) unit ray directions in head space."""
     xy = np.atleast_2d(np.asarray(xy_px, dtype=np.float64))

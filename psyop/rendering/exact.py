@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from psyop.rendering.camera_math import project_points_px
+from psyop.rendering.camera_math import project_directions_px, project_points_px
 from psyop.rendering.scene import Primitive, Shape
 
 
@@ -26,11 +26,13 @@ class ImageEllipse:
 
 
 def projected_disc(camera: Any, disc: Primitive) -> ImageEllipse:
-    """The image of a frontoparallel disc (shape DISC, axes along x and y) in pixels."""
+    """The image of a frontoparallel disc (shape DISC, axes along x and y) in pixels; a disc at
+    optical infinity is projected as directions (the centre of projection does not enter)."""
     if disc.shape is not Shape.DISC:
         raise ValueError("projected_disc needs a disc")
     c = np.array(disc.centre_m)
-    pts = project_points_px(camera, np.stack([c, c + disc.half_u_m, c + disc.half_v_m]))
+    project = project_directions_px if disc.at_infinity else project_points_px
+    pts = project(camera, np.stack([c, c + disc.half_u_m, c + disc.half_v_m]))
     rx = float(np.linalg.norm(pts[1] - pts[0]))
     ry = float(np.linalg.norm(pts[2] - pts[0]))
     return ImageEllipse((float(pts[0, 0]), float(pts[0, 1])), (rx, ry))

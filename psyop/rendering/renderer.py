@@ -98,6 +98,14 @@ def _eye_key(camera: Any) -> str:
     return str(getattr(eye, "value", eye))
 
 
+def _finite_extent_m(scene: Scene) -> float:
+    """An upper bound on the distance from the head origin to any point of a finite primitive
+    (the far clip is raised to it, so a far but finite surface is never dropped)."""
+    extent = [float(np.linalg.norm(p.centre_m) + np.linalg.norm(p.half_u_m) + np.linalg.norm(p.half_v_m))
+              for p in scene.primitives if not p.at_infinity]
+    return 1.001 * max(extent, default=0.0)
+
+
 def create_headless_context() -> moderngl.Context:
     """A standalone OpenGL context via EGL (no display needed)."""
     return moderngl.create_standalone_context(backend="egl")
@@ -163,6 +171,9 @@ class Renderer:
         data = np.zeros((max(1, len(scene.primitives)), TEXELS_PER_PRIMITIVE, 4), dtype=np.float32)
         self._centres_head = np.zeros((len(scene.primitives), 3))
         self._half_axes_m = np.zeros((2, len(scene.primitives), 3))
+        # w of each centre: 1 = a point (made camera-relative), 0 = a direction (optical infinity)
+        self._centre_w = np.array([0.0 if p.at_infinity else 1.0 for p in scene.primitives])
+        self._scene_far_m = _finite_extent_m(scene)
         for i, p in enumerate(scene.primitives):
             self._centres_head[i] = p.centre_m
             self._half_axes_m[:, i] = (p.half_u_m, p.half_v_m)
@@ -321,12 +332,14 @@ class Renderer:
             state.last_rendered_camera = None
         else:
             cop = np.asarray(camera.centre_of_projection_m, dtype=np.float64)
-            rel_m = self._centres_head - cop
+            rel_m = self._centres_head - self._centre_w[:, None] * cop  # directions stay put
             rel = np.zeros((MAX_PRIMITIVES, 4), dtype=np.float32)
             rel[: len(self._centres_head), :3] = rel_m
+            rel[: len(self._centres_head), 3] = self._centre_w
             self._centres.write(rel.tobytes())
             self._centres.bind_to_uniform_block(0)
             near, far = near_far_m(camera)
+            far = max(far, self._scene_far_m + float(np.linalg.norm(cop)))  # never clip a scene primitive
             ray = np.asarray(camera.pixel_to_ray, dtype=np.float32).T.tobytes()
             for prog in self._programs():
                 prog["Centres"].binding = 0

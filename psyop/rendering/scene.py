@@ -6,7 +6,13 @@ Every position is in head space (metres, x right, y up, -z forward); the rendere
 camera-relative in float64 before anything reaches float32 on the GPU.
 
 Primitives are planar so that a ray through the centre of projection hits each at most once:
-occlusion is resolved exactly by taking the nearest hit per sample.
+occlusion is resolved exactly by taking the nearest hit per sample. Hits at the same depth
+(within a relative :data:`COPLANAR_RELATIVE_DEPTH`) go to the later-listed primitive.
+
+A primitive ``at_infinity`` (optical infinity, 0 D) is a set of directions, not of points:
+its ``centre_m``/half axes give the primitive as seen at unit distance from the head origin,
+and only the directions from there to its points matter (homogeneous w = 0). It is drawn behind
+every finite primitive and no translation of the centre of projection moves it (zero parallax).
 """
 
 from __future__ import annotations
@@ -17,6 +23,11 @@ from enum import Enum
 import numpy as np
 
 Colour = tuple[float, float, float]
+
+# Two hits whose distances along a ray differ by at most this fraction count as coplanar; the
+# later-listed primitive wins (10 um at 1 m: far below any parallax the studies can show, far
+# above float32 rounding of the ray-plane distance).
+COPLANAR_RELATIVE_DEPTH = 1.0e-5
 
 
 def _vec3(value: object, name: str) -> tuple[float, float, float]:
@@ -138,7 +149,9 @@ class Primitive:
     """A planar disc (ellipse) or parallelogram: points ``centre + a * half_u + b * half_v``.
 
     Disc: a^2 + b^2 <= 1. Rect: |a| <= 1 and |b| <= 1. ``half_u`` and ``half_v`` must be
-    orthogonal. ``name`` is free text for debugging and tests.
+    orthogonal. ``name`` is free text for debugging and tests. ``at_infinity``: the primitive
+    lies at optical infinity (see the module docstring): a direction cone, drawn behind every
+    finite primitive, without parallax.
     """
 
     shape: Shape
@@ -148,9 +161,11 @@ class Primitive:
     material: Material
     border: SineBorder | None = None
     name: str = ""
+    at_infinity: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "shape", Shape(self.shape))
+        object.__setattr__(self, "at_infinity", bool(self.at_infinity))
         for attr in ("centre_m", "half_u_m", "half_v_m"):
             object.__setattr__(self, attr, _vec3(getattr(self, attr), attr))
         u = np.array(self.half_u_m)
@@ -162,7 +177,10 @@ class Primitive:
             raise ValueError(f"primitive {self.name!r}: half_u_m and half_v_m must be orthogonal")
 
     def closest_distance_m(self, point_m: np.ndarray) -> float:
-        """Exact distance from ``point_m`` to the primitive (ignoring the sine clip, which only removes area)."""
+        """Exact distance from ``point_m`` to the primitive (ignoring the sine clip, which only removes area);
+        inf at optical infinity."""
+        if self.at_infinity:
+            return float("inf")
         c, u, v = (np.array(x) for x in (self.centre_m, self.half_u_m, self.half_v_m))
         rel = np.asarray(point_m, dtype=np.float64) - c
         a = rel @ u / (u @ u)
@@ -176,7 +194,9 @@ class Primitive:
         return float(np.linalg.norm(rel - a * u - b * v))
 
     def farthest_distance_m(self, point_m: np.ndarray) -> float:
-        """Distance from ``point_m`` to the primitive's farthest point (corner or rim)."""
+        """Distance from ``point_m`` to the primitive's farthest point (corner or rim); inf at optical infinity."""
+        if self.at_infinity:
+            return float("inf")
         c, u, v = (np.array(x) for x in (self.centre_m, self.half_u_m, self.half_v_m))
         if self.shape is Shape.RECT:
             pts = [c + su * u + sv * v for su in (-1, 1) for sv in (-1, 1)]

@@ -1,7 +1,11 @@
 """GLSL for the full-screen ray-casting pass (OpenGL 4.5 core is not required: 4.1 suffices).
 
 Every pixel casts rays from the centre of projection (the origin: everything is camera-relative)
-through the analytic primitives; the nearest hit wins per sample. The anti-aliasing variant is
+through the analytic primitives; the nearest hit wins per sample. Hits within a relative
+``COPLANAR_REL`` of each other in distance are coplanar and the later-listed primitive wins.
+A primitive whose centre has w = 0 (``u_centre[i].w``) lies at optical infinity: its centre is
+a direction (not made camera-relative), it is not clipped by near/far, and its hit distance is
+``T_INFINITY``, behind every finite hit. The anti-aliasing variant is
 chosen at compile time with one of the ``AA_*`` defines:
 
 ``AA_NONE``        one sample at the pixel centre.
@@ -24,6 +28,8 @@ chosen at compile time with one of the ``AA_*`` defines:
 from __future__ import annotations
 
 from enum import Enum
+
+from psyop.rendering.scene import COPLANAR_RELATIVE_DEPTH
 
 MAX_PRIMITIVES = 128
 TEXELS_PER_PRIMITIVE = 7
@@ -49,6 +55,11 @@ FRAGMENT_TEMPLATE = """
 #define MAX_PRIMS %(max_prims)d
 #define %(aa_define)s
 const float TWO_PI = 6.28318530717958647692;
+const float T_INFINITY = 1e30;             // hit distance of a primitive at optical infinity
+const float COPLANAR_REL = %(coplanar)g;  // relative depth difference treated as coplanar
+
+// A hit at t replaces the best so far when it is nearer or coplanar (later-listed wins).
+bool replaces(float t, float best_t) { return t <= best_t * (1.0 + COPLANAR_REL); }
 
 layout(std140) uniform Centres { vec4 u_centre[MAX_PRIMS]; };
 #if defined(AA_EDGE_PASS) || defined(ADAPTIVE_CULL)
@@ -78,7 +89,7 @@ vec3 ray_at(vec2 xy_px) { return u_ray * vec3(xy_px / u_size_px, 1.0); }
 Hit intersect(int i, vec3 d) {
     Hit h; h.plane = false; h.inside = false; h.t = 0.0; h.a = 0.0; h.b = 0.0; h.g = 1e30;
     vec4 p0 = P(i, 0); vec4 p1 = P(i, 1);
-    vec3 hu = p0.xyz; vec3 hv = p1.xyz; vec3 c = u_centre[i].xyz;
+    vec3 hu = p0.xyz; vec3 hv = p1.xyz; vec3 c = u_centre[i].xyz; bool at_inf = u_centre[i].w < 0.5;
     vec3 n = cross(hu, hv);
     float denom = dot(d, n);
     float num = dot(c, n);
@@ -87,7 +98,7 @@ Hit intersect(int i, vec3 d) {
     if (!(t > 0.0) || isinf(t)) return h;
     vec3 x = t * d;
     float depth = -x.z;
-    if (depth < u_near_m || depth > u_far_m) return h;
+    if (!at_inf && (depth < u_near_m || depth > u_far_m)) return h;
     vec3 r = x - c;
     float a = dot(r, hu) / dot(hu, hu);
     float b = dot(r, hv) / dot(hv, hv);
@@ -98,7 +109,7 @@ Hit intersect(int i, vec3 d) {
         float border = p6.x + p5.y * sin(TWO_PI * p5.z * 0.5 * (b + 1.0) + p5.w);
         g = max(g, -p6.y * (a - border));  // keep side * (a - border) >= 0
     }
-    h.plane = true; h.t = t; h.a = a; h.b = b; h.g = g; h.inside = g <= 0.0;
+    h.plane = true; h.t = at_inf ? T_INFINITY : t; h.a = a; h.b = b; h.g = g; h.inside = g <= 0.0;
     return h;
 }
 
@@ -126,7 +137,7 @@ vec3 sample_colour(vec3 d, float footprint) {
     int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0;
     for (int i = 0; i < u_n_prims; ++i) {
         Hit h = intersect(i, d);
-        if (h.inside && h.t < best_t) { best = i; best_t = h.t; ba = h.a; bb = h.b; }
+        if (h.inside && replaces(h.t, best_t)) { best = i; best_t = h.t; ba = h.a; bb = h.b; }
     }
     return best < 0 ? u_background : shade(best, ba, bb, footprint);
 }
@@ -143,7 +154,8 @@ vec3 grid_colour(vec2 corner_px) {
 #if defined(AA_ADAPTIVE) || defined(AA_EDGE_PASS)
 #define MAX_RELEVANT 16
 // Primitive data of the pixel's relevant primitives, cached in registers for the sample loop.
-struct Cached { int index; vec3 c; vec3 n; vec3 hu2; vec3 hv2; float num; float rect; vec4 border; vec2 side; };
+struct Cached { int index; vec3 c; vec3 n; vec3 hu2; vec3 hv2; float num; float rect; vec4 border; vec2 side;
+                bool at_inf; };
 Cached relevant[MAX_RELEVANT];
 int n_relevant = 0;
 
@@ -152,7 +164,7 @@ void cache_primitive(int i) {
     Cached k;
     k.index = i; k.c = u_centre[i].xyz; k.n = cross(p0.xyz, p1.xyz);
     k.hu2 = p0.xyz / dot(p0.xyz, p0.xyz); k.hv2 = p1.xyz / dot(p1.xyz, p1.xyz);
-    k.num = dot(k.c, k.n); k.rect = p0.w; k.border = P(i, 5); k.side = P(i, 6).xy;
+    k.num = dot(k.c, k.n); k.rect = p0.w; k.border = P(i, 5); k.side = P(i, 6).xy; k.at_inf = u_centre[i].w < 0.5;
     relevant[n_relevant++] = k;
 }
 
@@ -167,9 +179,10 @@ vec3 grid_colour_relevant(vec2 corner_px) {
             int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0;
             for (int r = 0; r < n_relevant; ++r) {
                 float t = relevant[r].num / dot(d, relevant[r].n);
-                if (!(t > 0.0) || t >= best_t || isinf(t)) continue;
+                if (!(t > 0.0) || isinf(t)) continue;
+                if (!replaces(relevant[r].at_inf ? T_INFINITY : t, best_t)) continue;
                 vec3 x = t * d;
-                if (-x.z < u_near_m || -x.z > u_far_m) continue;
+                if (!relevant[r].at_inf && (-x.z < u_near_m || -x.z > u_far_m)) continue;
                 vec3 q = x - relevant[r].c;
                 float a = dot(q, relevant[r].hu2);
                 float b = dot(q, relevant[r].hv2);
@@ -178,7 +191,7 @@ vec3 grid_colour_relevant(vec2 corner_px) {
                 if (bd.x > 0.5)
                     g = max(g, -relevant[r].side.y
                                * (a - (relevant[r].side.x + bd.y * sin(TWO_PI * bd.z * 0.5 * (b + 1.0) + bd.w))));
-                if (g <= 0.0) { best = relevant[r].index; best_t = t; ba = a; bb = b; }
+                if (g <= 0.0) { best = relevant[r].index; best_t = relevant[r].at_inf ? T_INFINITY : t; ba = a; bb = b; }
             }
             acc += best < 0 ? u_background : shade(best, ba, bb, 0.0);
         }
@@ -253,7 +266,7 @@ void main() {
             if (n_relevant < MAX_RELEVANT) cache_primitive(i); else overflow = true;
         }
 #endif
-        if (h0.inside && h0.t < best_t) {
+        if (h0.inside && replaces(h0.t, best_t)) {
             best = i; best_t = h0.t; ba = h0.a; bb = h0.b; fw = max(dab.x, dab.y);
         }
     }
@@ -290,9 +303,10 @@ def fragment_shader(antialiasing: AntiAliasing, two_pass: bool = False, cull: bo
     }[AntiAliasing(antialiasing)]
     if two_pass and define == "AA_ADAPTIVE":
         define = "AA_ADAPTIVE\n#define ADAPTIVE_TWO_PASS" + ("\n#define ADAPTIVE_CULL" if cull else "")
-    return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": define}
+    return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": define, "coplanar": COPLANAR_RELATIVE_DEPTH}
 
 
 def edge_pass_shader() -> str:
     """Second pass of the two-pass adaptive sampler: SxS rays in the pixels the first pass marked."""
-    return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": "AA_EDGE_PASS"}
+    return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": "AA_EDGE_PASS",
+                                "coplanar": COPLANAR_RELATIVE_DEPTH}

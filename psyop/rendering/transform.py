@@ -4,7 +4,8 @@ Scenes are built in the head space of the session's start ("world"). A tracked h
 (position ``t`` in metres and unit quaternion ``q`` = (w, x, y, z), head -> world) moves the
 eyes through that world; rendering needs the scene in the current head space:
 ``p_head = R(q)^T (p_world - t)``, with the half axes rotated alike. The aperture is
-display-fixed and is left alone.
+display-fixed and is left alone. A primitive at optical infinity is a direction: it rotates with
+the head but no translation moves it.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ def scene_in_head(scene: Scene, head_position_m: Sequence[float], head_orientati
     primitives = tuple(
         dataclasses.replace(
             p,
-            centre_m=tuple(r_t @ (np.asarray(p.centre_m) - t)),
+            centre_m=tuple(r_t @ (np.asarray(p.centre_m) - (0.0 if p.at_infinity else t))),
             half_u_m=tuple(r_t @ np.asarray(p.half_u_m)),
             half_v_m=tuple(r_t @ np.asarray(p.half_v_m)),
         )

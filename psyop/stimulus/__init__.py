@@ -7,8 +7,10 @@ from psyop.stimulus.build import (
     interval_mode,
     interval_phases,
     recalibration_cross_scene,
+    scene_origin_m,
 )
 
 __all__ = [
     "INFINITY_M", "blank_scene", "build_scene", "interval_mode", "interval_phases", "recalibration_cross_scene",
+    "scene_origin_m",
 ]

@@ -1,11 +1,17 @@
 """Map a protocol's scene (psyop.protocol.scene models) for one trial row and time to the
 renderer's typed scene.
 
-Conventions (docs/rendering.md): angular sizes and positions are seen from the eye's centre of
-rotation C (the conventional centre of projection), so with ocular parallax off every element
-subtends exactly its nominal angle. A depth of 0 D (optical infinity) is placed at
-:data:`INFINITY_M`, far enough that no parallax of it can be rendered (a 10 mm shift moves it
-by 1e-6 rad, under 0.001 px on the Vive Pro).
+Conventions (docs/rendering.md):
+
+* One scene per frame for every eye, in head space (world-fixed). Angular sizes and positions
+  are seen from the scene origin (:func:`scene_origin_m`): the viewing eye's centre of rotation
+  C in a monocular protocol (so with ocular parallax off every element subtends exactly its
+  nominal angle), the head origin midway between the eyes in a stereo protocol (so the two
+  eyes see the same world-fixed objects, with their disparity).
+* A depth of 0 D is optical infinity: the primitive is built ``at_infinity`` (a direction
+  cone, drawn behind everything, without parallax), never at a large finite distance.
+* Coplanar primitives: the later-listed one wins (``psyop.rendering.scene``), so a protocol's
+  scene order is its layer order at equal depth.
 """
 
 from __future__ import annotations
@@ -35,7 +41,7 @@ from psyop.rendering.scene import (
 )
 from psyop.schedule import interval_values
 
-INFINITY_M = 1.0e4
+INFINITY_M = math.inf  # the distance of 0 D: optical infinity, rendered as directions
 DEFAULT_ARM_REACH_M = 0.70
 
 
@@ -43,7 +49,7 @@ def _distance_m(depth: ps.Depth, values: Mapping[str, Any]) -> float:
     depth_D = depth.resolve_D(values)
     if not math.isfinite(depth_D) or depth_D < 0:
         raise UserError(f"depth resolves to {depth_D} D for this trial")
-    return INFINITY_M if depth_D <= 1.0 / INFINITY_M else 1.0 / depth_D
+    return INFINITY_M if depth_D == 0.0 else 1.0 / depth_D
 
 
 def _trial_seed(values: Mapping[str, Any]) -> int:
@@ -144,8 +150,9 @@ def _fixation(item: ps.FixationTarget, values: Mapping[str, Any], time_s: float,
     dist = _distance_m(item.depth, values)
     size = float(item.size_deg)
     outer = builders.frontoparallel_disc(dist, size, Solid(tuple(item.rgb)), az, el, origin, f"{item.id}_outer")
-    inner = builders.frontoparallel_disc(dist * 0.999, size * 0.4 / 0.999, Solid(tuple(item.centre_rgb)), az, el,
-                                         origin, f"{item.id}_inner")
+    # coplanar with the outer disc and listed after it, so it is drawn on top (the coplanar rule)
+    inner = builders.frontoparallel_disc(dist, size * 0.4, Solid(tuple(item.centre_rgb)), az, el, origin,
+                                         f"{item.id}_inner")
     return [outer, inner]
 
 
@@ -172,6 +179,18 @@ def _reach_target(item: ps.ReachTarget, values: Mapping[str, Any], arm_reach_m: 
     shape = Shape.DISC if item.object == "sphere" else Shape.RECT
     return [Primitive(shape, (0.0, height, -distance), (size / 2, 0, 0), (0, size / 2, 0), Solid((0.9, 0.3, 0.1)),
                       name=item.id)]
+
+
+def scene_origin_m(protocol: Any, eye_centre_m: Any) -> np.ndarray:
+    """Where a protocol's angular sizes and positions are measured from, in head space.
+
+    Monocular (``eyes: left`` / ``right``): the viewing eye's centre of rotation
+    ``eye_centre_m``. Stereo: the head origin (midway between the eyes' centres, which lie at
+    (-+ipd/2, 0, 0)), whichever eye is being rendered, so both eyes see one world-fixed scene.
+    """
+    if str(getattr(protocol, "eyes", "right")) == "stereo":
+        return np.zeros(3)
+    return np.asarray(eye_centre_m, dtype=np.float64).reshape(3)
 
 
 def interval_phases(protocol: Any) -> list[Any]:
@@ -207,14 +226,15 @@ def build_scene(
 ) -> Scene:
     """The rendering scene of one trial during interval ``interval`` at ``time_s`` into it.
 
-    ``eye_centre_m``: the rendered eye's centre of rotation in head space; angular sizes and
-    positions are measured from it. Only the primitives the interval's ``show:`` lists are built,
-    or those ``show`` lists when given (a blank phase's ``show:``, with interval ``interval``'s
-    factor values).
+    ``eye_centre_m``: the rendered eye's centre of rotation in head space. Angular sizes and
+    positions are measured from :func:`scene_origin_m` (this centre for a monocular protocol,
+    the head origin for a stereo one, so both eyes get the same scene). Only the primitives the
+    interval's ``show:`` lists are built, or those ``show`` lists when given (a blank phase's
+    ``show:``, with interval ``interval``'s factor values).
     """
     values = interval_values(row, interval)
     values = {**values, "trial_seed": row.get("trial_seed", 0)}
-    origin = np.asarray(eye_centre_m, dtype=np.float64)
+    origin = scene_origin_m(protocol, eye_centre_m)
     phases = interval_phases(protocol)
     if show is None:
         show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
