@@ -28,6 +28,7 @@ from psyop.session.log.store import SessionStore, recover_tables
 from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop
 from psyop.session.protocol_adapter import fixation_path, observer_params, phases_from_protocol, study_name
 from psyop.session.responses.base import response_kind
+from psyop.session.resume import check_options, resolve_seed
 from psyop.session.responses.simulated import make_observer
 
 DEFAULT_IPD_M = 0.063  # used when the protocol says ipd: tracker and no tracker reports one
@@ -174,13 +175,8 @@ def run_session(
 
     study = study_name(protocol)
     paths = session_paths(options.data_root, study, options.participant, options.session)
-    seed = options.seed
-    if seed is None and paths.metadata.exists():
-        import json
-
-        seed = int(json.loads(paths.metadata.read_text())["seed"])
-    if seed is None:
-        seed = seed_for(study, options.participant, options.session)
+    check_options(clock=options.clock, responses=options.responses, tracker=options.tracker)
+    seed = resolve_seed(paths, options.seed, seed_for(study, options.participant, options.session))
     schedule = compile_schedule(protocol, seed)
     kind = response_kind(list(schedule.columns))
     phases = phases_from_protocol(protocol, kind)
