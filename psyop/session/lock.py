@@ -57,6 +57,27 @@ class SessionLock:
             pass  # the lock holds without the description (e.g. disk full)
         self._fd = fd
 
+    def check_free(self) -> None:
+        """Raise the same :class:`UserError` as :meth:`acquire` if another process holds the
+        lock now; takes nothing (a shared probe) and creates nothing."""
+        if self._fd is not None:
+            return
+        try:
+            fd = os.open(self.path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0))
+        except OSError:
+            return  # no lock file yet (new session) or unreadable: acquire() decides
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _read_holder(fd)
+            raise UserError(
+                f"session is in use by {holder}; only one psyop process may write a session "
+                "(wait for it to end, or use another --session)", str(self.path.parent)) from None
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+
     def release(self) -> None:
         if self._fd is None:
             return

@@ -20,6 +20,7 @@ responses and display are recorded in session.json's ``runs``.
 from __future__ import annotations
 
 from psyop.errors import UserError
+from psyop.session.lock import SessionLock
 from psyop.session.log.layout import SessionPaths
 from psyop.session.log.store import log_identity, read_metadata
 
@@ -56,7 +57,11 @@ def recorded_seed(paths: SessionPaths) -> int | None:
 
 
 def resolve_seed(paths: SessionPaths, requested: int | None, default: int) -> int:
-    """The seed this run must use (see the module docstring)."""
+    """The seed this run must use (see the module docstring).
+
+    A session another process is writing is refused first (naming it), as the store would.
+    """
+    SessionLock(paths.lock_file).check_free()
     recorded = recorded_seed(paths)
     if recorded is None:
         return default if requested is None else requested
