@@ -21,8 +21,8 @@ TRIALS_FILE = "trials.parquet"
 FRAMES_FILE = "frames.parquet"
 LOG_DIR = "log"
 #: Participant IDs are Psych-DS keys: letters and digits only.
-PARTICIPANT_PATTERN = re.compile(r"^[A-Za-z0-9]+$")
-STUDY_PATTERN = re.compile(r"^[A-Za-z0-9_-]+$")
+PARTICIPANT_PATTERN = re.compile(r"[A-Za-z0-9]{1,64}")  # use with fullmatch: "ab\n" is refused
+STUDY_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")  # use with fullmatch
 
 
 def session_dir(data_root: Path, study: str, participant: str, session: int) -> Path:

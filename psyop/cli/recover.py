@@ -22,19 +22,50 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from psyop.session.log.store import finalise_session, find_sessions
+    from psyop.session.log.store import finalise_session, find_sessions, read_metadata
 
     if not args.path.exists():
         raise UserError("no such directory", str(args.path))
     sessions = find_sessions(args.path)
     if not sessions:
         raise UserError("no psyop sessions (session.json) found here", str(args.path))
+    errors: list[UserError] = []
     for paths in sessions:
-        import json
-
-        meta = json.loads(paths.metadata.read_text())
-        trials, _ = finalise_session(paths, status="complete", summary=meta.get("summary"))
+        try:
+            meta = read_metadata(paths) or {}
+            if meta.get("status") == "complete" and paths.trials_parquet.is_file() and paths.frames_parquet.is_file():
+                print(f"{paths.directory}: complete and finalised; left untouched", file=sys.stdout)
+                continue
+            trials, _ = finalise_session(paths, status="complete", summary=meta.get("summary"))
+            meta = read_metadata(paths) or {}
+        except UserError as error:
+            print(f"psyop recover: error: {error}", file=sys.stderr)
+            errors.append(error)
+            continue
         n_expected = meta.get("n_trials_scheduled")
-        state = "complete" if n_expected is not None and len(trials) >= int(n_expected) else "incomplete (resumable)"
+        state = "complete" if meta.get("status") == "complete" else "incomplete (resumable)"
         print(f"{paths.directory}: {len(trials)}/{n_expected} trials, {state}", file=sys.stdout)
+        for line in describe_integrity(meta.get("integrity") or {}):
+            print(f"  {line}", file=sys.stdout)
+    if errors:
+        raise UserError(f"{len(errors)} of {len(sessions)} sessions could not be recovered (see above)", str(args.path))
     return 0
+
+
+def describe_integrity(report: dict) -> list[str]:  # type: ignore[type-arg]
+    """Human-readable lines for session.json's ``integrity`` report (empty if all is intact)."""
+    lines = []
+    lost = report.get("lost_trials") or []
+    if lost:
+        lines.append(f"lost (damaged) trials, re-run on resume: {lost}")
+    frames_lost = report.get("frames_lost_for_trials") or []
+    if frames_lost:
+        lines.append(f"trials kept whose frame records were damaged (frames missing): {frames_lost}")
+    for damage in report.get("damaged_records") or []:
+        trial = damage.get("trial")
+        what = f"trial {trial}" if trial is not None else "unidentified record"
+        lines.append(f"damaged {damage.get('record')} record ({what}, {damage.get('reason')}) in "
+                     f"{damage.get('segment')} at byte {damage.get('offset')}, {damage.get('length')} bytes")
+    for segment in report.get("torn_segments") or []:
+        lines.append(f"{segment}: torn tail (the run was killed mid-record; that trial was not recorded)")
+    return lines

@@ -145,3 +145,77 @@ class Design(StrictModel):
     repetitions: Integer = Field(ge=1, le=1000000)
     practice_trials: Integer = Field(default=0, ge=0, le=1000)
     randomisation: Randomisation = Field(default_factory=Randomisation)
+
+    @model_validator(mode="after")
+    def _bounded(self) -> "Design":
+        # counted from the factor sizes, before anything is expanded (two factors of 100000
+        # levels used to reach 8 GB before a cap on the expanded list was checked)
+        n = count_conditions(self.factors, MAX_TRIALS)
+        if n is not None and n * self.repetitions > MAX_TRIALS:
+            size = f"{n} conditions" if n <= MAX_TRIALS else f"over {MAX_TRIALS} conditions"
+            raise ValueError(f"{size} x {self.repetitions} repetitions is over {MAX_TRIALS} trials; "
+                             "reduce the factors' levels or the repetitions")
+        return self
+
+
+#: the most trials a protocol may schedule (checked before conditions are expanded)
+MAX_TRIALS = 10_000_000
+
+
+def _n_levels(levels: list[Level] | SteppedLevels) -> int:
+    return levels.count if isinstance(levels, SteppedLevels) else len(levels)
+
+
+def count_conditions(factors: dict[str, Factor], limit: int) -> int | None:
+    """How many conditions crossing ``factors`` gives, without expanding them.
+
+    Stops early and returns ``limit + 1`` once the count is known to exceed ``limit``;
+    returns None when the dependencies cannot be resolved (reported by the protocol checks).
+    Only the levels of factors that others depend on are tracked individually.
+    """
+    order: list[str] = []
+    remaining = dict(factors)
+    while remaining:
+        ready = [n for n, f in remaining.items() if f.depends_on is None or f.depends_on in order]
+        if not ready:
+            return None
+        for name in ready:
+            order.append(name)
+            del remaining[name]
+    parents = {f.depends_on for f in factors.values() if f.depends_on}
+    tracked: list[str] = []
+    states: dict[tuple[object, ...], int] = {(): 1}
+    for name in order:
+        factor = factors[name]
+        grown: dict[tuple[object, ...], int] = {}
+        for state, multiplicity in states.items():
+            if factor.adaptive is not None:
+                options: list[Level | SteppedLevels] | None = None
+                n_levels = 1
+            elif factor.levels is not None:
+                options, n_levels = None, _n_levels(factor.levels)
+            else:
+                parent_level = state[tracked.index(factor.depends_on)] if factor.depends_on in tracked else None
+                match = [v for k, v in (factor.levels_by or {}).items() if _same_level(k, parent_level)]
+                if not match:
+                    return None
+                options, n_levels = None, _n_levels(match[0])
+                if name in parents:
+                    options = list(_values(match[0]))
+            if name in parents:
+                values = options if options is not None else (
+                    [float("nan")] if factor.adaptive is not None else _values(factor.levels))  # type: ignore[arg-type]
+                for value in values:
+                    key = state + (value,)
+                    grown[key] = grown.get(key, 0) + multiplicity
+                    if len(grown) > limit:
+                        return limit + 1
+            else:
+                grown[state] = grown.get(state, 0) + multiplicity * n_levels
+        if name in parents:
+            tracked.append(name)
+        states = grown
+        total = sum(states.values())
+        if total > limit:
+            return limit + 1
+    return sum(states.values())

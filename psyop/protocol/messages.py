@@ -20,6 +20,7 @@ from psyop.protocol.source import Path, YamlDocument, format_path
 MAX_REPORTED = 8
 _BOUNDS = {"greater_than": "greater than", "greater_than_equal": "at least", "less_than": "less than",
            "less_than_equal": "at most"}
+_BOUND_KEYS = {"greater_than": "gt", "greater_than_equal": "ge", "less_than": "lt", "less_than_equal": "le"}
 
 
 def _candidates(tp: Any) -> list[Any]:
@@ -103,8 +104,7 @@ def _describe(root: type[BaseModel], error: dict[str, Any]) -> tuple[str, bool]:
                 break
         return f"missing required key '{loc[-1]}'{described}; add '{loc[-1]}: ...' here (see docs/protocols.md)", False
     if kind in _BOUNDS:
-        limit = (error.get("ctx") or {}).get(kind.replace("_than_equal", "").replace("_than", "").replace(
-            "greater", "gt").replace("less", "lt") + ("e" if kind.endswith("equal") else ""))
+        limit = (error.get("ctx") or {}).get(_BOUND_KEYS[kind])  # pydantic's ctx keys: gt, ge, lt, le
         return f"must be {_BOUNDS[kind]} {limit} (got {_short(error.get('input'))}); change the value", False
     if kind in ("union_tag_invalid", "union_tag_not_found"):
         ctx = error.get("ctx") or {}

@@ -109,6 +109,33 @@ def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDocument, seen: set
     elif isinstance(node, yaml.SequenceNode):
         for index, item in enumerate(node.value):
             _walk(loader, item, path + (index,), doc, seen, depth + 1)
+    else:
+        _check_scalar(loader, node, doc)
+
+
+#: what a scalar's constructor may raise on a bad value (``!!int abc``, ``!!bool maybe``,
+#: ``2020-02-30``, a 5000-digit integer): reported at the value, never as a traceback
+_CONSTRUCT_ERRORS = (ValueError, KeyError, TypeError, OverflowError, ArithmeticError, yaml.YAMLError)
+
+
+def _check_scalar(loader: Any, node: yaml.Node, doc: YamlDocument) -> None:
+    try:
+        loader.construct_object(node)
+    except _CONSTRUCT_ERRORS as error:
+        raise _value_error(node, error, doc.location(_mark(node))) from None
+
+
+def _value_error(node: yaml.Node, error: BaseException, location: str) -> UserError:
+    tag = str(node.tag).rsplit(":", 1)[-1]
+    tag = {"int": "an integer", "float": "a number", "bool": "true/false", "timestamp": "a date",
+           "null": "null"}.get(tag, f"a {tag}")
+    value = str(node.value)
+    shown = repr(value) if len(value) <= 40 else f"{value[:40]!r}... ({len(value)} characters)"
+    detail = str(error) if isinstance(error, (ValueError, TypeError, OverflowError)) else type(error).__name__
+    if "digits" in detail and "integer string conversion" in detail:
+        detail = f"a number with {len(value)} digits is far too long"
+    return UserError(f"cannot read {shown} as {tag} ({detail[:160]}); write a valid value or quote it as text",
+                     location)
 
 
 def _codepoint(character: Any) -> int:
@@ -168,6 +195,8 @@ def read_yaml(text: str, source_name: str) -> YamlDocument:
             data = loader.construct_document(node)
         except yaml.YAMLError as error:
             raise _syntax_error(error, source_name, text) from None
+        except _CONSTRUCT_ERRORS[:-1] as error:  # a value _walk did not see (e.g. behind a merge key)
+            raise UserError(f"cannot read a value: {str(error)[:160]}", source_name) from None
         except RecursionError:
             raise UserError("the protocol is nested too deeply to read; flatten it", source_name) from None
         return YamlDocument(data, source_name, document.value_marks, document.key_marks, document.containers)

@@ -27,6 +27,7 @@ from psyop.session.log.schema import trial_schema
 from psyop.session.log.store import SessionStore, recover_tables
 from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
+from psyop.session.resume import check_options, resolve_seed
 from psyop.session.responses.simulated import make_observer
 
 __all__ = ["DEFAULT_IPD_M", "SessionOptions", "print_outcome", "run_session"]
@@ -175,13 +176,8 @@ def run_session(
     plan = compile_plan(protocol)
     study = plan.study
     paths = session_paths(options.data_root, study, options.participant, options.session)
-    seed = options.seed
-    if seed is None and paths.metadata.exists():
-        import json
-
-        seed = int(json.loads(paths.metadata.read_text())["seed"])
-    if seed is None:
-        seed = seed_for(study, options.participant, options.session)
+    check_options(clock=options.clock, responses=options.responses, tracker=options.tracker)
+    seed = resolve_seed(paths, options.seed, seed_for(study, options.participant, options.session))
     schedule = compile_schedule(protocol, seed)
     display_profile = plan.display
 

@@ -2,16 +2,24 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
 
 _ID_PATTERN = dc.PARTICIPANT_PATTERN
+_STUDY_PATTERN = dc.STUDY_PATTERN
+MAX_SESSION = 9999
+#: new segments are checksummed record logs; ``.arrows`` ones are legacy Arrow IPC streams
+SEGMENT_SUFFIX = ".psylog"
+_SEGMENT_NAME = re.compile(r"(trials|frames)-([0-9]{3})\.(psylog|arrows)")
 
 
 @dataclass(frozen=True)
@@ -43,40 +51,92 @@ class SessionPaths:
     def frames_parquet(self) -> Path:
         return self.directory / dc.FRAMES_FILE
 
+    @property
+    def lock_file(self) -> Path:
+        return self.directory / ".lock"
+
     def trial_segment(self, index: int) -> Path:
-        return self.log_dir / f"trials-{index:03d}.arrows"
+        return self.log_dir / f"trials-{index:03d}{SEGMENT_SUFFIX}"
 
     def frame_segment(self, index: int) -> Path:
-        return self.log_dir / f"frames-{index:03d}.arrows"
+        return self.log_dir / f"frames-{index:03d}{SEGMENT_SUFFIX}"
 
     def segments(self, kind: str) -> list[Path]:
         """Existing stream segments of ``kind`` ('trials' or 'frames'), in write order."""
         if not self.log_dir.is_dir():
             return []
-        return sorted(self.log_dir.glob(f"{kind}-[0-9][0-9][0-9].arrows"))
+        found = []
+        for path in self.log_dir.iterdir():
+            match = _SEGMENT_NAME.fullmatch(path.name)
+            if match and match.group(1) == kind:
+                found.append((int(match.group(2)), path))
+        return [p for _, p in sorted(found)]
+
+    def next_run_index(self) -> int:
+        """One more than the highest segment index of either kind (0 for a new session)."""
+        indices = [int(_SEGMENT_NAME.fullmatch(p.name).group(2))  # type: ignore[union-attr]
+                   for kind in ("trials", "frames") for p in self.segments(kind)]
+        return max(indices, default=-1) + 1
 
 
 def session_paths(data_root: Path, study: str, participant: str, session: int) -> SessionPaths:
     """Validate the identifiers (Psych-DS keys are alphanumeric) and build the paths."""
-    if not _ID_PATTERN.match(participant):
-        raise UserError(f"participant ID {participant!r} must be letters and digits only", "--participant")
-    if session < 1:
-        raise UserError(f"session number must be 1 or more, got {session}", "--session")
-    if not dc.STUDY_PATTERN.match(study):
-        raise UserError(f"study name {study!r} must be letters, digits, '-' or '_'", "protocol")
-    return SessionPaths(Path(data_root), study, participant, session)
+    if not _ID_PATTERN.fullmatch(participant):
+        raise UserError(f"participant ID {_short(participant)} must be 1 to 64 letters and digits only", "--participant")
+    if not 1 <= session <= MAX_SESSION:
+        raise UserError(f"session number must be 1 or more and at most {MAX_SESSION}, got {str(session)[:20]}"
+                        + (f"... ({len(str(session))} digits)" if len(str(session)) > 20 else ""), "--session")
+    if not _STUDY_PATTERN.fullmatch(study):
+        raise UserError(f"study name {_short(study)} must be 1 to 64 letters, digits, '-' or '_'", "protocol")
+    root = Path(data_root)
+    if root.exists() and not root.is_dir():
+        raise UserError("the data root is not a directory; point --data at a directory", str(root))
+    return SessionPaths(root, study, participant, session)
+
+
+def _short(text: str, limit: int = 40) -> str:
+    """``text`` quoted, shortened to ``limit`` characters (a 5000-character name is not echoed)."""
+    return repr(text) if len(text) <= limit else f"{text[:limit]!r}... ({len(text)} characters)"
 
 
 def write_json_atomic(path: Path, content: dict[str, Any]) -> None:
     """Write JSON to ``path`` via a temporary file + rename, fsynced: never half-written."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "w") as handle:
-        json.dump(content, handle, indent=2, sort_keys=True, default=str)
-        handle.write("\n")
+    text = json.dumps(content, indent=2, sort_keys=True, default=str) + "\n"
+    with exclusive_temp(path) as (handle, tmp):
+        handle.write(text.encode())
         handle.flush()
         os.fsync(handle.fileno())
-    os.replace(tmp, path)
+        os.replace(tmp, path)
+
+
+TEMP_SUFFIX = ".tmp"
+
+
+@contextlib.contextmanager
+def exclusive_temp(path: Path) -> Iterator[tuple[BinaryIO, Path]]:
+    """A new temporary file next to ``path`` (O_EXCL | O_NOFOLLOW: never a planted file or
+    symlink), removed again if the body does not rename it into place."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}{TEMP_SUFFIX}")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(tmp, flags, 0o644)
+    except FileExistsError:  # a stale temp file (or a planted link) of a dead process with our pid
+        tmp.unlink()
+        fd = os.open(tmp, flags, 0o644)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            yield handle, tmp
+    finally:
+        if os.path.lexists(tmp):
+            tmp.unlink()
+
+
+def stale_temp_files(directory: Path) -> list[Path]:
+    """Temporary files left by an interrupted finalisation (``.NAME.PID.tmp``)."""
+    if not directory.is_dir():
+        return []
+    return sorted(p for p in directory.iterdir() if p.name.startswith(".") and p.name.endswith(TEMP_SUFFIX))
 
 
 def write_dataset_description(data_root: Path, *, simulated: bool, studies: list[str] | None = None) -> Path:

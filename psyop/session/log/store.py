@@ -6,6 +6,7 @@ import datetime as dt
 import json
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -14,19 +15,24 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from psyop.errors import UserError
-from psyop.session.log.layout import SessionPaths, write_json_atomic
+from psyop.session.lock import SessionLock
+from psyop.session.log.layout import SessionPaths, exclusive_temp, stale_temp_files, write_json_atomic
 from psyop.session.log.schema import FRAME_SCHEMA
-from psyop.session.log.stream import DurableStreamWriter, read_stream_tolerant
+from psyop.session.log.stream import DurableStreamWriter, is_legacy_ipc, read_segment, read_stream_tolerant
 
-#: session.json keys that must match when a session is resumed.
-_IDENTITY_KEYS = ("protocol_sha256", "seed", "study", "participant", "session", "simulated")
+#: session.json keys that must match when a session is resumed (also written into the log).
+_IDENTITY_KEYS = ("protocol_sha256", "seed", "study", "participant", "session", "simulated", "clock")
+#: options recorded per run (a resume may change them, e.g. another tracker host).
+_RUN_OPTION_KEYS = ("clock", "tracker", "responses", "display_mode", "pose", "render")
 
 
 class SessionStore:
     """The durable log of one session.
 
-    ``open`` creates the session directory (first run) or checks that a resume uses the
-    same protocol and seed, and starts a new stream segment for this run.
+    ``open`` takes the session's exclusive lock (:mod:`psyop.session.lock`), creates the
+    session directory (first run) or checks that a resume uses the same protocol, seed and
+    clock, and starts a new pair of checksummed segments for this run. The lock is held
+    until :meth:`finalise` (or :meth:`close`, or the process's death).
     """
 
     def __init__(self, paths: SessionPaths, trial_schema: pa.Schema, *, fsync: bool = True) -> None:
@@ -37,16 +43,29 @@ class SessionStore:
         self._frames: DurableStreamWriter | None = None
         self.run_index = 0
         self.metadata: dict[str, Any] = {}
+        self.lock = SessionLock(paths.lock_file)
 
     # -- lifecycle -------------------------------------------------------------------
     def open(self, metadata: Mapping[str, Any]) -> set[int]:
         """Create or resume; return the set of trial numbers already completed."""
+        self.lock.acquire("run")
+        try:
+            return self._open_locked(metadata)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open_locked(self, metadata: Mapping[str, Any]) -> set[int]:
         meta_path = self.paths.metadata
         completed: set[int] = set()
-        if meta_path.exists():
-            existing = json.loads(meta_path.read_text())
+        existing = read_metadata(self.paths)
+        if existing is None and self.paths.segments("trials"):
+            # session.json lost: the identity written into the log decides
+            existing = {k: v for k, v in log_identity(self.paths).items() if k in metadata}
+            existing["status"] = "incomplete"
+        if existing is not None:
             for key in _IDENTITY_KEYS:
-                if key in metadata and existing.get(key) != metadata[key]:
+                if key in metadata and key in existing and existing.get(key) != metadata[key]:
                     raise UserError(
                         f"cannot resume: {key} differs from the existing session "
                         f"({existing.get(key)!r} there, {metadata[key]!r} now); use another --session",
@@ -55,81 +74,218 @@ class SessionStore:
             if existing.get("status") == "complete":
                 raise UserError("session is already complete; use another --session", str(meta_path))
             completed = set(completed_trials(self.paths))
-            self.metadata = existing
-            self.metadata.setdefault("runs", [])
+            self.metadata = {**metadata, **existing}
+            self.metadata["runs"] = list(existing.get("runs", []))
         else:
             self.metadata = dict(metadata)
             self.metadata["runs"] = []
-            self.metadata["status"] = "running"
-        self.paths.log_dir.mkdir(parents=True, exist_ok=True)
-        self.run_index = len(self.paths.segments("trials"))
-        self.metadata["runs"].append(
-            {"run": self.run_index, "started": _now(), "host": metadata.get("host"),
-             "resumed_after_trials": len(completed),
-             "clock_sync": metadata.get("clock_sync")}
-        )
         self.metadata["status"] = "running"
-        write_json_atomic(meta_path, self.metadata)
-        self._trials = DurableStreamWriter(self.paths.trial_segment(self.run_index), self.trial_schema, fsync=self._fsync)
-        self._frames = DurableStreamWriter(self.paths.frame_segment(self.run_index), FRAME_SCHEMA, fsync=self._fsync)
+        try:
+            self.paths.log_dir.mkdir(parents=True, exist_ok=True)
+            self.run_index = self.paths.next_run_index()
+            self.metadata["runs"].append(
+                {"run": self.run_index, "started": _now(), "host": metadata.get("host"),
+                 "resumed_after_trials": len(completed),
+                 "clock_sync": metadata.get("clock_sync"),
+                 **{key: metadata.get(key) for key in _RUN_OPTION_KEYS if key in metadata}}
+            )
+            write_json_atomic(meta_path, self.metadata)
+            identity = {f"psyop.{key}": json.dumps(metadata.get(key)) for key in _IDENTITY_KEYS if key in metadata}
+            self._trials = DurableStreamWriter(self.paths.trial_segment(self.run_index),
+                                               self.trial_schema.with_metadata(identity), fsync=self._fsync)
+            self._frames = DurableStreamWriter(self.paths.frame_segment(self.run_index), FRAME_SCHEMA, fsync=self._fsync)
+        except OSError as exc:
+            raise UserError(f"cannot write the session: {exc.strerror or exc}", str(self.paths.directory)) from exc
         return completed
 
     def append_trial(self, row: Mapping[str, Any], frames: pa.Table | None) -> None:
         """Make one finished trial durable: its frames first, then its trial row.
 
         A crash between the two leaves frames without a trial; finalisation drops them.
+        A write error (disk full) stops the session cleanly: every earlier trial is
+        durable, session.json says 'incomplete' where it still can, and the error (exit
+        code 2) says how to resume.
         """
         assert self._trials is not None and self._frames is not None, "open() first"
-        if frames is not None and frames.num_rows:
-            self._frames.append(frames)
+        trial = int(row["trial"]) if row.get("trial") is not None else -1
         record = {name: [row.get(name)] for name in self.trial_schema.names}
-        self._trials.append(pa.Table.from_pydict(record, schema=self.trial_schema))
+        table = pa.Table.from_pydict(record, schema=self._trials.schema)
+        try:
+            if frames is not None and frames.num_rows:
+                self._frames.append(frames, key=trial)
+            self._trials.append(table, key=trial)
+        except OSError as exc:
+            self._stop_after_write_error(trial, exc)
+
+    def _stop_after_write_error(self, trial: int, exc: OSError) -> None:
+        reason = exc.strerror or str(exc)
+        self.metadata["status"] = "incomplete"
+        self.metadata["stopped"] = f"write error while recording trial {trial}: {reason}"
+        try:
+            write_json_atomic(self.paths.metadata, self.metadata)
+        except OSError:
+            pass  # session.json still says 'running': equally resumable
+        self.close()
+        raise UserError(
+            f"cannot record trial {trial} ({reason}); every earlier trial is safely in the log. "
+            "Free space (or fix the disk), then rerun the same command to resume the session",
+            str(self.paths.directory),
+        ) from exc
 
     def update_metadata(self, **fields: Any) -> None:
         self.metadata.update(fields)
         write_json_atomic(self.paths.metadata, self.metadata)
 
     def close(self) -> None:
-        for writer in (self._trials, self._frames):
-            if writer is not None:
-                writer.close()
+        try:
+            for writer in (self._trials, self._frames):
+                if writer is not None:
+                    try:
+                        writer.close()
+                    except OSError:
+                        pass  # the end record is optional: readers treat the tail as torn
+        finally:
+            self.lock.release()
 
     def finalise(self, *, status: str, summary: Mapping[str, Any] | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
         """Close the streams and write parquet + session.json (see :func:`finalise_session`)."""
-        self.close()
-        if self.metadata.get("runs"):
-            self.metadata["runs"][-1]["ended"] = _now()
-            self.metadata["runs"][-1]["status"] = status
-        write_json_atomic(self.paths.metadata, self.metadata)
-        return finalise_session(self.paths, status=status, summary=summary, expected_trials=self.metadata.get("n_trials_scheduled"))
+        for writer in (self._trials, self._frames):
+            if writer is not None:
+                writer.close()
+        try:
+            if self.metadata.get("runs"):
+                self.metadata["runs"][-1]["ended"] = _now()
+                self.metadata["runs"][-1]["status"] = status
+            write_json_atomic(self.paths.metadata, self.metadata)
+            return finalise_session(self.paths, status=status, summary=summary,
+                                    expected_trials=self.metadata.get("n_trials_scheduled"), lock=self.lock)
+        finally:
+            self.lock.release()
+
+
+def read_metadata(paths: SessionPaths) -> dict[str, Any] | None:
+    """session.json as a dict, None if absent; a damaged file is a located UserError."""
+    try:
+        text = paths.metadata.read_text()
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read session.json: {exc}", str(paths.metadata)) from exc
+    try:
+        meta = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise UserError(
+            f"session.json is damaged ({exc.msg}); restore it from a backup, or delete it: "
+            "`psyop recover` / `psyop run` then rebuild it from the checksummed log",
+            f"{paths.metadata}:{exc.lineno}:{exc.colno}") from exc
+    if not isinstance(meta, dict):
+        raise UserError("session.json is not a JSON object", str(paths.metadata))
+    return meta
+
+
+def log_identity(paths: SessionPaths) -> dict[str, Any]:
+    """Seed, protocol hash etc. written into the trial segments' schema (first readable one)."""
+    for segment in paths.segments("trials"):
+        if is_legacy_ipc(segment):
+            continue
+        schema = read_segment(segment).schema
+        if schema is None or not schema.metadata:
+            continue
+        identity: dict[str, Any] = {}
+        for raw_key, raw_value in schema.metadata.items():
+            key = raw_key.decode(errors="replace")
+            if key.startswith("psyop."):
+                try:
+                    identity[key.removeprefix("psyop.")] = json.loads(raw_value)
+                except ValueError:
+                    continue
+        if identity:
+            return identity
+    return {}
 
 
 def completed_trials(paths: SessionPaths) -> list[int]:
-    """Trial numbers durably recorded in any segment (torn tails ignored)."""
+    """Trial numbers durably recorded in any segment (torn tails and damaged records ignored)."""
     trials, _ = recover_tables(paths)
     return [] if trials is None else [int(t) for t in trials["trial"].tolist()]
 
 
-def recover_tables(paths: SessionPaths) -> tuple[pd.DataFrame | None, pd.DataFrame]:
-    """Read all segments: (trials or None, frames); duplicates keep the first record.
+@dataclass(frozen=True)
+class Salvage:
+    """Everything intact in a session's log, and an exact account of what is not."""
+
+    trials: pd.DataFrame | None
+    frames: pd.DataFrame
+    report: dict[str, Any]
+
+    @property
+    def lost_trials(self) -> list[int]:
+        return list(self.report["lost_trials"])
+
+
+def salvage(paths: SessionPaths) -> Salvage:
+    """Read all segments: intact records are kept (duplicates keep the first), damage reported.
 
     Frames whose trial has no trial record (crash between the two appends, or a
-    discarded trial) are dropped.
+    discarded trial) are dropped. The report lists every damaged stretch (segment,
+    offset, trial if its header survived), ``lost_trials`` (damaged and not recorded
+    intact elsewhere, or missing below the last recorded trial: resume re-runs them),
+    ``frames_lost_for_trials`` (trial row intact, its frame record damaged) and torn tails.
     """
-    trial_tables = [t for t, _ in (read_stream_tolerant(p) for p in paths.segments("trials")) if t is not None]
-    frame_tables = [t for t, _ in (read_stream_tolerant(p) for p in paths.segments("frames")) if t is not None]
+    damaged: list[dict[str, Any]] = []
+    torn: list[str] = []
+    damaged_keys: dict[str, set[int]] = {"trials": set(), "frames": set()}
+
+    def read_kind(kind: str) -> list[pa.Table]:
+        tables: list[pa.Table] = []
+        hint: pa.Schema | None = None
+        for segment in paths.segments(kind):
+            if is_legacy_ipc(segment):
+                table, was_torn = read_stream_tolerant(segment)
+                if was_torn:
+                    torn.append(segment.name)
+            else:
+                read = read_segment(segment, schema_hint=hint)
+                hint = read.schema or hint
+                table = read.table
+                for d in read.damage:
+                    if d.reason == "truncated" and d.offset + d.length == segment.stat().st_size:
+                        torn.append(segment.name)
+                        continue
+                    damaged.append({"segment": segment.name, **d.as_dict()})
+                    if d.key is not None and d.key >= 0:
+                        damaged_keys[kind].add(d.key)
+            if table is not None:
+                tables.append(table)
+        return tables
+
+    trial_tables = read_kind("trials")
+    frame_tables = read_kind("frames")
     frames = (
         pa.concat_tables(frame_tables, promote_options="permissive").to_pandas()
         if frame_tables else FRAME_SCHEMA.empty_table().to_pandas()
     )
+    report: dict[str, Any] = {"damaged_records": damaged, "torn_segments": sorted(set(torn))}
     if not trial_tables:  # no segment even holds a schema yet (killed while opening)
-        return None, frames.iloc[0:0]
-    trials = pa.concat_tables(trial_tables, promote_options="permissive").to_pandas()
+        report.update(lost_trials=sorted(damaged_keys["trials"]), frames_lost_for_trials=[])
+        return Salvage(None, frames.iloc[0:0], report)
+    trials = pa.concat_tables([t.replace_schema_metadata(None) for t in trial_tables],
+                              promote_options="permissive").to_pandas()
     trials = trials.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
     trials = trials.reset_index(drop=True)
-    frames = frames[frames["trial"].isin(set(trials["trial"].tolist()))]
+    recorded = {int(t) for t in trials["trial"].tolist()}
+    gaps = set(range(max(recorded) + 1)) - recorded if recorded else set()
+    report["lost_trials"] = sorted((damaged_keys["trials"] - recorded) | gaps)
+    report["frames_lost_for_trials"] = sorted(damaged_keys["frames"] & recorded)
+    frames = frames[frames["trial"].isin(recorded)]
     frames = frames.sort_values(["trial", "frame"], kind="stable").reset_index(drop=True)
-    return trials, frames
+    return Salvage(trials, frames, report)
+
+
+def recover_tables(paths: SessionPaths) -> tuple[pd.DataFrame | None, pd.DataFrame]:
+    """(trials or None, frames) salvaged from every segment (see :func:`salvage`)."""
+    found = salvage(paths)
+    return found.trials, found.frames
 
 
 def finalise_session(
@@ -138,29 +294,57 @@ def finalise_session(
     status: str,
     summary: Mapping[str, Any] | None = None,
     expected_trials: int | None = None,
+    lock: SessionLock | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Write trials.parquet / frames.parquet atomically from the streams; update session.json.
 
     ``status`` is 'complete' only when every scheduled trial is recorded; otherwise the
-    session stays resumable ('incomplete').
+    session stays resumable ('incomplete'). Takes the session lock unless ``lock`` (held
+    by the caller) is given; removes temporary files of an interrupted finalisation.
+    session.json's ``integrity`` records what the salvage found.
     """
-    if not paths.metadata.exists():
-        raise UserError("no session.json here: not a psyop session directory", str(paths.directory))
-    trials, frames = recover_tables(paths)
+    own_lock = lock is None
+    held = SessionLock(paths.lock_file) if lock is None else lock
+    held.acquire("finalise")
+    try:
+        return _finalise_locked(paths, status=status, summary=summary, expected_trials=expected_trials)
+    finally:
+        if own_lock:
+            held.release()
+
+
+def _finalise_locked(
+    paths: SessionPaths, *, status: str, summary: Mapping[str, Any] | None, expected_trials: int | None,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    meta = read_metadata(paths)
+    if meta is None:
+        if not paths.segments("trials"):
+            raise UserError("no session.json here: not a psyop session directory", str(paths.directory))
+        meta = {**log_identity(paths), "study": paths.study, "participant": paths.participant,
+                "session": paths.session, "rebuilt_from_log": _now()}
+    found = salvage(paths)
+    trials, frames = found.trials, found.frames
     if trials is None:
         trials = pd.DataFrame({"trial": pd.Series([], dtype="int64")})
-    meta = json.loads(paths.metadata.read_text())
     expected = expected_trials if expected_trials is not None else meta.get("n_trials_scheduled")
     if status == "complete" and expected is not None and len(trials) < int(expected):
         status = "incomplete"
-    _write_parquet_atomic(trials, paths.trials_parquet)
-    _write_parquet_atomic(frames, paths.frames_parquet)
-    meta["status"] = status
-    meta["n_trials_recorded"] = int(len(trials))
-    meta["finalised"] = _now()
-    if summary:
-        meta["summary"] = dict(summary)
-    write_json_atomic(paths.metadata, meta)
+    try:
+        for stale in stale_temp_files(paths.directory):
+            stale.unlink()
+        _write_parquet_atomic(trials, paths.trials_parquet)
+        _write_parquet_atomic(frames, paths.frames_parquet)
+        meta["status"] = status
+        meta["n_trials_recorded"] = int(len(trials))
+        meta["finalised"] = _now()
+        meta["integrity"] = found.report
+        if summary:
+            meta["summary"] = dict(summary)
+        write_json_atomic(paths.metadata, meta)
+    except OSError as exc:
+        raise UserError(
+            f"cannot finalise the session ({exc.strerror or exc}); the log is intact: fix the disk, "
+            "then run `psyop recover` on this directory", str(paths.directory)) from exc
     return trials, frames
 
 
@@ -181,12 +365,12 @@ def find_sessions(root: Path) -> Sequence[SessionPaths]:
 
 
 def _write_parquet_atomic(frame: pd.DataFrame, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     table = pa.Table.from_pandas(frame, preserve_index=False)
-    pq.write_table(table, tmp)
-    with open(tmp, "rb") as handle:
+    with exclusive_temp(path) as (handle, tmp):
+        pq.write_table(table, handle)
+        handle.flush()
         os.fsync(handle.fileno())
-    os.replace(tmp, path)
+        os.replace(tmp, path)
 
 
 def _now() -> str:

@@ -1,0 +1,104 @@
+"""One writer per session: an exclusive advisory lock on ``<session dir>/.lock``.
+
+``flock`` locks belong to the open file and are released by the kernel when the holder
+exits (even on SIGKILL), so a crashed session never needs a manual unlock. The holder
+writes its pid and host into the file so that a refused writer can say who holds it.
+The lock is taken without waiting: a second ``psyop run`` (or ``psyop recover``) on the
+same session is refused at once with exit code 2.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import platform
+from pathlib import Path
+
+from psyop.errors import UserError
+
+
+class SessionLock:
+    """Hold the session's lock from :meth:`acquire` until :meth:`release` (or process exit)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._fd: int | None = None
+
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
+    def acquire(self, purpose: str = "run") -> None:
+        """Take the lock now or raise :class:`UserError` naming the holder (exit code 2)."""
+        if self._fd is not None:
+            return
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0), 0o644)
+        except OSError as exc:
+            raise UserError(f"cannot create the session lock: {exc.strerror or exc}", str(self.path)) from exc
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _read_holder(fd)
+            os.close(fd)
+            raise UserError(
+                f"session is in use by {holder}; only one psyop process may write a session "
+                "(wait for it to end, or use another --session)", str(self.path.parent)) from None
+        except OSError as exc:
+            os.close(fd)
+            raise UserError(f"cannot lock the session: {exc.strerror or exc}", str(self.path)) from exc
+        info = json.dumps({"pid": os.getpid(), "host": platform.node(), "purpose": purpose}).encode()
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, info, 0)
+        except OSError:
+            pass  # the lock holds without the description (e.g. disk full)
+        self._fd = fd
+
+    def check_free(self) -> None:
+        """Raise the same :class:`UserError` as :meth:`acquire` if another process holds the
+        lock now; takes nothing (a shared probe) and creates nothing."""
+        if self._fd is not None:
+            return
+        try:
+            fd = os.open(self.path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0))
+        except OSError:
+            return  # no lock file yet (new session) or unreadable: acquire() decides
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _read_holder(fd)
+            raise UserError(
+                f"session is in use by {holder}; only one psyop process may write a session "
+                "(wait for it to end, or use another --session)", str(self.path.parent)) from None
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+
+    def release(self) -> None:
+        if self._fd is None:
+            return
+        fd, self._fd = self._fd, None
+        try:
+            os.ftruncate(fd, 0)
+        except OSError:
+            pass
+        os.close(fd)  # closing the last descriptor releases the flock
+
+    def __enter__(self) -> SessionLock:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def _read_holder(fd: int) -> str:
+    try:
+        info = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
+        return f"pid {int(info['pid'])} on host {str(info['host'])[:100]!r} ({str(info.get('purpose', 'run'))[:20]})"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another process (pid and host not yet written)"

@@ -1,0 +1,78 @@
+"""Which seed a session uses, and which option combinations a run or a resume may use.
+
+Called by the runner before anything is written:
+
+- :func:`check_options` refuses combinations that would record wrong numbers: a live
+  response device (serial button box, keyboard) timestamps presses in real time, so on
+  the virtual clock its response times would be meaningless (presses 0.25 s apart logged
+  as 24-28 s response times).
+- :func:`resolve_seed` decides the seed: an existing session's (session.json, or the
+  seed written into the checksummed log when session.json was lost) wins over the
+  default; an explicit ``--seed`` that differs from it is refused (exit code 2) rather
+  than mixing two schedules in one session.
+
+Resuming with another protocol, seed or clock is refused by the store
+(:class:`psyop.session.log.store.SessionStore`), which compares them with session.json
+or, without it, with the identity written into the log. Each run's clock, tracker,
+responses and display are recorded in session.json's ``runs``.
+"""
+
+from __future__ import annotations
+
+from psyop.errors import UserError
+from psyop.session.lock import SessionLock
+from psyop.session.log.layout import SessionPaths
+from psyop.session.log.store import log_identity, read_metadata
+
+#: response sources whose events carry real (wall-clock) time stamps
+REAL_TIME_RESPONSES = ("serial", "keyboard")
+#: trackers that stream in real time
+REAL_TIME_TRACKERS = ("pupil", "serial")
+
+
+def check_options(*, clock: str, responses: str, tracker: str) -> None:
+    """Refuse a live device on the virtual clock (exit code 2, naming the option)."""
+    if clock != "virtual":
+        return
+    response_kind = responses.partition(":")[0]
+    if response_kind in REAL_TIME_RESPONSES:
+        raise UserError(
+            f"--responses {response_kind} is a live device whose presses are timed in real time; "
+            "on --clock virtual its response times would be wrong: use --clock real", "--clock")
+    tracker_kind = tracker.partition(":")[0]
+    if tracker_kind in REAL_TIME_TRACKERS:
+        raise UserError(f"--tracker {tracker_kind} is a live device; use --clock real with it", "--clock")
+
+
+def recorded_seed(paths: SessionPaths) -> int | None:
+    """The seed of an existing session: session.json's, else the one in its log, else None."""
+    meta = read_metadata(paths)
+    if meta is not None and meta.get("seed") is not None:
+        return _as_seed(meta["seed"], str(paths.metadata))
+    if meta is None and paths.segments("trials"):
+        seed = log_identity(paths).get("seed")
+        if seed is not None:
+            return _as_seed(seed, str(paths.log_dir))
+    return None
+
+
+def resolve_seed(paths: SessionPaths, requested: int | None, default: int) -> int:
+    """The seed this run must use (see the module docstring).
+
+    A session another process is writing is refused first (naming it), as the store would.
+    """
+    SessionLock(paths.lock_file).check_free()
+    recorded = recorded_seed(paths)
+    if recorded is None:
+        return default if requested is None else requested
+    if requested is not None and requested != recorded:
+        raise UserError(
+            f"cannot resume: seed differs from the existing session ({recorded} there, {requested} now); "
+            "drop --seed to resume it, or use another --session", str(paths.directory))
+    return recorded
+
+
+def _as_seed(value: object, location: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise UserError(f"the recorded seed {value!r} is not an integer", location)
+    return value
