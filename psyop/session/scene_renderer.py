@@ -3,6 +3,9 @@
 Used for every frame when a person watches, and for the sampled check frames of
 headless simulated sessions (at reduced resolution: the check is that the image is
 finite and not blank, which does not need full resolution).
+
+Every image shown is checked (finite, not uniform unless blank by design) on the GPU, with
+only a reduced summary read back (psyop.rendering.frame_check), never the whole float frame.
 """
 
 from __future__ import annotations
@@ -44,7 +47,11 @@ class SceneRenderer:
         self._owns_ctx = owns_ctx
         self.last_eye: str | None = None
         self._renderer: Any = None
+        self._checker: Any = None
         self._base_dir = Path(protocol.source_name).parent if getattr(protocol, "source_name", "") else None
+        from psyop.rendering.textures import ImageFiles
+
+        self._images = ImageFiles(self._base_dir)  # image surfaces decoded once per session
         self.images_rendered = 0
         self.max_images = max_images  # None: every stimulus frame; n: only the first n (sampled checks)
         from psyop.rendering import AntiAliasing, RenderSettings
@@ -82,7 +89,7 @@ class SceneRenderer:
                 if self.max_images is not None and self.images_rendered >= self.max_images:
                     return FrameCheck(False, cameras_ok)
                 scene = build_scene(self.protocol, row, t_in_phase_s, self._centre(eye), interval=interval,
-                                    base_dir=self._base_dir)
+                                    base_dir=self._base_dir, images=self._images)
                 if head_pose is not None:
                     scene = scene_in_head(scene, *head_pose)
             else:
@@ -92,15 +99,24 @@ class SceneRenderer:
             else:
                 self._renderer.set_scene(scene)
             self._renderer.render(camera)
-            image = self._renderer.image(eye)
             self.images_rendered += 1
             self.last_eye = eye
             images += 1
-            has_content = phase.show == "blank" or np.ptp(image) > 0  # a blank frame is uniform by design
-            ok &= bool(image.size > 0 and np.isfinite(image).all() and has_content)
+            ok &= self._check(eye).ok(blank_by_design=phase.show == "blank")  # a blank frame is uniform by design
         return FrameCheck(images > 0, ok and cameras_ok)
 
+    def _check(self, eye: str) -> Any:
+        """The frame's check summary, reduced on the GPU (no full readback)."""
+        if self._checker is None:
+            from psyop.rendering.frame_check import FrameChecker
+
+            self._checker = FrameChecker(self._renderer.ctx)
+        return self._checker.summarise(self._renderer.colour_texture(eye))
+
     def close(self) -> None:
+        if self._checker is not None:
+            self._checker.release()
+            self._checker = None
         if self._renderer is not None:
             self._renderer.release()
             self._renderer = None
