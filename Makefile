@@ -15,10 +15,12 @@ export PYTHONHASHSEED := 0
 .PHONY: figures test bench clean venv sysdeps help
 
 help:
-	@echo "make figures  - simulate sessions if data/ is empty, then rebuild every figure and table"
+	@echo "make figures  - simulate sessions if data/ is empty, say which sessions are used, rebuild every figure and table"
+	@echo "                (MIX=1: allow a study to pool simulated and real sessions)"
+	@echo "make resimulate - delete the simulated sessions in data/ (refused if any is real), then make figures"
 	@echo "make test     - run the whole test suite"
 	@echo "make bench    - run the benchmarks; results in bench/"
-	@echo "make clean    - remove generated figures, results, benchmarks and the venv"
+	@echo "make clean    - remove generated figures, results, benchmarks, demo/ and the venv (never data/)"
 
 venv: $(STAMP)
 
@@ -54,4 +56,4 @@ bench: $(STAMP) $(SYSDEPS_STAMP)
 include figures.mk
 
 clean:
-	rm -rf figures results bench $(VENV) build *.egg-info .pytest_cache .hypothesis
+	rm -rf figures results bench demo $(VENV) build *.egg-info .pytest_cache .hypothesis

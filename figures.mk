@@ -21,7 +21,7 @@ STUDY_FIGURES := $(FIGDIR)/detection_thresholds.png $(FIGDIR)/discrimination_thr
 	$(FIGDIR)/ordinal_depth.png $(FIGDIR)/egocentric_reach.png $(FIGDIR)/realism_preferences.png
 TABLES := $(RESULTS)/summary.md
 
-.PHONY: figures figures-data figures-build
+.PHONY: figures figures-data figures-build resimulate
 
 figures: $(STAMP) $(SYSDEPS_STAMP)
 	@$(MAKE) --no-print-directory figures-data
@@ -29,13 +29,26 @@ figures: $(STAMP) $(SYSDEPS_STAMP)
 	@echo "[psyop] figures in $(FIGDIR)/, statistics in $(RESULTS)/ (summary: $(RESULTS)/summary.md)"
 
 # Simulate only when no session has been logged yet; real data is never overwritten.
+# Then say which sessions the figures use (per study: count, simulated or real) and refuse
+# a study that mixes simulated and real sessions unless MIX=1.
 figures-data: $(STAMP)
 	@if find $(DATA) -name trials.parquet -print -quit 2>/dev/null | grep -q .; then \
 	  echo "[psyop] using the sessions in $(DATA)/"; \
 	else \
 	  echo "[psyop] $(DATA)/ holds no sessions: simulating all five studies (marked simulated)"; \
-	  $(VENV)/bin/psyop simulate --data $(DATA) --protocols protocols --jobs $(JOBS); \
+	  $(PY) -m psyop simulate --data $(DATA) --protocols protocols --jobs $(JOBS); \
 	fi
+	@$(PY) -m psyop sessions $(DATA) $(if $(filter 1,$(MIX)),--allow-mixed) | sed 's/^/[psyop] /'; \
+	  test $${PIPESTATUS[0]} -eq 0
+
+# Re-simulate from scratch: only when every session in $(DATA)/ is simulated (real data is
+# never deleted), remove them with the results and figures, then `make figures`.
+resimulate: $(STAMP)
+	@$(PY) -m psyop sessions $(DATA) --require-simulated --allow-mixed >/dev/null
+	@echo "[psyop] removing the simulated sessions in $(DATA)/, $(RESULTS)/ and $(FIGDIR)/"
+	@find $(DATA) -mindepth 1 -maxdepth 1 ! -name README.md -exec rm -rf {} + 2>/dev/null || true
+	@rm -rf $(RESULTS) $(FIGDIR)
+	@$(MAKE) --no-print-directory figures
 
 figures-build: $(MODEL_FIGURES) $(STUDY_FIGURES) $(TABLES)
 

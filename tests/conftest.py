@@ -9,12 +9,15 @@ from hypothesis import HealthCheck, settings
 
 matplotlib.use("Agg")
 
-# CI runs on 2 cores; keep property tests deterministic and bounded.
+# Property tests are derandomised in every run (make test, CI, a bare pytest): the same
+# examples on every machine, so a red run is reproducible and a load spike cannot turn
+# one red. No per-example deadline: a loaded machine makes examples slower, not wrong.
+# To search fresh examples on purpose: PSYOP_HYPOTHESIS=explore pytest ...
 settings.register_profile(
-    "ci",
+    "psyop",
     derandomize=True,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
 )
-settings.register_profile("dev", deadline=None, suppress_health_check=[HealthCheck.too_slow])
-settings.load_profile("ci" if os.environ.get("CI") else "dev")
+settings.register_profile("explore", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("explore" if os.environ.get("PSYOP_HYPOTHESIS") == "explore" else "psyop")

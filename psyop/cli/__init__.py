@@ -3,6 +3,11 @@
 Each sub-command lives in its own module in this package and exposes
 ``register(subparsers)``, which adds a parser and sets ``func`` on it. Modules are
 discovered by name, so adding a command touches no shared file.
+
+Start-up stays short: ``psyop COMMAND ...`` imports only that command's module, and a
+command module imports its heavy dependencies (pandas, pydantic, OpenGL) inside the
+function that runs it, so ``psyop --help`` and ``psyop validate`` import only what they use
+(benchmarks/bench_cli_startup.py; tests/test_cli_startup.py).
 """
 
 from __future__ import annotations
@@ -17,23 +22,31 @@ from psyop import __version__
 from psyop.errors import UserError
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_names() -> list[str]:
+    """The sub-commands: one module each in this package (names only, nothing imported)."""
+    return sorted(info.name for info in pkgutil.iter_modules(__path__) if not info.name.startswith("_"))
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The ``psyop`` parser with every sub-command, or only ``only`` (what ``main`` runs)."""
     parser = argparse.ArgumentParser(
         prog="psyop",
         description="Gaze-contingent VR psychophysics: protocols, sessions, rendering, analysis.",
     )
     parser.add_argument("--version", action="version", version=f"psyop {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
+    for name in command_names():
+        if only is not None and name != only:
             continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
+        module = importlib.import_module(f"{__name__}.{name}")
         module.register(subparsers)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    first = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(first if first in command_names() else None)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

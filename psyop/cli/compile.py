@@ -6,8 +6,6 @@ import argparse
 from pathlib import Path
 
 from psyop.errors import UserError
-from psyop.protocol import load_protocol
-from psyop.schedule import compile_schedule, write_schedule
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,6 +19,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from psyop.protocol import load_protocol
+    from psyop.schedule import compile_schedule, write_schedule
+
     protocol = load_protocol(args.protocol)
     schedule = compile_schedule(protocol, args.seed)
     if not args.out.parent.exists():

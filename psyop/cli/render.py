@@ -10,10 +10,12 @@ import argparse
 import json
 import math
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from psyop.errors import UserError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -65,6 +67,8 @@ def _parse_crop(text: str, width_px: int, height_px: int) -> tuple[int, int, int
 
 def frustum_tangents(pixel_to_ray: np.ndarray) -> dict[str, float]:
     """Left/right/bottom/top tangents of the image seen from the centre of projection."""
+    import numpy as np
+
     m = np.asarray(pixel_to_ray, dtype=np.float64)
     corner = lambda u, v: m @ np.array([u, v, 1.0])  # noqa: E731
     tl, br = corner(0.0, 0.0), corner(1.0, 1.0)
@@ -79,6 +83,8 @@ def write_png(path: Path, image_uint8: np.ndarray) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from psyop.optics.camera import make_eye_camera
     from psyop.protocol import load_protocol, resolve_display_profile, resolve_eye_model
     from psyop.rendering import Renderer, RenderSettings

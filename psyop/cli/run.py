@@ -21,7 +21,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=None, help="schedule/observer seed (default: from IDs, or the session's)")
     parser.add_argument("--tracker", default="sim", help="sim | replay:FILE | pupil:HOST:PORT | serial:DEVICE")
     parser.add_argument("--pose", default="sim",
-                        help="head/hand pose: sim (simulated from the seed) | replay:SESSION_DIR (a logged session)")
+                        help="head/hand pose: sim (simulated from the seed) | replay:SESSION_DIR (a logged session with "
+                        "the same schedule: protocol, seed, conditions) | replay-by-condition:SESSION_DIR (each trial "
+                        "replays a logged trial of the same condition)")
     parser.add_argument("--responses", default="sim", help="sim | keyboard | serial:DEVICE")
     parser.add_argument("--display", default="headless", choices=["headless", "window"])
     parser.add_argument("--clock", default="virtual", choices=["virtual", "real"])

@@ -6,11 +6,11 @@ import argparse
 import json
 from pathlib import Path
 
-from psyop.protocol import Protocol
-
 
 def protocol_json_schema() -> dict:
     """JSON Schema (draft 2020-12) of a protocol file."""
+    from psyop.protocol import Protocol
+
     schema = Protocol.model_json_schema(mode="validation")
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = "psyop protocol"

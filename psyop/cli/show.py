@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from psyop.protocol import load_protocol
-from psyop.schedule.summary import summarise
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("show", help="summarise a protocol: conditions, trial counts, duration",
@@ -16,5 +13,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from psyop.protocol import load_protocol
+    from psyop.schedule.summary import summarise
+
     print(summarise(load_protocol(args.protocol)))
     return 0

@@ -6,8 +6,6 @@ import argparse
 import sys
 
 from psyop.errors import UserError
-from psyop.protocol import load_protocol
-from psyop.schedule import trial_count
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,6 +17,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from psyop.protocol import load_protocol
+    from psyop.schedule.counts import trial_count
+
     paths = args.protocol if isinstance(args.protocol, list) else [args.protocol]
     if len(paths) == 1:  # a single file: let the CLI report the error as usual
         protocol = load_protocol(paths[0])

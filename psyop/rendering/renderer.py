@@ -90,6 +90,7 @@ class _EyeState:
     last_valid_camera: Any = None
     last_rendered_camera: Any = None
     depth_range_m: tuple[float, float] = (0.0, math.inf)
+    rendered_scene: Scene | None = None  # the scene of this eye's last image (reuse needs the same)
     released: list[Any] = field(default_factory=list)
 
 
@@ -140,9 +141,11 @@ class Renderer:
 
     # -- scene upload (once per scene) ----------------------------------------------------------
     def set_scene(self, scene: Scene) -> None:
-        """Upload a scene's static data; frame reuse restarts.
+        """Upload a scene's static data.
 
-        An equal scene is a no-op (reuse continues), and textures are re-synthesised and
+        An equal scene is a no-op. Frame reuse is per eye: an eye reuses its last image only if
+        it was rendered from a scene equal to the current one, so a stereo session that sets
+        each eye's scene in turn keeps reusing both eyes' frames. Textures are re-synthesised and
         re-uploaded only when the set of texture materials changes, so a session can call this
         every frame (e.g. for a moving fixation target) at the cost of a few hundred bytes.
         """
@@ -210,7 +213,6 @@ class Renderer:
         aperture_changed = self._scene is None or scene.aperture != self._scene.aperture
         self._scene = scene
         for state in self._eyes.values():
-            state.last_rendered_camera = None
             if aperture_changed:  # the aperture is screen-fixed: recomputed only when it changes
                 self._release_eye_aperture(state)
                 state.aperture = None
@@ -307,7 +309,8 @@ class Renderer:
             self.stats.invalid_cameras += 1
         use = state.last_valid_camera
         decision = None
-        if use is not None and self.settings.reuse_tolerance_px is not None:
+        same_scene = state.rendered_scene is self._scene or state.rendered_scene == self._scene
+        if use is not None and self.settings.reuse_tolerance_px is not None and same_scene:
             decision = decide_reuse(state.last_rendered_camera, use, state.depth_range_m,
                                     self.settings.reuse_tolerance_px)
             if decision.skip:
@@ -330,6 +333,7 @@ class Renderer:
             bg = self.scene.background
             target.clear(bg[0], bg[1], bg[2], 1.0)
             state.last_rendered_camera = None
+            state.rendered_scene = None
         else:
             cop = np.asarray(camera.centre_of_projection_m, dtype=np.float64)
             rel_m = self._centres_head - self._centre_w[:, None] * cop  # directions stay put
@@ -358,6 +362,7 @@ class Renderer:
             else:
                 self._vao.render(moderngl.TRIANGLES, vertices=3)
             state.last_rendered_camera = camera
+            state.rendered_scene = self._scene
             state.depth_range_m = self.scene.depth_range_m(cop)
         if state.msaa_fbo is not None:
             self.ctx.copy_framebuffer(state.fbo, state.msaa_fbo)
@@ -391,6 +396,10 @@ class Renderer:
     def framebuffer(self, eye: str) -> Any:
         """The eye's resolved framebuffer (for presenting in a window)."""
         return self._eyes[eye].fbo
+
+    def colour_texture(self, eye: str) -> Any:
+        """The eye's resolved float colour texture (for a GPU-side check: psyop.rendering.frame_check)."""
+        return self._eyes[eye].colour
 
     def image(self, eye: str = "right") -> np.ndarray:
         """(H, W, 3) float32 image of the eye's last frame, top row first, values in [0, 1]."""

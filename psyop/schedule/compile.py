@@ -20,6 +20,7 @@ from psyop.protocol.model import Protocol
 from psyop.protocol.response import (LeftRightNearerResponse, ModeFromFactor, PairwisePreferenceResponse,
                                      ReachResponse, TwoIntervalResponse)
 from psyop.protocol.scene import FixationTarget, SinusoidalBorder
+from psyop.schedule.counts import expected_duration_s, trial_count  # noqa: F401 - re-exported
 
 #: Independent random streams derived from the user's seed (adding a stream never changes others).
 _STREAM_ORDER, _STREAM_SEEDS, _STREAM_COUNTERBALANCE, _STREAM_STIMULUS, _STREAM_PRACTICE = range(5)
@@ -197,17 +198,3 @@ def _stimulus_columns(protocol: Protocol, n: int, rng: np.random.Generator) -> d
             phase = rng.uniform(0.0, 360.0, size=n) if item.phase == "random" else np.full(n, float(item.phase))
             out[f"{item.id}_phase_deg"] = phase
     return out
-
-
-def expected_duration_s(protocol: Protocol) -> float:
-    """Expected session length (s): trials (practice included) x expected trial length."""
-    design = protocol.design
-    n_trials = len(expand_conditions(design)) * design.repetitions + design.practice_trials
-    return n_trials * protocol.trial.expected_duration_s()
-
-
-def trial_count(protocol: Protocol) -> int:
-    """Rows of the schedule (practice included)."""
-    design = protocol.design
-    return len(expand_conditions(design)) * design.repetitions + design.practice_trials
-

@@ -5,7 +5,7 @@ from __future__ import annotations
 from psyop.protocol.base import format_level
 from psyop.protocol.conditions import condition_label, expand_conditions
 from psyop.protocol.model import Protocol
-from psyop.schedule.compile import expected_duration_s, trial_count
+from psyop.schedule.counts import expected_duration_s, trial_count
 
 
 def _minutes(seconds: float) -> str:

@@ -20,7 +20,6 @@ import contextlib
 import dataclasses
 import math
 import signal
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -31,7 +30,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from psyop.session.clock import Clock
 from psyop.session.frames import Display, FrameRecorder, FrameRenderer, latency_summary
@@ -43,6 +41,7 @@ from psyop.session.log.store import SessionStore
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.session.plan import TIMEOUT_RESPONSE, ResponsePlan
+from psyop.session.progress import session_progress
 from psyop.session.responses.base import Response, ResponseSource
 
 
@@ -102,20 +101,6 @@ def _sigint_deferred() -> Iterator[None]:
         raise KeyboardInterrupt
 
 
-class _NoProgress:
-    """Stands in for the progress bar when it is off. A disabled tqdm still takes tqdm's
-    process-shared lock; a session killed (SIGKILL) while holding it would block every later
-    bar in any process forked from the same parent (seen in the crash-safety test)."""
-
-    def set_postfix(self, **_: Any) -> None:
-        return None
-
-    def update(self, _: int = 1) -> None:
-        return None
-
-    def close(self) -> None:
-        return None
-
 class TrialLoop:
     """Runs the remaining trials of a schedule into a :class:`SessionStore`."""
 
@@ -158,9 +143,8 @@ class TrialLoop:
         rows = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
         n_total = len(schedule)
         n_done = len(completed)
-        bar = (tqdm(total=n_total, initial=n_done, file=sys.stderr, unit="trial", dynamic_ncols=True,
-                    desc=f"{self.identity['study']} sub-{self.identity['participant']}")
-               if self.config.progress else _NoProgress())
+        bar = session_progress(n_total, n_done, f"{self.identity['study']} sub-{self.identity['participant']}",
+                               enabled=self.config.progress)
         status, message = "complete", f"all {n_total} trials recorded"
         try:
             for row in rows:

@@ -99,20 +99,23 @@ def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig)
     raise UserError(f"unknown tracker {spec!r}; use sim, replay:FILE, pupil:HOST:PORT or serial:DEVICE", "--tracker")
 
 
-def _make_pose(spec: str, seed: int) -> Any:
-    """The head/hand pose source: simulated (from the seed) or replayed from a logged session."""
+def _make_pose(spec: str, seed: int, protocol_sha256: str = "", schedule: pd.DataFrame | None = None) -> Any:
+    """The head/hand pose source: simulated (from the seed) or replayed from a logged session
+    (checked against this session's schedule: psyop.session.pose_replay.pair_trials)."""
     kind, _, arg = spec.partition(":")
     if kind == "sim" and not arg:
         from psyop.session.pose import SimulatedPose
 
         return SimulatedPose(seed_for(seed, "pose"))
-    if kind == "replay":
-        from psyop.session.pose_replay import ReplayPose
+    if kind in ("replay", "replay-by-condition"):
+        from psyop.session.pose_replay import ReplayPose, ReplaySchedule
 
         if not arg:
-            raise UserError("expected replay:SESSION_DIR", "--pose")
-        return ReplayPose.from_path(Path(arg))
-    raise UserError(f"unknown pose source {spec!r}; use sim or replay:SESSION_DIR", "--pose")
+            raise UserError(f"expected {kind}:SESSION_DIR", "--pose")
+        target = None if schedule is None else ReplaySchedule(
+            protocol_sha256, seed, tuple(schedule["condition"].astype(str)) if "condition" in schedule else ())
+        return ReplayPose.from_path(Path(arg), target, by_condition=kind == "replay-by-condition")
+    raise UserError(f"unknown pose source {spec!r}; use sim, replay:SESSION_DIR or replay-by-condition:SESSION_DIR", "--pose")
 
 
 def _make_responses(spec: str, plan: SessionPlan, seed: int, participant: str, clock: Any, window: Any) -> Any:
@@ -200,7 +203,7 @@ def run_session(
     }
     metadata["pose"] = options.pose
     renderer: Any = None
-    pose = _make_pose(options.pose, seed)
+    pose = _make_pose(options.pose, seed, protocol.source_sha256, schedule)
     gaze = _make_gaze(options.tracker, clock, seed, options.tracker_faults)
     window = None
     if options.display == "window":
@@ -268,7 +271,8 @@ def run_session(
         pose.close()
         display.close()
     summary = {"outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
-               "tracker": gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held}}
+               "tracker": gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held,
+                        "hand_trials_reused": getattr(pose, "n_reused_hand_trials", 0)}}
     flips = getattr(clock, "flips", None)
     if flips is not None and len(flips.times_s) >= 8:
         period, _ = flips.estimate(1.0 / float(display_profile.refresh_hz))

@@ -3,6 +3,9 @@
 Used for every frame when a person watches, and for the sampled check frames of
 headless simulated sessions (at reduced resolution: the check is that the image is
 finite and not blank, which does not need full resolution).
+
+Every image shown is checked (finite, not uniform unless blank by design) on the GPU, with
+only a reduced summary read back (psyop.rendering.frame_check), never the whole float frame.
 """
 
 from __future__ import annotations
@@ -44,7 +47,11 @@ class SceneRenderer:
         self._owns_ctx = owns_ctx
         self.last_eye: str | None = None
         self._renderer: Any = None
+        self._checker: Any = None
         self._base_dir = Path(plan.protocol.source_name).parent if plan.protocol.source_name else None
+        from psyop.rendering.textures import ImageFiles
+
+        self._images = ImageFiles(self._base_dir)  # image surfaces decoded once per session
         self.images_rendered = 0
         self.max_images = max_images  # None: every stimulus frame; n: only the first n (sampled checks)
         from psyop.rendering import AntiAliasing, RenderSettings
@@ -69,7 +76,7 @@ class SceneRenderer:
         if phase.show not in ("stimulus", "blank"):
             return None
         scene = build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
-                            base_dir=self._base_dir, show=phase.primitives)
+                            base_dir=self._base_dir, show=phase.primitives, images=self._images)
         return scene_in_head(scene, *head_pose) if head_pose is not None else scene
 
     def render(self, row: Mapping[str, Any], phase: PhaseSpec, mode: str, t_in_phase_s: float,
@@ -95,15 +102,25 @@ class SceneRenderer:
             else:
                 self._renderer.set_scene(scene)
             self._renderer.render(camera)
-            image = self._renderer.image(eye)
             self.images_rendered += 1
             self.last_eye = eye
             images += 1
-            has_content = (phase.show == "blank" and not phase.primitives) or np.ptp(image) > 0  # a bare blank is uniform
-            ok &= bool(image.size > 0 and np.isfinite(image).all() and has_content)
+            # a bare blank is uniform by design
+            ok &= self._check(eye).ok(blank_by_design=phase.show == "blank" and not phase.primitives)
         return FrameCheck(images > 0, ok and cameras_ok)
 
+    def _check(self, eye: str) -> Any:
+        """The frame's check summary, reduced on the GPU (no full readback)."""
+        if self._checker is None:
+            from psyop.rendering.frame_check import FrameChecker
+
+            self._checker = FrameChecker(self._renderer.ctx)
+        return self._checker.summarise(self._renderer.colour_texture(eye))
+
     def close(self) -> None:
+        if self._checker is not None:
+            self._checker.release()
+            self._checker = None
         if self._renderer is not None:
             self._renderer.release()
             self._renderer = None

@@ -26,6 +26,7 @@ import numpy as np
 from psyop.errors import UserError
 from psyop.protocol import scene as ps
 from psyop.rendering import builders
+from psyop.rendering.textures import ImageFiles
 from psyop.rendering.scene import (
     Aperture,
     GridMaterial,
@@ -56,7 +57,8 @@ def _trial_seed(values: Mapping[str, Any]) -> int:
     return int(values.get("trial_seed", 0)) % (2**31)
 
 
-def _material(surface: Any, values: Mapping[str, Any], size_deg: float, base_dir: Path | None) -> Material:
+def _material(surface: Any, values: Mapping[str, Any], size_deg: float, base_dir: Path | None,
+              images: ImageFiles | None = None) -> Material:
     """A rendering material for a protocol surface (noise seeded from the trial seed)."""
     if isinstance(surface, ps.SolidSurface):
         return Solid(tuple(float(c) for c in surface.rgb))
@@ -70,19 +72,8 @@ def _material(surface: Any, values: Mapping[str, Any], size_deg: float, base_dir
         return NoiseTexture(NoiseKind.PINK, seed=seed, size_px=256, mean=float(surface.mean),
                             contrast=float(surface.contrast) / 2.0)
     if isinstance(surface, ps.ImageSurface):
-        path = (base_dir or Path(".")) / surface.path
-        try:
-            import matplotlib.image as mpimg
-
-            pixels = np.asarray(mpimg.imread(path), dtype=np.float64)
-        except (OSError, ValueError) as error:
-            raise UserError(f"cannot read image {path}: {error}") from None
-        if pixels.max() > 1.0:
-            pixels = pixels / 255.0
-        if pixels.ndim == 2:
-            pixels = np.repeat(pixels[:, :, None], 3, axis=2)
         repeats = size_deg / float(surface.tile_deg) if surface.tile_deg else 1.0
-        return ImageTexture(pixels[:, :, :3], key=str(path), repeats=repeats)
+        return (images if images is not None else ImageFiles(base_dir)).texture(surface.path, repeats)
     raise UserError(f"unsupported surface kind {getattr(surface, 'kind', surface)!r}")
 
 
@@ -96,7 +87,7 @@ def _rotate_axes(prim: Primitive, angle_deg: float) -> Primitive:
 
 
 def _sinusoidal_border(item: ps.SinusoidalBorder, values: Mapping[str, Any], origin: np.ndarray,
-                       base_dir: Path | None) -> list[Primitive]:
+                       base_dir: Path | None, images: ImageFiles | None = None) -> list[Primitive]:
     near_side = item.near_side if item.near_side != "schedule" else str(values.get("near_side", "left"))
     if near_side not in ("left", "right"):
         raise UserError(f"near_side must be left or right, got {near_side!r}")
@@ -110,9 +101,9 @@ def _sinusoidal_border(item: ps.SinusoidalBorder, values: Mapping[str, Any], ori
     border = SineBorder(amplitude=math.tan(math.radians(float(item.amplitude_deg))) / half_tan,
                         cycles=size / float(item.period_deg), phase_rad=math.radians(phase_deg), offset=0.0,
                         side=-1 if near_side == "left" else 1)
-    far = builders.frontoparallel_rect(far_m, size, size, _material(far_surface, values, size, base_dir),
+    far = builders.frontoparallel_rect(far_m, size, size, _material(far_surface, values, size, base_dir, images),
                                        origin_m=origin, name=f"{item.id}_far")
-    near = builders.frontoparallel_rect(near_m, size, size, _material(near_surface, values, size, base_dir),
+    near = builders.frontoparallel_rect(near_m, size, size, _material(near_surface, values, size, base_dir, images),
                                         origin_m=origin, border=border, name=f"{item.id}_near")
     return [_rotate_axes(far, float(item.orientation_deg)), _rotate_axes(near, float(item.orientation_deg))]
 
@@ -223,6 +214,7 @@ def build_scene(
     arm_reach_m: float = DEFAULT_ARM_REACH_M,
     background: tuple[float, float, float] = (0.5, 0.5, 0.5),
     show: Sequence[str] | None = None,
+    images: ImageFiles | None = None,
 ) -> Scene:
     """The rendering scene of one trial during interval ``interval`` at ``time_s`` into it.
 
@@ -231,6 +223,9 @@ def build_scene(
     the head origin for a stereo one, so both eyes get the same scene). Only the primitives the
     interval's ``show:`` lists are built, or those ``show`` lists when given (a blank phase's
     ``show:``, with interval ``interval``'s factor values).
+
+    ``images``: the session's decoded image files (decoded once, reused every frame); without
+    it image surfaces are decoded from ``base_dir`` on every call.
     """
     values = interval_values(row, interval)
     values = {**values, "trial_seed": row.get("trial_seed", 0)}
@@ -244,7 +239,7 @@ def build_scene(
         if show != "all" and item.id not in show:
             continue
         if isinstance(item, ps.Disc):
-            mat = _material(item.surface, values, float(item.size_deg), base_dir)
+            mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
             prims.append(builders.frontoparallel_disc(_distance_m(item.depth, values), float(item.size_deg), mat,
                                                       float(item.centre_deg[0]), float(item.centre_deg[1]), origin,
                                                       item.id))
@@ -252,11 +247,11 @@ def build_scene(
             size = max(float(item.width_deg), float(item.height_deg))
             prims.append(builders.frontoparallel_rect(_distance_m(item.depth, values), float(item.width_deg),
                                                       float(item.height_deg),
-                                                      _material(item.surface, values, size, base_dir),
+                                                      _material(item.surface, values, size, base_dir, images),
                                                       float(item.centre_deg[0]), float(item.centre_deg[1]), origin,
                                                       name=item.id))
         elif isinstance(item, ps.SinusoidalBorder):
-            prims += _sinusoidal_border(item, values, origin, base_dir)
+            prims += _sinusoidal_border(item, values, origin, base_dir, images)
         elif isinstance(item, ps.Aperture):
             aperture = Aperture(radius_deg=float(item.diameter_deg) / 2.0, colour=tuple(item.surround_rgb))
         elif isinstance(item, ps.GridPlanes):
@@ -264,7 +259,7 @@ def build_scene(
         elif isinstance(item, ps.TargetField):
             near_D = item.near.resolve_D(values)
             far_D = item.far.resolve_D(values)
-            mat = _material(item.surface, values, float(item.size_deg), base_dir)
+            mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
             field = builders.target_field(_trial_seed(values), int(item.count), near_D, far_D, float(item.size_deg),
                                           float(item.field_deg), origin, material=mat,
                                           min_gap_deg=float(item.min_gap_deg))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
@@ -53,7 +52,6 @@ def _random_fixations(rng, n, centre):
 
 def test_hundred_thousand_degenerate_and_extreme_cases_stay_finite_and_flagged():
     rng = np.random.default_rng(20201)
-    start = time.perf_counter()
     chunks = 20
     n = CASES // chunks
     total_invalid = 0
@@ -83,9 +81,7 @@ def test_hundred_thousand_degenerate_and_extreme_cases_stay_finite_and_flagged()
         assert (cams.tangents[:, 1] > cams.tangents[:, 0]).all() and (cams.tangents[:, 3] > cams.tangents[:, 2]).all()
         assert (np.abs(np.linalg.det(cams.projection)) > 0).all()
         total_invalid += int((~cams.valid).sum())
-    elapsed = time.perf_counter() - start
     assert total_invalid > CASES // 2  # the degenerate classes were really exercised
-    assert elapsed < 10.0, f"{CASES} cases took {elapsed:.1f} s"
 
 
 def test_bad_fallback_direction_falls_back_to_straight_ahead():

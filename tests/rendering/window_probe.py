@@ -34,7 +34,7 @@ def main() -> int:
             renderer.render(cam)
             window.present(renderer.framebuffer("right"))
             if k == STALL_FRAME:
-                time.sleep(4.5 * REFRESH_S)  # a stall that must show up as dropped frames
+                time.sleep(4.5 * REFRESH_S)  # not a wait: a stall that must show up as dropped frames
 
         timing = run_paced(20, REFRESH_S, frame)
         screen = window.screen_pixels()

@@ -24,3 +24,19 @@ def fast_protocol(directory: Path, study: str, repetitions: int = 1, phase_s: fl
     text = re.sub(r"(?m)^(\s*(?:-\s*)?(?:duration_s|expected_s|min_duration_s):)\s*[\d.]+", rf"\g<1> {phase_s}", path.read_text())
     path.write_text(text)
     return path
+
+
+def wait_until(predicate, *, timeout_s: float = 60.0, what: str = "condition", poll_s: float = 0.01):
+    """Poll ``predicate`` until it returns a truthy value (returned) or fail after a generous
+    ``timeout_s``. Tests wait for an event this way, never with a fixed sleep, so a loaded
+    machine makes them slower, not red."""
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(poll_s)

@@ -101,9 +101,9 @@ def test_replayed_pose_reproduces_the_logged_reaches_exactly(tmp_path: Path) -> 
     common = ["run", str(protocol), "--data", str(tmp_path / "data"), "--no-progress"]
     assert cli_main([*common, "--participant", "A1", "--seed", "3"]) == 0
     original = _session(tmp_path / "data", "egocentric", "A1")
-    # another seed: another observer and schedule, but the hand comes from A1's log
-    assert cli_main([*common, "--participant", "B1", "--seed", "8", "--pose", f"replay:{original}"]) == 0
-    assert cli_main([*common, "--participant", "C1", "--seed", "8"]) == 0
+    # another participant, same schedule (same protocol and seed): the hand comes from A1's log
+    assert cli_main([*common, "--participant", "B1", "--seed", "3", "--pose", f"replay:{original}"]) == 0
+    assert cli_main([*common, "--participant", "C1", "--seed", "3"]) == 0
     a, b, c = (pd.read_parquet(_session(tmp_path / "data", "egocentric", p) / "trials.parquet") for p in ("A1", "B1", "C1"))
     assert len(a) == len(b) > 5
     assert b["reach_m"].tolist() == a["reach_m"].tolist() and b["response"].tolist() == a["response"].tolist()
@@ -114,6 +114,50 @@ def test_replayed_pose_reproduces_the_logged_reaches_exactly(tmp_path: Path) -> 
         assert reach_from_positions(xyz, 10)[0] == row["reach_m"]
     frames = pd.read_parquet(original / "frames.parquet")
     assert len(frames) and np.isfinite(frames[HEAD].to_numpy(dtype=float)).all()
+
+
+def test_replay_refuses_a_source_with_another_schedule_unless_mapped_by_condition(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 13: replaying a session of another seed paired a reach made to a 0.50 target with a
+    0.90 target, silently. Now: exit 2 naming what differs; by condition, targets match."""
+    protocol = small_protocol(tmp_path, "egocentric", 1)
+    common = ["run", str(protocol), "--data", str(tmp_path / "data"), "--no-progress"]
+    assert cli_main([*common, "--participant", "A1", "--seed", "3"]) == 0
+    original = _session(tmp_path / "data", "egocentric", "A1")
+    capsys.readouterr()
+    assert cli_main([*common, "--participant", "B1", "--seed", "8", "--pose", f"replay:{original}"]) == 2
+    err = capsys.readouterr().err
+    assert "another schedule" in err and "seed 3 vs 8" in err and "replay-by-condition" in err
+    assert not (tmp_path / "data" / "egocentric" / "sub-B1").exists() or not any(
+        (tmp_path / "data" / "egocentric" / "sub-B1").rglob("trials.parquet"))
+    other = tmp_path / "other.yaml"  # same seed, another protocol text: refused too
+    other.write_text(protocol.read_text() + "\n# edited\n")
+    assert cli_main(["run", str(other), "--data", str(tmp_path / "data"), "--no-progress", "--participant", "B2",
+                     "--seed", "3", "--pose", f"replay:{original}"]) == 2
+    assert "protocol hash" in capsys.readouterr().err
+
+    assert cli_main([*common, "--participant", "B1", "--seed", "8", "--pose", f"replay-by-condition:{original}"]) == 0
+    a = pd.read_parquet(original / "trials.parquet")
+    b = pd.read_parquet(_session(tmp_path / "data", "egocentric", "B1") / "trials.parquet")
+    assert a["condition"].tolist() != b["condition"].tolist()  # really another order
+    for condition, group in b.groupby("condition"):  # each reach replays one made to the same target
+        logged = a[a["condition"] == condition].sort_values("trial")["reach_m"].tolist()
+        replayed = group.sort_values("trial")["reach_m"].tolist()
+        assert replayed == [logged[j % len(logged)] for j in range(len(replayed))]
+    import json
+
+    summary = json.loads((_session(tmp_path / "data", "egocentric", "B1") / "session.json").read_text())
+    assert summary["summary"]["pose"]["hand_trials_reused"] == len(b) - b["condition"].map(
+        a["condition"].value_counts()).clip(upper=b["condition"].map(b["condition"].value_counts())).groupby(
+        b["condition"]).first().sum()  # counted, never silent
+
+
+def test_replay_of_a_missing_session_names_it_without_suggesting_recover(tmp_path: Path, capsys) -> None:
+    protocol = small_protocol(tmp_path, "egocentric", 1)
+    assert cli_main(["run", str(protocol), "--data", str(tmp_path / "d"), "--no-progress", "--participant", "X1",
+                     "--pose", f"replay:{tmp_path / 'data' / 'egocentric' / 'sub-sim01'}"]) == 2
+    err = capsys.readouterr().err
+    assert "no such session directory" in err and "recover" not in err
 
 
 def test_head_pose_is_logged_every_frame_and_replays(tmp_path: Path) -> None:
@@ -134,7 +178,7 @@ def test_head_pose_is_logged_every_frame_and_replays(tmp_path: Path) -> None:
 
 def test_bad_pose_option_is_a_user_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     protocol = small_protocol(tmp_path, "detection", 1)
-    for spec, says in [(f"replay:{tmp_path / 'missing'}", "frames.parquet"), ("replay:", "SESSION_DIR"), ("vive", "unknown pose")]:
+    for spec, says in [(f"replay:{tmp_path / 'missing'}", "no such session directory"), ("replay:", "SESSION_DIR"), ("vive", "unknown pose")]:
         assert cli_main(["run", str(protocol), "--participant", "X1", "--data", str(tmp_path / "d"), "--no-progress",
                          "--pose", spec]) == 2
         assert says in capsys.readouterr().err

@@ -3,20 +3,20 @@
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 from pupil_server import FakePupilCapture
-from session_helpers import fast_protocol
+from session_helpers import fast_protocol, wait_until
 
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.clock import RealClock
 from psyop.session.gaze.pupil import PupilClient, fit_clock_sync, world_mm_to_head_m
 from psyop.session.gaze.sample import TrackerLost
+from psyop.session.log.store import SessionStore
 from psyop.session.runner import SessionOptions, run_session
 
 
@@ -37,26 +37,35 @@ def test_world_camera_to_head_space() -> None:
 def test_client_syncs_clock_receives_gaze_counts_gaps_and_detects_disconnect() -> None:
     server = FakePupilCapture(offset_s=1000.0, skip_every=10, low_confidence_every=7)
     clock = RealClock()
-    client = PupilClient("127.0.0.1", server.port, clock=clock.now_s, n_sync=10, lost_after_s=0.3)
+    client = PupilClient("127.0.0.1", server.port, clock=clock.now_s, n_sync=10, lost_after_s=1.0)
     try:
+        started_s = clock.now_s()
         client.start()
         assert client.sync is not None
         # Pupil time = monotonic + 1000; the session clock starts near 0, so the offset is ~1000 + epoch
         local_now = clock.now_s()
         assert client.sync.to_local(server.pupil_time()) == pytest.approx(local_now, abs=0.01)
-        time.sleep(0.4)
+        wait_until(lambda: client.stats()["samples_received"] > 20 and client.stats()["gaps"] >= 2
+                   and client.stats()["low_confidence"] >= 2, what="20 gaze messages, 2 gaps, 2 low-confidence")
         sample = client.latest(clock.now_s())
         assert sample is not None
         assert sample.fixation_m == pytest.approx((0.1, 0.05, -0.8))
-        assert abs(clock.now_s() - sample.timestamp_s) < 0.05  # mapped onto the session clock
+        # mapped onto the session clock: sent after the client started, received before now
+        assert started_s - 0.01 <= sample.timestamp_s <= clock.now_s() + 0.01
         stats = client.stats()
-        assert stats["samples_received"] > 20
         assert stats["gaps"] >= 2  # every 10th message withheld
         assert stats["low_confidence"] >= 2
         server.stop()
-        time.sleep(0.5)
-        with pytest.raises(TrackerLost, match="no gaze from Pupil"):
-            client.latest(clock.now_s())
+
+        def lost() -> bool:
+            try:
+                client.latest(clock.now_s())
+            except TrackerLost as exc:
+                assert "no gaze from Pupil" in str(exc)
+                return True
+            return False
+
+        wait_until(lost, what="TrackerLost after the server stopped")
     finally:
         client.close()
         server.stop()
@@ -68,10 +77,17 @@ def test_session_stops_cleanly_when_pupil_disconnects_mid_trial(tmp_path: Path) 
     data = tmp_path / "data"
     options = SessionOptions(participant="P1", seed=3, tracker=f"pupil:127.0.0.1:{server.port}", clock="real",
                              data_root=data, progress=False, render="cameras")
-    import threading
+    # the tracker disconnects once 3 trials are durable (an event, not a wall-clock moment)
+    real_append = SessionStore.append_trial
 
-    threading.Timer(1.0, server.stop).start()  # about 4 trials in, mid-trial
-    outcome = run_session(protocol, compile_schedule, options)
+    def append_then_disconnect(self: SessionStore, row, frames) -> None:
+        real_append(self, row, frames)
+        if int(row["trial"]) == 2:
+            server.stop()
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(SessionStore, "append_trial", append_then_disconnect)
+        outcome = run_session(protocol, compile_schedule, options)
     assert outcome.status == "tracker_lost"
     assert "no gaze from Pupil" in outcome.message and "discarded" in outcome.message
     assert outcome.exit_code == 3
@@ -84,11 +100,12 @@ def test_session_stops_cleanly_when_pupil_disconnects_mid_trial(tmp_path: Path) 
     fresh = frames[frames["gaze_valid"]]
     # gaze counts as live up to the 0.1 s staleness limit, applied when the frame takes the sample;
     # sample_age_s is measured later, at flip, so it may exceed the limit by that frame's own time
-    frame_time_s = fresh["submit_s"] - fresh["render_start_s"]
+    # the sample was taken after the previous frame's submit, so age <= limit + time since that submit
+    # (typical ages are durations: benchmarks/bench_session_latency.py)
+    since_previous_s = frames["submit_s"].diff()
     assert len(fresh) > 50 and (fresh["sample_age_s"] >= 0).all()
-    assert (fresh["sample_age_s"] <= 0.1 + frame_time_s + 0.002).all()
-    assert fresh["sample_age_s"].median() < 0.05  # while the server runs, a few ms old
-    assert fresh["sample_age_s"].median() < 0.02
+    later = fresh.index[fresh.index > 0]
+    assert (fresh.loc[later, "sample_age_s"] <= 0.1 + since_previous_s[later] + 1e-9).all()
     # trials finished after the server went silent (before the 1 s loss limit) hold the last gaze, flagged
     held = frames[frames["gaze_held"]]
     assert held[["fixation_x_m", "fixation_y_m", "fixation_z_m"]].notna().all().all()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +17,7 @@ from psyop.session.runner import SessionOptions, run_session
 
 def test_simulate_all_five_studies_reduced(tmp_path: Path) -> None:
     data = tmp_path / "data"
-    start = time.perf_counter()
     assert cli_main(["simulate", "--data", str(data), "--protocols", str(PROTOCOLS), "--participants", "1", "--jobs", "2"]) == 0
-    elapsed = time.perf_counter() - start
     description = json.loads((data / "dataset_description.json").read_text())
     assert description["simulated"] is True
     assert sorted(description["studies"]) == ["detection", "discrimination", "egocentric", "ordinal", "realism"]
@@ -36,8 +33,7 @@ def test_simulate_all_five_studies_reduced(tmp_path: Path) -> None:
         assert frames["image_ok"].all()
         assert 1 <= frames["image_checked"].sum() <= 2  # two images (one stereo frame or two mono) per session
         assert meta["rendering"].startswith("images")
-    # 5 sessions of 45-225 trials each; the full paper-size run is in benchmarks/bench_session_latency.py
-    assert elapsed < 60
+    # its run time is a duration: the full paper-size run is timed in benchmarks/bench_session_latency.py
     # running it again finds everything complete and does no work
     assert cli_main(["simulate", "--data", str(data), "--protocols", str(PROTOCOLS), "--participants", "1", "--jobs", "1"]) == 0
 
