@@ -24,6 +24,7 @@ from psyop.rendering.frame_check import FrameChecker, summarise_image
 from psyop.rendering.renderer import create_headless_context
 from psyop.schedule import compile_schedule
 from psyop.session.phases import PhaseSpec
+from psyop.session.plan import compile_plan
 from psyop.session.scene_renderer import SceneRenderer
 
 REPO = Path(__file__).resolve().parents[2]
@@ -63,7 +64,7 @@ def test_frame_check_matches_the_full_readback_and_reads_back_a_small_fraction(c
 
 def test_a_session_frame_is_checked_without_reading_the_frame_back(monkeypatch: pytest.MonkeyPatch) -> None:
     protocol = load_protocol(REPO / "protocols" / "detection.yaml")
-    renderer = SceneRenderer(protocol, VIVE_PRO, IPD_M, NC_M, scale=0.25)
+    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=IPD_M), scale=0.25)
 
     def no_readback(*_a, **_k):
         raise AssertionError("the whole frame was read back")
@@ -91,7 +92,7 @@ def test_image_surfaces_are_decoded_once_per_session(tmp_path: Path, monkeypatch
     decoded = []
     real_imread = mpimg.imread
     monkeypatch.setattr(mpimg, "imread", lambda p, *a, **k: decoded.append(p) or real_imread(p, *a, **k))
-    renderer = SceneRenderer(protocol, VIVE_PRO, IPD_M, NC_M, scale=0.1)
+    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=IPD_M), scale=0.1)
     try:
         row = compile_schedule(protocol, 1).iloc[0].to_dict()
         interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1")
