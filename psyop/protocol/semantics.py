@@ -287,6 +287,14 @@ class _Checker:
             self.factor_exists(observer.level_column, path + ("level_column",), numeric=True)
             if observer.threshold_offset_column is not None:
                 self.factor_exists(observer.threshold_offset_column, path + ("threshold_offset_column",), numeric=True)
+        elif observer.kind == "ordinal_accuracy":
+            self.check_ordinal_observer(observer, path)
+        elif observer.kind == "pairwise_preference":
+            response = self.p.response
+            if response.pair_factor in self.factors:
+                modes = {m for level in self.factors[response.pair_factor].all_levels() for m in str(level).split("|")}
+                for mode in sorted(modes - set(observer.strength)):
+                    self.add(path + ("strength",), f"no strength for mode '{mode}'; add '{mode}: 1.0' under strength")
         elif observer.kind == "reach":
             response = self.p.response
             if response.rendering_factor in self.factors:
@@ -294,6 +302,29 @@ class _Checker:
                 for level in levels:
                     if level not in observer.by_condition:
                         self.add(path + ("by_condition",), f"no reach model for rendering '{level}'; add it")
+
+
+    def check_ordinal_observer(self, observer: Any, path: tuple[Any, ...]) -> None:
+        """p_correct must give a probability for every (mode, separation) a trial can have."""
+        response = self.p.response
+        if isinstance(response.mode, ModeFromFactor):
+            if response.mode.factor not in self.factors:
+                return
+            modes = [str(m) for m in self.factors[response.mode.factor].all_levels()]
+        else:
+            modes = [response.mode]
+        if response.separation_factor not in self.factors:
+            return
+        separations = self.factors[response.separation_factor].all_levels()
+        for mode in modes:
+            given = observer.p_correct.get(mode)
+            if given is None:
+                self.add(path + ("p_correct",), f"no p_correct for mode '{mode}'; add '{mode}: {{separation: p}}'")
+                continue
+            for separation in separations:
+                if not any(_same(separation, key) for key in given):
+                    self.add(path + ("p_correct", mode), f"no p_correct for {response.separation_factor} = "
+                                                         f"{separation} in mode '{mode}'; add '{separation}: p'")
 
 
 def _same(a: Any, b: Any) -> bool:

@@ -25,7 +25,7 @@ from psyop.optics.display import DisplayProfile
 from psyop.optics.rig import EyeRig
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
-from psyop.protocol.response import ReachResponse
+from psyop.protocol.response import LeftRightNearerResponse, ReachResponse
 from psyop.protocol.scene import FixationTarget
 from psyop.protocol.trial import Blank, DriftRecalibration, Interval, ResponsePhase
 from psyop.session.phases import PhaseSpec, mode_for
@@ -108,7 +108,13 @@ class SessionPlan:
         return mode_for(phase, row)
 
     def observer_params(self) -> dict[str, Any] | None:
-        return None if self.observer is None else self.observer.model_dump()
+        """The simulated observer's parameters, with the schedule columns it reads."""
+        if self.observer is None:
+            return None
+        params = self.observer.model_dump()
+        if isinstance(self.protocol.response, LeftRightNearerResponse):
+            params["separation_column"] = self.protocol.response.separation_factor
+        return params
 
     def metadata(self) -> dict[str, Any]:
         """The plan as session.json records it."""

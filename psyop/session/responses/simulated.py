@@ -117,9 +117,11 @@ class OrdinalAccuracy(SimulatedObserver):
                 self.table[(str(record["mode"]), round(float(record["separation_D"]), 6))] = float(record["p"])
         sd = float(_get(params, "between_subject_sd", 0.0))
         self.participant_shift = float(self._participant_rng.normal(0.0, sd)) if sd > 0 else 0.0
+        # the response's separation factor (the session plan passes its name)
+        self.separation_column = str(_get(params, "separation_column", "separation_D"))
 
     def p_correct(self, row: Mapping[str, Any]) -> float:
-        key = (str(row["mode"]), round(float(row["separation_D"]), 6))
+        key = (str(row["mode"]), round(float(row[self.separation_column]), 6))
         if key not in self.table:
             raise UserError(f"observer: no p_correct for mode={key[0]!r}, separation_D={key[1]}", "protocol observer")
         return float(np.clip(self.table[key] + self.participant_shift, 0.0, 1.0))

@@ -1,0 +1,90 @@
+"""Generated protocols, end to end (issue 9, item 5).
+
+Property: a protocol from the whole language either validates, compiles into a session plan,
+runs headless (simulated tracker and observer, virtual clock, camera-only frames), finalises,
+loads with psyop.statistics.dataset.load_dataset and goes through the analysis function of its
+response kind -- or validation refuses it with a UserError located at file:line:column. There is
+no third outcome.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from generated_protocols import TEXTURE, protocols
+from hypothesis import HealthCheck, event, given, settings
+
+from psyop.errors import UserError
+from psyop.protocol import load_protocol
+from psyop.schedule import compile_schedule
+from psyop.session.plan import compile_plan
+from psyop.session.runner import SessionOptions, run_session
+from psyop.statistics.dataset import load_dataset
+
+N_EXAMPLES = int(__import__("os").environ.get("PSYOP_GENERATED_EXAMPLES", "200"))
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    import matplotlib.image as mpimg
+
+    root = tmp_path_factory.mktemp("generated")
+    mpimg.imsave(root / TEXTURE, np.random.default_rng(0).uniform(size=(8, 8, 3)))
+    return root
+
+
+def analyse(kind: str, trials: pd.DataFrame, protocol) -> pd.DataFrame | dict:
+    """The analysis function of each response kind (the one the paper's analysis scripts use)."""
+    if kind == "two_interval":
+        from psyop.statistics.psychometric import FitOptions, fit_psychometric_table
+
+        return fit_psychometric_table(trials, level_column=protocol.response.level_factor, group_columns=("participant",),
+                                      options=FitOptions(n_bootstrap=10, estimate_eta=False))
+    if kind == "left_right_nearer":
+        from psyop.statistics.binomial import binomial_test
+
+        answered = trials[trials["correct"].notna()]
+        return binomial_test(int(answered["correct"].astype(bool).sum()), len(answered), 0.5)
+    if kind == "pairwise_preference":
+        from psyop.statistics.binomial import pairwise_preferences
+
+        return pairwise_preferences(trials)
+    from psyop.statistics.regression import linear_fits_by
+
+    return linear_fits_by(trials, "target_fraction", "reach_m", "rendering")
+
+
+@settings(max_examples=N_EXAMPLES, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.large_base_example])
+@given(generated=protocols())
+def test_a_generated_protocol_runs_end_to_end_or_is_refused_with_its_location(workdir: Path, generated) -> None:
+    text, mistake = generated
+    path = workdir / "generated.yaml"
+    path.write_text(text)
+    try:
+        protocol = load_protocol(path)
+    except UserError as error:
+        event(f"refused ({mistake or 'no planted mistake'})")
+        assert re.match(rf"^{re.escape(str(path))}:\d+:\d+$", error.location or ""), (error.location, str(error))
+        return
+    assert mistake is None, f"a protocol with mistake {mistake!r} validated:\n{text}"
+    event(f"ran: {protocol.response.kind}")
+    plan = compile_plan(protocol)
+    assert plan.response.protocol_kind == protocol.response.kind
+    root = workdir / "data"
+    shutil.rmtree(root, ignore_errors=True)
+    options = SessionOptions(participant="G1", seed=1, data_root=root, progress=False, fsync=False, render="cameras")
+    outcome = run_session(protocol, compile_schedule, options)
+    assert outcome.status == "complete", outcome.message
+    meta = json.loads((root / "generated" / "sub-G1" / "ses-1" / "session.json").read_text())
+    assert meta["status"] == "complete" and meta["ipd_m"] == plan.rig.ipd_m
+    dataset = load_dataset(root, "generated")
+    assert dataset.simulated and len(dataset.trials) == len(compile_schedule(protocol, 1)) - protocol.design.practice_trials
+    result = analyse(protocol.response.kind, dataset.trials, protocol)
+    assert len(result) > 0
