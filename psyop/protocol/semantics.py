@@ -17,8 +17,8 @@ from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
-from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, ReachTarget,
-                                  SinusoidalBorder, TargetField)
+from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, PinkNoiseSurface,
+                                  ReachTarget, Room, SinusoidalBorder, TargetField)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
 
 #: Random sequential placement of equal discs jams at about 54.7 % area coverage. Measured for
@@ -143,6 +143,13 @@ class _Checker:
                 surface = getattr(item, surface_name, None)
                 if isinstance(surface, ImageSurface):
                     self.check_image(surface, path + (surface_name, "path"))
+                if isinstance(surface, PinkNoiseSurface) and surface.exponent != 1.0:
+                    self.add(path + (surface_name, "exponent"), f"exponent {surface.exponent:g} is not rendered: only 1/f "
+                                                                "noise (exponent: 1) is implemented; use 1 or white_noise")
+            if isinstance(item, Room) and item.table_height_m is not None and item.table_height_m >= item.height_m:
+                self.add(path + ("table_height_m",), "the table is as high as the room; make table_height_m less than height_m")
+            if isinstance(item, Room) and item.eye_height_m >= item.height_m:
+                self.add(path + ("eye_height_m",), "the eyes are above the ceiling; make eye_height_m less than height_m")
             if isinstance(item, TargetField):
                 self.check_target_field(item, path, conditions)
             if isinstance(item, SinusoidalBorder):

@@ -212,12 +212,14 @@ def room_with_pencil(
     room_half_width_m: float = 2.0,
     room_depth_m: float = 4.0,
     eye_height_m: float = 1.2,
+    room_height_m: float = 2.6,
+    table_height_m: float | None = 0.75,
 ) -> tuple[Primitive, ...]:
     """A simple room (floor, walls, ceiling, back wall, a table and a few objects at other
-    depths) and a pencil-like reach target: a 15 cm x 7 mm yellow bar with a dark tip,
+    depths; ``table_height_m`` None: no table) and a pencil-like reach target: a 15 cm x 7 mm yellow bar with a dark tip,
     floating ``pencil_distance_m`` straight ahead at ``pencil_height_m`` relative to the eyes."""
     floor_y = -eye_height_m
-    ceil_y = 2.6 - eye_height_m
+    ceil_y = room_height_m - eye_height_m
     cy = (floor_y + ceil_y) / 2
     hh = (ceil_y - floor_y) / 2
     zc = -room_depth_m / 2
@@ -233,13 +235,15 @@ def room_with_pencil(
         Primitive(Shape.RECT, (0, cy, -room_depth_m), (room_half_width_m, 0, 0), (0, hh, 0),
                   NoiseTexture(NoiseKind.PINK, seed=12, size_px=128, mean=0.6, contrast=0.15, repeats=2.0),
                   name="back_wall"),
-        Primitive(Shape.RECT, (0, floor_y + 0.75, -1.2), (0.6, 0, 0), (0, 0, 0.4), Solid((0.45, 0.3, 0.2)),
+        Primitive(Shape.RECT, (0, floor_y + table_height_m, -1.2), (0.6, 0, 0), (0, 0, 0.4), Solid((0.45, 0.3, 0.2)),
                   name="table_top"),
-        Primitive(Shape.DISC, (-0.3, floor_y + 0.9, -1.1), (0.06, 0, 0), (0, 0.06, 0), Solid((0.2, 0.4, 0.8)),
+        Primitive(Shape.DISC, (-0.3, floor_y + (table_height_m or 0.0) + 0.15, -1.1), (0.06, 0, 0), (0, 0.06, 0), Solid((0.2, 0.4, 0.8)),
                   name="plate"),
-        Primitive(Shape.RECT, (0.35, floor_y + 0.9, -1.3), (0.04, 0, 0), (0, 0.15, 0), Solid((0.1, 0.5, 0.2)),
+        Primitive(Shape.RECT, (0.35, floor_y + (table_height_m or 0.0) + 0.15, -1.3), (0.04, 0, 0), (0, 0.15, 0), Solid((0.1, 0.5, 0.2)),
                   name="bottle"),
     ]
+    if table_height_m is None:  # no table: nothing stands on it either
+        prims = [p for p in prims if p.name not in ("table_top", "plate", "bottle")]
     pencil_z = -pencil_distance_m
     prims += [
         Primitive(Shape.RECT, (0, pencil_height_m, pencil_z), (0.065, 0, 0), (0, 0.0035, 0),

@@ -20,6 +20,8 @@ def summarise(protocol: Protocol) -> str:
     lines = [f"{protocol.study.name}: {protocol.study.title}"]
     if protocol.study.citation:
         lines.append(f"  citation: {protocol.study.citation}")
+    if protocol.study.description:
+        lines.append(f"  description: {protocol.study.description}")
     profile = display.profile if isinstance(display.profile, str) else f"{display.profile.name} (inline)"
     eye = display.eye_model if isinstance(display.eye_model, str) else f"NC = {display.eye_model.nc_mm} mm"
     ipd = display.ipd if isinstance(display.ipd, str) else f"{display.ipd.mm} mm"
@@ -42,7 +44,7 @@ def summarise(protocol: Protocol) -> str:
             assert factor.levels_by is not None
             text = "; ".join(f"{factor.depends_on}={format_level(k)}: "
                              + ", ".join(format_level(v) for v in factor.levels_for(k)) for k in factor.levels_by)
-        lines.append(f"    {name}: {text}")
+        lines.append(f"    {name}: {text}" + (f"  ({factor.description})" if factor.description else ""))
     lines.append(f"  conditions: {len(conditions)} x {design.repetitions} repetitions"
                  + (f" + {design.practice_trials} practice" if design.practice_trials else "")
                  + f" = {trial_count(protocol)} trials")

@@ -25,7 +25,7 @@ from psyop.optics.display import DisplayProfile
 from psyop.optics.rig import EyeRig
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
-from psyop.protocol.response import LeftRightNearerResponse, ReachResponse
+from psyop.protocol.response import LeftRightNearerResponse, ReachResponse, TwoIntervalResponse
 from psyop.protocol.scene import FixationTarget
 from psyop.protocol.trial import Blank, DriftRecalibration, Interval, ResponsePhase
 from psyop.session.phases import PhaseSpec, mode_for
@@ -74,12 +74,13 @@ class ResponsePlan:
     timeout_s: float | None = None
     display_off: bool = False
     average_last_samples: int = 10
+    level_factor: str | None = None  # two_interval: the factor whose level the observer must detect
     phase: PhaseSpec = field(default_factory=lambda: PhaseSpec("response", 0.0, "blank", "none"))
 
     def as_dict(self) -> dict[str, Any]:
         return {"kind": self.kind.value, "protocol_kind": self.protocol_kind, "question": self.question,
                 "prompt": self.prompt, "timeout_s": self.timeout_s, "display_off": self.display_off,
-                "average_last_samples": self.average_last_samples}
+                "average_last_samples": self.average_last_samples, "level_factor": self.level_factor}
 
 
 @dataclass(frozen=True)
@@ -184,7 +185,7 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
 
     spec = protocol.display
     if isinstance(spec.ipd, FixedIpd):
-        ipd_m, source = spec.ipd.ipd_m, "protocol"
+        ipd_m, source = spec.ipd.mm / 1000.0, "protocol"
     elif tracker_ipd_m is not None:
         ipd_m, source = float(tracker_ipd_m), "tracker"
     else:
@@ -202,6 +203,7 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
         timeout_s=float(response_phase.timeout_s) if response_phase is not None and response_phase.timeout_s else None,
         display_off=display_off,
         average_last_samples=int(r.average_last_samples) if isinstance(r, ReachResponse) else 10,
+        level_factor=r.level_factor if isinstance(r, TwoIntervalResponse) else None,
         phase=PhaseSpec("response", 0.0, "off" if display_off else "blank", "none"),
     )
     return SessionPlan(study=protocol.study.name, protocol=protocol, phases=phases, response=response,

@@ -149,7 +149,9 @@ def _fixation(item: ps.FixationTarget, values: Mapping[str, Any], time_s: float,
 
 def _room(item: ps.Room) -> list[Primitive]:
     prims = builders.room_with_pencil(pencil_distance_m=1.0, room_half_width_m=float(item.width_m) / 2.0,
-                                      room_depth_m=float(item.depth_m), eye_height_m=float(item.eye_height_m))
+                                      room_depth_m=float(item.depth_m), eye_height_m=float(item.eye_height_m),
+                                      room_height_m=float(item.height_m),
+                                      table_height_m=None if item.table_height_m is None else float(item.table_height_m))
     return [p for p in prims if not p.name.startswith("pencil")]
 
 

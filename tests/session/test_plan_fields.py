@@ -244,3 +244,24 @@ def test_reach_levels_with_any_names_run(tmp_path: Path) -> None:
     trials = pd.read_parquet(tmp_path / "data" / "egocentric" / "sub-P1" / "ses-1" / "trials.parquet")
     assert set(trials["rendering"]) == {"with_parallax", "without"}
     assert trials["reach_m"].notna().all()
+
+
+# -- scene fields that were validated and then ignored -------------------------------------------------
+def test_room_height_and_table_height_are_built(tmp_path: Path) -> None:
+    from psyop.stimulus import build_scene
+
+    path = _variant(tmp_path, "egocentric", ("    height_m: 2.6 ", "    height_m: 3.1 "),
+                    ("table_height_m: 0.75", "table_height_m: 0.9"))
+    protocol = load_protocol(path)
+    row = compile_schedule(protocol, 1).iloc[0].to_dict()
+    scene = build_scene(protocol, row, 0.0, (0.03, 0.0, 0.0))
+    by_name = {p.name: p for p in scene.primitives}
+    eye_height = 1.2
+    assert by_name["ceiling"].centre_m[1] == pytest.approx(3.1 - eye_height)
+    assert by_name["table_top"].centre_m[1] == pytest.approx(0.9 - eye_height)
+
+
+def test_pink_noise_exponent_other_than_one_is_refused(tmp_path: Path) -> None:
+    path = _variant(tmp_path, "ordinal", ("left: {kind: one_over_f, exponent: 1,", "left: {kind: one_over_f, exponent: 2,"))
+    with pytest.raises(UserError, match="only 1/f"):
+        load_protocol(path)

@@ -1,0 +1,110 @@
+"""Who uses each field of the protocol language (a protocol field is used or refused).
+
+Every field of every protocol model is listed here with the part of psyop that reads it:
+
+- ``plan``: the session plan compiler (psyop.session.plan);
+- ``schedule``: the trial-table compiler (psyop.schedule.compile);
+- ``stimulus``: the scene builder (psyop.stimulus.build);
+- ``display``: display profile / eye model resolution (psyop.protocol.display -> psyop.optics);
+- ``observer``: the simulated observers (psyop.session.responses.simulated; the plan hands them
+  the whole ``observer:`` section);
+- ``summary``: ``psyop show`` and session.json's copy of the protocol text (descriptive fields);
+- ``validation``: a field that only selects or checks (discriminators, the format version);
+- ``refused``: validated structurally, then refused with its file:line (not available yet).
+
+tests/protocol/test_protocol_fields.py walks the pydantic schema and checks that every field is
+listed, and that each listed field's name appears in its user's source.
+"""
+
+from __future__ import annotations
+
+USERS: dict[str, tuple[str, ...]] = {
+    "plan": ("psyop/session/plan.py",),
+    "schedule": ("psyop/schedule/compile.py", "psyop/protocol/conditions.py", "psyop/protocol/design.py"),
+    "stimulus": ("psyop/stimulus/build.py", "psyop/protocol/scene.py"),
+    "display": ("psyop/protocol/display.py", "psyop/optics/display.py"),
+    "observer": ("psyop/session/responses/simulated.py",),
+    "summary": ("psyop/schedule/summary.py", "psyop/protocol/conditions.py"),
+    "validation": ("psyop/protocol/semantics.py", "psyop/protocol/model.py", "psyop/protocol/scene.py",
+                   "psyop/protocol/trial.py", "psyop/protocol/response.py", "psyop/protocol/observer.py",
+                   "psyop/protocol/design.py", "psyop/protocol/display.py"),
+    "refused": ("psyop/protocol/semantics.py",),
+}
+
+_SCENE_COMMON = {"id": "stimulus", "kind": "validation"}
+
+
+def _scene(**fields: str) -> dict[str, str]:
+    return {**_SCENE_COMMON, **fields}
+
+
+FIELD_USERS: dict[str, dict[str, str]] = {
+    "Protocol": {"psyop_protocol": "validation", "study": "plan", "display": "plan", "eyes": "plan", "scene": "stimulus",
+                 "trial": "plan", "design": "schedule", "response": "plan", "observer": "plan"},
+    "StudyInfo": {"name": "plan", "title": "summary", "citation": "summary", "description": "summary"},
+    "DisplaySpec": {"profile": "display", "eye_model": "display", "ipd": "plan"},
+    "InlineDisplayProfile": {k: "display" for k in ("name", "width_px", "height_px", "refresh_hz", "horizontal_fov_deg",
+                                                      "vertical_fov_deg", "tan_left", "tan_right", "tan_bottom",
+                                                      "tan_top", "d_m")},
+    "InlineEyeModel": {"nc_mm": "display", "name": "display"},
+    "FixedIpd": {"mm": "plan"},
+    "Disc": _scene(size_deg="stimulus", depth="stimulus", surface="stimulus", centre_deg="stimulus"),
+    "Depth": {"D": "stimulus", "m": "stimulus", "factor": "stimulus"},
+    "SolidSurface": {"kind": "validation", "rgb": "stimulus"},
+    "WhiteNoiseSurface": {"kind": "validation", "grain_deg": "stimulus", "mean": "stimulus", "contrast": "stimulus",
+                          "seed": "stimulus"},
+    # exponent: only 1 (1/f) is rendered; other values are refused in semantics.py
+    "PinkNoiseSurface": {"kind": "validation", "exponent": "validation", "mean": "stimulus", "contrast": "stimulus",
+                         "seed": "stimulus"},
+    "ImageSurface": {"kind": "validation", "path": "stimulus", "tile_deg": "stimulus"},
+    "Quad": _scene(width_deg="stimulus", height_deg="stimulus", depth="stimulus", surface="stimulus",
+                   centre_deg="stimulus"),
+    "SinusoidalBorder": _scene(size_deg="stimulus", amplitude_deg="stimulus", period_deg="stimulus",
+                               orientation_deg="stimulus", phase="schedule", left="stimulus", right="stimulus",
+                               near_depth="stimulus", far_depth="stimulus", near_side="stimulus"),
+    "Aperture": _scene(diameter_deg="stimulus", surround_rgb="stimulus", ignores_ocular_parallax="validation"),
+    "GridPlanes": _scene(planes="stimulus", half_width_m="stimulus", half_height_m="stimulus", near_m="stimulus",
+                         far_m="stimulus", spacing_m="stimulus", line_width_deg="stimulus", rgb="stimulus",
+                         background_rgb="stimulus"),
+    "TargetField": _scene(count="stimulus", size_deg="stimulus", near="stimulus", far="stimulus", field_deg="stimulus",
+                          min_gap_deg="stimulus", surface="stimulus"),
+    "FixationTarget": _scene(size_deg="stimulus", depth="stimulus", rgb="stimulus", centre_rgb="stimulus",
+                             centre_deg="stimulus", path="plan"),
+    "CirclePath": {"kind": "validation", "eccentricity_deg": "plan", "speed_deg_s": "plan", "start": "schedule",
+                   "direction": "schedule"},
+    "Room": _scene(width_m="stimulus", depth_m="stimulus", height_m="stimulus", table_height_m="stimulus",
+                   eye_height_m="stimulus"),
+    "ReachTarget": _scene(object="stimulus", size_m="stimulus", distance_fraction="stimulus", height_m="stimulus"),
+    "FactorRef": {"factor": "stimulus"},
+    "TrialSpec": {"phases": "plan"},
+    "DriftRecalibration": {"kind": "validation", "target_size_deg": "plan", "expected_s": "plan"},
+    "Interval": {"kind": "validation", "duration_s": "plan", "min_duration_s": "plan", "expected_s": "plan",
+                 "show": "plan"},
+    "Blank": {"kind": "validation", "duration_s": "plan", "expected_s": "plan", "show": "plan", "mode": "plan",
+              "display_off": "plan"},
+    "ResponsePhase": {"kind": "validation", "expected_s": "summary", "timeout_s": "plan", "prompt": "plan",
+                      "display_off": "plan"},
+    "Design": {"factors": "schedule", "repetitions": "schedule", "practice_trials": "schedule",
+               "randomisation": "schedule"},
+    "Factor": {"levels": "schedule", "depends_on": "schedule", "levels_by": "schedule", "adaptive": "refused",
+               "description": "summary"},
+    "SteppedLevels": {"start": "schedule", "step": "schedule", "count": "schedule"},
+    # adaptive levels: refused in semantics.py (ADAPTIVE_PROCEDURES) until a procedure exists
+    "AdaptiveLevel": {"procedure": "refused", "start": "refused", "min": "refused", "max": "refused"},
+    "Randomisation": {"kind": "schedule", "by": "schedule", "block_order": "schedule"},
+    "TwoIntervalResponse": {"kind": "plan", "question": "plan", "test": "schedule", "reference": "schedule",
+                            "level_factor": "plan", "order": "schedule"},
+    "IntervalSpec": {"mode": "schedule", "set": "schedule"},
+    "ModeFromFactor": {"factor": "schedule"},
+    "LeftRightNearerResponse": {"kind": "plan", "question": "plan", "mode": "schedule", "separation_factor": "plan",
+                                "near_side": "schedule"},
+    "PairwisePreferenceResponse": {"kind": "plan", "question": "plan", "pair_factor": "schedule", "order": "schedule"},
+    "ReachResponse": {"kind": "plan", "question": "plan", "rendering_factor": "schedule", "target_factor": "schedule",
+                      "modes": "schedule", "average_last_samples": "plan"},
+    "Psychometric2afc": {k: "observer" for k in ("kind", "level_column", "threshold_D", "width_D", "lapse",
+                                                 "threshold_slope", "threshold_offset_column", "between_subject_sd_D")},
+    "OrdinalAccuracy": {"kind": "observer", "p_correct": "observer", "between_subject_sd": "observer"},
+    "PairwisePreference": {"kind": "observer", "strength": "observer"},
+    "Reach": {"kind": "observer", "arm_reach_m": "observer", "arm_reach_sd_m": "observer", "by_condition": "observer"},
+    "ReachCondition": {"slope": "observer", "intercept_m": "observer", "noise_sd_m": "observer"},
+}
