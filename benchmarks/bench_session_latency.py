@@ -65,7 +65,7 @@ def _frame_path_ms(with_camera: bool, n: int, with_pose: bool = False) -> np.nda
                      gaze=_LiveSource(clock), responses=None, renderer=renderer, display=HeadlessDisplay(clock),
                      store=None, config=LoopConfig(progress=False),  # type: ignore[arg-type]
                      pose=SimulatedPose(seed=0) if with_pose else None)
-    phase = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1")
+    phase = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)
     row = {"trial": 0, "mode_interval1": "ocular"}
     frames = FrameRecorder()
     for i in range(50):  # warm-up

@@ -22,3 +22,27 @@ def interval_values(row: Mapping[str, Any], interval: int) -> dict[str, Any]:
         if str(key).endswith(suffix):
             values[str(key)[: -len(suffix)]] = value
     return values
+
+
+#: The rendering modes a ``mode_interval<k>`` column may hold.
+RENDERING_MODES: tuple[str, ...] = ("conventional", "ocular", "reversed")
+
+
+def mode_column(interval: int) -> str:
+    """The schedule column holding interval ``interval``'s rendering mode (every response kind)."""
+    if interval < 1:
+        raise ValueError(f"intervals are numbered from 1, got {interval}")
+    return f"mode_interval{interval}"
+
+
+def interval_mode(row: Mapping[str, Any], interval: int) -> str:
+    """The rendering mode of interval ``interval`` (1-based) of a trial row: the one
+    interval-to-mode rule (the schedule compiler has already applied a reach study's ``modes:``)."""
+    column = mode_column(interval)
+    if column not in row:
+        raise KeyError(f"trial row has no {column} column (schedules from psyop.schedule.compile_schedule have it)")
+    value = str(row[column])
+    if value not in RENDERING_MODES:
+        raise ValueError(f"trial {row.get('trial')}: {column} is {value!r}, not a rendering mode "
+                         f"({', '.join(RENDERING_MODES)})")
+    return value

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from psyop.optics.nodal import RenderingMode
+from psyop.schedule.rows import interval_mode
 
 RENDERING_MODES: tuple[str, ...] = tuple(m.value for m in RenderingMode)
 
@@ -42,6 +43,9 @@ class PhaseSpec:
             raise ValueError(f"phase {self.name!r}: show must be cross, stimulus, blank or off, got {self.show!r}")
         if self.mode not in RENDERING_MODES:
             raise ValueError(f"phase {self.name!r}: unknown rendering mode {self.mode!r}")
+        if self.mode_column is not None and (self.interval < 1 or self.mode_column != f"mode_interval{self.interval}"):
+            raise ValueError(f"phase {self.name!r}: mode_column must be mode_interval<interval> with interval >= 1, "
+                             f"got {self.mode_column!r} and interval {self.interval}")
 
     @property
     def renders(self) -> bool:
@@ -58,12 +62,9 @@ def mode_for(phase: PhaseSpec, row: Mapping[str, Any]) -> str:
 
     An interval's mode is the schedule's ``mode_interval<k>`` column, which the schedule
     compiler fills for every response kind (a reach study's ``modes:`` mapping is applied there);
-    every other phase has its fixed ``mode``.
+    every other phase has its fixed ``mode`` (psyop.schedule.rows.interval_mode, also used by
+    psyop.stimulus).
     """
     if phase.mode_column is None:
         return phase.mode
-    value = str(row[phase.mode_column])
-    if value not in RENDERING_MODES:
-        raise ValueError(f"trial {row.get('trial')}: column {phase.mode_column} is {value!r}, not a rendering mode "
-                         f"({', '.join(RENDERING_MODES)})")
-    return value
+    return interval_mode(row, phase.interval)

@@ -28,6 +28,7 @@ from psyop.protocol.observer import Observer
 from psyop.protocol.response import LeftRightNearerResponse, ReachResponse, TwoIntervalResponse
 from psyop.protocol.scene import FixationTarget
 from psyop.protocol.trial import Blank, DriftRecalibration, Interval, ResponsePhase
+from psyop.schedule.rows import mode_column
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.session.responses.base import ResponseKind
 
@@ -165,7 +166,7 @@ def compile_phases(protocol: Protocol, gaze: str) -> tuple[tuple[PhaseSpec, ...]
             n_interval += 1
             primitives = None if phase.show == "all" else tuple(phase.show)
             out.append(PhaseSpec(f"interval{n_interval}", _duration_s(phase), "stimulus", gaze,
-                                 mode_column=f"mode_interval{n_interval}", primitives=primitives, interval=n_interval))
+                                 mode_column=mode_column(n_interval), primitives=primitives, interval=n_interval))
         elif isinstance(phase, Blank):
             if phase.display_off:
                 out.append(PhaseSpec("display_off", _duration_s(phase), "off", "none", mode=phase.mode))

@@ -192,18 +192,14 @@ def interval_phases(protocol: Any) -> list[Any]:
 
 
 def interval_mode(protocol: Any, row: Mapping[str, Any], interval: int) -> str:
-    """The rendering mode of interval ``interval`` (1-based) of a trial row."""
-    values = interval_values(row, interval)
-    if "mode" in values and str(values["mode"]) in ps.RENDERING_MODES:
-        return str(values["mode"])
-    for key in (("mode_a", "mode_b")[interval - 1:interval] if interval in (1, 2) else ()):
-        if key in row:
-            return str(row[key])
-    if "rendering" in row:
-        modes = getattr(protocol.response, "modes", {}) or {}
-        if str(row["rendering"]) in modes:
-            return str(modes[str(row["rendering"])])
-    raise UserError(f"cannot tell the rendering mode of interval {interval} from the trial row; pass --mode")
+    """The rendering mode of interval ``interval`` (1-based) of a trial row
+    (:func:`psyop.schedule.rows.interval_mode`, the one interval-to-mode rule)."""
+    from psyop.schedule.rows import interval_mode as rule
+
+    try:
+        return rule(row, interval)
+    except (KeyError, ValueError) as error:
+        raise UserError(f"cannot tell the rendering mode of interval {interval}: {error}; pass --mode") from None
 
 
 def build_scene(
