@@ -229,3 +229,19 @@ def test_stereo_scene_is_the_same_for_both_eyes(tmp_path):
     left = build_scene(protocol, row, 0.0, [-0.032, 0.0, 0.0])
     right = build_scene(protocol, row, 0.0, [0.032, 0.0, 0.0])
     assert left == right
+
+
+def test_far_finite_surface_is_not_clipped_by_the_cameras_far_plane(gl_context):
+    """A disc 500 m away (0.002 D) lies beyond the cameras' 100 m far plane; the renderer raises the
+    far clip to the scene, so it is drawn with its exact area."""
+    from psyop.rendering.exact import projected_disc
+
+    disc = frontoparallel_disc(500.0, 2.0, Solid((1.0, 0.0, 0.0)), origin_m=RIGHT_C, name="far")
+    cam = _camera("right", "ocular", (5.0, 0.0))
+    ellipse = projected_disc(cam, disc)
+    crop = _crop(cam, ellipse.centre_px, 24)
+    with Renderer(Scene((disc,)), SETTINGS, ctx=gl_context) as renderer:
+        renderer.render(crop)
+        img = renderer.image()
+    area = _coverage_centroid(img[..., 0] - img[..., 1])[0]
+    assert area == pytest.approx(math.pi * ellipse.radii_px[0] * ellipse.radii_px[1], rel=0.005)
