@@ -42,15 +42,6 @@ class AuditFrame:
                 f"{self.eye} eye, gaze {self.gaze_index} (t = {self.time_s:.3g} s)")
 
 
-def interval_duration_s(phase: Any) -> float:
-    """How long an interval phase lasts: ``duration_s``, else ``min_duration_s`` or ``expected_s``."""
-    for name in ("duration_s", "min_duration_s", "expected_s"):
-        value = getattr(phase, name, None)
-        if value:
-            return float(value)
-    return 1.0
-
-
 def representative_rows(schedule: Any) -> list[dict[str, Any]]:
     """The first trial of each condition, non-practice trials preferred, in schedule order."""
     rows: dict[str, dict[str, Any]] = {}

@@ -1,5 +1,9 @@
 """Render every audited frame of a protocol and check what the participant would see.
 
+The frames come from the session plan (``psyop.session.plan.compile_plan``): its interval
+phases with their modes, durations and ``show:`` lists, its eye rig (eyes, ipd, eye model,
+cameras) and display, so the audit sees what a session would draw.
+
 Checks (each failure is one line naming the primitive, its scene item and the frame):
 
 * **never visible**: a rendered primitive whose visible area is below :data:`MIN_VISIBLE_SAMPLES`
@@ -21,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from psyop.audit.frames import AuditFrame, fixation_point, interval_duration_s, representative_rows
+from psyop.audit.frames import AuditFrame, fixation_point, representative_rows
 from psyop.audit.masks import FrameMeasurer
 from psyop.audit.occlusion import hidden_by
 from psyop.errors import UserError
@@ -87,16 +91,6 @@ def item_of(name: str, item_ids: list[str]) -> str:
     return max(matches, key=len) if matches else name
 
 
-def _eyes(protocol: Any) -> tuple[str, ...]:
-    eyes = str(getattr(protocol, "eyes", "right"))
-    return ("left", "right") if eyes == "stereo" else (eyes,)
-
-
-def _ipd_m(protocol: Any, settings: AuditSettings) -> float:
-    fixed = getattr(protocol.display, "ipd", "tracker")
-    return float(fixed.mm) / 1000.0 if hasattr(fixed, "mm") else settings.ipd_m
-
-
 def _fixation_prefix(protocol: Any) -> str | None:
     from psyop.protocol import scene as ps
 
@@ -106,37 +100,32 @@ def _fixation_prefix(protocol: Any) -> str | None:
     return None
 
 
-def iter_frames(protocol: Any, settings: AuditSettings) -> Iterator[AuditFrame]:
-    """Every audited frame, in order: condition, interval, eye, gaze."""
+def iter_frames(plan: Any, settings: AuditSettings) -> Iterator[tuple[AuditFrame, Any]]:
+    """Every audited frame and its plan phase, in order: condition, interval, eye, gaze."""
     from psyop.schedule import compile_schedule
-    from psyop.stimulus import interval_mode, interval_phases
 
-    schedule = compile_schedule(protocol, settings.seed)
-    phases = interval_phases(protocol)
+    schedule = compile_schedule(plan.protocol, settings.seed)
+    phases = [phase for phase in plan.phases if phase.show == "stimulus"]
     for row in representative_rows(schedule):
-        for interval, phase in enumerate(phases, start=1):
-            mode = interval_mode(protocol, row, interval)
-            duration = interval_duration_s(phase)
-            for eye in _eyes(protocol):
+        for phase in phases:
+            mode = plan.mode_for(phase, row)
+            for eye in plan.eyes:
                 for k in range(settings.gazes):
-                    yield AuditFrame(str(row["condition"]), int(row["trial"]), row, interval, mode, eye, k,
-                                     duration * k / settings.gazes)
+                    yield AuditFrame(str(row["condition"]), int(row["trial"]), row, phase.interval, mode, eye, k,
+                                     float(phase.duration_s) * k / settings.gazes), phase
 
 
 def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir: Path | None = None) -> AuditReport:
     """Render and check every audited frame of ``protocol`` (see the module docstring)."""
-    from psyop.optics.camera import make_eye_camera
-    from psyop.protocol import resolve_display_profile, resolve_eye_model
     from psyop.rendering import RenderSettings
     from psyop.rendering.renderer import create_headless_context
+    from psyop.session.plan import compile_plan
     from psyop.stimulus import build_scene, scene_origin_m
 
-    display = resolve_display_profile(protocol.display)
-    display = dataclasses.replace(display, width_px=max(16, round(display.width_px * settings.scale)),
-                                  height_px=max(16, round(display.height_px * settings.scale)))
-    px_scale = (display.width_px / resolve_display_profile(protocol.display).width_px) ** 2
-    nc_m = resolve_eye_model(protocol.display).nc_m
-    ipd_m = _ipd_m(protocol, settings)
+    plan = compile_plan(protocol, tracker_ipd_m=settings.ipd_m)
+    display = dataclasses.replace(plan.display, width_px=max(16, round(plan.display.width_px * settings.scale)),
+                                  height_px=max(16, round(plan.display.height_px * settings.scale)))
+    px_scale = (display.width_px / plan.display.width_px) ** 2
     item_ids = [str(item.id) for item in protocol.scene]
     fixation_prefix = _fixation_prefix(protocol)
     owns_ctx = ctx is None
@@ -144,12 +133,13 @@ def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir:
     measurer = FrameMeasurer(ctx, RenderSettings(samples_per_axis=settings.samples_per_axis, reuse_tolerance_px=None))
     records: list[FrameRecord] = []
     try:
-        for frame in iter_frames(protocol, settings):
-            centre = np.array([(-0.5 if frame.eye == "left" else 0.5) * ipd_m, 0.0, 0.0])
-            scene = build_scene(protocol, frame.row, frame.time_s, centre, interval=frame.interval, base_dir=base_dir)
+        for frame, phase in iter_frames(plan, settings):
+            centre = plan.rig.centre_m(frame.eye)
+            scene = build_scene(protocol, frame.row, frame.time_s, centre, interval=frame.interval, base_dir=base_dir,
+                                show=phase.primitives)
             origin = scene_origin_m(protocol, centre)
             fixation = fixation_point(scene, fixation_prefix, origin, frame.gaze_index, settings.gazes)
-            camera = make_eye_camera(display, frame.eye, fixation, ipd_m, nc_m, frame.mode)
+            camera = plan.rig.camera(display, frame.eye, fixation, frame.mode)
             image = measurer.colour(scene, camera)
             areas = measurer.visible_areas_px(scene, camera) / px_scale
             names = tuple(p.name for p in scene.primitives)
