@@ -83,8 +83,8 @@ def _rotate_axes(prim: Primitive, angle_deg: float) -> Primitive:
         return prim
     a = math.radians(angle_deg)
     rot = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
-    return Primitive(prim.shape, prim.centre_m, rot @ np.array(prim.half_u_m), rot @ np.array(prim.half_v_m),
-                     prim.material, prim.border, prim.name)
+    return dataclasses.replace(prim, half_u_m=tuple(rot @ np.array(prim.half_u_m)),
+                               half_v_m=tuple(rot @ np.array(prim.half_v_m)))  # keeps at_infinity
 
 
 def _sinusoidal_border(item: ps.SinusoidalBorder, values: Mapping[str, Any], origin: np.ndarray,
