@@ -17,6 +17,7 @@ Conventions (docs/rendering.md):
 from __future__ import annotations
 
 import math
+import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -82,8 +83,8 @@ def _rotate_axes(prim: Primitive, angle_deg: float) -> Primitive:
         return prim
     a = math.radians(angle_deg)
     rot = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
-    return Primitive(prim.shape, prim.centre_m, rot @ np.array(prim.half_u_m), rot @ np.array(prim.half_v_m),
-                     prim.material, prim.border, prim.name)
+    return dataclasses.replace(prim, half_u_m=tuple(rot @ np.array(prim.half_u_m)),
+                               half_v_m=tuple(rot @ np.array(prim.half_v_m)))  # keeps at_infinity
 
 
 def _sinusoidal_border(item: ps.SinusoidalBorder, values: Mapping[str, Any], origin: np.ndarray,
@@ -152,7 +153,7 @@ def _room(item: ps.Room) -> list[Primitive]:
                                       room_depth_m=float(item.depth_m), eye_height_m=float(item.eye_height_m),
                                       room_height_m=float(item.height_m),
                                       table_height_m=None if item.table_height_m is None else float(item.table_height_m))
-    return [p for p in prims if not p.name.startswith("pencil")]
+    return [dataclasses.replace(p, name=f"{item.id}_{p.name}") for p in prims if not p.name.startswith("pencil")]
 
 
 def _reach_target(item: ps.ReachTarget, values: Mapping[str, Any], arm_reach_m: float) -> list[Primitive]:
@@ -220,7 +221,8 @@ def build_scene(
     positions are measured from :func:`scene_origin_m` (this centre for a monocular protocol,
     the head origin for a stereo one, so both eyes get the same scene). Only the primitives the
     interval's ``show:`` lists are built, or those ``show`` lists when given (a blank phase's
-    ``show:``, with interval ``interval``'s factor values).
+    ``show:``, with interval ``interval``'s factor values). Every primitive's name is its scene
+    item's ``id`` or starts with ``<id>_`` (``psyop audit`` maps primitives back to items by it).
 
     ``images``: the session's decoded image files (decoded once, reused every frame); without
     it image surfaces are decoded from ``base_dir`` on every call.
@@ -261,7 +263,7 @@ def build_scene(
             field = builders.target_field(_trial_seed(values), int(item.count), near_D, far_D, float(item.size_deg),
                                           float(item.field_deg), origin, material=mat,
                                           min_gap_deg=float(item.min_gap_deg))
-            prims += list(field)
+            prims += [dataclasses.replace(p, name=f"{item.id}_{p.name}") for p in field]
         elif isinstance(item, ps.FixationTarget):
             prims += _fixation(item, values, time_s, origin)
         elif isinstance(item, ps.Room):

@@ -229,3 +229,31 @@ def test_stereo_scene_is_the_same_for_both_eyes(tmp_path):
     left = build_scene(protocol, row, 0.0, [-0.032, 0.0, 0.0])
     right = build_scene(protocol, row, 0.0, [0.032, 0.0, 0.0])
     assert left == right
+
+
+def test_far_finite_surface_is_not_clipped_by_the_cameras_far_plane(gl_context):
+    """A disc 500 m away (0.002 D) lies beyond the cameras' 100 m far plane; the renderer raises the
+    far clip to the scene, so it is drawn with its exact area."""
+    from psyop.rendering.exact import projected_disc
+
+    disc = frontoparallel_disc(500.0, 2.0, Solid((1.0, 0.0, 0.0)), origin_m=RIGHT_C, name="far")
+    cam = _camera("right", "ocular", (5.0, 0.0))
+    ellipse = projected_disc(cam, disc)
+    crop = _crop(cam, ellipse.centre_px, 24)
+    with Renderer(Scene((disc,)), SETTINGS, ctx=gl_context) as renderer:
+        renderer.render(crop)
+        img = renderer.image()
+    area = _coverage_centroid(img[..., 0] - img[..., 1])[0]
+    assert area == pytest.approx(math.pi * ellipse.radii_px[0] * ellipse.radii_px[1], rel=0.005)
+
+
+def test_rotated_border_at_optical_infinity_stays_at_infinity():
+    """An oriented sinusoidal border whose far surface is at 0 D: rotating its axes keeps it a
+    direction set (it was rebuilt as a 1 m surface)."""
+    protocol = load_protocol(PROTOCOLS / "ordinal.yaml")
+    item = protocol.scene[0].model_copy(update={"orientation_deg": 90,
+                                                "far_depth": protocol.scene[0].far_depth.model_copy(update={"D": 0})})
+    protocol = protocol.model_copy(update={"scene": [item, *protocol.scene[1:]]})
+    row = compile_schedule(load_protocol(PROTOCOLS / "ordinal.yaml"), 0).iloc[0].to_dict()
+    far = next(p for p in build_scene(protocol, row, 0.0, RIGHT_C).primitives if p.name == "surfaces_far")
+    assert far.at_infinity and far.half_u_m[0] == pytest.approx(0.0, abs=1e-12)

@@ -1,0 +1,75 @@
+"""Which frames ``psyop audit`` renders: every condition x interval x eye x gaze.
+
+One representative trial per condition (its first non-practice trial in the schedule of the
+given seed), each interval phase of it in that interval's rendering mode, each eye the protocol
+shows, and ``gazes`` gaze directions: along the fixation target's path when the scene has a
+moving fixation target (the target's position at ``k / gazes`` of the interval), otherwise a
+grid (straight ahead, then a ring at :data:`GRID_ECCENTRICITY_DEG`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from psyop.rendering.builders import direction_from_angles
+
+GRID_ECCENTRICITY_DEG = 10.0
+GRID_FIXATION_DISTANCE_M = 1.0
+
+
+@dataclass(frozen=True)
+class AuditFrame:
+    """One frame to check. ``gaze_index`` numbers the gazes of a (condition, interval, eye);
+    the same index means the same gaze and time in every interval."""
+
+    condition: str
+    trial: int
+    row: Mapping[str, Any]
+    interval: int
+    mode: str
+    eye: str
+    gaze_index: int
+    time_s: float
+
+    @property
+    def label(self) -> str:
+        return (f"condition {self.condition}, trial {self.trial}, interval {self.interval} ({self.mode}), "
+                f"{self.eye} eye, gaze {self.gaze_index} (t = {self.time_s:.3g} s)")
+
+
+def representative_rows(schedule: Any) -> list[dict[str, Any]]:
+    """The first trial of each condition, non-practice trials preferred, in schedule order."""
+    rows: dict[str, dict[str, Any]] = {}
+    for row in schedule.to_dict("records"):
+        key = str(row["condition"])
+        if key not in rows or (rows[key].get("practice") and not row.get("practice")):
+            rows[key] = row
+    return sorted(rows.values(), key=lambda r: int(r["trial"]))
+
+
+def grid_gaze_deg(index: int, count: int) -> tuple[float, float]:
+    """Gaze ``index`` of ``count`` on the grid: straight ahead, then evenly round a ring."""
+    if index == 0:
+        return (0.0, 0.0)
+    phi = 2.0 * math.pi * (index - 1) / max(1, count - 1)
+    return (GRID_ECCENTRICITY_DEG * math.cos(phi), GRID_ECCENTRICITY_DEG * math.sin(phi))
+
+
+def fixation_point(scene: Any, fixation_prefix: str | None, origin_m: np.ndarray, gaze_index: int,
+                   gaze_count: int) -> np.ndarray:
+    """Where the eyes fixate in this frame, head space: the fixation target's centre ((4,) with
+    w = 0 when it is at optical infinity), else a grid point ``GRID_FIXATION_DISTANCE_M`` from
+    the scene origin."""
+    if fixation_prefix is not None:
+        for prim in scene.primitives:
+            if prim.name == f"{fixation_prefix}_outer":
+                if prim.at_infinity:
+                    return np.array([*prim.centre_m, 0.0])
+                return np.asarray(prim.centre_m, dtype=np.float64)
+    direction = direction_from_angles(*grid_gaze_deg(gaze_index, gaze_count))
+    return origin_m + direction * (GRID_FIXATION_DISTANCE_M / -direction[2])

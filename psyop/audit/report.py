@@ -1,0 +1,83 @@
+"""The audit's table and contact sheet.
+
+Table: one line per rendered primitive; per rendering mode the smallest and largest visible
+area over the audited frames in that mode, in display pixels (full resolution), and how many of
+those frames exact geometry says hide it (``hid``). A primitive's change with mode is read across
+a line: e.g. the detection study's red back disc is 0 in conventional frames and a crescent of
+a few px^2 in ocular frames at non-zero levels.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from psyop.audit.run import AuditReport
+
+MODES = ("conventional", "ocular", "reversed")
+
+
+def format_table(report: AuditReport) -> str:
+    names: dict[str, str] = {}
+    stats: dict[tuple[str, str], list[float]] = {}
+    hidden: dict[tuple[str, str], int] = {}
+    for rec in report.records:
+        for i, (name, item, area) in enumerate(zip(rec.names, rec.items, rec.visible_px2)):
+            names.setdefault(name, item)
+            stats.setdefault((name, rec.frame.mode), []).append(area)
+            hidden[(name, rec.frame.mode)] = hidden.get((name, rec.frame.mode), 0) + (i in rec.hidden_by)
+    modes = [m for m in MODES if any(k[1] == m for k in stats)]
+    width = max([9] + [len(n) for n in names])
+    item_width = max([4] + [len(i) for i in names.values()])
+    head = f"{'primitive':<{width}}  {'item':<{item_width}}" + "".join(
+        f"  {m + ' px^2 min..max (hid/frames)':>40}" for m in modes)
+    lines = [f"psyop audit: {report.protocol_name}: {len(report.records)} frames at scale {report.settings.scale:g}, "
+             f"{report.settings.gazes} gaze(s) per interval and eye; areas in display pixels", head, "-" * len(head)]
+    for name, item in names.items():
+        cells = []
+        for m in modes:
+            values = stats.get((name, m))
+            if not values:
+                cells.append(f"  {'-':>40}")
+                continue
+            cells.append(f"  {f'{min(values):9.2f} ..{max(values):9.2f} ({hidden[(name, m)]}/{len(values)})':>40}")
+        lines.append(f"{name:<{width}}  {item:<{item_width}}" + "".join(cells))
+    lines += list(report.notes)
+    lines += list(report.failures) if report.failures else ["PASS: every primitive is seen, none shows where it is "
+                                                             "covered, differing intervals render differently"]
+    return "\n".join(lines)
+
+
+def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> None:
+    """A PNG of every audited frame: one row per (condition, eye), columns interval x gaze,
+    with the row's condition and eye written at its left."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows: dict[tuple[str, str], list] = {}
+    for rec in report.records:
+        rows.setdefault((rec.frame.condition, rec.frame.eye), []).append(rec)
+    if not rows:
+        raise ValueError("no frames to put on a contact sheet")
+    h, w = report.records[0].image.shape[:2]
+    n_cols = max(len(r) for r in rows.values())
+    label_px = 260
+    sheet = np.ones((len(rows) * (h + gap_px) + gap_px, label_px + n_cols * (w + gap_px) + gap_px, 3), np.float32)
+    for r, recs in enumerate(rows.values()):
+        for c, rec in enumerate(sorted(recs, key=lambda x: (x.frame.interval, x.frame.gaze_index))):
+            y, x = gap_px + r * (h + gap_px), label_px + gap_px + c * (w + gap_px)
+            sheet[y:y + h, x:x + w] = np.clip(rec.image, 0.0, 1.0)
+    dpi = 100
+    fig = plt.figure(figsize=(sheet.shape[1] / dpi, sheet.shape[0] / dpi), dpi=dpi)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.imshow(sheet, interpolation="nearest")
+    ax.set_axis_off()
+    for r, (condition, eye) in enumerate(rows):
+        ax.text(4, gap_px + r * (h + gap_px) + h / 2, f"{condition}\n{eye} eye", fontsize=7, va="center")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)

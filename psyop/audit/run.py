@@ -1,0 +1,210 @@
+"""Render every audited frame of a protocol and check what the participant would see.
+
+The frames come from the session plan (``psyop.session.plan.compile_plan``): its interval
+phases with their modes, durations and ``show:`` lists, its eye rig (eyes, ipd, eye model,
+cameras) and display, so the audit sees what a session would draw.
+
+Checks (each failure is one line naming the primitive, its scene item and the frame):
+
+* **never visible**: a rendered primitive whose visible area is below :data:`MIN_VISIBLE_SAMPLES`
+  edge samples in every audited frame (a declared stimulus the participant never sees);
+* **shows although hidden**: a primitive that exact geometry says is wholly covered by another
+  in this frame (:mod:`psyop.audit.occlusion`) but has visible area in the rendered frame;
+* **identical intervals**: the two intervals of a trial differ in their values (level, mode)
+  but render bit-identically at every audited gaze of some eye.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psyop.audit.frames import AuditFrame, fixation_point, representative_rows
+from psyop.audit.masks import FrameMeasurer
+from psyop.audit.occlusion import hidden_by
+from psyop.errors import UserError
+
+# Visible means covering at least half of one of the S x S samples of an edge pixel; exact
+# occlusion leaves a hidden primitive's mask at exactly 0.
+MIN_VISIBLE_SAMPLES = 0.5
+
+
+@dataclass(frozen=True)
+class AuditSettings:
+    """``scale``: the display's pixel counts are multiplied by it (frustum unchanged);
+    ``gazes``: gazes per (condition, interval, eye); ``samples_per_axis``: the adaptive
+    sampler's S (S x S rays in edge pixels; the session uses 32); ``ipd_m`` when the protocol
+    takes the ipd from the tracker; ``seed``: the schedule seed that picks each condition's trial."""
+
+    scale: float = 0.125
+    gazes: int = 4
+    samples_per_axis: int = 16
+    ipd_m: float = 0.064
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.scale) and 0.01 <= self.scale <= 1.0):
+            raise UserError(f"--scale must be in [0.01, 1], got {self.scale}")
+        if not 2 <= self.samples_per_axis <= 32:
+            raise UserError(f"--samples must be in 2..32, got {self.samples_per_axis}")
+        if not 1 <= self.gazes <= 64:
+            raise UserError(f"--gazes must be in 1..64, got {self.gazes}")
+        if not (math.isfinite(self.ipd_m) and 0.04 <= self.ipd_m <= 0.08):
+            raise UserError(f"--ipd-mm must be in 40..80 mm, got {self.ipd_m * 1000:g}")
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """What one audited frame showed: visible area per primitive in display pixels (full
+    resolution: audit pixels / scale^2) and which primitives geometry says are hidden."""
+
+    frame: AuditFrame
+    names: tuple[str, ...]
+    items: tuple[str, ...]
+    visible_px2: tuple[float, ...]
+    hidden_by: dict[int, int]
+    image: np.ndarray = field(compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class AuditReport:
+    protocol_name: str
+    settings: AuditSettings
+    records: tuple[FrameRecord, ...]
+    failures: tuple[str, ...]
+    notes: tuple[str, ...]
+
+    @property
+    def passed(self) -> bool:
+        return not self.failures
+
+
+def item_of(name: str, item_ids: list[str]) -> str:
+    """The scene item a primitive came from: its name is the item's id or ``<id>_...``."""
+    matches = [i for i in item_ids if name == i or name.startswith(i + "_")]
+    return max(matches, key=len) if matches else name
+
+
+def _fixation_prefix(protocol: Any) -> str | None:
+    from psyop.protocol import scene as ps
+
+    for item in protocol.scene:
+        if isinstance(item, ps.FixationTarget):
+            return str(item.id)
+    return None
+
+
+def iter_frames(plan: Any, settings: AuditSettings) -> Iterator[tuple[AuditFrame, Any]]:
+    """Every audited frame and its plan phase, in order: condition, interval, eye, gaze."""
+    from psyop.schedule import compile_schedule
+
+    schedule = compile_schedule(plan.protocol, settings.seed)
+    phases = [phase for phase in plan.phases if phase.show == "stimulus"]
+    for row in representative_rows(schedule):
+        for phase in phases:
+            mode = plan.mode_for(phase, row)
+            for eye in plan.eyes:
+                for k in range(settings.gazes):
+                    yield AuditFrame(str(row["condition"]), int(row["trial"]), row, phase.interval, mode, eye, k,
+                                     float(phase.duration_s) * k / settings.gazes), phase
+
+
+def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir: Path | None = None) -> AuditReport:
+    """Render and check every audited frame of ``protocol`` (see the module docstring)."""
+    from psyop.rendering import RenderSettings
+    from psyop.rendering.renderer import create_headless_context
+    from psyop.session.plan import compile_plan
+    from psyop.stimulus import build_scene, scene_origin_m
+
+    plan = compile_plan(protocol, tracker_ipd_m=settings.ipd_m)
+    display = dataclasses.replace(plan.display, width_px=max(16, round(plan.display.width_px * settings.scale)),
+                                  height_px=max(16, round(plan.display.height_px * settings.scale)))
+    px_scale = (display.width_px / plan.display.width_px) ** 2
+    item_ids = [str(item.id) for item in protocol.scene]
+    fixation_prefix = _fixation_prefix(protocol)
+    owns_ctx = ctx is None
+    ctx = ctx if ctx is not None else create_headless_context()
+    measurer = FrameMeasurer(ctx, RenderSettings(samples_per_axis=settings.samples_per_axis, reuse_tolerance_px=None))
+    records: list[FrameRecord] = []
+    try:
+        for frame, phase in iter_frames(plan, settings):
+            centre = plan.rig.centre_m(frame.eye)
+            scene = build_scene(protocol, frame.row, frame.time_s, centre, interval=frame.interval, base_dir=base_dir,
+                                show=phase.primitives)
+            origin = scene_origin_m(protocol, centre)
+            fixation = fixation_point(scene, fixation_prefix, origin, frame.gaze_index, settings.gazes)
+            camera = plan.rig.camera(display, frame.eye, fixation, frame.mode)
+            image = measurer.colour(scene, camera)
+            areas = measurer.visible_areas_px(scene, camera) / px_scale
+            names = tuple(p.name for p in scene.primitives)
+            records.append(FrameRecord(frame, names, tuple(item_of(n, item_ids) for n in names),
+                                       tuple(float(a) for a in areas),
+                                       hidden_by(scene.primitives, camera.centre_of_projection_m), image))
+    finally:
+        measurer.release()
+        if owns_ctx:
+            ctx.release()
+    min_visible = MIN_VISIBLE_SAMPLES / settings.samples_per_axis**2 / px_scale
+    failures, notes = _check(records, item_ids, min_visible)
+    return AuditReport(str(protocol.study.name), settings, tuple(records), tuple(failures), tuple(notes))
+
+
+def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float) -> tuple[list[str], list[str]]:
+    failures: list[str] = []
+    notes: list[str] = []
+    best: dict[str, float] = {}
+    item_of_name: dict[str, str] = {}
+    for rec in records:
+        for name, item, area in zip(rec.names, rec.items, rec.visible_px2):
+            best[name] = max(best.get(name, 0.0), area)
+            item_of_name[name] = item
+        for ia, ib in rec.hidden_by.items():
+            if rec.visible_px2[ia] > min_visible:
+                failures.append(f"FAIL {rec.names[ia]} (item {rec.items[ia]}): shows {rec.visible_px2[ia]:.3g} px^2 "
+                                f"although {rec.names[ib]} covers it (nearer, or coplanar and listed later) in "
+                                f"{rec.frame.label}")
+    for name, area in best.items():
+        if area <= min_visible:
+            hidden = sum(1 for rec in records if name in rec.names and rec.names.index(name) in rec.hidden_by)
+            why = f"; geometry hides it in {hidden} of them" if hidden else ""
+            frames = sum(1 for rec in records if name in rec.names)
+            failures.append(f"FAIL {name} (item {item_of_name[name]}): never visible in {frames} audited frames "
+                            f"(largest visible area {area:.3g} px^2){why}")
+    shown = set(item_of_name.values())
+    for item in item_ids:
+        if item not in shown:
+            notes.append(f"note: item {item} has no primitive in any interval (an aperture, or not in any show:)")
+    failures += _identical_intervals(records)
+    return failures, notes
+
+
+def _identical_intervals(records: list[FrameRecord]) -> list[str]:
+    from psyop.schedule import interval_values
+
+    by_key: dict[tuple[str, str], dict[int, dict[int, FrameRecord]]] = {}
+    for rec in records:
+        f = rec.frame
+        by_key.setdefault((f.condition, f.eye), {}).setdefault(f.interval, {})[f.gaze_index] = rec
+    failures = []
+    for (condition, eye), intervals in by_key.items():
+        numbers = sorted(intervals)
+        for i, j in zip(numbers, numbers[1:]):
+            first, second = intervals[i], intervals[j]
+            row = next(iter(first.values())).frame.row
+            vi, vj = interval_values(row, i), interval_values(row, j)
+            mi, mj = next(iter(first.values())).frame.mode, next(iter(second.values())).frame.mode
+            differ = [k for k in vi if k in vj and str(vi[k]) != str(vj[k])] + (["mode"] if mi != mj else [])
+            if not differ:
+                continue
+            gazes = sorted(set(first) & set(second))
+            if gazes and all(np.array_equal(first[g].image, second[g].image) for g in gazes):
+                what = ", ".join(f"{k} {vi.get(k, mi)} vs {vj.get(k, mj)}" for k in dict.fromkeys(differ))
+                failures.append(f"FAIL condition {condition}, {eye} eye: intervals {i} and {j} render identically "
+                                f"at all {len(gazes)} audited gazes although they differ ({what})")
+    return failures

@@ -1,0 +1,47 @@
+"""``psyop audit PROTOCOL``: render every condition (each interval's mode, each eye, several
+gazes) at a reduced scale and check what the participant sees; exit 1 when a check fails."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from psyop.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "audit", help="render every condition and check each primitive's visibility (exit 1 on failure)",
+        description="Render every condition of a protocol (one trial each; every interval in its mode, every "
+                    "eye, several gazes along the fixation path or on a grid) at a reduced scale with the "
+                    "session's renderer, and report per primitive its visible area by mode. Fails (exit 1) when a "
+                    "primitive is never visible, when one that exact geometry says is covered shows, or when two "
+                    "intervals that differ (level, mode) render identically.")
+    parser.add_argument("protocol", help="protocol YAML file")
+    parser.add_argument("--scale", type=float, default=0.125,
+                        help="fraction of the display's pixels in each direction (default 0.125)")
+    parser.add_argument("--gazes", type=int, default=4, help="gazes per condition, interval and eye (default 4)")
+    parser.add_argument("--samples", type=int, default=16,
+                        help="rays per axis in edge pixels (S x S; the session uses 32; default 16)")
+    parser.add_argument("--seed", type=int, default=0, help="schedule seed that picks each condition's trial")
+    parser.add_argument("--ipd-mm", type=float, default=64.0,
+                        help="interpupillary distance when the protocol takes it from the tracker")
+    parser.add_argument("--sheet", default=None, metavar="PATH.png", help="write a contact sheet of the checked frames")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from psyop.audit import AuditSettings, format_table, run_audit, write_contact_sheet
+    from psyop.protocol import load_protocol
+
+    if args.sheet is not None and not str(args.sheet).lower().endswith(".png"):
+        raise UserError(f"--sheet must name a .png file, got {args.sheet!r}")
+    settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=args.ipd_mm / 1000.0, seed=args.seed)
+    path = Path(args.protocol)
+    protocol = load_protocol(path)
+    report = run_audit(protocol, settings, base_dir=path.parent)
+    print(format_table(report))
+    if args.sheet is not None:
+        write_contact_sheet(report, Path(args.sheet))
+        print(f"wrote contact sheet {args.sheet}")
+    return 0 if report.passed else 1

@@ -1,0 +1,180 @@
+"""``psyop audit``: the five shipped protocols pass; invisible or identical stimuli fail with a
+clear line; the audit's areas agree with exact geometry."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from psyop.audit import AuditSettings, format_table, run_audit
+from psyop.audit.masks import FrameMeasurer, decode, mask_scene
+from psyop.audit.occlusion import hidden_by
+from psyop.cli import main
+from psyop.protocol import load_protocol
+from psyop.rendering import RenderSettings, Scene, Solid
+from psyop.rendering.builders import detection_stimulus, frontoparallel_disc, frontoparallel_rect
+from psyop.rendering.exact import visible_back_area_px
+from psyop.rendering.measure import GAZE_DEG, RIGHT_CENTRE_M, right_eye_camera
+from psyop.rendering.renderer import create_headless_context
+
+REPO = Path(__file__).resolve().parents[1]
+PROTOCOLS = REPO / "protocols"
+# low resolution, coarse edge sampling, two gazes: the whole audit of the five studies in seconds
+FAST = AuditSettings(scale=0.0625, gazes=2, samples_per_axis=8)
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    context = create_headless_context()
+    yield context
+    context.release()
+
+
+@pytest.mark.parametrize("name", ["detection", "discrimination", "ordinal", "realism", "egocentric"])
+def test_shipped_protocols_pass_the_audit(ctx, name):
+    report = run_audit(load_protocol(PROTOCOLS / f"{name}.yaml"), FAST, ctx=ctx, base_dir=PROTOCOLS)
+    assert report.passed, "\n".join(report.failures)
+    assert all(any(area > 0 for area in areas) for areas in zip(*(r.visible_px2 for r in report.records)))
+
+
+def test_audit_shows_the_coplanar_rule_and_the_mode_change_in_detection(ctx):
+    """Level 0: the noise disc is coplanar with the red disc and listed later, so geometry hides the
+    red disc in every mode and the render shows none of it; at level > 0 it shows in ocular mode only."""
+    report = run_audit(load_protocol(PROTOCOLS / "detection.yaml"), FAST, ctx=ctx)
+    level0 = [r for r in report.records if r.frame.row["level_D"] == 0]
+    assert level0 and all(r.hidden_by.get(r.names.index("back")) == r.names.index("front") for r in level0)
+    assert all(r.visible_px2[r.names.index("back")] == 0.0 for r in level0)
+    ocular = [r.visible_px2[r.names.index("back")] for r in report.records
+              if r.frame.mode == "ocular" and r.frame.row["level_D"] >= 0.5]
+    conventional = [r.visible_px2[r.names.index("back")] for r in report.records if r.frame.mode == "conventional"]
+    assert max(ocular) > 0.0 and max(conventional) == 0.0
+    table = format_table(report)
+    assert "back" in table and "conventional" in table and "ocular" in table and "PASS" in table
+
+
+HIDDEN_DISC = """
+psyop_protocol: 1
+study: {name: hidden_disc, title: a red disc behind an opaque grey plane}
+display: {profile: vive_pro, eye_model: gullstrand_emsley_relaxed, ipd: tracker}
+eyes: right
+scene:
+  - id: target
+    kind: disc
+    size_deg: 2
+    depth: {D: 1}
+    surface: {kind: solid, rgb: [1, 0, 0]}
+  - id: wall
+    kind: quad
+    width_deg: 30
+    height_deg: 30
+    depth: {D: 3}
+    surface: {kind: solid, rgb: [0.4, 0.4, 0.4]}
+trial:
+  phases:
+    - {kind: interval, duration_s: 1}
+    - {kind: interval, duration_s: 1}
+    - {kind: response, expected_s: 1}
+design:
+  factors:
+    level_D: {levels: [0, 1]}
+  repetitions: 1
+  randomisation: {kind: full}
+response:
+  kind: two_interval
+  test: {mode: ocular}
+  reference: {mode: conventional}
+  level_factor: level_D
+  order: balanced
+"""
+
+
+def test_a_disc_behind_an_opaque_plane_fails_with_a_clear_line(tmp_path, capsys):
+    path = tmp_path / "hidden.yaml"
+    path.write_text(HIDDEN_DISC)
+    sheet = tmp_path / "sheet.png"
+    rc = main(["audit", str(path), "--scale", "0.0625", "--gazes", "2", "--samples", "8", "--sheet", str(sheet)])
+    out = capsys.readouterr().out
+    assert rc == 1
+    lines = [line for line in out.splitlines() if line.startswith("FAIL")]
+    assert len(lines) == 1, out
+    assert lines[0].startswith("FAIL target (item target): never visible in 8 audited frames")
+    assert "geometry hides it in 8 of them" in lines[0]
+    img = mpimg.imread(sheet)
+    assert img.ndim == 3 and img.shape[0] > 2 * 100  # two conditions, rows of 100 px frames
+
+
+IDENTICAL = (HIDDEN_DISC.replace("width_deg: 30", "width_deg: 2").replace("height_deg: 30", "height_deg: 2")
+             .replace("depth: {D: 3}", "centre_deg: [6, 0]\n    depth: {D: 3}")
+             .replace("reference: {mode: conventional}", "reference: {mode: ocular, set: {level_D: 0}}"))
+
+
+def test_identical_intervals_at_a_non_zero_level_fail(ctx, tmp_path):
+    """Both intervals ocular and the level factor moves no primitive: at level 1 the test and
+    reference intervals differ on paper (level_D 1 vs 0) but render identically."""
+    path = tmp_path / "identical.yaml"
+    path.write_text(IDENTICAL)
+    report = run_audit(load_protocol(path), FAST, ctx=ctx)
+    assert len(report.failures) == 1, report.failures
+    assert report.failures[0].startswith("FAIL condition level_D=1, right eye: intervals 1 and 2 render identically")
+    assert "level_D" in report.failures[0]
+
+
+def test_bad_options_exit_2(tmp_path, capsys):
+    assert main(["audit", str(PROTOCOLS / "detection.yaml"), "--scale", "3"]) == 2
+    assert "--scale" in capsys.readouterr().err
+    assert main(["audit", str(PROTOCOLS / "detection.yaml"), "--sheet", str(tmp_path / "x.jpg")]) == 2
+
+
+# -- the measurement itself -----------------------------------------------------------------------
+
+def test_packed_masks_decode_exactly():
+    s = 8
+    rng = np.random.default_rng(1)
+    n1 = rng.integers(0, s * s + 1, 1000)
+    n0 = rng.integers(0, s * s + 1 - n1)
+    # what the shader accumulates: per sample 1 or 1/(S^2+1), summed in float32, times 1/S^2
+    acc = np.zeros(1000, dtype=np.float32)
+    for k in range(s * s):
+        acc += np.where(k < n1, np.float32(1.0), np.where(k < n1 + n0, np.float32(1 / (s * s + 1)), np.float32(0)))
+    value = acc * np.float32(1 / 64)
+    high, low = decode(value, s, 2)
+    assert np.array_equal(high * s * s, n1) and np.array_equal(low * s * s, n0)
+
+
+def test_audit_areas_match_exact_geometry(ctx):
+    """The mask measurement of the detection stimulus's red crescent, ocular mode, against the exact
+    circle overlap (and zero where geometry hides it)."""
+    from psyop.rendering.camera_math import crop_camera, project_points_px
+
+    measurer = FrameMeasurer(ctx, RenderSettings(reuse_tolerance_px=None, samples_per_axis=32))
+    try:
+        for back_D, rel_D in ((1.0, 0.5), (2.0, 1.0)):
+            back, front = detection_stimulus(back_D, rel_D, origin_m=RIGHT_CENTRE_M)
+            extra = frontoparallel_disc(0.3, 1.0, Solid((0, 1, 0)), 20.0, 0.0, RIGHT_CENTRE_M, "extra")
+            scene = Scene((back, front, extra, back, front, extra, back))  # 7: two mask renders
+            for mode in ("ocular", "conventional"):
+                full = right_eye_camera(*GAZE_DEG, mode)
+                c = project_points_px(full, [back.centre_m])[0]
+                cam = crop_camera(full, int(c[0]) - 24, int(c[1]) - 24, 48, 48)
+                areas = measurer.visible_areas_px(scene, cam)
+                exact = visible_back_area_px(cam, back, front)
+                # duplicates: later-listed coplanar copies win, so only the last back disc shows
+                assert areas[0] == areas[3] == 0.0
+                assert areas[6] == pytest.approx(exact, rel=0.01, abs=1e-3), (back_D, rel_D, mode)
+                assert (mode == "conventional") == (6 in hidden_by(scene.primitives, cam.centre_of_projection_m))
+    finally:
+        measurer.release()
+
+
+def test_occlusion_geometry_knows_optical_infinity():
+    far = frontoparallel_disc(math.inf, 2.0, Solid((1, 0, 0)), name="far")
+    wall = frontoparallel_rect(2.0, 10.0, 10.0, Solid((0, 0, 0)), name="wall")
+    far_later = frontoparallel_disc(math.inf, 4.0, Solid((1, 0, 0)), name="far_later")
+    assert hidden_by((far, wall), np.array([0.03, 0.0, 0.0])) == {0: 1}
+    assert hidden_by((far, far_later), np.array([0.03, 0.01, -0.02])) == {0: 1}
+    assert hidden_by((far_later, far), np.zeros(3)) == {}
+    assert mask_scene(Scene((far, wall)), 0, 8).primitives[1].material == Solid((1 / 65, 0, 0))
