@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -134,6 +135,7 @@ class PupilClient:
         self._last_pupil_t = math.nan
         self._received = self._gaps = self._low_confidence = self._malformed = 0
         self._nonfinite = self._clock_jumps = self._sync_timeouts = self._sync_malformed = self._resyncs = 0
+        self._sync_slow = 0
         self._events: list[dict[str, float | str]] = []
         self.sync: ClockSync | None = None
         self._pairs: list[tuple[float, float, float]] = []  # (local mid, remote, round trip)
@@ -156,9 +158,15 @@ class PupilClient:
         """The reply, or None when none came within ``request_timeout_s``."""
         assert self._req is not None
         self._req.send_string(message)
-        if not self._req.poll(int(self.request_timeout_s * 1000)):
-            return None
-        return self._req.recv().decode("utf-8", errors="replace")
+        deadline = time.monotonic() + self.request_timeout_s
+        while (left_s := deadline - time.monotonic()) > 0:
+            if not self._req.poll(max(1, int(left_s * 1000))):
+                return None
+            try:  # a late reply to an earlier, timed-out request is dropped here (REQ_CORRELATE)
+                return self._req.recv(zmq.NOBLOCK).decode("utf-8", errors="replace")
+            except zmq.Again:
+                continue
+        return None
 
     def _unreachable(self, what: str) -> UserError:
         return UserError(f"Pupil Remote at {self.address} {what}; is Pupil Capture (or Service) running "
@@ -190,14 +198,18 @@ class PupilClient:
         """
         if fresh:
             self._pairs.clear()
-        good = sum(self._round_trip() for _ in range(self.n_sync))
+        good = sum(self._round_trip(reject_slow=False) for _ in range(self.n_sync))
         if good < min(3, self.n_sync):
             raise self._unreachable(f"gave {good} usable clock replies to {self.n_sync} 't' requests "
                                     f"({self._sync_timeouts} timed out, {self._sync_malformed} malformed)")
         return self._fit()
 
-    def _round_trip(self) -> bool:
-        """One 't' request; True when it gave a usable (local, remote) pair."""
+    def _round_trip(self, *, reject_slow: bool = True) -> bool:
+        """One 't' request; True when it gave a usable (local, remote) pair.
+
+        During the session a reply that took far longer than usual (queued behind a slow
+        one) is not used (``sync_slow``); the initial sync keeps every pair and fits the
+        faster half."""
         t0 = self._clock()
         reply = self._request("t")
         t1 = self._clock()
@@ -215,6 +227,12 @@ class PupilClient:
                 self._log_event("malformed 't' reply", reply=reply[:40])
             return False
         mid = 0.5 * (t0 + t1)
+        if reject_slow and self._pairs:
+            typical_s = float(np.median([trip for _, _, trip in self._pairs]))
+            if t1 - t0 > max(0.005, 4.0 * typical_s):  # queued: its mid-point says little about the offset
+                with self._lock:
+                    self._sync_slow += 1
+                return False
         current = self.sync
         if current is not None and abs(current.to_local(remote) - mid) > self.clock_jump_s:
             with self._lock:
@@ -327,6 +345,7 @@ class PupilClient:
                     "low_confidence": self._low_confidence, "malformed": self._malformed,
                     "nonfinite_samples": self._nonfinite, "clock_jumps": self._clock_jumps,
                     "sync_timeouts": self._sync_timeouts, "sync_malformed": self._sync_malformed,
+                    "sync_slow": self._sync_slow,
                     "resyncs": self._resyncs, "clock_events": list(self._events)}
 
     def close(self) -> None:
