@@ -225,3 +225,27 @@ def test_non_finite_or_absurd_serial_positions_are_invalid(line: bytes) -> None:
     finally:
         source.close()
         device.close()
+
+
+def test_trials_with_little_valid_gaze_are_listed_and_warned(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A Pupil clock fault left trials with 0 % valid gaze and no warning."""
+    import json
+
+    import psyop.session.runner  # noqa: F401 - before capsys swaps sys.stderr
+    from psyop.cli import main as cli_main
+
+    protocol = fast_protocol(tmp_path, "detection", 1, 0.03)
+    server = FakePupilCapture()
+    try:
+        server.gaze_time_shift_s = 100.0  # every gaze time implausible: every frame invalid
+        code = cli_main(["run", str(protocol), "--participant", "G1", "--data", str(tmp_path / "data"),
+                         "--tracker", f"pupil:127.0.0.1:{server.port}", "--clock", "real", "--no-progress",
+                         "--render", "cameras"])
+    finally:
+        server.stop()
+    err = capsys.readouterr().err
+    meta = json.loads((tmp_path / "data" / "detection" / "sub-G1" / "ses-1" / "session.json").read_text())
+    assert code == 0, err
+    assert meta["integrity"]["low_gaze_trials"] == list(range(15))
+    assert "warning: 15 trials had less than 50% valid gaze" in err
+    assert meta["summary"]["tracker"]["clock_jumps"] > 0

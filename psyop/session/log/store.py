@@ -288,6 +288,20 @@ def recover_tables(paths: SessionPaths) -> tuple[pd.DataFrame | None, pd.DataFra
     return found.trials, found.frames
 
 
+#: a trial whose frames had a smaller share of valid gaze is listed in session.json's
+#: ``integrity.low_gaze_trials`` and warned about (the tracker lost the eye, or its clock)
+MIN_VALID_GAZE_SHARE = 0.5
+
+
+def low_gaze_report(trials: pd.DataFrame, threshold: float = MIN_VALID_GAZE_SHARE) -> dict[str, Any]:
+    """Trials whose ``gaze_valid_fraction`` is below ``threshold`` (NaN: no frames, not listed)."""
+    if "gaze_valid_fraction" not in trials or not len(trials):
+        return {"low_gaze_trials": [], "min_valid_gaze_share": threshold}
+    share = pd.to_numeric(trials["gaze_valid_fraction"], errors="coerce")
+    low = trials.loc[share < threshold, "trial"]
+    return {"low_gaze_trials": [int(t) for t in low.tolist()], "min_valid_gaze_share": threshold}
+
+
 def finalise_session(
     paths: SessionPaths,
     *,
@@ -337,7 +351,7 @@ def _finalise_locked(
         meta["status"] = status
         meta["n_trials_recorded"] = int(len(trials))
         meta["finalised"] = _now()
-        meta["integrity"] = found.report
+        meta["integrity"] = {**found.report, **low_gaze_report(trials)}
         if summary:
             meta["summary"] = dict(summary)
         write_json_atomic(paths.metadata, meta)
