@@ -133,4 +133,35 @@ def run(out_dir: Path, quick: bool) -> str:
         old, new = med_ms("old", fsync), med_ms("new", fsync)
         lines.append(f"| {'on' if fsync else 'off'} | {old:.3f} | {new:.3f} | {new / old:.2f} |")
     lines += ["", f"Taking the session lock (once per run): median {statistics.median(lock_s) * 1e3:.3f} ms.", ""]
+    lines += _largest_design_memory(out_dir, quick)
     return "\n".join(lines)
+
+
+def _largest_design_memory(out_dir: Path, quick: bool) -> list[str]:
+    """Peak RSS of `psyop validate` / `psyop compile` on the largest design accepted
+    (100 000 conditions x 10 repetitions = the 1 million trial cap)."""
+    import re
+    import subprocess
+    import sys
+
+    repo = Path(__file__).resolve().parents[1]
+    if quick:
+        return ["Largest accepted design: skipped in --quick.", ""]
+    text = (repo / "protocols" / "detection.yaml").read_text()
+    text = text.replace("levels: [1, 2, 3]", "levels: {start: 0, step: 1, count: 20000}", 1)
+    text = re.sub(r"(?m)^(\s*repetitions:).*$", r"\g<1> 10", text, count=1)
+    rows = ["| command | peak RSS MB | wall s |", "|---|---|---|"]
+    with tempfile.TemporaryDirectory(prefix="psyop-bench-design-") as tmp:
+        protocol = Path(tmp) / "largest.yaml"
+        protocol.write_text(text)
+        for name, extra in (("validate", []), ("compile", ["--seed", "1", "--out", str(Path(tmp) / "s.parquet")])):
+            # each in a fresh interpreter that reports its own peak RSS (ru_maxrss, kB on Linux)
+            code = ("import resource, sys; from psyop.cli import main; rc = main(sys.argv[1:]); "
+                    "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)")
+            start = time.perf_counter()
+            done = subprocess.run([sys.executable, "-c", code, name, str(protocol), *extra],
+                                  capture_output=True, text=True, check=True)
+            wall = time.perf_counter() - start
+            kb = int(done.stderr.rsplit("MAXRSS", 1)[1].split()[0])
+            rows.append(f"| psyop {name} (100 000 conditions x 10 repetitions) | {kb / 1024:.0f} | {wall:.1f} |")
+    return ["### Largest accepted design", "", *rows, ""]

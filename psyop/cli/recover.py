@@ -66,6 +66,10 @@ def describe_integrity(report: dict) -> list[str]:  # type: ignore[type-arg]
         what = f"trial {trial}" if trial is not None else "unidentified record"
         lines.append(f"damaged {damage.get('record')} record ({what}, {damage.get('reason')}) in "
                      f"{damage.get('segment')} at byte {damage.get('offset')}, {damage.get('length')} bytes")
+    low = report.get("low_gaze_trials") or []
+    if low:
+        lines.append(f"warning: {len(low)} trials had less than {report.get('min_valid_gaze_share', 0.5):.0%} valid "
+                     f"gaze (tracker lost the eye or its clock): {low[:20]}{' ...' if len(low) > 20 else ''}")
     for segment in report.get("torn_segments") or []:
         lines.append(f"{segment}: torn tail (the run was killed mid-record; that trial was not recorded)")
     return lines

@@ -56,4 +56,18 @@ def main(args: argparse.Namespace) -> int:
     )
     outcome = run_session(protocol, compile_schedule, options)
     print_outcome(outcome)
+    _print_integrity_warnings(args.data, protocol.study.name, args.participant, args.session)
     return outcome.exit_code
+
+
+def _print_integrity_warnings(data_root: Path, study: str, participant: str, session: int) -> None:
+    """What the finalised session.json says about damage and low-gaze trials (stderr)."""
+    import sys
+
+    from psyop.cli.recover import describe_integrity
+    from psyop.session.log.layout import session_paths
+    from psyop.session.log.store import read_metadata
+
+    meta = read_metadata(session_paths(data_root, study, participant, session)) or {}
+    for line in describe_integrity(meta.get("integrity") or {}):
+        print(f"  {line}", file=sys.stderr)

@@ -150,16 +150,21 @@ class Design(StrictModel):
     def _bounded(self) -> "Design":
         # counted from the factor sizes, before anything is expanded (two factors of 100000
         # levels used to reach 8 GB before a cap on the expanded list was checked)
-        n = count_conditions(self.factors, MAX_TRIALS)
+        n = count_conditions(self.factors, MAX_CONDITIONS)
+        if n is not None and n > MAX_CONDITIONS:
+            raise ValueError(f"the factors cross to over {MAX_CONDITIONS} conditions; reduce their levels")
         if n is not None and n * self.repetitions > MAX_TRIALS:
-            size = f"{n} conditions" if n <= MAX_TRIALS else f"over {MAX_TRIALS} conditions"
-            raise ValueError(f"{size} x {self.repetitions} repetitions is over {MAX_TRIALS} trials; "
+            raise ValueError(f"{n} conditions x {self.repetitions} repetitions is over {MAX_TRIALS} trials; "
                              "reduce the factors' levels or the repetitions")
         return self
 
 
-#: the most trials a protocol may schedule (checked before conditions are expanded)
-MAX_TRIALS = 10_000_000
+#: the most trials a protocol may schedule, checked before conditions are expanded: it bounds
+#: validate/compile memory (1 million trials compile in under 0.6 GB; a session of them would
+#: take weeks)
+MAX_TRIALS = 1_000_000
+#: the most crossed conditions (each is a dict while validating)
+MAX_CONDITIONS = 100_000
 
 
 def _n_levels(levels: list[Level] | SteppedLevels) -> int:

@@ -2,8 +2,9 @@
 the serial response box.
 
 The reader thread reads with a timeout (never blocks forever), so ``close`` always
-joins it. Bytes that are not ASCII, lines that do not parse and over-long runs without
-a newline are counted and skipped, never fatal.
+joins it. Bytes that are not ASCII, lines that do not parse and over-long lines are
+counted and skipped, never fatal. A line longer than ``MAX_LINE_BYTES`` is discarded whole,
+up to and including its newline: its tail is never parsed as a line of its own.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ class SerialLineReader:
     def _run(self) -> None:
         assert self._port is not None
         buffer = bytearray()
+        discarding = False  # inside an over-long line: drop everything up to its newline
         while not self._stop.is_set():
             try:
                 chunk = self._port.read(max(1, self._port.in_waiting))
@@ -62,9 +64,18 @@ class SerialLineReader:
                 if end < 0:
                     if len(buffer) > MAX_LINE_BYTES:
                         buffer.clear()
+                        if not discarding:
+                            with self.lock:
+                                self.garbage += 1
+                        discarding = True
+                    break
+                if discarding or end > MAX_LINE_BYTES:  # the whole over-long line goes, not just its head
+                    del buffer[: end + 1]
+                    if not discarding:
                         with self.lock:
                             self.garbage += 1
-                    break
+                    discarding = False
+                    continue
                 raw = bytes(buffer[:end]).strip(b"\r \t\x00")
                 del buffer[: end + 1]
                 if not raw:

@@ -4,6 +4,11 @@ Pupil Remote (REP): 'SUB_PORT' -> the PUB port, 't' -> Pupil time as a string.
 IPC backbone (PUB): multipart [b'gaze.3d.01.', msgpack map] at ``rate_hz``.
 Pupil time = monotonic + ``offset_s`` (+ ``drift`` x elapsed), so the client's clock
 sync has something to find. ``skip_every`` drops messages to create gaps.
+
+Faults (plain attributes, changeable while it runs): ``t_delay_s`` delays every 't' reply;
+``t_reply`` replaces its text (garbage, 'nan'); ``gaze_time_shift_s`` shifts only the gaze
+timestamps (a far-future stream); ``gaze_timestamp`` replaces them (NaN); ``offset_s``
+changed mid-run is a Pupil clock reset (both 't' and gaze jump).
 """
 
 from __future__ import annotations
@@ -22,6 +27,11 @@ class FakePupilCapture:
         self.offset_s, self.drift, self.rate_hz = offset_s, drift, rate_hz
         self.point_mm, self.confidence = point_mm, confidence
         self.skip_every, self.low_confidence_every = skip_every, low_confidence_every
+        self.t_delay_s = 0.0
+        self.t_reply: str | None = None
+        self.gaze_time_shift_s = 0.0
+        self.gaze_timestamp: float | None = None
+        self.t_requests = 0
         self._ctx = zmq.Context()
         self._rep = self._ctx.socket(zmq.REP)
         self._rep.setsockopt(zmq.LINGER, 0)
@@ -48,7 +58,10 @@ class FakePupilCapture:
             if request == "SUB_PORT":
                 self._rep.send_string(str(self.sub_port))
             elif request == "t":
-                self._rep.send_string(repr(self.pupil_time()))
+                self.t_requests += 1
+                if self.t_delay_s:
+                    self._stop.wait(self.t_delay_s)
+                self._rep.send_string(self.t_reply if self.t_reply is not None else repr(self.pupil_time()))
             else:
                 self._rep.send_string("unknown command")
         self._rep.close(0)
@@ -64,7 +77,8 @@ class FakePupilCapture:
             if self.skip_every and k % self.skip_every == 0:
                 continue
             confidence = 0.1 if self.low_confidence_every and k % self.low_confidence_every == 0 else self.confidence
-            payload = {"topic": "gaze.3d.01.", "timestamp": self.pupil_time(), "confidence": confidence,
+            stamp = self.gaze_timestamp if self.gaze_timestamp is not None else self.pupil_time() + self.gaze_time_shift_s
+            payload = {"topic": "gaze.3d.01.", "timestamp": stamp, "confidence": confidence,
                        "gaze_point_3d": list(self.point_mm), "norm_pos": [0.5, 0.5]}
             self._pub.send_multipart([b"gaze.3d.01.", msgpack.packb(payload, use_bin_type=True)])
             self.sent += 1

@@ -66,7 +66,10 @@ def test_design_size_is_capped_before_expansion(tmp_path: Path, capsys: pytest.C
     path = _protocol_with(tmp_path, r"levels: \[1, 2, 3\]", stepped)
     text = re.sub(r"levels: \[0, 0.25, 0.5, 0.75, 1\]", stepped, path.read_text())
     path.write_text(text)
-    _fails_cleanly(capsys, ["validate", str(path)], "over 10000000 trials")
+    _fails_cleanly(capsys, ["validate", str(path)], "over 100000 conditions")
+    path = _protocol_with(tmp_path, r"levels: \[1, 2, 3\]", "levels: {start: 0, step: 1, count: 1000}")
+    path.write_text(re.sub(r"(?m)^(\s*repetitions:).*$", r"\g<1> 1000", path.read_text()))
+    _fails_cleanly(capsys, ["validate", str(path)], "5000 conditions x 1000 repetitions is over 1000000 trials")
 
 
 def test_condition_count_matches_the_expansion_for_dependent_factors() -> None:

@@ -271,6 +271,16 @@ def test_without_session_json_the_seed_in_the_log_decides(reference: tuple[Path,
     pd.testing.assert_frame_equal(_comparable(final), _comparable(_reference_trials(reference)), check_dtype=False)
 
 
+def test_recover_rebuilds_a_lost_session_json_from_the_log(reference: tuple[Path, Path], tmp_path: Path) -> None:
+    paths = _copy(reference, tmp_path)
+    paths.metadata.unlink()
+    assert cli_main(["recover", str(paths.data_root)]) == 0
+    meta = json.loads(paths.metadata.read_text())
+    assert meta["seed"] == SEED and meta["rebuilt_from_log"]
+    assert meta["n_trials_scheduled"] == N_TRIALS and meta["status"] == "complete"
+    assert len(pd.read_parquet(paths.trials_parquet)) == N_TRIALS
+
+
 def test_truncated_session_json_is_a_located_error(reference: tuple[Path, Path], tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     protocol, _ = reference

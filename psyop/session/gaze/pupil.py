@@ -17,13 +17,16 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import msgpack
 import numpy as np
 import zmq
 
+from psyop.errors import UserError
 from psyop.session.gaze.sample import GazeSample, TrackerLost, is_usable
 
 
@@ -76,9 +79,22 @@ def world_mm_to_head_m(point_mm: tuple[float, float, float]) -> tuple[float, flo
 class PupilClient:
     """A :class:`~psyop.session.gaze.sample.GazeSource` reading gaze from Pupil Capture.
 
-    A background thread receives gaze (polling with a timeout, so ``close`` always
-    joins it). ``latest`` raises :class:`TrackerLost` after ``lost_after_s`` without a
-    message.
+    Two background threads: one receives gaze, one owns Pupil Remote (REQ) and re-runs the
+    clock sync every ``resync_every_s``, so a slow or garbled ``t`` reply never delays gaze.
+    Each thread polls with a timeout, so ``close`` always joins them.
+
+    Honest failures:
+    - ``start`` on an unreachable Pupil Remote raises a UserError with exit code 3 naming
+      the address (no traceback).
+    - A malformed, NaN or infinite ``t`` reply, and a ``t`` that times out, are counted
+      (``sync_malformed``, ``sync_timeouts``) and survived.
+    - A gaze sample with a non-finite timestamp or position is an invalid sample; one whose
+      time maps more than ``clock_jump_s`` away from now (far future, or a Pupil clock reset)
+      is invalid, counted in ``clock_jumps``, logged in ``clock_events`` and triggers a fresh
+      resync (old sync pairs dropped).
+    - ``latest`` raises :class:`TrackerLost` after ``lost_after_s`` without any gaze message
+      ("no gaze"), and separately when no clock sync has succeeded for ``sync_stale_after_s``
+      (a multiple of the resync's own request timeout): each message says which it is.
     """
 
     def __init__(
@@ -92,6 +108,9 @@ class PupilClient:
         nominal_rate_hz: float = 120.0,
         lost_after_s: float = 1.0,
         request_timeout_s: float = 2.0,
+        resync_every_s: float = 1.0,
+        clock_jump_s: float = 1.0,
+        sync_stale_after_s: float | None = None,
     ) -> None:
         self.host, self.port = host, port
         self._clock = clock
@@ -100,72 +119,163 @@ class PupilClient:
         self.nominal_rate_hz = nominal_rate_hz
         self.lost_after_s = lost_after_s
         self.request_timeout_s = request_timeout_s
+        self.resync_every_s = resync_every_s
+        self.clock_jump_s = clock_jump_s
+        self.sync_stale_after_s = (sync_stale_after_s if sync_stale_after_s is not None
+                                   else max(5.0, 3.0 * (resync_every_s + request_timeout_s)))
         self._ctx = zmq.Context()
         self._req: zmq.Socket | None = None
-        self._thread: threading.Thread | None = None
+        self._threads: list[threading.Thread] = []
         self._stop = threading.Event()
+        self._resync_now = threading.Event()
         self._lock = threading.Lock()
         self._latest: GazeSample | None = None
         self._last_message_local_s = math.nan
+        self._last_sync_ok_s = math.nan
         self._last_pupil_t = math.nan
         self._received = self._gaps = self._low_confidence = self._malformed = 0
+        self._nonfinite = self._clock_jumps = self._sync_timeouts = self._sync_malformed = self._resyncs = 0
+        self._sync_slow = 0
+        self._events: list[dict[str, float | str]] = []
         self.sync: ClockSync | None = None
-        self.resync_every_s = 1.0
         self._pairs: list[tuple[float, float, float]] = []  # (local mid, remote, round trip)
 
+    @property
+    def address(self) -> str:
+        return f"tcp://{self.host}:{self.port}"
+
     # connection ----------------------------------------------------------------------
-    def _request(self, message: str) -> str:
+    def _connect_req(self) -> zmq.Socket:
+        req = self._ctx.socket(zmq.REQ)
+        req.setsockopt(zmq.LINGER, 0)
+        # a request that timed out must not wedge the socket; a late reply to it is dropped
+        req.setsockopt(zmq.REQ_RELAXED, 1)
+        req.setsockopt(zmq.REQ_CORRELATE, 1)
+        req.connect(self.address)
+        return req
+
+    def _request(self, message: str) -> str | None:
+        """The reply, or None when none came within ``request_timeout_s``."""
         assert self._req is not None
         self._req.send_string(message)
-        if not self._req.poll(int(self.request_timeout_s * 1000)):
-            raise TrackerLost(f"Pupil Remote at {self.host}:{self.port} did not answer {message!r} "
-                              f"within {self.request_timeout_s} s; is Pupil Capture running?")
-        return self._req.recv_string()
+        deadline = time.monotonic() + self.request_timeout_s
+        while (left_s := deadline - time.monotonic()) > 0:
+            if not self._req.poll(max(1, int(left_s * 1000))):
+                return None
+            try:  # a late reply to an earlier, timed-out request is dropped here (REQ_CORRELATE)
+                return self._req.recv(zmq.NOBLOCK).decode("utf-8", errors="replace")
+            except zmq.Again:
+                continue
+        return None
+
+    def _unreachable(self, what: str) -> UserError:
+        return UserError(f"Pupil Remote at {self.address} {what}; is Pupil Capture (or Service) running "
+                         "with Pupil Remote on this port?", "--tracker", exit_code=3)
 
     def start(self) -> None:
-        self._req = self._ctx.socket(zmq.REQ)
-        self._req.setsockopt(zmq.LINGER, 0)
-        self._req.connect(f"tcp://{self.host}:{self.port}")
-        sub_port = int(self._request("SUB_PORT"))
+        self._req = self._connect_req()
+        reply = self._request("SUB_PORT")
+        if reply is None:
+            raise self._unreachable(f"did not answer 'SUB_PORT' within {self.request_timeout_s} s")
+        if not reply.isdigit() or not 0 < int(reply) < 65536:
+            raise self._unreachable(f"answered 'SUB_PORT' with {reply[:40]!r}, not a port number")
+        sub_port = int(reply)
         self.sync = self.synchronise()
         sub = self._ctx.socket(zmq.SUB)
         sub.setsockopt(zmq.LINGER, 0)
         sub.connect(f"tcp://{self.host}:{sub_port}")
         sub.setsockopt_string(zmq.SUBSCRIBE, "gaze.3d.")
         self._last_message_local_s = self._clock()
-        self._thread = threading.Thread(target=self._receive, args=(sub,), name="pupil-sub", daemon=True)
-        self._thread.start()
+        self._threads = [threading.Thread(target=self._receive, args=(sub,), name="pupil-sub", daemon=True),
+                         threading.Thread(target=self._keep_synced, name="pupil-sync", daemon=True)]
+        for thread in self._threads:
+            thread.start()
 
-    def synchronise(self) -> ClockSync:
-        """Repeated 't' round trips -> least-squares offset (and drift, once they span >= 1 s)."""
-        for _ in range(self.n_sync):
-            self._round_trip()
+    def synchronise(self, *, fresh: bool = False) -> ClockSync:
+        """Repeated 't' round trips -> least-squares offset (and drift, once they span >= 1 s).
+
+        At least three usable replies are needed (else a UserError, exit code 3).
+        """
+        if fresh:
+            self._pairs.clear()
+        good = sum(self._round_trip(reject_slow=False) for _ in range(self.n_sync))
+        if good < min(3, self.n_sync):
+            raise self._unreachable(f"gave {good} usable clock replies to {self.n_sync} 't' requests "
+                                    f"({self._sync_timeouts} timed out, {self._sync_malformed} malformed)")
         return self._fit()
 
-    def _round_trip(self) -> None:
+    def _round_trip(self, *, reject_slow: bool = True) -> bool:
+        """One 't' request; True when it gave a usable (local, remote) pair.
+
+        During the session a reply that took far longer than usual (queued behind a slow
+        one) is not used (``sync_slow``); the initial sync keeps every pair and fits the
+        faster half."""
         t0 = self._clock()
-        remote = float(self._request("t"))
+        reply = self._request("t")
         t1 = self._clock()
-        self._pairs.append((0.5 * (t0 + t1), remote, t1 - t0))
+        if reply is None:
+            with self._lock:
+                self._sync_timeouts += 1
+            return False
+        try:
+            remote = float(reply)
+        except ValueError:
+            remote = math.nan
+        if not math.isfinite(remote):
+            with self._lock:
+                self._sync_malformed += 1
+                self._log_event("malformed 't' reply", reply=reply[:40])
+            return False
+        mid = 0.5 * (t0 + t1)
+        if reject_slow and self._pairs:
+            typical_s = float(np.median([trip for _, _, trip in self._pairs]))
+            if t1 - t0 > max(0.005, 4.0 * typical_s):  # queued: its mid-point says little about the offset
+                with self._lock:
+                    self._sync_slow += 1
+                return False
+        current = self.sync
+        if current is not None and abs(current.to_local(remote) - mid) > self.clock_jump_s:
+            with self._lock:
+                self._clock_jumps += 1
+                self._log_event("Pupil clock jumped; old sync pairs dropped", jump_s=current.to_local(remote) - mid)
+            self._pairs.clear()
+        self._pairs.append((mid, remote, t1 - t0))
         del self._pairs[:-500]
+        with self._lock:
+            self._last_sync_ok_s = t1
+        return True
 
     def _fit(self) -> ClockSync:
         pairs = np.array(self._pairs)
         return fit_clock_sync(pairs[:, 0], pairs[:, 1], pairs[:, 2])
 
+    def _log_event(self, what: str, **values: float | str) -> None:
+        """Record a tracker event (caller holds the lock); the first 50 are kept."""
+        if len(self._events) < 50:
+            self._events.append({"t_s": self._clock(), "event": what, **values})
+
+    def _keep_synced(self) -> None:
+        """The sync thread: owns the REQ socket after start(); never touches gaze."""
+        while not self._stop.is_set():
+            requested = self._resync_now.wait(timeout=self.resync_every_s)
+            if self._stop.is_set():
+                break
+            self._resync_now.clear()
+            if requested:  # a gaze timestamp far from now: fresh pairs only
+                self._pairs.clear()
+                with self._lock:
+                    self._resyncs += 1
+                good = sum(self._round_trip() for _ in range(max(3, self.n_sync // 4)) if not self._stop.is_set())
+            else:
+                good = int(self._round_trip())
+            if good and self._pairs:
+                sync = self._fit()
+                with self._lock:
+                    self.sync = sync
+
     def _receive(self, sub: zmq.Socket) -> None:
-        last_sync = self._clock()
         try:
             while not self._stop.is_set():
-                if self._clock() - last_sync > self.resync_every_s:
-                    last_sync = self._clock()
-                    try:  # this thread owns the REQ socket after start()
-                        self._round_trip()
-                        sync = self._fit()
-                        with self._lock:
-                            self.sync = sync
-                    except TrackerLost:
-                        pass  # the gaze stream going silent is what latest() reports
                 if not sub.poll(50):
                     continue
                 parts = sub.recv_multipart()
@@ -181,42 +291,68 @@ class PupilClient:
             confidence = float(payload.get("confidence", 0.0))
             point = payload.get("gaze_point_3d") or (math.nan, math.nan, math.nan)
             fixation = world_mm_to_head_m(tuple(float(v) for v in point[:3]))
-        except (IndexError, KeyError, TypeError, ValueError, msgpack.UnpackException):
+        except (IndexError, KeyError, TypeError, ValueError, OverflowError, msgpack.UnpackException):
             with self._lock:
                 self._malformed += 1
             return
-        assert self.sync is not None
-        sample_valid = is_usable(fixation, confidence, self.confidence_threshold)
-        sample = GazeSample(self.sync.to_local(pupil_t), fixation, confidence, sample_valid)
+        with self._lock:
+            sync = self.sync
+        assert sync is not None
+        local_t = sync.to_local(pupil_t) if math.isfinite(pupil_t) else math.nan
+        jump = math.isfinite(local_t) and abs(local_t - now) > self.clock_jump_s
+        if not math.isfinite(local_t) or jump:
+            sample = GazeSample.invalid(now)  # no trustworthy time: never a valid sample
+        else:
+            sample = GazeSample(local_t, fixation, confidence, is_usable(fixation, confidence, self.confidence_threshold))
         with self._lock:
             self._received += 1
-            if not sample_valid:
+            if not math.isfinite(local_t):
+                self._nonfinite += 1
+            elif jump:
+                self._clock_jumps += 1
+                self._log_event("gaze timestamp implausible; resync requested", offset_from_now_s=local_t - now)
+                self._resync_now.set()
+            elif not sample.valid:
                 self._low_confidence += 1
-            if math.isfinite(self._last_pupil_t) and pupil_t - self._last_pupil_t > 1.5 / self.nominal_rate_hz:
-                self._gaps += 1
-            self._last_pupil_t = max(pupil_t, self._last_pupil_t) if math.isfinite(self._last_pupil_t) else pupil_t
+            if math.isfinite(pupil_t):
+                if math.isfinite(self._last_pupil_t) and 0 < pupil_t - self._last_pupil_t and \
+                        pupil_t - self._last_pupil_t > 1.5 / self.nominal_rate_hz and not jump:
+                    self._gaps += 1
+                self._last_pupil_t = pupil_t
             self._last_message_local_s = now
             self._latest = sample
 
     # GazeSource ----------------------------------------------------------------------
     def latest(self, now_s: float) -> GazeSample | None:
         with self._lock:
-            silent_s = self._clock() - self._last_message_local_s
+            now = self._clock()
+            silent_s = now - self._last_message_local_s
+            sync_age_s = now - self._last_sync_ok_s
             sample = self._latest
         if silent_s > self.lost_after_s:
             raise TrackerLost(f"no gaze from Pupil at {self.host}:{self.port} for {silent_s:.1f} s "
                               f"(disconnected?); the session stops here and can be resumed")
+        if sync_age_s > self.sync_stale_after_s:
+            raise TrackerLost(f"Pupil Remote at {self.host}:{self.port} has not answered a clock-sync 't' request "
+                              f"for {sync_age_s:.1f} s (each waits {self.request_timeout_s} s; gaze still arrives), "
+                              "so gaze times cannot be mapped to the session clock; the session stops here and can "
+                              "be resumed")
         return sample
 
-    def stats(self) -> dict[str, float | int]:
+    def stats(self) -> dict[str, Any]:
         with self._lock:
             return {"samples_received": self._received, "gaps": self._gaps,
-                    "low_confidence": self._low_confidence, "malformed": self._malformed}
+                    "low_confidence": self._low_confidence, "malformed": self._malformed,
+                    "nonfinite_samples": self._nonfinite, "clock_jumps": self._clock_jumps,
+                    "sync_timeouts": self._sync_timeouts, "sync_malformed": self._sync_malformed,
+                    "sync_slow": self._sync_slow,
+                    "resyncs": self._resyncs, "clock_events": list(self._events)}
 
     def close(self) -> None:
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
+        self._resync_now.set()
+        for thread in self._threads:
+            thread.join(timeout=2.0 + self.request_timeout_s)
         if self._req is not None:
             self._req.close(0)
         self._ctx.term()

@@ -69,10 +69,15 @@ def angles_to_direction(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
     return np.array([math.cos(el) * math.sin(az), math.sin(el), -math.cos(el) * math.cos(az)])
 
 
+#: a fixation farther than this is not a measurement (``G 1e308 ...`` overflowed to NaN downstream)
+MAX_FIXATION_DISTANCE_M = 1e5
+
+
 def is_usable(fixation_m: tuple[float, float, float], confidence: float, threshold: float) -> bool:
-    """Finite, in front of the eyes (z < 0) and confident enough."""
+    """Finite, in front of the eyes (z < 0), within :data:`MAX_FIXATION_DISTANCE_M` and confident enough."""
     x, y, z = fixation_m
     return bool(
         math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and z < -1e-3
+        and math.hypot(x, y, z) <= MAX_FIXATION_DISTANCE_M
         and math.isfinite(confidence) and confidence >= threshold
     )

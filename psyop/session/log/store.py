@@ -90,7 +90,8 @@ class SessionStore:
                  **{key: metadata.get(key) for key in _RUN_OPTION_KEYS if key in metadata}}
             )
             write_json_atomic(meta_path, self.metadata)
-            identity = {f"psyop.{key}": json.dumps(metadata.get(key)) for key in _IDENTITY_KEYS if key in metadata}
+            identity = {f"psyop.{key}": json.dumps(metadata.get(key))
+                        for key in (*_IDENTITY_KEYS, "n_trials_scheduled") if key in metadata}
             self._trials = DurableStreamWriter(self.paths.trial_segment(self.run_index),
                                                self.trial_schema.with_metadata(identity), fsync=self._fsync)
             self._frames = DurableStreamWriter(self.paths.frame_segment(self.run_index), FRAME_SCHEMA, fsync=self._fsync)
@@ -288,6 +289,20 @@ def recover_tables(paths: SessionPaths) -> tuple[pd.DataFrame | None, pd.DataFra
     return found.trials, found.frames
 
 
+#: a trial whose frames had a smaller share of valid gaze is listed in session.json's
+#: ``integrity.low_gaze_trials`` and warned about (the tracker lost the eye, or its clock)
+MIN_VALID_GAZE_SHARE = 0.5
+
+
+def low_gaze_report(trials: pd.DataFrame, threshold: float = MIN_VALID_GAZE_SHARE) -> dict[str, Any]:
+    """Trials whose ``gaze_valid_fraction`` is below ``threshold`` (NaN: no frames, not listed)."""
+    if "gaze_valid_fraction" not in trials or not len(trials):
+        return {"low_gaze_trials": [], "min_valid_gaze_share": threshold}
+    share = pd.to_numeric(trials["gaze_valid_fraction"], errors="coerce")
+    low = trials.loc[share < threshold, "trial"]
+    return {"low_gaze_trials": [int(t) for t in low.tolist()], "min_valid_gaze_share": threshold}
+
+
 def finalise_session(
     paths: SessionPaths,
     *,
@@ -329,6 +344,8 @@ def _finalise_locked(
     expected = expected_trials if expected_trials is not None else meta.get("n_trials_scheduled")
     if status == "complete" and expected is not None and len(trials) < int(expected):
         status = "incomplete"
+    if status == "complete" and expected is None and "rebuilt_from_log" in meta:
+        status = "incomplete"  # cannot tell: never call a rebuilt session complete without its schedule size
     try:
         for stale in stale_temp_files(paths.directory):
             stale.unlink()
@@ -337,7 +354,7 @@ def _finalise_locked(
         meta["status"] = status
         meta["n_trials_recorded"] = int(len(trials))
         meta["finalised"] = _now()
-        meta["integrity"] = found.report
+        meta["integrity"] = {**found.report, **low_gaze_report(trials)}
         if summary:
             meta["summary"] = dict(summary)
         write_json_atomic(paths.metadata, meta)
@@ -349,19 +366,21 @@ def _finalise_locked(
 
 
 def find_sessions(root: Path) -> Sequence[SessionPaths]:
-    """Every session directory under ``root`` (a data root or a session directory)."""
+    """Every session directory under ``root`` (a data root or a session directory): those
+    with a session.json, and those whose session.json is lost but whose log remains."""
     root = Path(root)
-    found: list[SessionPaths] = []
-    for meta in sorted(root.rglob("session.json")):
-        ses_dir = meta.parent
+    found: dict[Path, SessionPaths] = {}
+    candidates = [m.parent for m in root.rglob("session.json")]
+    candidates += [log.parent for log in root.rglob("log") if log.is_dir() and any(log.glob("trials-*"))]
+    for ses_dir in sorted(set(candidates)):
         try:
             session = int(ses_dir.name.removeprefix("ses-"))
         except ValueError:
             continue
         participant = ses_dir.parent.name.removeprefix("sub-")
         study = ses_dir.parent.parent.name
-        found.append(SessionPaths(ses_dir.parent.parent.parent, study, participant, session))
-    return found
+        found[ses_dir] = SessionPaths(ses_dir.parent.parent.parent, study, participant, session)
+    return list(found.values())
 
 
 def _write_parquet_atomic(frame: pd.DataFrame, path: Path) -> None:
