@@ -209,7 +209,8 @@ def run_session(
     if options.display == "window":
         from psyop.session.window import GlfwWindow
 
-        window = GlfwWindow(display_profile, clock, scale=options.window_scale)
+        window = GlfwWindow(display_profile, clock, scale=options.window_scale,
+                            n_eyes=2 if str(getattr(protocol, "eyes", "right")) == "stereo" else 1)
         display: Any = window
     elif options.display == "headless":
         display = HeadlessDisplay(clock)

@@ -128,6 +128,15 @@ class SceneRenderer:
             self._ctx.release()
         self._ctx = None
 
+    def eye_textures(self) -> list[Any]:
+        """Each eye's latest image as a colour texture, left eye first; [] until every eye has one."""
+        if self._renderer is None:
+            return []
+        try:
+            return [self._renderer.colour_texture(eye) for eye in self.eyes]
+        except KeyError:
+            return []
+
     def last_framebuffer(self) -> Any:
         """The framebuffer of the last rendered eye (for a window to present), or None."""
         if self._renderer is None or self.last_eye is None:
