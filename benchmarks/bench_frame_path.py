@@ -41,21 +41,20 @@ def _session_vs_bare(scale: float, n: int) -> dict[str, float]:
     from psyop.rendering import Renderer
     from psyop.schedule import compile_schedule
     from psyop.session.phases import PhaseSpec
+    from psyop.session.plan import compile_plan
     from psyop.session.scene_renderer import SceneRenderer
-    from psyop.stimulus import build_scene
 
     protocol = load_protocol(REPO / "protocols" / "detection.yaml")
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
-    phase = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1")
-    session = SceneRenderer(protocol, VIVE_PRO, 0.064, 0.0076916, scale=scale)
+    phase = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)
+    session = SceneRenderer(compile_plan(protocol, tracker_ipd_m=0.064), scale=scale)
     session.settings = dataclasses.replace(session.settings, reuse_tolerance_px=None)  # every frame renders
     try:
         session.render(row, phase, "ocular", 0.0, MOVING[0])  # warm-up: compile, allocate
         renderer = session._renderer  # noqa: SLF001 - the same renderer, context and eye
         eye = session.eyes[0]
-        centre = session._centre(eye)  # noqa: SLF001
-        scene = build_scene(protocol, row, 0.0, centre, interval=1, base_dir=session._base_dir)  # noqa: SLF001
-        cams = [session._make_camera(session.display, eye, f, 0.064, 0.0076916, "ocular") for f in MOVING]  # noqa: SLF001
+        scene = session._scene(row, phase, 0.0, eye, None)  # noqa: SLF001 - the session's own scene
+        cams = [session.rig.camera(session.display, eye, f, "ocular") for f in MOVING]
 
         def bare(k: int) -> None:
             renderer.set_scene(scene)
@@ -89,12 +88,13 @@ def _stereo_reuse(scale: float, n_frames: int) -> tuple[int, int]:
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
     from psyop.session.phases import PhaseSpec
+    from psyop.session.plan import compile_plan
     from psyop.session.scene_renderer import SceneRenderer
 
     protocol = load_protocol(REPO / "protocols" / "egocentric.yaml")
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
-    phase = PhaseSpec("interval1", 5.0, "stimulus", "free", "mode_interval1")
-    session = SceneRenderer(protocol, VIVE_PRO, 0.064, 0.0076916, scale=scale)
+    phase = PhaseSpec("interval1", 5.0, "stimulus", "free", "mode_interval1", interval=1)
+    session = SceneRenderer(compile_plan(protocol, tracker_ipd_m=0.064), scale=scale)
     try:
         for _ in range(n_frames // 2):  # a still gaze: every frame after each eye's first may be reused
             session.render(row, phase, "ocular", 0.0, (0.0, -0.1, -0.8))

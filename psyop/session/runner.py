@@ -210,7 +210,7 @@ def run_session(
         from psyop.session.window import GlfwWindow
 
         window = GlfwWindow(display_profile, clock, scale=options.window_scale,
-                            n_eyes=2 if str(getattr(protocol, "eyes", "right")) == "stereo" else 1)
+                            n_eyes=len(plan.rig.eyes))
         display: Any = window
     elif options.display == "headless":
         display = HeadlessDisplay(clock)

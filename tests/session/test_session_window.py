@@ -69,14 +69,16 @@ STEREO_SCRIPT = textwrap.dedent(
     from psyop.session.clock import RealClock
     from psyop.session.phases import PhaseSpec
     from psyop.session.scene_renderer import SceneRenderer
+    from psyop.session.plan import compile_plan
     from psyop.session.window import GlfwWindow
 
     protocol = load_protocol(Path({repo!r}) / "protocols" / "egocentric.yaml")  # eyes: stereo
-    window = GlfwWindow(VIVE_PRO, RealClock(), scale={scale!r}, n_eyes=2)
-    renderer = SceneRenderer(protocol, VIVE_PRO, 0.064, 0.0076916, scale=window.scale, ctx=window.ctx, owns_ctx=False)
+    plan = compile_plan(protocol, tracker_ipd_m=0.064)
+    window = GlfwWindow(plan.display, RealClock(), scale={scale!r}, n_eyes=len(plan.rig.eyes))
+    renderer = SceneRenderer(plan, scale=window.scale, ctx=window.ctx, owns_ctx=False)
     window.source = renderer
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
-    check = renderer.render(row, PhaseSpec("interval1", 1.0, "stimulus", "free", "mode_interval1"), "ocular", 0.1,
+    check = renderer.render(row, PhaseSpec("interval1", 1.0, "stimulus", "free", "mode_interval1", interval=1), "ocular", 0.1,
                             (0.0, 0.0, -1.0))
     window.submit()
     screen = window._window.screen_pixels()
