@@ -27,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--responses", default="sim", help="sim | keyboard | serial:DEVICE")
     parser.add_argument("--display", default="headless", choices=["headless", "window"])
     parser.add_argument("--clock", default="virtual", choices=["virtual", "real"])
+    parser.add_argument("--window-scale", type=float, default=0.25, metavar="S",
+                        help="--display window: render and show each eye at S x the display's resolution "
+                             "(1 = full resolution; both eyes side by side for stereo; default 0.25)")
     parser.add_argument("--data", type=Path, default=Path("data"), help="data root (default data/)")
     parser.add_argument("--render", default="auto", choices=["auto", "images", "cameras"],
                         help="images: ray-cast the stimulus; cameras: eye cameras only; auto: images if OpenGL works")
@@ -50,6 +53,7 @@ def main(args: argparse.Namespace) -> int:
     options = SessionOptions(
         participant=args.participant, session=args.session, seed=args.seed, tracker=args.tracker,
         responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
+        window_scale=args.window_scale,
         progress=not args.no_progress, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),

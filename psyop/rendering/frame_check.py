@@ -5,7 +5,7 @@ design, not uniform (``max - min > 0`` over all colour values). Reading the whol
 framebuffer back for that costs 37 MB per eye at 1440x1600 (20-42 ms on llvmpipe, against an
 11.1 ms frame at 90 Hz). Instead one small GPU pass reduces each ``block_px`` x ``block_px``
 block to (count of non-finite values, smallest value, largest value), and only that reduced
-image is read back (1/256 of the bytes with 16 px blocks). The verdict is exactly the one
+image is read back (1/1024 of the bytes with the default 32 px blocks). The verdict is exactly the one
 the full readback gives: every pixel is visited.
 """
 
@@ -80,7 +80,7 @@ def summarise_image(image: np.ndarray) -> FrameSummary:
 class FrameChecker:
     """Summarises a colour texture on the GPU; reads back 1 / ``block_px``^2 of it."""
 
-    def __init__(self, ctx: moderngl.Context, block_px: int = 16) -> None:
+    def __init__(self, ctx: moderngl.Context, block_px: int = 32) -> None:
         self.ctx, self.block_px = ctx, int(block_px)
         self._prog = ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=REDUCE_SHADER)
         self._vao = ctx.vertex_array(self._prog, [])

@@ -86,3 +86,28 @@ def border_position_errors(settings: RenderSettings, ctx: Any, mode: str = "ocul
     rows = np.arange(h)[:, None] + (np.arange(64) + 0.5)[None, :] / 64.0
     exact = border_x_px(cam, front, rows.ravel()).reshape(h, 64).mean(axis=1)
     return np.abs(measured - exact)
+
+
+def straight_edge_errors(ctx: Any, samples: tuple[int, ...] = (1, 2, 4, 8, 16, 32)) -> dict[int, tuple[float, float]]:
+    """Max and mean |rendered - exact| / contrast over the edge pixels of a slanted, receding
+    solid rect (a room-like straight edge), per samples per axis (1 = one ray per pixel)."""
+    from psyop.rendering.exact_coverage import coverage_px, projected_corners_px
+    from psyop.rendering.scene import Primitive, Shape
+    from psyop.rendering.shaders import AntiAliasing
+
+    cam = crop_camera(right_eye_camera(0.0, 0.0, "ocular"), 720 - 64, 840, 128, 128)
+    a = np.radians(20.0)
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    floor = Primitive(Shape.RECT, (0.05, -0.3, -1.6), tuple(rot @ [0.3, 0, 0]), tuple(rot @ [0, 0, 0.6]),
+                      Solid((0.9, 0.9, 0.9)), name="floor")
+    cov = coverage_px(projected_corners_px(cam, floor), cam.width_px, cam.height_px)
+    expected, edge = 0.5 + 0.4 * cov, (cov > 0) & (cov < 1)
+    out = {}
+    for n in samples:
+        settings = RenderSettings(antialiasing=AntiAliasing.NONE) if n == 1 else RenderSettings()
+        prim = floor if n == 1 else dataclasses.replace(floor, edge_samples_per_axis=n)
+        with Renderer(Scene((prim,), background=(0.5, 0.5, 0.5)), settings, ctx=ctx) as r:
+            r.render(cam)
+            err = np.abs(r.image("right")[..., 0].astype(np.float64) - expected)[edge] / 0.4
+        out[n] = (float(err.max()), float(err.mean()))
+    return out

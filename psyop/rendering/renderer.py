@@ -203,6 +203,8 @@ class Renderer:
                 b = p.border
                 data[i, 5] = (1.0, b.amplitude, b.cycles, b.phase_rad)
                 data[i, 6, :2] = (b.offset, b.side)
+            data[i, 6, 2] = 0 if p.edge_samples_per_axis is None else min(int(p.edge_samples_per_axis),
+                                                                          self.settings.samples_per_axis)
         if self._prims_tex is not None and self._prims_tex.size == (TEXELS_PER_PRIMITIVE, data.shape[0]):
             self._prims_tex.write(data.tobytes())
         else:

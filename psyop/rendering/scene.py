@@ -162,10 +162,16 @@ class Primitive:
     border: SineBorder | None = None
     name: str = ""
     at_infinity: bool = False
+    # anti-aliasing effort at this primitive's edges (adaptive sampling): samples per pixel axis,
+    # None = the renderer's full ``samples_per_axis`` (stimulus edges). Background geometry with
+    # straight edges (a room) takes a few; the error of each choice: benchmarks/bench_frame_path.py
+    edge_samples_per_axis: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "shape", Shape(self.shape))
         object.__setattr__(self, "at_infinity", bool(self.at_infinity))
+        if self.edge_samples_per_axis is not None and not 1 <= int(self.edge_samples_per_axis) <= 64:
+            raise ValueError(f"primitive {self.name!r}: edge_samples_per_axis must be in [1, 64]")
         for attr in ("centre_m", "half_u_m", "half_v_m"):
             object.__setattr__(self, attr, _vec3(getattr(self, attr), attr))
         u = np.array(self.half_u_m)

@@ -23,6 +23,10 @@ chosen at compile time with one of the ``AA_*`` defines:
                    CPU-computed screen box overlaps the pixel. Non-edge pixels thus never pay for
                    the supersampling code (which a SIMD rasteriser such as llvmpipe would
                    otherwise execute masked in every pixel).
+                   Effort per primitive: an edge pixel gets the largest ``edge_samples_per_axis``
+                   of the primitives that can reach it (a primitive's own, or ``u_samples`` when it
+                   has none), so straight background edges (a room's corners) take a few samples
+                   and the stimulus edges the full grid.
 """
 
 from __future__ import annotations
@@ -142,11 +146,11 @@ vec3 sample_colour(vec3 d, float footprint) {
     return best < 0 ? u_background : shade(best, ba, bb, footprint);
 }
 
-vec3 grid_colour(vec2 corner_px) {
+vec3 grid_colour(vec2 corner_px, int n) {
     vec3 acc = vec3(0.0);
-    float inv = 1.0 / float(u_samples);
-    for (int j = 0; j < u_samples; ++j)
-        for (int k = 0; k < u_samples; ++k)
+    float inv = 1.0 / float(n);
+    for (int j = 0; j < n; ++j)
+        for (int k = 0; k < n; ++k)
             acc += sample_colour(ray_at(corner_px + (vec2(k, j) + 0.5) * inv), 0.0);
     return acc * inv * inv;
 }
@@ -155,7 +159,7 @@ vec3 grid_colour(vec2 corner_px) {
 #define MAX_RELEVANT 16
 // Primitive data of the pixel's relevant primitives, cached in registers for the sample loop.
 struct Cached { int index; vec3 c; vec3 n; vec3 hu2; vec3 hv2; float num; float rect; vec4 border; vec2 side;
-                bool at_inf; };
+                bool at_inf; int samples; };
 Cached relevant[MAX_RELEVANT];
 int n_relevant = 0;
 
@@ -164,17 +168,28 @@ void cache_primitive(int i) {
     Cached k;
     k.index = i; k.c = u_centre[i].xyz; k.n = cross(p0.xyz, p1.xyz);
     k.hu2 = p0.xyz / dot(p0.xyz, p0.xyz); k.hv2 = p1.xyz / dot(p1.xyz, p1.xyz);
-    k.num = dot(k.c, k.n); k.rect = p0.w; k.border = P(i, 5); k.side = P(i, 6).xy; k.at_inf = u_centre[i].w < 0.5;
+    vec4 p6 = P(i, 6);
+    k.num = dot(k.c, k.n); k.rect = p0.w; k.border = P(i, 5); k.side = p6.xy; k.at_inf = u_centre[i].w < 0.5;
+    k.samples = p6.z > 0.5 ? int(p6.z + 0.5) : u_samples;  // the primitive's edge effort (0: default)
     relevant[n_relevant++] = k;
+}
+
+// Samples per axis for a pixel: the largest effort among the primitives that can reach it, so
+// an edge of a stimulus primitive gets the full grid and one between background primitives
+// (e.g. room corners) only theirs.
+int relevant_samples() {
+    int n = 1;
+    for (int r = 0; r < n_relevant; ++r) n = max(n, relevant[r].samples);
+    return n;
 }
 
 // Like grid_colour, but only over the primitives that can be hit inside this pixel: those
 // covering its centre or with an edge within the margin (no other one reaches the pixel).
-vec3 grid_colour_relevant(vec2 corner_px) {
+vec3 grid_colour_relevant(vec2 corner_px, int n) {
     vec3 acc = vec3(0.0);
-    float inv = 1.0 / float(u_samples);
-    for (int j = 0; j < u_samples; ++j)
-        for (int k = 0; k < u_samples; ++k) {
+    float inv = 1.0 / float(n);
+    for (int j = 0; j < n; ++j)
+        for (int k = 0; k < n; ++k) {
             vec3 d = ray_at(corner_px + (vec2(k, j) + 0.5) * inv);
             int best = -1; float best_t = 1e38; float ba = 0.0; float bb = 0.0;
             for (int r = 0; r < n_relevant; ++r) {
@@ -208,7 +223,7 @@ void main() {
 #if defined(AA_NONE)
     colour = sample_colour(ray_at(corner + 0.5), 0.0);
 #elif defined(AA_SUPERSAMPLE)
-    colour = grid_colour(corner);
+    colour = grid_colour(corner, u_samples);
 #elif defined(AA_MSAA)
     vec2 sp = gl_SamplePosition;
     colour = sample_colour(ray_at(corner + vec2(sp.x, 1.0 - sp.y)), 0.0);
@@ -223,7 +238,7 @@ void main() {
             if (n_relevant < MAX_RELEVANT) cache_primitive(i); else overflow = true;
         }
     }
-    colour = overflow ? grid_colour(corner) : grid_colour_relevant(corner);
+    colour = overflow ? grid_colour(corner, u_samples) : grid_colour_relevant(corner, relevant_samples());
     alpha = 0.5;
 #else
     vec3 d0 = ray_at(corner + 0.5);
@@ -275,7 +290,10 @@ void main() {
     // First pass: one ray per pixel; edge pixels are marked in the depth buffer for the second.
     gl_FragDepth = edge ? 0.0 : 1.0;
 #else
-    if (edge) { colour = overflow ? grid_colour(corner) : grid_colour_relevant(corner); alpha = 0.5; }
+    if (edge) {
+        colour = overflow ? grid_colour(corner, u_samples) : grid_colour_relevant(corner, relevant_samples());
+        alpha = 0.5;
+    }
 #endif
 #endif
     float ap = texelFetch(u_aperture, ivec2(fc.x, fc.y), 0).r;

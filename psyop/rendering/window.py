@@ -40,6 +40,18 @@ def count_dropped_frames(present_s: np.ndarray, refresh_interval_s: float) -> tu
     return dropped, late
 
 
+BLIT_SHADER = """
+#version 410 core
+uniform sampler2D u_image;
+uniform vec2 u_offset_px;
+out vec4 colour;
+void main() {
+    ivec2 p = ivec2(gl_FragCoord.xy - u_offset_px);
+    colour = vec4(clamp(texelFetch(u_image, p, 0).rgb, 0.0, 1.0), 1.0);
+}
+"""
+
+
 class Window:
     """A glfw window with an OpenGL 4.1 core context wrapped by moderngl."""
 
@@ -69,6 +81,29 @@ class Window:
         self._glfw.swap_buffers(self._window)
         self._glfw.poll_events()
 
+    def present_side_by_side(self, textures: list[Any]) -> None:
+        """Show colour textures left to right (e.g. the left and right eye, each at full
+        render resolution: texel = screen pixel), then swap. The window must be wide enough."""
+        from psyop.rendering.shaders import VERTEX_SHADER
+
+        if getattr(self, "_blit", None) is None:
+            prog = self.ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=BLIT_SHADER)
+            self._blit = (prog, self.ctx.vertex_array(prog, []))
+        prog, vao = self._blit
+        self.ctx.screen.use()
+        x = 0
+        for texture in textures:
+            width, height = texture.size
+            self.ctx.viewport = (x, 0, width, height)
+            texture.use(0)
+            prog["u_image"].value = 0
+            prog["u_offset_px"].value = (float(x), 0.0)
+            vao.render(moderngl.TRIANGLES, vertices=3)
+            x += width
+        self.ctx.viewport = (0, 0, self.width_px, self.height_px)
+        self._glfw.swap_buffers(self._window)
+        self._glfw.poll_events()
+
     def screen_pixels(self) -> np.ndarray:
         """(H, W, 3) uint8 of the back buffer's current content, top row first."""
         raw = self.ctx.screen.read(components=3, dtype="f1")
@@ -76,6 +111,9 @@ class Window:
 
     def release(self) -> None:
         if self._window is not None:
+            for obj in reversed(getattr(self, "_blit", None) or ()):
+                obj.release()
+            self._blit = None
             self.ctx.release()
             self._glfw.destroy_window(self._window)
             self._glfw.terminate()

@@ -209,7 +209,8 @@ def run_session(
     if options.display == "window":
         from psyop.session.window import GlfwWindow
 
-        window = GlfwWindow(display_profile, clock, scale=options.window_scale)
+        window = GlfwWindow(display_profile, clock, scale=options.window_scale,
+                            n_eyes=len(plan.rig.eyes))
         display: Any = window
     elif options.display == "headless":
         display = HeadlessDisplay(clock)

@@ -48,6 +48,7 @@ class SceneRenderer:
         self.last_eye: str | None = None
         self._renderer: Any = None
         self._checker: Any = None
+        self._summaries: dict[str, Any] = {}  # per eye: the check summary of its current image
         self._base_dir = Path(plan.protocol.source_name).parent if plan.protocol.source_name else None
         from psyop.rendering.textures import ImageFiles
 
@@ -101,12 +102,14 @@ class SceneRenderer:
                 self._renderer = Renderer(scene, settings=self.settings, ctx=self._ctx)
             else:
                 self._renderer.set_scene(scene)
-            self._renderer.render(camera)
+            result = self._renderer.render(camera)
             self.images_rendered += 1
             self.last_eye = eye
             images += 1
+            if result.rendered or eye not in self._summaries:  # a reused frame keeps its checked image
+                self._summaries[eye] = self._check(eye)
             # a bare blank is uniform by design
-            ok &= self._check(eye).ok(blank_by_design=phase.show == "blank" and not phase.primitives)
+            ok &= self._summaries[eye].ok(blank_by_design=phase.show == "blank" and not phase.primitives)
         return FrameCheck(images > 0, ok and cameras_ok)
 
     def _check(self, eye: str) -> Any:
@@ -127,6 +130,15 @@ class SceneRenderer:
         if self._ctx is not None and self._owns_ctx:
             self._ctx.release()
         self._ctx = None
+
+    def eye_textures(self) -> list[Any]:
+        """Each eye's latest image as a colour texture, left eye first; [] until every eye has one."""
+        if self._renderer is None:
+            return []
+        try:
+            return [self._renderer.colour_texture(eye) for eye in self.eyes]
+        except KeyError:
+            return []
 
     def last_framebuffer(self) -> Any:
         """The framebuffer of the last rendered eye (for a window to present), or None."""

@@ -2,8 +2,10 @@
 
 Built on :class:`psyop.rendering.window.Window` (glfw + moderngl). With a
 :class:`~psyop.session.scene_renderer.SceneRenderer` sharing the window's context
-(``source``), each submit presents the newest rendered eye image; outside stimulus phases
-(cross, blank, prompt) the screen is flat grey. Flip times are recorded on the real clock
+(``source``), each submit presents the newest image of every eye, side by side for a
+stereo protocol (left eye on the left), at the render resolution: ``scale`` 1
+(``psyop run --window-scale 1``) shows the display profile's full resolution per eye.
+Before any image (and when there is no source) the screen is flat grey. Flip times are recorded on the real clock
 (:meth:`RealClock.on_flip`), which estimates the display's refresh period.
 """
 
@@ -15,13 +17,17 @@ from typing import Any
 class GlfwWindow:
     """Implements the loop's Display and the keyboard's KeyEvents."""
 
-    def __init__(self, display_profile: Any, clock: Any, *, scale: float = 0.25) -> None:
+    def __init__(self, display_profile: Any, clock: Any, *, scale: float = 0.25, n_eyes: int = 1) -> None:
         from psyop.errors import UserError
         from psyop.rendering.window import Window, WindowUnavailable
 
+        if not (0.0 < scale <= 1.0):
+            raise UserError(f"window scale must be in (0, 1] (1 = the display's full resolution), got {scale:g}",
+                            "--window-scale")
+        self.n_eyes = n_eyes
         try:
-            self._window = Window(max(64, int(display_profile.width_px * scale)),
-                                  max(64, int(display_profile.height_px * scale)), title="psyop session")
+            self._window = Window(max(64, n_eyes * max(16, round(display_profile.width_px * scale))),
+                                  max(64, max(16, round(display_profile.height_px * scale))), title="psyop session")
         except WindowUnavailable as exc:
             raise UserError(f"cannot open a window: {exc}", "--display") from exc
         import glfw
@@ -61,11 +67,11 @@ class GlfwWindow:
         return keys
 
     def submit(self) -> float:
-        """Present the renderer's newest image (or a flat grey screen outside stimuli) and flip."""
+        """Present every eye's newest image side by side (flat grey before any) and flip."""
         ctx = self._window.ctx
-        framebuffer = self.source.last_framebuffer() if self.source is not None else None
-        if framebuffer is not None and framebuffer.size == (self._window.width_px, self._window.height_px):
-            self._window.present(framebuffer)
+        textures = self.source.eye_textures() if self.source is not None else []
+        if textures and sum(t.size[0] for t in textures) <= self._window.width_px:
+            self._window.present_side_by_side(textures)
         else:
             ctx.screen.use()
             ctx.clear(self.shade, self.shade, self.shade)
