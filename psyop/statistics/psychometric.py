@@ -78,7 +78,7 @@ GUESS_2AFC = 0.5
 #: A 2AFC curve with lapse >= this never reaches 75 % correct.
 LAPSE_NO_THRESHOLD = 0.25
 #: The refined posterior grid is refined again until each axis's central 95 % spans this many points.
-MIN_CI_POINTS = 12
+MIN_CI_POINTS = 10
 #: Tail mass left outside a refined grid, per side and axis.
 REFINE_TAIL = 1e-5
 
@@ -343,8 +343,8 @@ def _marginal(post: np.ndarray, axis: int) -> np.ndarray:
 def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict[str, tuple[float, float]]
                      ) -> tuple[dict[str, np.ndarray], bool]:
     """A grid spanning each free axis's posterior mass (tails <= :data:`REFINE_TAIL` cut) with
-    the same number of points; ``done`` is True when every axis already resolves its central 95 %
-    with >= :data:`MIN_CI_POINTS` points."""
+    the same number of points; ``done`` is True when the threshold and width axes already resolve
+    their central 95 % with >= :data:`MIN_CI_POINTS` points (or half the axis)."""
     names = sorted(grid)
     new, done = {}, True
     for axis, name in enumerate(names):
@@ -354,14 +354,15 @@ def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict
             continue
         cdf = np.cumsum(_marginal(post, axis))
         inner = np.searchsorted(cdf, [0.025, 0.975])
-        if inner[1] - inner[0] + 1 < MIN_CI_POINTS:
+        if name in ("threshold", "width") and inner[1] - inner[0] + 1 < min(MIN_CI_POINTS, len(values) // 2):
             done = False
         lo_i = max(int(np.searchsorted(cdf, REFINE_TAIL)) - 1, 0)
         hi_i = min(int(np.searchsorted(cdf, 1.0 - REFINE_TAIL)) + 1, len(values) - 1)
         lo, hi = values[lo_i], values[hi_i]
         lo, hi = max(lo, bounds[name][0]), min(hi, bounds[name][1])
         new[name] = np.linspace(lo, hi, len(values)) if hi > lo else values
-    return new, done
+    unchanged = all(np.allclose(np.atleast_1d(new[n]), np.atleast_1d(grid[n])) for n in names)
+    return new, done or unchanged
 
 
 _NORM_SPAN = float(norm.ppf(0.95) - norm.ppf(0.05))  # psignifit 'norm' width: 5 %-95 % of the unscaled sigmoid
@@ -403,10 +404,11 @@ def log_posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray]) ->
     return np.broadcast_to(lp, tuple(len(v) for v in axes))
 
 
-def posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, float]]:
+def posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray], log_posterior: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, dict[str, float]]:
     """psignifit's ``posterior_grid`` (normalised trapezoid mass per grid point, grid maximum)
     on :func:`log_posterior_2afc`."""
-    lp = log_posterior_2afc(data, priors, grid)
+    lp = log_posterior if log_posterior is not None else log_posterior_2afc(data, priors, grid)
     imax = np.unravel_index(int(np.argmax(lp)), lp.shape)
     names = sorted(grid)
     grid_max = {n: float(np.atleast_1d(grid[n])[i]) for n, i in zip(names, imax)}
@@ -462,43 +464,49 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
     post_sparse, _ = posterior_2afc(data, priors, sparse)
     tight = masked_parameter_bounds(sparse, post_sparse >= conf.max_bound_value)
     dense_grid = parameter_grid(tight, conf.grid_steps)
-    dense_post, grid_max = posterior_2afc(data, priors, dense_grid)
+    dense_lp = log_posterior_2afc(data, priors, dense_grid)
+    dense_post, grid_max = posterior_2afc(data, priors, dense_grid, dense_lp)
     _, dense_t75, names = _t75_mesh(dense_grid, sigmoid)
 
-    grid, post, n_ref = dense_grid, dense_post, 0
+    grid, post, n_ref, lp = dense_grid, dense_post, 0, dense_lp
     for _ in range(options.posterior_refinements):
         new_grid, done = refine_posterior(grid, post, bounds)
         if done:
             break
-        post, grid_max = posterior_2afc(data, priors, new_grid)
+        lp = log_posterior_2afc(data, priors, new_grid)
+        post, grid_max = posterior_2afc(data, priors, new_grid, lp)
         grid, n_ref = new_grid, n_ref + 1
     mesh, t75, names = _t75_mesh(grid, sigmoid)
-    modes = _find_modes(data, priors, grid, bounds, options.map_refinements)
+    modes = _find_modes(data, priors, grid, bounds, options.map_refinements, lp) if options.map_refinements else []
     grid_max = modes[0][1] if modes else grid_max
     return GridPosterior(mesh, post, t75, grid, bounds, grid_max, names, dense_grid, dense_post, dense_t75, n_ref,
                          tuple(modes))
 
 
-def _find_modes(data, priors, grid, bounds, zooms: int, max_starts: int = 4, min_log_ratio: float = -2.3
-                ) -> list[tuple[float, dict[str, float]]]:
+def _find_modes(data, priors, grid, bounds, zooms: int, lp: np.ndarray, max_starts: int = 4,
+                min_log_ratio: float = -1.0) -> list[tuple[float, dict[str, float]]]:
     """Local posterior maxima: every grid local maximum within ``min_log_ratio`` of the highest
     (at most ``max_starts``), each zoomed into ``zooms`` times; distinct modes, best first.
 
     psignifit starts one Nelder-Mead search at the grid maximum; two modes a few hundredths
     of a log unit apart can swap places on a grid, so psyop zooms from each candidate.
     """
-    lp = log_posterior_2afc(data, priors, grid)
     finite = np.where(np.isfinite(lp), lp, -np.inf)
     is_max = (finite == ndimage.maximum_filter(finite, size=3, mode="nearest")) & (finite >= finite.max() + min_log_ratio)
     starts = sorted(np.argwhere(is_max), key=lambda i: -finite[tuple(i)])[:max_starts]
     names = sorted(grid)
     steps = {n: (np.ptp(np.atleast_1d(grid[n])) / max(len(np.atleast_1d(grid[n])) - 1, 1)) for n in names}
+    # 15 points per free axis shrink the box seven-fold per zoom; with eta free (4 axes) 9 points
+    # (four-fold) keep each zoom at ~6,500 points, and 1.4x the zooms reach the same resolution.
+    n_free = sum(len(np.atleast_1d(grid[n])) > 1 for n in names)
+    points = 15 if n_free <= 3 else 9
+    zooms = zooms if n_free <= 3 else int(np.ceil(zooms * np.log(7) / np.log(4)))
     modes: list[tuple[float, dict[str, float]]] = []
     for idx in starts:
         point = {n: float(np.atleast_1d(grid[n])[i]) for n, i in zip(names, idx)}
         zoom = grid
         for _ in range(zooms):
-            zoom = _shrink(zoom, point, bounds)  # the step shrinks seven-fold per zoom
+            zoom = _shrink(zoom, point, bounds, points)
             point = _refine_map(data, priors, zoom, point)
         value = float(log_posterior_2afc(data, priors, {k: np.atleast_1d(v) for k, v in point.items()}).max())
         same = [m for m in modes if all(abs(m[1][n] - point[n]) <= 0.5 * steps[n] for n in names)]
