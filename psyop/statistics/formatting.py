@@ -24,7 +24,14 @@ def _df(value: float) -> str:
 
 
 def format_anova(row: Mapping) -> str:
-    """One ANOVA effect. GG-corrected df and p, with eps, when eps < 1; plain otherwise."""
+    """One ANOVA effect. GG-corrected df and p, with eps, when eps < 1; plain otherwise.
+    A degenerate row (``status`` other than 'ok') is spelled out, not given numbers."""
+    status = row.get("status", "ok") if hasattr(row, "get") else "ok"
+    if status == "zero_error_variance":
+        return f"not testable: zero error variance (F undefined; F({_df(row['df1'])}, {_df(row['df2'])}))"
+    if status == "eps_undefined":
+        return (f"F({_df(row['df1'])}, {_df(row['df2'])}) = {row['F']:.2f}, {format_p(row['p_unc'])} uncorrected; "
+                "GG epsilon undefined")
     eps = float(row["eps_gg"])
     if eps < 1.0:
         return (f"F({_df(row['df1_gg'])}, {_df(row['df2_gg'])}) = {row['F']:.2f}, "
@@ -34,6 +41,8 @@ def format_anova(row: Mapping) -> str:
 
 def format_ttest(row: Mapping) -> str:
     """A Bonferroni-corrected paired t-test row from :func:`psyop.statistics.anova.posthoc_paired`."""
+    if (row.get("status", "ok") if hasattr(row, "get") else "ok") == "zero_variance":
+        return f"not testable: the differences have zero variance (df = {_df(row['dof'])})"
     return f"t({_df(row['dof'])}) = {row['T']:.2f}, {format_p(row['p_bonf'])} (Bonferroni x{int(row['m'])})"
 
 
