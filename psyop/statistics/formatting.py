@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from psyop.statistics.regression import ConditionComparison, LinearFit
+from psyop.statistics.regression import ConditionComparison, LinearFit, MixedComparison
 
 
 def format_p(p: float) -> str:
@@ -63,6 +63,14 @@ def format_condition_comparison(c: ConditionComparison) -> str:
     return (f"{c.other} vs {c.reference}: intercept difference = {c.intercept_diff:.3f} ({format_p(c.intercept_diff_p)}), "
             f"slope difference = {c.slope_diff:.3f} ({format_p(c.slope_diff_p)}); "
             f"joint F({c.joint_df1}, {c.joint_df2}) = {c.joint_F:.2f}, {format_p(c.joint_p)}")
+
+
+def format_mixed_comparison(m: MixedComparison) -> str:
+    """The subject-aware reach test: method, differences, joint Wald chi2, and any fallback reason."""
+    out = (f"{m.other} vs {m.reference}: intercept difference = {m.intercept_diff:.3f} ({format_p(m.intercept_diff_p)}), "
+           f"slope difference = {m.slope_diff:.3f} ({format_p(m.slope_diff_p)}); joint chi2({m.joint_df}) = "
+           f"{m.joint_chi2:.2f}, {format_p(m.joint_p)} [{m.method}; {m.n_subjects} participants, {m.n} reaches]")
+    return out + (f" (fallback: {m.fallback_reason})" if m.fallback_reason else "")
 
 
 def format_threshold(row: Mapping) -> str:
