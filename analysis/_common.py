@@ -48,7 +48,13 @@ def write_json(path: Path, payload: dict) -> Path:
 
 
 def read_fits(path: Path) -> pd.DataFrame:
-    """Read a psychometric fit cache (results/<study>_fits.csv) with ``flags`` as '' when clean."""
-    fits = pd.read_csv(path, dtype={"participant": str, "flags": str}, keep_default_na=False, na_values=[""])
+    """Read a psychometric fit cache (results/<study>_fits.csv): ``flags`` '' when none, ``status`` required."""
+    fits = pd.read_csv(path, dtype={"participant": str, "flags": str, "status": str}, keep_default_na=False,
+                       na_values=[""])
     fits["flags"] = fits["flags"].fillna("").astype(str)
+    if "status" not in fits:
+        from psyop.errors import UserError
+
+        raise UserError("fit cache has no 'status' column (written by an older psyop): delete it and rerun "
+                        "analysis/fit_psychometric.py", str(path))
     return fits

@@ -1,7 +1,10 @@
-"""Detection thresholds by back-surface distance (subject thresholds with 95 % CIs, mean +- SE).
+"""Detection thresholds by back-surface distance (subject thresholds with 95 % CIs, mean ± SE).
 
 Reads the fit cache (results/detection_fits.csv); writes results/detection_thresholds.json
-with the grand mean threshold and a one-way rm-ANOVA of thresholds over back distance.
+with the grand mean threshold (and its 95 % t-interval over participants) and a one-way
+rm-ANOVA of thresholds over back distance. Fits whose status is not usable (censored,
+lapse at bound, bimodal, grid edge, no fit) are left out by the documented rule
+(psyop.statistics.psychometric.usable_for_analysis) and counted by status.
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ from psyop.figures.study_figures import plot_thresholds
 from psyop.statistics.anova import rm_anova
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_anova
+from psyop.statistics.psychometric import usable_for_analysis
+from scipy import stats
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -24,15 +29,21 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     fits = read_fits(args.fits)
     simulated = is_simulated(args.data)
-    clean = fits[fits["flags"] == ""]
+    clean, left_out = usable_for_analysis(fits)
+    per_subject = clean.groupby("participant")["threshold_D"].mean()
     per_back = clean.groupby("back_D")["threshold_D"].agg(["mean", "std", "count"]).reset_index()
+    n = len(per_subject)
+    half = float(stats.t.ppf(0.975, n - 1) * per_subject.std(ddof=1) / n ** 0.5) if n > 1 else float("nan")
+    mean = float(per_subject.mean())
     payload = {
         "study": "detection", "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
-        "n_fits": len(fits), "n_flagged": int((fits["flags"] != "").sum()),
-        "flagged": fits.loc[fits["flags"] != "", ["participant", "back_D", "flags"]].to_dict("records"),
-        "mean_threshold_D": float(clean["threshold_D"].mean()),
+        "n_fits": len(fits), "n_left_out": int(sum(left_out.values())), "left_out_by_status": left_out,
+        "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", "back_D", "status"]].to_dict("records"),
+        "mean_threshold_D": mean, "mean_threshold_ci_D": [mean - half, mean + half],
         "per_back": per_back.to_dict("records"),
-        "summary": {"detection threshold (mean over subjects and back distances)": f"{clean['threshold_D'].mean():.2f} D"},
+        "summary": {"detection threshold (mean over subjects and back distances)":
+                    f"{mean:.2f} D [95 % CI {mean - half:.2f}, {mean + half:.2f}; {n} participants; "
+                    f"{sum(left_out.values())} of {len(fits)} fits left out: {left_out or 'none'}]"},
     }
     try:
         aov = rm_anova(clean, "threshold_D", "back_D")

@@ -18,11 +18,17 @@ from psyop.statistics.formatting import format_anova, format_ttest
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parser(__doc__, "figures/fig_ordinal_depth.png").parse_args(argv)
+    p = parser(__doc__, "figures/fig_ordinal_depth.png")
+    p.add_argument("--bonferroni-family", choices=["per_level", "all"], default="per_level",
+                   help="per_level: correct over the 3 mode pairs within each separation (the paper's "
+                        "'pairwise t-tests between rendering modes at each separation distance'); all: over all 6")
+    args = p.parse_args(argv)
     ds = load_dataset(args.data, "ordinal")
     cells = cell_means(ds.trials, "correct", ["mode", "separation_D"])
     aov = rm_anova(cells, "correct", ["mode", "separation_D"])
-    posthoc = posthoc_paired(cells, "correct", "mode", by="separation_D")
+    posthoc = posthoc_paired(cells, "correct", "mode", by="separation_D", family=args.bonferroni_family)
+    family_text = ("the 3 mode pairs within each separation (m = 3)" if args.bonferroni_family == "per_level"
+                   else f"all {len(posthoc)} mode pairs across separations (m = {len(posthoc)})")
     args.results.mkdir(parents=True, exist_ok=True)
     cells.to_csv(args.results / "ordinal_cells.csv", index=False)
     aov.table.to_csv(args.results / "ordinal_anova.csv", index=False)
@@ -36,7 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     write_json(args.results / "ordinal.json", {
         "study": "ordinal", "simulated": ds.simulated, "n_subjects": aov.n_subjects,
         "dropped": aov.dropped.to_dict("records"), "anova": aov.table.to_dict("records"),
-        "posthoc": posthoc.to_dict("records"), "summary": summary,
+        "posthoc": posthoc.to_dict("records"), "bonferroni_family": args.bonferroni_family,
+        "bonferroni_family_text": family_text, "summary": summary,
     })
     save_figure(plot_ordinal(cells[~cells["participant"].isin(aov.dropped["subject"])], posthoc,
                              simulated=ds.simulated), args.out)

@@ -35,8 +35,8 @@ def main(argv: list[str] | None = None) -> int:
     table["simulated"] = ds.simulated
     args.out.parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out, index=False)
-    flagged = table[table["flags"].fillna("") != ""]
-    print(f"{args.study}: {len(table)} fits, {len(flagged)} flagged -> {args.out}", file=sys.stderr)
+    counts = table["status"].value_counts().to_dict()
+    print(f"{args.study}: {len(table)} fits, status {counts} -> {args.out}", file=sys.stderr)
     return 0
 
 

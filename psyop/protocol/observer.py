@@ -66,6 +66,10 @@ class Reach(StrictModel):
     kind: Literal["reach"]
     arm_reach_m: Number = Field(gt=0.2, le=1.5)
     arm_reach_sd_m: Number = Field(default=0.0, ge=0)
+    slope_sd: Number = Field(default=0.0, ge=0, le=1, description="sd of a participant's slope deviation (shared by conditions)")
+    intercept_sd_m: Number = Field(default=0.0, ge=0, le=0.5, description="sd of a participant's intercept deviation")
+    max_reach_fraction: Number = Field(default=1.0, gt=0.3, le=1.5,
+                                       description="the hand ends at most this fraction of arm reach from the eyes")
     by_condition: dict[str, ReachCondition] = Field(min_length=1)
 
 

@@ -39,6 +39,7 @@ from psyop.session.gaze.sample import GazeSample, GazeSource, TrackerLost
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.log.store import SessionStore
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
+from psyop.session.reach import horizontal_reach_m
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.session.plan import TIMEOUT_RESPONSE, ResponsePlan
 from psyop.session.progress import session_progress
@@ -214,7 +215,8 @@ class TrialLoop:
 
     def _track_reach(self, row: Mapping[str, Any], response: Response, end_s: float) -> tuple[Response, dict[str, Any]]:
         """A reach: take the pose source's last N hand samples (hold last valid), recompute
-        the reach from them and log them with the trial (``hand_sample_*`` columns)."""
+        the reach from their mean along the horizontal eye-to-target direction and log them
+        with the trial (``hand_sample_*`` columns)."""
         if response.reach_m is None or self.pose is None:
             return response, {}
         extras = dict(response.extras)
@@ -224,7 +226,8 @@ class TrialLoop:
             return response, {}
         hands = [self.hand_conditioner.condition(s) for s in samples]
         self.n_hand_held += sum(h.held for h in hands)
-        reach, mean = reach_from_positions(np.array([h.position_m for h in hands]), self.config.hand_last_n)
+        _, mean = reach_from_positions(np.array([h.position_m for h in hands]), self.config.hand_last_n)
+        reach = horizontal_reach_m(mean)  # along the horizontal eye-to-target direction (psyop/session/reach.py)
         extras.update(hand_x_m=float(mean[0]), hand_y_m=float(mean[1]), hand_z_m=float(mean[2]))
         columns = dict(hand_sample_t_s=[h.sample_t_s for h in hands],
                        **{f"hand_sample_{a}_m": [h.position_m[i] for h in hands] for i, a in enumerate("xyz")},

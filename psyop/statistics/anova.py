@@ -5,6 +5,20 @@ W and p, the Greenhouse-Geisser epsilon, GG-corrected df (df * eps) and GG-corre
 pingouin drops a subject with any missing cell (listwise deletion) without saying so;
 psyop finds those subjects first, drops them itself, and lists who and why in
 :attr:`AnovaResult.dropped`.
+
+Degenerate data never produce a number that looks like a result:
+
+- every effect's error sum of squares (the subject x effect interaction) is computed here;
+  when it is zero relative to the total (<= :data:`ZERO_SS_REL`, e.g. a level effect plus an
+  exact subject offset, where pingouin reports F = 2.7e17 or a *negative* F), the row's
+  ``status`` is ``zero_error_variance`` and F, p and eps are NaN;
+- a GG epsilon pingouin cannot compute is NaN with ``status`` ``eps_undefined``, never 1
+  (eps = 1 only for one-df effects, where it is 1 by definition);
+- constant data, a level name only some subjects have (a typo: the subject and level are
+  named), and too few complete subjects raise :class:`AnovaInputError` (a
+  :class:`psyop.errors.UserError` and a ``ValueError``) with the fix;
+- post-hoc pairs whose differences have zero variance get ``status`` ``zero_variance`` and
+  NaN t and p instead of numpy warnings or p = 1e-112.
 """
 
 from __future__ import annotations
@@ -19,10 +33,21 @@ import numpy as np
 import pandas as pd
 import pingouin as pg
 
+from psyop.errors import UserError
+
 ANOVA_COLUMNS = [
     "effect", "F", "df1", "df2", "p_unc", "eps_gg", "df1_gg", "df2_gg", "p_gg",
-    "mauchly_W", "mauchly_p", "sphericity", "ng2", "n_subjects",
+    "mauchly_W", "mauchly_p", "sphericity", "ng2", "n_subjects", "status",
 ]
+#: An error sum of squares at or below this fraction of the total counts as zero.
+ZERO_SS_REL = 1e-10
+
+
+class AnovaInputError(UserError, ValueError):
+    """Data a repeated-measures test cannot be run on; the message names what and whom."""
+
+    def __init__(self, message: str, location: str | None = None):
+        UserError.__init__(self, message, location)
 
 
 @dataclass(frozen=True)
@@ -75,6 +100,61 @@ def find_incomplete_subjects(data: pd.DataFrame, dv: str, within: Sequence[str],
     return pd.DataFrame(rows, columns=["subject", "reason"])
 
 
+def check_level_names(data: pd.DataFrame, within: Sequence[str], subject: str) -> None:
+    """Raise :class:`AnovaInputError` when a subject has a level of a factor that most subjects lack
+    (a typo or relabelled condition), naming the subject, the level and the expected levels."""
+    n_subjects = data[subject].nunique()
+    for w in within:
+        per_level = data.groupby(w, observed=True)[subject].nunique()
+        common = {lv for lv, n in per_level.items() if n > n_subjects / 2}
+        odd = [lv for lv, n in per_level.items() if lv not in common]
+        if not odd or not common:
+            continue
+        problems = []
+        for lv in odd:
+            whose = sorted(data.loc[data[w] == lv, subject].unique(), key=str)
+            for s_ in whose:
+                have = set(data.loc[data[subject] == s_, w])
+                lacks = sorted((str(c) for c in common - have))
+                problems.append(f"subject {s_!s} has {w}={lv!s}" + (f" but lacks {w}={', '.join(lacks)}" if lacks else ""))
+        raise AnovaInputError(
+            f"level names differ between subjects: {'; '.join(problems)} (levels most subjects have: "
+            f"{', '.join(sorted(map(str, common)))}); correct the label or drop the subject before the ANOVA")
+
+
+def _check_enough_subjects(kept: pd.DataFrame, subject: str, need: int, what: str, dropped: pd.DataFrame) -> int:
+    n = int(kept[subject].nunique())
+    if n < need:
+        names = ", ".join(map(str, sorted(kept[subject].unique(), key=str))) or "none"
+        gone = f"; dropped for missing cells: {', '.join(map(str, dropped['subject']))}" if len(dropped) else ""
+        raise AnovaInputError(f"{n} complete subject(s) ({names}){gone}: {what} needs at least {need}")
+    return n
+
+
+def error_sums_of_squares(data: pd.DataFrame, dv: str, within: Sequence[str], subject: str) -> dict[str, float]:
+    """Error sum of squares of each effect (the subject x effect interaction) of a complete design,
+    keyed like pingouin's effects ('A', 'B', 'A * B'), plus 'total' (around the grand mean)."""
+    within = list(within)
+    wide = data.pivot_table(index=subject, columns=within, values=dv, aggfunc="first", observed=True)
+    y = wide.to_numpy(float)
+    total = float(((y - y.mean()) ** 2).sum())
+    if len(within) == 1:
+        r = y - y.mean(axis=1, keepdims=True) - y.mean(axis=0, keepdims=True) + y.mean()
+        return {within[0]: float((r ** 2).sum()), "total": total}
+    a = len(wide.columns.levels[0]) if hasattr(wide.columns, "levels") else 1
+    y = y.reshape(len(wide), a, -1)  # subject x A x B (pivot_table sorts the column MultiIndex)
+    b = y.shape[2]
+    m_sa, m_sb, m_s = y.mean(axis=2), y.mean(axis=1), y.mean(axis=(1, 2))
+    m_a, m_b, g = y.mean(axis=(0, 2)), y.mean(axis=(0, 1)), y.mean()
+    r_a = m_sa - m_s[:, None] - m_a[None, :] + g
+    r_b = m_sb - m_s[:, None] - m_b[None, :] + g
+    m_ab = y.mean(axis=0)
+    r_ab = (y - m_sa[:, :, None] - m_sb[:, None, :] + m_s[:, None, None]
+            - (m_ab - m_a[:, None] - m_b[None, :] + g)[None])
+    return {within[0]: float(b * (r_a ** 2).sum()), within[1]: float(a * (r_b ** 2).sum()),
+            f"{within[0]} * {within[1]}": float((r_ab ** 2).sum()), "total": total}
+
+
 def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: str = "participant") -> AnovaResult:
     """One- or two-way repeated-measures ANOVA with sphericity tests and GG correction.
 
@@ -86,43 +166,52 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
         raise ValueError("rm_anova supports one or two within-subject factors")
     if data.duplicated([subject, *within]).any():
         raise ValueError("more than one value per subject and cell; aggregate first (cell_means)")
+    check_level_names(data, within, subject)
     dropped = find_incomplete_subjects(data, dv, within, subject)
     kept = data[~data[subject].isin(dropped["subject"])].copy()
     kept[dv] = kept[dv].astype(float)
-    n = int(kept[subject].nunique())
-    max_levels = max(kept[w].nunique() for w in within)
-    if n < max(2, max_levels):
-        raise ValueError(f"{n} complete subject(s) cannot test sphericity of {max_levels} levels "
-                         f"(dropped: {list(dropped['subject'])})")
-    with _quiet_pingouin():
+    max_levels = max(kept[w].nunique() for w in within) if len(kept) else 0
+    n = _check_enough_subjects(kept, subject, max(2, max_levels), f"an rm-ANOVA with {max_levels} levels", dropped)
+    error_ss = error_sums_of_squares(kept, dv, within, subject)
+    if error_ss["total"] <= 0.0 or np.ptp(kept[dv].to_numpy(float)) == 0.0:
+        raise AnovaInputError(f"{dv!r} is the same value ({kept[dv].iloc[0]:g}) in every subject and cell: "
+                              "there is no variance to test")
+    with _quiet_pingouin(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # degenerate rows are caught below, by error SS
         aov = pg.rm_anova(kept, dv=dv, within=within if len(within) > 1 else within[0],
                           subject=subject, correction=True, detailed=True)
     rows = []
+    zero = {k: v <= ZERO_SS_REL * error_ss["total"] for k, v in error_ss.items() if k != "total"}
     if len(within) == 1:
         effect, error = aov.iloc[0], aov.iloc[1]
-        rows.append(_row(within[0], effect, int(effect["DF"]), int(error["DF"]), n))
+        rows.append(_row(within[0], effect, int(effect["DF"]), int(error["DF"]), n, zero[within[0]]))
     else:
         for _, effect in aov.iterrows():
-            rows.append(_row(effect["Source"], effect, int(effect["ddof1"]), int(effect["ddof2"]), n))
+            rows.append(_row(effect["Source"], effect, int(effect["ddof1"]), int(effect["ddof2"]), n,
+                             zero[effect["Source"]]))
     table = pd.DataFrame(rows, columns=ANOVA_COLUMNS)
     return AnovaResult(table=table, dropped=dropped, within=tuple(within), dv=dv, n_subjects=n)
 
 
-def _row(name: str, effect: pd.Series, df1: int, df2: int, n: int) -> dict:
-    eps = float(effect.get("eps", 1.0))
-    if df1 == 1 or not np.isfinite(eps):
-        eps = 1.0
-    p_unc = float(effect["p_unc"])
-    p_gg = float(effect.get("p_GG_corr", np.nan))
-    if not np.isfinite(p_gg):
-        p_gg = p_unc  # pingouin leaves it empty when eps == 1 (two levels)
+def _row(name: str, effect: pd.Series, df1: int, df2: int, n: int, zero_error: bool) -> dict:
+    nan = float("nan")
+    status = "ok"
+    eps = float(effect.get("eps", nan))
+    if df1 == 1:
+        eps = 1.0  # one numerator df: sphericity holds by definition
+    elif not np.isfinite(eps):
+        status = "eps_undefined"
+    f_value, p_unc = float(effect.get("F", nan)), float(effect.get("p_unc", nan))
+    p_gg = float(effect.get("p_GG_corr", nan)) if df1 > 1 else p_unc  # pingouin leaves it empty for one df
+    if zero_error or not np.isfinite(f_value) or f_value < 0:
+        status, f_value, p_unc, p_gg, eps = "zero_error_variance", nan, nan, nan, nan
     return {
-        "effect": name, "F": float(effect["F"]), "df1": df1, "df2": df2, "p_unc": p_unc,
+        "effect": name, "F": f_value, "df1": df1, "df2": df2, "p_unc": p_unc,
         "eps_gg": eps, "df1_gg": df1 * eps, "df2_gg": df2 * eps, "p_gg": p_gg,
-        "mauchly_W": float(effect.get("W_spher", np.nan)) if df1 > 1 else 1.0,
-        "mauchly_p": float(effect.get("p_spher", np.nan)) if df1 > 1 else 1.0,
+        "mauchly_W": float(effect.get("W_spher", nan)) if df1 > 1 else 1.0,
+        "mauchly_p": float(effect.get("p_spher", nan)) if df1 > 1 else 1.0,
         "sphericity": bool(effect.get("sphericity", True)) if df1 > 1 else True,
-        "ng2": float(effect["ng2"]), "n_subjects": n,
+        "ng2": float(effect.get("ng2", nan)), "n_subjects": n, "status": status,
     }
 
 
@@ -138,19 +227,27 @@ def posthoc_paired(
     cells are dropped as in :func:`rm_anova`.
     """
     within = [factor] + ([by] if by else [])
+    check_level_names(data, within, subject)
     dropped = find_incomplete_subjects(data, dv, within, subject)
     kept = data[~data[subject].isin(dropped["subject"])]
+    _check_enough_subjects(kept, subject, 2, "a paired t-test", dropped)
     groups = [(None, kept)] if by is None else list(kept.groupby(by, sort=True))
     rows = []
     for level, sub in groups:
         levels = sorted(sub[factor].unique(), key=str)
         wide = sub.pivot(index=subject, columns=factor, values=dv).astype(float)
         for a, b in itertools.combinations(levels, 2):
-            t = pg.ttest(wide[a], wide[b], paired=True)
+            diff = (wide[a] - wide[b]).to_numpy(float)
+            scale = max(np.abs(wide[[a, b]].to_numpy(float)).max(), 1e-300)
+            if np.std(diff) <= 1e-9 * scale:  # constant differences: t is infinite or undefined
+                t_val, dof, p_val, status = float("nan"), float(len(diff) - 1), float("nan"), "zero_variance"
+            else:
+                t = pg.ttest(wide[a], wide[b], paired=True)
+                t_val, dof, p_val, status = (float(t["T"].iloc[0]), float(t["dof"].iloc[0]),
+                                             float(t["p_val"].iloc[0]), "ok")
             rows.append({
                 "by": level, "A": a, "B": b, "mean_A": wide[a].mean(), "mean_B": wide[b].mean(),
-                "T": float(t["T"].iloc[0]), "dof": float(t["dof"].iloc[0]), "p_unc": float(t["p_val"].iloc[0]),
-                "n_subjects": len(wide),
+                "T": t_val, "dof": dof, "p_unc": p_val, "n_subjects": len(wide), "status": status,
             })
     out = pd.DataFrame(rows)
     if out.empty:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from psyop.statistics.regression import ConditionComparison, LinearFit
+from psyop.statistics.regression import ConditionComparison, LinearFit, MixedComparison
 
 
 def format_p(p: float) -> str:
@@ -24,7 +24,14 @@ def _df(value: float) -> str:
 
 
 def format_anova(row: Mapping) -> str:
-    """One ANOVA effect. GG-corrected df and p, with eps, when eps < 1; plain otherwise."""
+    """One ANOVA effect. GG-corrected df and p, with eps, when eps < 1; plain otherwise.
+    A degenerate row (``status`` other than 'ok') is spelled out, not given numbers."""
+    status = row.get("status", "ok") if hasattr(row, "get") else "ok"
+    if status == "zero_error_variance":
+        return f"not testable: zero error variance (F undefined; F({_df(row['df1'])}, {_df(row['df2'])}))"
+    if status == "eps_undefined":
+        return (f"F({_df(row['df1'])}, {_df(row['df2'])}) = {row['F']:.2f}, {format_p(row['p_unc'])} uncorrected; "
+                "GG epsilon undefined")
     eps = float(row["eps_gg"])
     if eps < 1.0:
         return (f"F({_df(row['df1_gg'])}, {_df(row['df2_gg'])}) = {row['F']:.2f}, "
@@ -34,6 +41,8 @@ def format_anova(row: Mapping) -> str:
 
 def format_ttest(row: Mapping) -> str:
     """A Bonferroni-corrected paired t-test row from :func:`psyop.statistics.anova.posthoc_paired`."""
+    if (row.get("status", "ok") if hasattr(row, "get") else "ok") == "zero_variance":
+        return f"not testable: the differences have zero variance (df = {_df(row['dof'])})"
     return f"t({_df(row['dof'])}) = {row['T']:.2f}, {format_p(row['p_bonf'])} (Bonferroni x{int(row['m'])})"
 
 
@@ -54,6 +63,14 @@ def format_condition_comparison(c: ConditionComparison) -> str:
     return (f"{c.other} vs {c.reference}: intercept difference = {c.intercept_diff:.3f} ({format_p(c.intercept_diff_p)}), "
             f"slope difference = {c.slope_diff:.3f} ({format_p(c.slope_diff_p)}); "
             f"joint F({c.joint_df1}, {c.joint_df2}) = {c.joint_F:.2f}, {format_p(c.joint_p)}")
+
+
+def format_mixed_comparison(m: MixedComparison) -> str:
+    """The subject-aware reach test: method, differences, joint Wald chi2, and any fallback reason."""
+    out = (f"{m.other} vs {m.reference}: intercept difference = {m.intercept_diff:.3f} ({format_p(m.intercept_diff_p)}), "
+           f"slope difference = {m.slope_diff:.3f} ({format_p(m.slope_diff_p)}); joint chi2({m.joint_df}) = "
+           f"{m.joint_chi2:.2f}, {format_p(m.joint_p)} [{m.method}; {m.n_subjects} participants, {m.n} reaches]")
+    return out + (f" (fallback: {m.fallback_reason})" if m.fallback_reason else "")
 
 
 def format_threshold(row: Mapping) -> str:

@@ -1,24 +1,54 @@
 """2AFC psychometric functions with psignifit 4.3 (cumulative normal on linear diopters).
 
 Why not simply ``psignifit.psignifit``: its last step refines the MAP with a Nelder-Mead
-search whose objective calls ``scipy.stats.norm.ppf`` on scalars; that step is ~75 % of a
+search whose objective calls ``scipy.stats.norm.ppf`` on scalars; that step is most of a
 ~1-2 s fit here, while the grid posterior (priors, bounds, credible intervals) costs tens
 of ms. psyop runs psignifit's own pipeline (its Configuration, parameter bounds, default
-priors, sparse grid -> tightened bounds -> dense grid), replaces the Nelder-Mead step by
-two vectorised zoom-in grids around the posterior mode, and reports:
+priors, sparse grid -> tightened bounds -> dense grid), then
+
+- **refines the posterior grid** around the posterior mass (:func:`refine_posterior`): the
+  dense grid spans the tightened prior bounds, so with many trials per level the whole
+  posterior falls between two grid points and a CI read off that grid collapses to the grid
+  step. The refined grid spans the mass at the same number of points, repeated until each
+  axis's central 95 % spans at least :data:`MIN_CI_POINTS` points;
+- **zooms into the posterior mode** with vectorised grids (:func:`_refine_map`) instead of
+  the scalar Nelder-Mead search.
+
+Reported:
 
 - ``threshold_D``: the 75 %-correct level of the MAP curve (what ``res.threshold(0.75)``
   returns for psignifit's MAP; lapse included, so it is *not* the 'threshold' parameter);
-- ``threshold_ci_*_D``: 2.5/97.5 % posterior percentiles of the 75 %-correct level computed
-  at every grid point (``res.threshold``'s CIs combine corners of marginal CIs and are,
-  per its docstring, "only upper bounds");
+  **NaN unless the fit's status allows a number** (see below);
+- ``threshold_ci_*_D``: 2.5/97.5 % posterior percentiles of the 75 %-correct level over the
+  refined grid (interpolated); ``+inf`` when >= 2.5 % of the posterior are curves that never
+  reach 75 % correct (status ``no_upper_bound``);
 - width, lapse (MAP), eta (overdispersion; see :class:`FitOptions`), and a deviance test.
 
-``tests/statistics/test_statistics_psychometric.py`` checks agreement with the public
-``psignifit.psignifit`` and recovery/coverage on simulated observers.
+Status (exactly one per fit, the first that applies; :data:`STATUSES`):
 
-Degenerate data is flagged (``flags``), never silently returned: ``fewer_than_two_levels``
-(no fit), ``all_correct``, ``threshold_outside_range``, ``posterior_at_grid_edge``.
+``no_fit`` fewer than two tested levels (everything NaN);
+``lapse_at_bound`` the MAP lapse is >= 0.25, so the MAP curve never reaches 75 % correct:
+no threshold (NaN), censored above the highest level;
+``censored_below`` the MAP 75 % point lies below the lowest tested level (e.g. all correct):
+``threshold_D`` NaN, ``threshold_bound_D`` = lowest level, read "< lowest level";
+``censored_above`` ... above the highest level (e.g. chance performance): NaN, "> highest level";
+``bimodal`` the dense-grid posterior has two separated modes (:func:`is_bimodal`); the MAP
+is then arbitrary between them;
+``posterior_at_grid_edge`` the threshold or width marginal has > 0.1 % mass at a prior bound
+(psignifit's own check);
+``no_upper_bound`` the upper CI bound is infinite (threshold itself is in range);
+``ok`` none of these.
+
+``flags`` lists every condition that applies (the status among them), plus ``all_correct``
+and ``ci_below_range`` / ``ci_above_range`` (a CI bound beyond the tested levels: a posterior
+percentile under the fitted model, kept as a number but never unflagged).
+
+Analyses use :func:`usable_for_analysis` (statuses in :data:`USABLE_STATUSES`) and report
+how many fits of each other status they left out.
+
+Input rows are checked (:func:`validate_blocks`): NaN levels or counts, negative,
+non-integer counts and n_correct > n_total raise :class:`InvalidPsychometricData` naming the
+rows.
 """
 
 from __future__ import annotations
@@ -31,11 +61,13 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import pandas as pd
 import psignifit
-from scipy.stats import norm
 from psignifit._parameter import masked_parameter_bounds, parameter_bounds, parameter_grid
-from psignifit._posterior import posterior_grid
+from psignifit._posterior import integral_weights
 from psignifit._priors import setup_priors
+from scipy import ndimage, special
+from scipy.stats import norm
 
+from psyop.errors import UserError
 from psyop.statistics.goodness import deviance_test
 
 #: Mass of a normalised marginal at the outermost grid point above which the posterior
@@ -43,6 +75,21 @@ from psyop.statistics.goodness import deviance_test
 EDGE_MASS = 1e-3
 TARGET_PC = 0.75
 GUESS_2AFC = 0.5
+#: A 2AFC curve with lapse >= this never reaches 75 % correct.
+LAPSE_NO_THRESHOLD = 0.25
+#: The refined posterior grid is refined again until each axis's central 95 % spans this many points.
+MIN_CI_POINTS = 10
+#: Tail mass left outside a refined grid, per side and axis.
+REFINE_TAIL = 1e-5
+
+STATUSES = ("no_fit", "lapse_at_bound", "censored_below", "censored_above", "bimodal",
+            "posterior_at_grid_edge", "no_upper_bound", "ok")
+#: Statuses whose ``threshold_D`` is a point estimate inside the tested range that analyses use.
+USABLE_STATUSES = ("ok", "no_upper_bound")
+
+
+class InvalidPsychometricData(UserError):
+    """Rows of ``[level, n_correct, n_total]`` that cannot be fitted, named by row."""
 
 
 @dataclass(frozen=True)
@@ -94,23 +141,29 @@ class FitOptions:
     fixed_lambda: float | None = None
     #: eta (overdispersion) is fixed to 0 for the threshold and its interval: with free eta the
     #: 95 % intervals covered the true threshold in 100 % of simulated observers (too wide); with
-    #: eta = 0 coverage is ~98 % (docs/statistics.md). Overdispersion is still estimated
+    #: eta = 0 coverage is ~0.95 (docs/statistics.md). Overdispersion is still estimated
     #: (``estimate_eta``) and tested by the deviance bootstrap.
     fixed_eta: float | None = 0.0
     estimate_eta: bool = True
     ci_level: float = 0.95
     n_bootstrap: int = 2000
     seed: int = 0
-    map_refinements: int = 2
+    #: zoom-in grids around the posterior mode (each shrinks the step seven-fold)
+    map_refinements: int = 4
+    #: at most this many posterior-grid refinements for the credible interval
+    posterior_refinements: int = 3
 
 
 @dataclass(frozen=True)
 class PsychometricFit:
-    """One 2AFC psychometric fit. Levels in diopters; NaN where no fit was possible."""
+    """One 2AFC psychometric fit. Levels in diopters; NaN where the status allows no number."""
 
+    status: str
     threshold_D: float
     threshold_ci_low_D: float
     threshold_ci_high_D: float
+    #: censored fits: the tested level the threshold lies beyond (NaN otherwise)
+    threshold_bound_D: float
     width_D: float  # psignifit width: distance between the 5 % and 95 % points of the unscaled sigmoid
     sigma_D: float  # sd of the cumulative normal (width / 3.29)
     location_D: float  # psignifit 'threshold' parameter: 50 % point of the unscaled sigmoid
@@ -130,11 +183,31 @@ class PsychometricFit:
 
     @property
     def ok(self) -> bool:
-        return not self.flags
+        return self.status == "ok"
+
+    @property
+    def usable(self) -> bool:
+        return self.status in USABLE_STATUSES
+
+    @property
+    def threshold_text(self) -> str:
+        """The threshold as a reader should see it: a number, or a censored bound."""
+        return threshold_text(self.status, self.threshold_D, self.threshold_bound_D)
 
     def proportion_correct(self, level_D: np.ndarray) -> np.ndarray:
         """The fitted 2AFC curve (guess 0.5, fitted lapse) at ``level_D``."""
         return predicted_pc(np.asarray(level_D, float), self.location_D, self.width_D, self.lapse)
+
+
+def threshold_text(status: str, threshold_D: float, bound_D: float) -> str:
+    """'0.36 D', '< 0.00 D' (censored below), '> 1.00 D' (censored above), 'no fit'."""
+    if status == "no_fit":
+        return "no fit"
+    if status == "censored_below":
+        return f"< {bound_D:.2f} D"
+    if status in ("censored_above", "lapse_at_bound"):
+        return f"> {bound_D:.2f} D"
+    return f"{threshold_D:.2f} D"
 
 
 def predicted_pc(level_D: np.ndarray, location_D: float, width_D: float, lapse: float) -> np.ndarray:
@@ -152,27 +225,88 @@ def aggregate_blocks(levels_D: np.ndarray, correct: np.ndarray) -> np.ndarray:
     return np.array(rows, float).reshape(-1, 3)
 
 
+def _rows(mask: np.ndarray) -> str:
+    idx = np.flatnonzero(mask)
+    shown = ", ".join(str(i) for i in idx[:10])
+    return f"row{'s' if len(idx) > 1 else ''} {shown}{' ...' if len(idx) > 10 else ''}"
+
+
+def validate_blocks(data: np.ndarray, source: str = "psychometric data") -> np.ndarray:
+    """Check ``[level_D, n_correct, n_total]`` rows; return them as a float array.
+
+    Raises :class:`InvalidPsychometricData` naming the 0-based rows with a NaN/inf level
+    or count, a negative or non-integer count, or n_correct > n_total.
+    """
+    arr = np.asarray(data, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InvalidPsychometricData(f"expected rows of [level_D, n_correct, n_total], got shape {arr.shape}", source)
+    problems = []
+    level, k, n = arr[:, 0], arr[:, 1], arr[:, 2]
+    checks = [
+        (~np.isfinite(level), "level is NaN or infinite"),
+        (~np.isfinite(k), "n_correct is NaN or infinite"),
+        (~np.isfinite(n), "n_total is NaN or infinite"),
+    ]
+    finite = np.isfinite(k) & np.isfinite(n)
+    checks += [
+        (finite & ((k < 0) | (n < 0)), "negative count"),
+        (finite & ((k != np.round(k)) | (n != np.round(n))), "non-integer count"),
+        (finite & (k > n), "n_correct > n_total"),
+    ]
+    for mask, what in checks:
+        if mask.any():
+            problems.append(f"{what} in {_rows(mask)}")
+    if problems:
+        raise InvalidPsychometricData(
+            "; ".join(problems) + " (counts must be whole numbers 0 <= n_correct <= n_total; levels finite)", source)
+    return arr
+
+
 def _no_fit(data: np.ndarray, flags: tuple[str, ...]) -> PsychometricFit:
     nan = float("nan")
     levels = data[:, 0] if len(data) else np.array([nan])
     return PsychometricFit(
-        nan, nan, nan, nan, nan, nan, nan, nan, nan, nan,
+        "no_fit", nan, nan, nan, nan, nan, nan, nan, nan, nan, nan, nan,
         n_levels=len(data), n_trials=int(data[:, 2].sum()) if len(data) else 0,
-        level_min_D=float(np.min(levels)), level_max_D=float(np.max(levels)), flags=flags,
+        level_min_D=float(np.min(levels)), level_max_D=float(np.max(levels)), flags=("no_fit", *flags),
     )
 
 
-def _weighted_quantiles(values: np.ndarray, weights: np.ndarray, qs: Sequence[float]) -> np.ndarray:
-    order = np.argsort(values)
+def weighted_quantiles(values: np.ndarray, weights: np.ndarray, qs: Sequence[float]) -> np.ndarray:
+    """Quantiles of a weighted sample, interpolated between the sorted values' mid-cumulative weights.
+
+    ``+inf`` values (curves that never reach the target) sort last; a quantile falling among
+    them is ``+inf``.
+    """
+    values = np.asarray(values, float).ravel()
+    weights = np.asarray(weights, float).ravel()
+    keep = weights > 0
+    values, weights = values[keep], weights[keep]
+    order = np.argsort(values, kind="stable")
     v, w = values[order], weights[order]
-    cdf = np.cumsum(w)
-    cdf /= cdf[-1]
-    return np.array([v[min(np.searchsorted(cdf, q), len(v) - 1)] for q in qs])
+    cdf = (np.cumsum(w) - 0.5 * w) / w.sum()
+    out = []
+    for q in qs:
+        i = int(np.searchsorted(cdf, q))
+        if i == 0:
+            out.append(v[0])
+        elif i >= len(v):
+            out.append(v[-1])
+        elif not np.isfinite(v[i]) or not np.isfinite(v[i - 1]):
+            out.append(v[i])
+        else:
+            frac = (q - cdf[i - 1]) / (cdf[i] - cdf[i - 1])
+            out.append(v[i - 1] + frac * (v[i] - v[i - 1]))
+    return np.array(out, float)
 
 
 @dataclass(frozen=True)
 class GridPosterior:
-    """psignifit's dense-grid posterior with the derived 75 %-correct level per grid point."""
+    """psignifit's posterior on a grid, with the derived 75 %-correct level per grid point.
+
+    ``dense_*`` keep the psignifit dense-grid posterior (bound checks, bimodality); ``mesh``,
+    ``posterior``, ``t75_D`` and ``grid`` are the refined grid the CI is read from.
+    """
 
     mesh: dict[str, np.ndarray]
     posterior: np.ndarray
@@ -181,10 +315,128 @@ class GridPosterior:
     bounds: dict[str, tuple[float, float]]
     grid_max: dict[str, float]
     names: list[str]
+    dense_grid: dict[str, np.ndarray]
+    dense_posterior: np.ndarray
+    dense_t75_D: np.ndarray
+    n_refinements: int
+    #: distinct local maxima (log posterior, parameters), best first; ``grid_max`` is the first
+    modes: tuple[tuple[float, dict[str, float]], ...] = ()
+
+
+def _t75_mesh(grid: dict[str, np.ndarray], sigmoid) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
+    names = sorted(grid)  # psignifit orders posterior axes alphabetically
+    mesh = dict(zip(names, np.meshgrid(*[np.atleast_1d(grid[n]) for n in names], indexing="ij")))
+    gamma = mesh["gamma"]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scaled = (TARGET_PC - gamma) / (1.0 - mesh["lambda"] - gamma)
+        t75 = sigmoid._inverse(np.clip(scaled, 0.0, 1.0), mesh["threshold"], mesh["width"])
+    reachable = (scaled > 0.0) & (scaled < 1.0)
+    t75 = np.where(reachable & np.isfinite(t75), t75, np.inf)
+    return mesh, t75, names
+
+
+def _marginal(post: np.ndarray, axis: int) -> np.ndarray:
+    m = post.sum(axis=tuple(i for i in range(post.ndim) if i != axis))
+    return m / m.sum()
+
+
+def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict[str, tuple[float, float]]
+                     ) -> tuple[dict[str, np.ndarray], bool]:
+    """A grid spanning each free axis's posterior mass (tails <= :data:`REFINE_TAIL` cut) with
+    the same number of points; ``done`` is True when the threshold and width axes already resolve
+    their central 95 % with >= :data:`MIN_CI_POINTS` points (or half the axis)."""
+    names = sorted(grid)
+    new, done = {}, True
+    for axis, name in enumerate(names):
+        values = np.atleast_1d(grid[name])
+        if len(values) < 2:
+            new[name] = grid[name]
+            continue
+        cdf = np.cumsum(_marginal(post, axis))
+        inner = np.searchsorted(cdf, [0.025, 0.975])
+        if name in ("threshold", "width") and inner[1] - inner[0] + 1 < min(MIN_CI_POINTS, len(values) // 2):
+            done = False
+        lo_i = max(int(np.searchsorted(cdf, REFINE_TAIL)) - 1, 0)
+        hi_i = min(int(np.searchsorted(cdf, 1.0 - REFINE_TAIL)) + 1, len(values) - 1)
+        lo, hi = values[lo_i], values[hi_i]
+        lo, hi = max(lo, bounds[name][0]), min(hi, bounds[name][1])
+        new[name] = np.linspace(lo, hi, len(values)) if hi > lo else values
+    unchanged = all(np.allclose(np.atleast_1d(new[n]), np.atleast_1d(grid[n])) for n in names)
+    return new, done or unchanged
+
+
+_NORM_SPAN = float(norm.ppf(0.95) - norm.ppf(0.05))  # psignifit 'norm' width: 5 %-95 % of the unscaled sigmoid
+
+
+def log_posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray]) -> np.ndarray:
+    """psignifit 4.3's ``log_posterior`` for the 2AFC 'norm' sigmoid, vectorised over levels.
+
+    Same model, priors and axis order (alphabetical: eta, gamma, lambda, threshold, width);
+    psignifit evaluates its sigmoid through scalar ``scipy.stats`` calls whose overhead
+    (~9 ms a call) dominated psyop's fits. ``test_log_posterior_matches_psignifit`` checks equality.
+    """
+    names = sorted(grid)
+    axes = [np.atleast_1d(np.asarray(grid[n], float)) for n in names]
+    mesh = dict(zip(names, np.meshgrid(*axes, indexing="ij", sparse=True)))
+    eta_std, gamma, lam, thr, width = (mesh[n] for n in ("eta", "gamma", "lambda", "threshold", "width"))
+    x = data[:, 0].reshape((-1,) + (1,) * len(names))
+    k = data[:, 1].reshape(x.shape)
+    n = data[:, 2].reshape(x.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        psi = gamma + (1.0 - gamma - lam) * special.ndtr((x - thr) * _NORM_SPAN / width)
+        log_psi = np.where(k > 0, k * np.log(psi), 0.0)
+        log_1m = np.where(n - k > 0, (n - k) * np.log(1.0 - psi), 0.0)
+        eta_var = eta_std ** 2
+        binomial = (log_psi + log_1m).sum(axis=0)
+        if np.any(eta_var > 1e-9):
+            eta_prime = np.where(eta_var > 1e-9, 1.0 / np.where(eta_var > 1e-9, eta_var, 1.0) - 1.0, 1.0)
+            a, b = psi * eta_prime, (1.0 - psi) * eta_prime
+            beta_bin = np.where(k > 0, special.gammaln(k + a) - special.gammaln(a), 0.0) \
+                + np.where(n - k > 0, special.gammaln(n - k + b) - special.gammaln(b), 0.0) \
+                - special.gammaln(n + eta_prime) + special.gammaln(eta_prime)
+            lp = np.where(eta_var > 1e-9, beta_bin.sum(axis=0), binomial)
+        else:
+            lp = binomial
+        lp = lp + np.log(priors["threshold"](thr)) + np.log(priors["width"](width)) \
+            + np.log(priors["lambda"](lam)) + np.log(priors["gamma"](gamma))
+        if np.any(eta_var > 1e-9) or len(axes[0]) > 1:
+            lp = lp + np.log(priors["eta"](eta_std))
+    return np.broadcast_to(lp, tuple(len(v) for v in axes))
+
+
+def posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray], log_posterior: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, dict[str, float]]:
+    """psignifit's ``posterior_grid`` (normalised trapezoid mass per grid point, grid maximum)
+    on :func:`log_posterior_2afc`."""
+    lp = log_posterior if log_posterior is not None else log_posterior_2afc(data, priors, grid)
+    imax = np.unravel_index(int(np.argmax(lp)), lp.shape)
+    names = sorted(grid)
+    grid_max = {n: float(np.atleast_1d(grid[n])[i]) for n, i in zip(names, imax)}
+    p = np.exp(lp - lp[imax]) * integral_weights([np.atleast_1d(grid[n]) for n in names])
+    return p / p.sum(), grid_max
+
+
+def tabulate_priors(priors, bounds: dict[str, tuple[float, float]], points: int = 20001) -> dict:
+    """psignifit's normalised priors as lookup tables over their bounds (linear interpolation).
+
+    psignifit's width prior freezes a ``scipy.stats`` distribution on every call (~1 ms);
+    a fit evaluates priors some 15 times. Relative interpolation error < 1e-5 at 20001 points.
+    """
+    out = {}
+    for name, prior in priors.items():
+        lo, hi = bounds[name]
+        if np.isclose(lo, hi):
+            value = float(np.asarray(prior(np.array([lo], float)))[0])
+            out[name] = (lambda v: lambda x: np.full(np.shape(x), v))(value)
+            continue
+        xs = np.linspace(lo, hi, points)
+        ys = np.asarray(prior(xs), float)
+        out[name] = (lambda xs_, ys_: lambda x: np.interp(x, xs_, ys_, left=0.0, right=0.0))(xs, ys)
+    return out
 
 
 def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> GridPosterior:
-    """Run psignifit's pipeline up to the dense-grid posterior (no Nelder-Mead MAP refinement)."""
+    """psignifit's pipeline up to the dense-grid posterior, then the refined posterior and MAP."""
     grid_spec = options.grid
     fixed = {name: value for name, value in (("lambda", options.fixed_lambda), ("eta", options.fixed_eta))
              if value is not None} or None
@@ -207,41 +459,83 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
         custom_priors=None, bounds=bounds, stimulus_range=stimulus_range, width_min=width_min,
         width_alpha=conf.width_alpha, beta_prior=conf.beta_prior, threshold_prop_correct=conf.thresh_PC,
     )
+    priors = tabulate_priors(priors, bounds)
     sparse = parameter_grid(bounds, conf.steps_moving_bounds)
-    post_sparse, _ = posterior_grid(data, sigmoid=sigmoid, priors=priors, grid=sparse)
+    post_sparse, _ = posterior_2afc(data, priors, sparse)
     tight = masked_parameter_bounds(sparse, post_sparse >= conf.max_bound_value)
-    grid = parameter_grid(tight, conf.grid_steps)
-    post, grid_max = posterior_grid(data, sigmoid=sigmoid, priors=priors, grid=grid)
+    dense_grid = parameter_grid(tight, conf.grid_steps)
+    dense_lp = log_posterior_2afc(data, priors, dense_grid)
+    dense_post, grid_max = posterior_2afc(data, priors, dense_grid, dense_lp)
+    _, dense_t75, names = _t75_mesh(dense_grid, sigmoid)
 
-    names = sorted(grid)  # psignifit orders posterior axes alphabetically
-    mesh = dict(zip(names, np.meshgrid(*[np.atleast_1d(grid[n]) for n in names], indexing="ij")))
-    gamma = mesh["gamma"]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scaled = (TARGET_PC - gamma) / (1.0 - mesh["lambda"] - gamma)
-        t75 = sigmoid._inverse(np.clip(scaled, 0.0, 1.0), mesh["threshold"], mesh["width"])
-    t75 = np.where(np.isfinite(t75), t75, np.inf)
-    for _ in range(options.map_refinements):
-        grid_max = _refine_map(data, sigmoid, priors, grid, grid_max)
-    return GridPosterior(mesh, post, t75, grid, bounds, grid_max, names)
+    grid, post, n_ref, lp = dense_grid, dense_post, 0, dense_lp
+    for _ in range(options.posterior_refinements):
+        new_grid, done = refine_posterior(grid, post, bounds)
+        if done:
+            break
+        lp = log_posterior_2afc(data, priors, new_grid)
+        post, grid_max = posterior_2afc(data, priors, new_grid, lp)
+        grid, n_ref = new_grid, n_ref + 1
+    mesh, t75, names = _t75_mesh(grid, sigmoid)
+    modes = _find_modes(data, priors, grid, bounds, options.map_refinements, lp) if options.map_refinements else []
+    grid_max = modes[0][1] if modes else grid_max
+    return GridPosterior(mesh, post, t75, grid, bounds, grid_max, names, dense_grid, dense_post, dense_t75, n_ref,
+                         tuple(modes))
 
 
-def _refine_map(data, sigmoid, priors, grid, grid_max, points: int = 7) -> dict[str, float]:
-    """Zoom into the posterior mode: a finer grid spanning one dense step either side.
+def _find_modes(data, priors, grid, bounds, zooms: int, lp: np.ndarray, max_starts: int = 4,
+                min_log_ratio: float = -1.0) -> list[tuple[float, dict[str, float]]]:
+    """Local posterior maxima: every grid local maximum within ``min_log_ratio`` of the highest
+    (at most ``max_starts``), each zoomed into ``zooms`` times; distinct modes, best first.
 
-    Replaces psignifit's scalar Nelder-Mead MAP search by one vectorised grid evaluation.
+    psignifit starts one Nelder-Mead search at the grid maximum; two modes a few hundredths
+    of a log unit apart can swap places on a grid, so psyop zooms from each candidate.
     """
-    local = {}
+    finite = np.where(np.isfinite(lp), lp, -np.inf)
+    is_max = (finite == ndimage.maximum_filter(finite, size=3, mode="nearest")) & (finite >= finite.max() + min_log_ratio)
+    starts = sorted(np.argwhere(is_max), key=lambda i: -finite[tuple(i)])[:max_starts]
+    names = sorted(grid)
+    steps = {n: (np.ptp(np.atleast_1d(grid[n])) / max(len(np.atleast_1d(grid[n])) - 1, 1)) for n in names}
+    # 15 points per free axis shrink the box seven-fold per zoom; with eta free (4 axes) 9 points
+    # (four-fold) keep each zoom at ~6,500 points, and 1.4x the zooms reach the same resolution.
+    n_free = sum(len(np.atleast_1d(grid[n])) > 1 for n in names)
+    points = 15 if n_free <= 3 else 9
+    zooms = zooms if n_free <= 3 else int(np.ceil(zooms * np.log(7) / np.log(4)))
+    modes: list[tuple[float, dict[str, float]]] = []
+    for idx in starts:
+        point = {n: float(np.atleast_1d(grid[n])[i]) for n, i in zip(names, idx)}
+        zoom = grid
+        for _ in range(zooms):
+            zoom = _shrink(zoom, point, bounds, points)
+            point = _refine_map(data, priors, zoom, point)
+        value = float(log_posterior_2afc(data, priors, {k: np.atleast_1d(v) for k, v in point.items()}).max())
+        same = [m for m in modes if all(abs(m[1][n] - point[n]) <= 0.5 * steps[n] for n in names)]
+        if not same:
+            modes.append((value, point))
+    return sorted(modes, key=lambda m: -m[0])
+
+
+def _shrink(grid: dict[str, np.ndarray], centre: dict[str, float], bounds, points: int = 15) -> dict[str, np.ndarray]:
+    """The next MAP zoom box: +-1 step of ``grid`` around ``centre`` at ``points`` points."""
+    out = {}
     for name, values in grid.items():
         values = np.atleast_1d(values)
         if len(values) < 2:
-            local[name] = values
+            out[name] = values
             continue
-        i = int(np.argmin(np.abs(values - grid_max[name])))
-        step = values[1] - values[0] if i == 0 else values[i] - values[i - 1]
-        lo = max(values[0], grid_max[name] - step)
-        hi = min(values[-1], grid_max[name] + step)
-        local[name] = np.linspace(lo, hi, points)
-    _, best = posterior_grid(data, sigmoid=sigmoid, priors=priors, grid=local)
+        step = (values[-1] - values[0]) / (len(values) - 1)
+        lo = max(bounds[name][0], centre[name] - step)
+        hi = min(bounds[name][1], centre[name] + step)
+        out[name] = np.linspace(lo, hi, points)
+    return out
+
+
+def _refine_map(data, priors, local, grid_max) -> dict[str, float]:
+    """One zoom into the posterior mode: the posterior on the small grid ``local`` (plus the
+    current best point, so the posterior never decreases). Replaces psignifit's scalar
+    Nelder-Mead MAP search by vectorised grid evaluations."""
+    local = {n: np.unique(np.append(v, grid_max[n])) if len(np.atleast_1d(v)) > 1 else v for n, v in local.items()}
+    _, best = posterior_2afc(data, priors, local)
     return best
 
 
@@ -253,24 +547,83 @@ def _t75(params: dict[str, float]) -> float:
     return float(params["threshold"] + norm.ppf(scaled) * params["width"] / (2.0 * norm.ppf(0.95)))
 
 
-def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions()) -> PsychometricFit:
+def is_bimodal(post: np.ndarray, min_ratio: float = 0.1, max_dip: float = 0.75) -> bool:
+    """Whether a grid posterior has two separated modes (the MAP is then arbitrary between them).
+
+    Local maxima of the joint posterior (each >= its 3^d grid neighbourhood) with at least
+    ``min_ratio`` of the highest density are candidates; two are separate modes when the
+    density along the straight line between them (linear interpolation on the grid) drops
+    below ``max_dip`` of the lower one. Two modes within a few hundredths of a log unit
+    (e.g. a small-lapse shallow curve and a large-lapse steep one) are the typical case.
+    """
+    p = np.squeeze(np.asarray(post, float))
+    if p.ndim == 0 or p.max() <= 0:
+        return False
+    p = p / p.max()
+    is_max = (p == ndimage.maximum_filter(p, size=3, mode="nearest")) & (p >= min_ratio)
+    peaks = np.argwhere(is_max)
+    if len(peaks) < 2:
+        return False
+    top = peaks[np.argmax(p[tuple(peaks.T)])]
+    for other in peaks:
+        dist = np.abs(other - top).max()
+        if dist < 2:
+            continue
+        t = np.linspace(0.0, 1.0, 4 * int(dist) + 1)
+        line = top[:, None] + (other - top)[:, None] * t[None, :]
+        along = ndimage.map_coordinates(p, line, order=1, mode="nearest")
+        if along.min() < max_dip * p[tuple(other)]:
+            return True
+    return False
+
+
+def _distinct_thresholds(modes, ci_width_D: float, min_log_ratio: float = -1.0, min_shift: float = 0.25) -> bool:
+    """A second posterior mode, within ``min_log_ratio`` of the best, whose 75 % point differs
+    from the best one's by more than ``min_shift`` of the CI width (or is unreachable)."""
+    if len(modes) < 2:
+        return False
+    best_lp, best = modes[0]
+    t_best = _t75(best)
+    for lp, other in modes[1:]:
+        if lp - best_lp < min_log_ratio:
+            continue
+        t_other = _t75(other)
+        if not (np.isfinite(t_best) and np.isfinite(t_other)):
+            return True
+        if abs(t_other - t_best) > min_shift * (ci_width_D if np.isfinite(ci_width_D) else 0.0):
+            return True
+    return False
+
+
+def _edge_mass(grid, post, bounds, names) -> bool:
+    for name in ("threshold", "width"):
+        axis = names.index(name)
+        marginal = _marginal(post, axis)
+        at_bound = np.isclose(grid[name][[0, -1]], bounds[name])
+        if (at_bound & (marginal[[0, -1]] > EDGE_MASS)).any():
+            return True
+    return False
+
+
+def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), source: str = "psychometric data"
+                     ) -> PsychometricFit:
     """Fit a 2AFC cumulative normal to ``data`` (rows ``[level_D, n_correct, n_total]``).
 
     Follows ``psignifit.psignifit`` step by step (same Configuration, bounds, priors,
-    sparse grid -> tightened bounds -> dense grid) and summarises the dense-grid posterior.
+    sparse grid -> tightened bounds -> dense grid), refines the posterior grid for the CI and
+    zooms into the MAP. Rows with ``n_total == 0`` carry no information and are left out.
     """
-    data = np.asarray(data, float).reshape(-1, 3)
+    data = validate_blocks(np.asarray(data, float).reshape(-1, 3) if np.size(data) else np.empty((0, 3)), source)
     data = data[data[:, 2] > 0]
     if len(np.unique(data[:, 0])) < 2:
         return _no_fit(data, ("fewer_than_two_levels",))
-    post_ = grid_posterior(data, options)
-    post, t75, grid, bounds, names = post_.posterior, post_.t75_D, post_.grid, post_.bounds, post_.names
-    grid_max = post_.grid_max
+    gp = grid_posterior(data, options)
+    grid_max = gp.grid_max
     levels = data[:, 0]
-    weights = post.ravel()
+    lo_level, hi_level = float(levels.min()), float(levels.max())
     half = (1.0 - options.ci_level) / 2.0
-    low, high = _weighted_quantiles(t75.ravel(), weights, (half, 1.0 - half))
-    threshold = float(_t75(grid_max))
+    low, high = weighted_quantiles(gp.t75_D, gp.posterior, (half, 1.0 - half))
+    t_map = float(_t75(grid_max))
 
     width = float(grid_max["width"])
     lapse = float(grid_max["lambda"])
@@ -282,29 +635,45 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions()) -> Ps
     if options.fixed_eta is not None:
         eta = float("nan")
         if options.estimate_eta:
-            free = grid_posterior(data, replace(options, fixed_eta=None))
+            free = grid_posterior(data, replace(options, fixed_eta=None, map_refinements=0, posterior_refinements=0))
             eta = float((free.mesh["eta"] * free.posterior).sum())
 
-    flags: list[str] = []
+    conditions: list[str] = []
+    if not np.isfinite(t_map) or lapse >= LAPSE_NO_THRESHOLD:
+        conditions.append("lapse_at_bound")
+    elif t_map < lo_level:
+        conditions.append("censored_below")
+    elif t_map > hi_level:
+        conditions.append("censored_above")
+    if is_bimodal(gp.posterior) or _distinct_thresholds(gp.modes, high - low):
+        conditions.append("bimodal")
+    if _edge_mass(gp.dense_grid, gp.dense_posterior, gp.bounds, gp.names):
+        conditions.append("posterior_at_grid_edge")
+    if not np.isfinite(high):
+        conditions.append("no_upper_bound")
+    status = next((s for s in STATUSES if s in conditions), "ok")
+
+    flags = [s for s in STATUSES if s in conditions]
     if np.all(data[:, 1] == data[:, 2]):
         flags.append("all_correct")
-    if not (levels.min() <= threshold <= levels.max()):
-        flags.append("threshold_outside_range")
-    for name in ("threshold", "width"):
-        axis = names.index(name)
-        marginal = post.sum(axis=tuple(i for i in range(post.ndim) if i != axis))
-        marginal = marginal / marginal.sum()
-        at_bound = np.isclose(grid[name][[0, -1]], bounds[name])
-        if (at_bound & (marginal[[0, -1]] > EDGE_MASS)).any():
-            flags.append("posterior_at_grid_edge")
-            break
+    if np.isfinite(low) and low < lo_level:
+        flags.append("ci_below_range")
+    if np.isfinite(high) and high > hi_level:
+        flags.append("ci_above_range")
+
+    threshold = t_map
+    bound = float("nan")
+    if status == "censored_below":
+        threshold, bound = float("nan"), lo_level
+    elif status in ("censored_above", "lapse_at_bound"):
+        threshold, bound = float("nan"), hi_level
     # psignifit's 'norm' width spans the 5 %-95 % points of the unscaled sigmoid: 2 * 1.645 sd
     sigma = width / (2.0 * float(norm.ppf(0.95)))
     return PsychometricFit(
-        threshold_D=threshold, threshold_ci_low_D=float(low), threshold_ci_high_D=float(high),
-        width_D=width, sigma_D=float(sigma), location_D=location, lapse=lapse, eta=eta,
+        status=status, threshold_D=threshold, threshold_ci_low_D=float(low), threshold_ci_high_D=float(high),
+        threshold_bound_D=bound, width_D=width, sigma_D=float(sigma), location_D=location, lapse=lapse, eta=eta,
         deviance=gof.deviance, deviance_p=gof.p_value, n_levels=len(data), n_trials=int(data[:, 2].sum()),
-        level_min_D=float(levels.min()), level_max_D=float(levels.max()), flags=tuple(flags),
+        level_min_D=lo_level, level_max_D=hi_level, flags=tuple(flags),
     )
 
 
@@ -316,7 +685,7 @@ def fit_many(datasets: Sequence[np.ndarray], options: FitOptions = FitOptions(),
     """Fit every dataset; ``n_jobs`` > 1 spreads fits over processes (-1: all cores)."""
     if n_jobs < 0:
         n_jobs = os.cpu_count() or 1
-    tasks = [(np.asarray(d, float), options) for d in datasets]
+    tasks = [(validate_blocks(d, f"dataset {i}"), options) for i, d in enumerate(datasets)]
     if n_jobs == 1 or len(tasks) < 2:
         return [fit_psychometric(*t) for t in tasks]
     with ProcessPoolExecutor(max_workers=min(n_jobs, len(tasks))) as pool:
@@ -324,9 +693,24 @@ def fit_many(datasets: Sequence[np.ndarray], options: FitOptions = FitOptions(),
 
 
 FIT_COLUMNS = [
-    "threshold_D", "threshold_ci_low_D", "threshold_ci_high_D", "width_D", "sigma_D", "location_D",
-    "lapse", "eta", "deviance", "deviance_p", "n_levels", "n_trials", "level_min_D", "level_max_D",
+    "status", "threshold_D", "threshold_ci_low_D", "threshold_ci_high_D", "threshold_bound_D", "width_D",
+    "sigma_D", "location_D", "lapse", "eta", "deviance", "deviance_p", "n_levels", "n_trials", "level_min_D",
+    "level_max_D",
 ]
+
+
+def usable_for_analysis(fits: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
+    """The documented exclusion rule: keep fits whose status is in :data:`USABLE_STATUSES`.
+
+    Censored, lapse-at-bound, bimodal, grid-edge and no-fit thresholds are left out of means,
+    ANOVAs and regressions (they are bounds or ambiguous, not numbers). Returns the kept rows
+    and ``{status: count}`` of the rows left out.
+    """
+    if "status" not in fits:
+        raise KeyError("fit table lacks a 'status' column; refit with this version of psyop")
+    keep = fits["status"].isin(USABLE_STATUSES)
+    excluded = fits.loc[~keep, "status"].value_counts().sort_index()
+    return fits[keep], {str(k): int(v) for k, v in excluded.items()}
 
 
 def fit_psychometric_table(
@@ -337,15 +721,22 @@ def fit_psychometric_table(
     options: FitOptions = FitOptions(),
     n_jobs: int = 1,
 ) -> pd.DataFrame:
-    """One row per group (e.g. subject x condition) with threshold, CI, width, lapse, eta, GOF, flags.
+    """One row per group (e.g. subject x condition) with status, threshold, CI, width, lapse, eta, GOF, flags.
 
-    Trials with a null ``correct`` (no response) are dropped and counted in ``n_missing``.
-    ``flags`` is a ';'-joined string ('' when the fit is clean) so the table stays CSV-friendly.
+    Trials with a null ``correct`` (no response) are dropped and counted in ``n_missing``; a
+    trial with a missing or infinite level raises :class:`InvalidPsychometricData` naming the rows.
+    ``flags`` is a ';'-joined string so the table stays CSV-friendly.
     """
     group_columns = list(group_columns)
     missing = [c for c in [level_column, correct_column, *group_columns] if c not in trials]
     if missing:
         raise KeyError(f"trials lack columns {missing}")
+    bad_level = ~np.isfinite(pd.to_numeric(trials[level_column], errors="coerce").to_numpy(float))
+    if bad_level.any():
+        rows = list(trials.index[bad_level][:10])
+        raise InvalidPsychometricData(
+            f"{int(bad_level.sum())} trial(s) have a missing or non-numeric {level_column!r} (trial table index "
+            f"{rows}{' ...' if bad_level.sum() > 10 else ''}); fix or drop them before fitting", "trials")
     keys, datasets, n_missing = [], [], []
     for key, group in trials.groupby(group_columns, sort=True):
         answered = group[group[correct_column].notna()]

@@ -4,16 +4,24 @@
   reach vs target per condition).
 - :func:`condition_interaction`: y ~ x * C(condition), which tests whether slopes and
   intercepts differ between conditions (the paper's "multiple regression analysis"),
-  with a joint F-test of both differences against the pooled line.
+  with a joint F-test of both differences against the pooled line. It treats every trial as
+  independent (pooled); reported beside the primary test.
+- :func:`mixed_condition_comparison`: the same contrasts in a linear mixed model with a random
+  intercept and slope per participant (statsmodels MixedLM, REML), the subject-aware primary
+  test; when that model cannot be fitted it falls back, in order, to a random intercept only and
+  to OLS with participant-clustered standard errors, and says why (``fallback_reason``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import statsmodels.api as sm
+from scipy.stats import chi2
 import statsmodels.formula.api as smf
 
 
@@ -108,9 +116,116 @@ def condition_interaction(data: pd.DataFrame, x: str, y: str, condition: str, re
     )
 
 
+@dataclass(frozen=True)
+class MixedComparison:
+    """Condition differences with participants as a random factor (or the stated fallback)."""
+
+    method: str
+    fallback_reason: str  # '' when the random intercept + slope model was fitted
+    reference: str
+    other: str
+    slope: float  # reference condition's fixed-effect slope
+    intercept: float
+    intercept_diff: float
+    intercept_diff_p: float
+    slope_diff: float
+    slope_diff_p: float
+    joint_chi2: float
+    joint_df: int
+    joint_p: float
+    n: int
+    n_subjects: int
+
+
+def _mixed_fit(d: pd.DataFrame, re_formula: str):
+    from statsmodels.tools.sm_exceptions import ConvergenceWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit = smf.mixedlm("y ~ xc * other", d, groups=d["subject"], re_formula=re_formula.replace("x", "xc")).fit(reml=True)
+    # statsmodels warns "MLE may be on the boundary" whenever its Hessian check is inconclusive;
+    # psyop judges the fitted covariance itself: a variance below 0.1 % of the residual variance
+    # (or a non-finite one) means the model is not identified on these data.
+    problems = [str(w.message).splitlines()[0] for w in caught
+                if issubclass(w.category, ConvergenceWarning) and "boundary" not in str(w.message)]
+    if not getattr(fit, "converged", True):
+        problems.append("optimizer did not converge")
+    cov = np.atleast_2d(np.asarray(fit.cov_re, float))
+    if not np.all(np.isfinite(cov)) or np.linalg.eigvalsh(cov).min() <= 1e-3 * float(fit.scale):
+        problems.append("random-effects covariance is singular (a variance estimated at ~0)")
+    if not np.all(np.isfinite(fit.bse[["other", "xc:other"]])):
+        problems.append("standard errors are not finite")
+    return fit, problems
+
+
+def mixed_condition_comparison(data: pd.DataFrame, x: str, y: str, condition: str, subject: str = "participant",
+                               reference: str | None = None) -> MixedComparison:
+    """Do intercept and slope of ``y`` on ``x`` differ between two conditions, participants random?
+
+    Model: y = b0 + b1 x + b2 [other] + b3 x [other] + u0_s + u1_s x + e, (u0, u1) ~ N(0, G) per
+    participant (MixedLM, REML). b2, b3 are tested by Wald z; both jointly by a Wald chi2 (2 df).
+    Fallbacks (``method`` and ``fallback_reason`` say which and why): random intercept only when
+    the slope variance is not estimable; OLS with participant-clustered SEs when no mixed model fits.
+    """
+    d = _clean(data, [x, y, condition, subject]).rename(columns={x: "x", y: "y", condition: "cond", subject: "subject"})
+    d["x"], d["y"] = d["x"].astype(float), d["y"].astype(float)
+    levels = sorted(d["cond"].astype(str).unique())
+    if len(levels) != 2:
+        raise ValueError(f"mixed_condition_comparison needs exactly two conditions, have {levels}")
+    reference = reference or levels[0]
+    other = [lv for lv in levels if lv != reference][0]
+    d["other"] = (d["cond"].astype(str) == other).astype(float)
+    x_mean = float(d["x"].mean())
+    d["xc"] = d["x"] - x_mean
+    n_subjects = int(d["subject"].nunique())
+    reasons: list[str] = []
+    fit, method = None, ""
+    if n_subjects < 3:
+        reasons.append(f"only {n_subjects} participant(s): no between-participant variance to estimate")
+    else:
+        for re_formula, name in (("~x", "MixedLM, random intercept and slope per participant (REML)"),
+                                 ("~1", "MixedLM, random intercept per participant (REML)")):
+            try:
+                candidate, problems = _mixed_fit(d, re_formula)
+            except (np.linalg.LinAlgError, ValueError) as exc:
+                candidate, problems = None, [f"{type(exc).__name__}: {exc}"]
+            if not problems:
+                fit, method = candidate, name
+                break
+            reasons.append(f"{name.split(', ')[1].split(' (')[0]}: {'; '.join(problems)}")
+    if fit is None:
+        ols = smf.ols("y ~ xc * other", d)
+        fit = ols.fit(cov_type="cluster", cov_kwds={"groups": pd.factorize(d["subject"])[0]}) if n_subjects >= 2 else ols.fit()
+        method = "OLS, participant-clustered standard errors" if n_subjects >= 2 else "OLS (one participant)"
+    # x is centred for the fit (intercept and slope variances are otherwise nearly collinear and
+    # the covariance lands on its boundary); intercepts are reported at x = 0 by linear contrasts.
+    names = list(fit.fe_params.index) if hasattr(fit, "fe_params") else list(fit.params.index)
+
+    def contrast(weights: dict[str, float]):
+        vec = np.zeros(len(names))
+        for k, v in weights.items():
+            vec[names.index(k)] = v
+        res = fit.t_test(vec.reshape(1, -1), use_t=False) if hasattr(fit, "cov_re") else fit.t_test(vec.reshape(1, -1))
+        return float(np.squeeze(res.effect)), float(np.squeeze(res.pvalue))
+    intercept, _ = contrast({"Intercept": 1.0, "xc": -x_mean})
+    intercept_diff, intercept_diff_p = contrast({"other": 1.0, "xc:other": -x_mean})
+    terms = ["other", "xc:other"]
+    b = np.asarray(fit.params[terms], float)
+    v = np.asarray(fit.cov_params().loc[terms, terms], float)
+    joint_chi2 = float(b @ np.linalg.solve(v, b))
+    return MixedComparison(
+        method=method, fallback_reason="; ".join(reasons), reference=reference, other=other,
+        slope=float(fit.params["xc"]), intercept=intercept,
+        intercept_diff=intercept_diff, intercept_diff_p=intercept_diff_p,
+        slope_diff=float(fit.params["xc:other"]), slope_diff_p=float(fit.pvalues["xc:other"]),
+        joint_chi2=joint_chi2, joint_df=2, joint_p=float(chi2.sf(joint_chi2, 2)), n=int(len(d)), n_subjects=n_subjects,
+    )
+
+
 def as_frame(result) -> pd.DataFrame:
     """A dataclass result as a one-row tidy table."""
     return pd.DataFrame([result.__dict__])
 
 
-__all__ = ["LinearFit", "ConditionComparison", "linear_fit", "linear_fits_by", "condition_interaction", "as_frame"]
+__all__ = ["LinearFit", "ConditionComparison", "MixedComparison", "linear_fit", "linear_fits_by", "condition_interaction",
+           "mixed_condition_comparison", "as_frame"]

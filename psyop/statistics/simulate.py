@@ -87,20 +87,28 @@ def simulate_ordinal(rng: np.random.Generator, n_subjects: int = 19, pc: Mapping
 
 def simulate_reach(rng: np.random.Generator, n_subjects: int = 13,
                    lines: Mapping[str, tuple[float, float]] | None = None, noise_sd: float = 0.08,
-                   n_repeats: int = 5, subject_sd: float = 0.05) -> pd.DataFrame:
-    """Blind-reach trials; reach fraction = intercept + slope * target fraction + noise.
+                   n_repeats: int = 5, subject_sd: float = 0.05, slope_sd: float = 0.0,
+                   max_reach_fraction: float | None = None, hand_height_m: float = -0.15) -> pd.DataFrame:
+    """Blind-reach trials; reach fraction = intercept + slope * target fraction + a participant's
+    own intercept (sd ``subject_sd``) and slope (sd ``slope_sd``) deviations + noise.
 
     ``lines`` maps rendering -> (slope, intercept) in fractions of arm reach; the paper
-    reports 1.141/0.167 (enabled) and 1.128/0.165 (disabled).
+    reports 1.141/0.167 (enabled) and 1.128/0.165 (disabled). Reach and target are horizontal
+    distances (psyop.session.reach); with ``max_reach_fraction`` the hand, ``hand_height_m``
+    below the eyes, ends at most that fraction of arm reach from the eyes (as the session observer).
     """
     lines = lines or {"enabled": (1.141, 0.167), "disabled": (1.128, 0.165)}
     frames = []
     for participant in _participants(n_subjects):
         arm_m = rng.uniform(0.6, 0.8)
-        bias = rng.normal(0.0, subject_sd)
+        bias = rng.normal(0.0, subject_sd) if subject_sd > 0 else 0.0
+        slope_dev = rng.normal(0.0, slope_sd) if slope_sd > 0 else 0.0
         for rendering, (slope, intercept) in lines.items():
             target = np.repeat(np.asarray(REACH_TARGETS, float), n_repeats)
-            reach = intercept + slope * target + bias + rng.normal(0.0, noise_sd, target.size)
+            reach = intercept + (slope + slope_dev) * target + bias + rng.normal(0.0, noise_sd, target.size)
+            if max_reach_fraction is not None:
+                top = np.sqrt(max(max_reach_fraction ** 2 - (hand_height_m / arm_m) ** 2, 0.0))
+                reach = np.clip(reach, 0.0, top)
             frames.append(pd.DataFrame({"study": "egocentric", "participant": participant, "session": 1,
                                         "rendering": rendering, "target_fraction": target, "arm_reach_m": arm_m,
                                         "reach_m": reach * arm_m}))

@@ -69,17 +69,34 @@ def test_fit_cache_flags_the_degenerate_subject(built):
     row = fits[(fits["participant"] == "03") & (fits["back_D"] == 3.0)].iloc[0]
     assert "all_correct" in row["flags"]
     assert fits["simulated"].all()
+    assert row["status"] == "censored_below" and np.isnan(row["threshold_D"])  # a bound, not a negative number
     payload = json.loads((built / "results" / "detection_thresholds.json").read_text())
-    assert payload["n_flagged"] >= 1 and payload["flagged"][0]["participant"] == "03"
+    assert payload["n_left_out"] >= 1 and payload["left_out_by_status"].get("censored_below", 0) >= 1
+    assert any(r["participant"] == "03" and r["status"] == "censored_below" for r in payload["left_out"])
+    assert "fits left out" in payload["summary"]["detection threshold (mean over subjects and back distances)"]
 
 
 def test_summary_collects_every_study_and_says_simulated(built):
     md = (built / "results" / "summary.md").read_text()
     summary = json.loads((built / "results" / "summary.json").read_text())
-    assert "SIMULATED DATA" in md and summary["simulated"] is True
+    assert "Simulated data" in md and summary["simulated"] is True
     assert set(summary["summary"]) == {"detection_thresholds", "discrimination_fit", "ordinal", "egocentric", "realism"}
     assert "eps = " in md or "F(1, " in md
     assert "one-tailed binomial test" in md and "joint F(2, " in md
+
+
+def test_summary_puts_the_paper_beside_psyop_for_all_five_studies(built):
+    """The old summary gave psyop's numbers without the paper's."""
+    md = (built / "results" / "summary.md").read_text()
+    rows = json.loads((built / "results" / "summary.json").read_text())["paper_comparison"]
+    assert {r["study"] for r in rows} == {"detection_thresholds", "discrimination_fit", "ordinal", "egocentric", "realism"}
+    assert all(r["agrees"] in ("yes", "no", "n/a") and r["paper"] and r["psyop"] for r in rows)
+    for paper_value in ("0.36 D", "F(1.7, 30.65) = 17.98", "1.141", "76.8 %", "0.38 D"):
+        assert paper_value in md
+    assert "| study | statistic | paper | psyop | conclusion agrees |" in md
+    assert "Bonferroni over the 3 mode pairs within each separation (m = 3)" in md
+    assert "--bonferroni-family" in md and "Eta (overdispersion) is fixed at 0" in md
+    assert "random intercept and slope per participant" in md
 
 
 def test_ordinal_listwise_deletion_is_reported(built):

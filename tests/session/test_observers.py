@@ -53,7 +53,7 @@ def test_ordinal_preference_and_reach() -> None:
     chosen = [preference.collect(r, 0).chosen_mode for r in rows]
     assert np.mean(np.array(chosen) == "ocular") == pytest.approx(3.3 / 4.3, abs=0.03)
 
-    reach = make_observer({"kind": "reach", "arm_reach_m": 0.7, "by_condition": {
+    reach = make_observer({"kind": "reach", "arm_reach_m": 0.7, "max_reach_fraction": 1.5, "by_condition": {
         "enabled": {"slope": 1.141, "intercept_m": 0.117, "noise_sd_m": 0.03},
         "disabled": {"slope": 1.128, "intercept_m": 0.116, "noise_sd_m": 0.03}}}, seed=3, participant="S01")
     fractions = np.tile([0.5, 0.58, 0.67, 0.75, 0.82, 0.9], 300)
@@ -62,10 +62,10 @@ def test_ordinal_preference_and_reach() -> None:
     reaches = np.array([r.reach_m for r in responses])
     slope, intercept = np.polyfit(fractions * 0.7, reaches, 1)
     assert slope == pytest.approx(1.141, abs=0.05) and intercept == pytest.approx(0.117, abs=0.03)
-    # the observer reports where its hand truly ends; reach_m is that endpoint's distance
+    # the observer reports where its hand truly ends; reach_m is its horizontal distance (straight ahead)
     extras = dict(responses[0].extras)
     hand = np.array([extras["hand_x_m"], extras["hand_y_m"], extras["hand_z_m"]])
-    assert np.linalg.norm(hand) == pytest.approx(responses[0].reach_m, abs=1e-9)
+    assert -hand[2] == pytest.approx(responses[0].reach_m, abs=1e-9) and hand[1] < 0
     assert extras["arm_reach_m"] == 0.7 and extras["target_m"] == pytest.approx(0.5 * 0.7)
 
 

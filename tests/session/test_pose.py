@@ -24,6 +24,7 @@ from psyop.session.pose import (
     quaternion_from_yaw_pitch_roll,
     reach_from_positions,
 )
+from psyop.session.reach import horizontal_reach_m
 from psyop.session.responses.base import Response
 from psyop.session.runner import SessionOptions, run_session
 
@@ -87,11 +88,12 @@ def test_invalid_hand_samples_are_held_flagged_and_the_reach_uses_the_held_value
             if i > 0:  # a held sample repeats the one before it (held or not)
                 np.testing.assert_array_equal(xyz[i], xyz[i - 1])
         np.testing.assert_allclose(np.diff(cols["hand_sample_t_s"]), 1 / 120.0)
-        reach, mean = reach_from_positions(xyz, 10)
+        _, mean = reach_from_positions(xyz, 10)
+        reach = horizontal_reach_m(mean)  # along the horizontal eye-to-target direction, as the paper's supplement
         if np.isfinite(reach):
             n_reaches += 1
             assert response.reach_m == reach and response.response == f"{reach:.6f}"
-            assert abs(reach - np.linalg.norm(endpoint)) < 0.003
+            assert abs(reach - 0.5) < 0.003
             assert dict(response.extras)["hand_x_m"] == mean[0]
     assert n_held >= 10 and loop.n_hand_held == n_held and n_reaches >= 4
 
@@ -111,7 +113,7 @@ def test_replayed_pose_reproduces_the_logged_reaches_exactly(tmp_path: Path) -> 
     for _, row in a.iterrows():  # the reach is recomputed from the logged hand samples
         xyz = np.column_stack([row["hand_sample_x_m"], row["hand_sample_y_m"], row["hand_sample_z_m"]])
         assert len(xyz) == 10 and row["hand_sample_valid"].all()
-        assert reach_from_positions(xyz, 10)[0] == row["reach_m"]
+        assert horizontal_reach_m(reach_from_positions(xyz, 10)[1]) == row["reach_m"]
     frames = pd.read_parquet(original / "frames.parquet")
     assert len(frames) and np.isfinite(frames[HEAD].to_numpy(dtype=float)).all()
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from psyop.errors import UserError
 from psyop.session.gaze.simulated import seed_for
-from psyop.session.pose import REACH_DIRECTION
+from psyop.session.reach import HAND_HEIGHT_M
 from psyop.session.responses.base import Response, ResponseKind, score
 
 
@@ -157,11 +157,16 @@ class PairwisePreference(SimulatedObserver):
 
 
 class Reach(SimulatedObserver):
-    """reach_m = intercept_m + slope * target_m + N(0, noise_sd_m), per rendering condition.
+    """Horizontal reach = intercept_m + slope * target_m + a participant's own deviations + N(0, noise_sd_m).
 
-    ``target_m = target_fraction * arm_reach_m``. Parameters: ``by_condition: {enabled:
-    {slope, intercept_m, noise_sd_m}, disabled: {...}}`` (or the three keys at top level
-    for every condition), ``arm_reach_m`` (mean) and ``arm_reach_sd_m`` between people.
+    ``target_m = target_fraction * arm_reach_m`` (the target's horizontal distance). Parameters:
+    ``by_condition: {enabled: {slope, intercept_m, noise_sd_m}, disabled: {...}}`` (or the three
+    keys at top level for every condition), ``arm_reach_m`` (mean) and ``arm_reach_sd_m`` between
+    people; ``slope_sd`` and ``intercept_sd_m``: each participant's line deviates from the
+    condition's by one draw of each (shared by the conditions); ``max_reach_fraction``: the hand
+    ends at most this fraction of the arm reach from the eyes (3-D), a physical bound.
+    The hand ends at :data:`psyop.session.reach.HAND_HEIGHT_M` below the eyes, straight ahead;
+    ``reach_m`` is its horizontal distance (psyop.session.reach).
     """
 
     kind = ResponseKind.REACH
@@ -171,6 +176,11 @@ class Reach(SimulatedObserver):
         arm_mean = float(_get(params, "arm_reach_m", 0.7))
         arm_sd = float(_get(params, "arm_reach_sd_m", 0.0))
         self.arm_reach_m = arm_mean + (float(self._participant_rng.normal(0.0, arm_sd)) if arm_sd > 0 else 0.0)
+        slope_sd = float(_get(params, "slope_sd", 0.0))
+        intercept_sd = float(_get(params, "intercept_sd_m", 0.0))
+        self.slope_offset = float(self._participant_rng.normal(0.0, slope_sd)) if slope_sd > 0 else 0.0
+        self.intercept_offset_m = float(self._participant_rng.normal(0.0, intercept_sd)) if intercept_sd > 0 else 0.0
+        self.max_reach_m = float(_get(params, "max_reach_fraction", 1.0)) * self.arm_reach_m
         self.conditions = {str(k): dict(v) for k, v in dict(_get(params, "by_condition", None) or _get(params, "conditions", {}) or {}).items()}
 
     def _condition(self, rendering: str) -> Mapping[str, Any]:
@@ -181,13 +191,16 @@ class Reach(SimulatedObserver):
         return cond
 
     def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
-        """Where the hand really ends (the observer's motor output, ``reach_m`` = its distance).
-        A hand tracker (the session's pose source) then measures it with its own error."""
+        """Where the hand really ends (the observer's motor output, ``reach_m`` = its horizontal
+        distance). A hand tracker (the session's pose source) then measures it with its own error."""
         cond = self._condition(str(row.get("rendering", "")))
         target_m = float(row["target_fraction"]) * self.arm_reach_m
         rng = self.trial_rng(row)
-        reach = float(cond["intercept_m"]) + float(cond["slope"]) * target_m + float(rng.normal(0.0, float(cond["noise_sd_m"])))
-        endpoint = REACH_DIRECTION * reach
+        reach = (float(cond["intercept_m"]) + self.intercept_offset_m + (float(cond["slope"]) + self.slope_offset) * target_m
+                 + float(rng.normal(0.0, float(cond["noise_sd_m"]))))
+        horizontal_max = math.sqrt(max(self.max_reach_m ** 2 - HAND_HEIGHT_M ** 2, 0.0))
+        reach = min(max(reach, 0.0), horizontal_max)  # the hand cannot end behind the eyes or beyond the arm
+        endpoint = np.array([0.0, HAND_HEIGHT_M, -reach])
         r = score(self.kind, row, f"{reach:.6f}", reach_m=reach)
         extras = (("arm_reach_m", self.arm_reach_m), ("target_m", target_m),
                   ("hand_x_m", float(endpoint[0])), ("hand_y_m", float(endpoint[1])), ("hand_z_m", float(endpoint[2])))

@@ -1,0 +1,167 @@
+"""The statistics the paper reports (/work/shared/paper, main text sec. 5-6), each with the rule that
+decides whether psyop's result reaches the same conclusion.
+
+Each :class:`PaperStat` names the study JSON (results/<file>.json) psyop's value comes from.
+Conclusions: ``significant`` / ``not significant`` at alpha 0.05 (psyop's p after the same
+correction), or ``value``: the paper's number lies in psyop's 95 % interval.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+ALPHA = 0.05
+MODE_NAMES = {"ocular": "ocular parallax", "reversed": "reversed ocular parallax", "conventional": "conventional"}
+
+
+@dataclass(frozen=True)
+class PaperStat:
+    study: str  # study JSON stem
+    statistic: str
+    paper: str  # as the paper writes it
+    paper_conclusion: str  # 'significant', 'not significant', or a value claim
+    psyop: Callable[[dict], tuple[str, bool | None]]  # study payload -> (psyop's value, conclusion agrees?)
+
+
+def _fmt_p(p: float | None) -> str:
+    if p is None:
+        return "p = n/a"
+    return "p < 0.0001" if p < 1e-4 else "p < 0.001" if p < 1e-3 else f"p = {p:.3g}"
+
+
+def _anova(effect: str, significant: bool) -> Callable[[dict], tuple[str, bool | None]]:
+    def get(s: dict) -> tuple[str, bool | None]:
+        row = next((r for r in s.get("anova", []) if r["effect"] == effect), None)
+        if row is None or row.get("status", "ok") != "ok" or row.get("p_gg") is None:
+            return (f"not testable ({row.get('status') if row else 'missing'})", None)
+        text = s["summary"][f"ordinal rm-ANOVA: {effect}"]
+        return text, (row["p_gg"] < ALPHA) == significant
+    return get
+
+
+def _posthoc(sep: float, a: str, b: str, significant: bool) -> Callable[[dict], tuple[str, bool | None]]:
+    def get(s: dict) -> tuple[str, bool | None]:
+        for r in s.get("posthoc", []):
+            if float(r["separation_D"]) == sep and {r["A"], r["B"]} == {a, b}:
+                if r.get("p_bonf") is None:
+                    return ("not testable", None)
+                first = r["A"] if r["mean_A"] >= r["mean_B"] else r["B"]
+                text = (f"{MODE_NAMES[first]} higher, t({r['dof']:.0f}) = {abs(r['T']):.2f}, {_fmt_p(r['p_bonf'])} "
+                        f"(Bonferroni x{int(r['m'])})")
+                sig = r["p_bonf"] < ALPHA
+                direction_ok = not significant or first == a
+                return text, (sig == significant) and direction_ok
+        return ("missing", None)
+    return get
+
+
+def _binomial(first: str, second: str, significant: bool) -> Callable[[dict], tuple[str, bool | None]]:
+    def get(s: dict) -> tuple[str, bool | None]:
+        for r in s.get("preferences", []):
+            if r["first"] == first and r["second"] == second:
+                return (f"{100 * r['proportion']:.1f} % ({r['k']}/{r['n']}), {_fmt_p(r['p'])}",
+                        (r["p"] < ALPHA) == significant)
+        return ("missing", None)
+    return get
+
+
+def _in_ci(value: float, getter: Callable[[dict], tuple[float, float, float, str]]) -> Callable[[dict], tuple[str, bool | None]]:
+    def get(s: dict) -> tuple[str, bool | None]:
+        try:
+            est, lo, hi, unit = getter(s)
+        except (KeyError, TypeError, StopIteration):
+            return ("missing", None)
+        if est is None or lo is None or hi is None:
+            return ("not computed", None)
+        return f"{est:.3f}{unit} [95 % CI {lo:.3f}, {hi:.3f}]", lo <= value <= hi
+    return get
+
+
+def _reach_line(rendering: str, what: str):
+    def getter(s: dict):
+        r = next(f for f in s["fits"] if f["rendering"] == rendering)
+        return r[what], r[f"{what}_ci_low"], r[f"{what}_ci_high"], ""
+    return getter
+
+
+def _reach_difference(s: dict) -> tuple[str, bool | None]:
+    m, c = s.get("mixed"), s.get("comparison")
+    if not m:
+        return ("missing", None)
+    text = (f"primary {m['method'].split(',')[0]}: chi2(2) = {m['joint_chi2']:.2f}, {_fmt_p(m['joint_p'])}; "
+            f"pooled regression F({c['joint_df1']}, {c['joint_df2']}) = {c['joint_F']:.2f}, {_fmt_p(c['joint_p'])}")
+    if m.get("fallback_reason"):
+        text += f" (fallback: {m['fallback_reason']})"
+    return text, m["joint_p"] >= ALPHA
+
+
+def _back_effect(s: dict) -> tuple[str, bool | None]:
+    rows = s.get("anova_back_D")
+    if not rows:
+        return (s["summary"].get("effect of back distance on threshold (rm-ANOVA)", "not computed"), None)
+    row = rows[0]
+    if row.get("status", "ok") != "ok":
+        return (f"not testable ({row['status']})", None)
+    return s["summary"]["effect of back distance on threshold (rm-ANOVA)"], row["p_gg"] >= ALPHA
+
+
+PAPER: list[PaperStat] = [
+    PaperStat("detection_thresholds", "detection threshold (mean)", "approximately 0.36 D", "0.36 D",
+              _in_ci(0.36, lambda s: (s["mean_threshold_D"], *s["mean_threshold_ci_D"], " D"))),
+    PaperStat("detection_thresholds", "effect of back distance on threshold", "thresholds invariant to back distance",
+              "no effect", _back_effect),
+    PaperStat("discrimination_fit", "slope of threshold vs offset", "0.11", "0.11",
+              _in_ci(0.11, lambda s: (s["linear_fit"]["slope"], s["linear_fit"]["slope_ci_low"], s["linear_fit"]["slope_ci_high"], ""))),
+    PaperStat("discrimination_fit", "intercept of threshold vs offset", "0.38 D", "0.38 D",
+              _in_ci(0.38, lambda s: (s["linear_fit"]["intercept"], s["linear_fit"]["intercept_ci_low"],
+                                      s["linear_fit"]["intercept_ci_high"], " D"))),
+    PaperStat("ordinal", "rendering mode (rm-ANOVA, GG)", "F(1.7, 30.65) = 17.98, p < 0.0001", "significant",
+              _anova("mode", True)),
+    PaperStat("ordinal", "separation (rm-ANOVA)", "F(1, 18) = 8.14, p < 0.05", "significant", _anova("separation_D", True)),
+    PaperStat("ordinal", "mode x separation (rm-ANOVA, GG)", "F(1.78, 31.96) = 0.42, p = 0.64", "not significant",
+              _anova("mode * separation_D", False)),
+    PaperStat("ordinal", "1 D: ocular parallax vs conventional", "ocular parallax higher, p < 0.001", "significant",
+              _posthoc(1.0, "ocular", "conventional", True)),
+    PaperStat("ordinal", "1 D: ocular parallax vs reversed", "not significant", "not significant",
+              _posthoc(1.0, "ocular", "reversed", False)),
+    PaperStat("ordinal", "1 D: reversed vs conventional", "not significant", "not significant",
+              _posthoc(1.0, "reversed", "conventional", False)),
+    PaperStat("ordinal", "2 D: ocular parallax vs conventional", "ocular parallax higher, p < 0.001", "significant",
+              _posthoc(2.0, "ocular", "conventional", True)),
+    PaperStat("ordinal", "2 D: ocular parallax vs reversed", "ocular parallax higher, p < 0.05", "significant",
+              _posthoc(2.0, "ocular", "reversed", True)),
+    PaperStat("ordinal", "2 D: reversed vs conventional", "reversed higher, p < 0.05", "significant",
+              _posthoc(2.0, "reversed", "conventional", True)),
+    PaperStat("egocentric", "slope, ocular parallax enabled", "1.141", "1.141", _in_ci(1.141, _reach_line("enabled", "slope"))),
+    PaperStat("egocentric", "slope, ocular parallax disabled", "1.128", "1.128", _in_ci(1.128, _reach_line("disabled", "slope"))),
+    PaperStat("egocentric", "intercept, enabled", "0.167", "0.167", _in_ci(0.167, _reach_line("enabled", "intercept"))),
+    PaperStat("egocentric", "intercept, disabled", "0.165", "0.165", _in_ci(0.165, _reach_line("disabled", "intercept"))),
+    PaperStat("egocentric", "enabled vs disabled (slope and intercept)", "multiple regression: not significant",
+              "not significant", _reach_difference),
+    PaperStat("realism", "ocular parallax over conventional", "76.8 %, p < 0.001 (one-tailed binomial)", "significant",
+              _binomial("ocular", "conventional", True)),
+    PaperStat("realism", "reversed over conventional", "75.1 %, p < 0.001 (one-tailed binomial)", "significant",
+              _binomial("reversed", "conventional", True)),
+    PaperStat("realism", "ocular parallax over reversed", "49.1 %, not significant", "not significant",
+              _binomial("ocular", "reversed", False)),
+]
+
+
+def rows_for(studies: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per paper statistic: study, statistic, paper, psyop, agrees ('yes'/'no'/'n/a')."""
+    out = []
+    for stat in PAPER:
+        payload = studies.get(stat.study)
+        if payload is None:
+            text, agrees = "study not run", None
+        else:
+            try:
+                text, agrees = stat.psyop(payload)
+            except (KeyError, TypeError, StopIteration) as exc:
+                text, agrees = f"missing ({exc})", None
+        out.append({"study": stat.study, "statistic": stat.statistic, "paper": stat.paper,
+                    "paper_conclusion": stat.paper_conclusion, "psyop": text,
+                    "agrees": "n/a" if agrees is None else "yes" if agrees else "no"})
+    return out
