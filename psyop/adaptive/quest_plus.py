@@ -6,7 +6,7 @@ lapse). The posterior lives on a threshold x width x lapse grid; the next level 
 the stimulus grid that minimises the expected posterior entropy after the next response.
 
 Vectorised numpy rather than the ``questplus`` package: that package's next-stimulus step takes
-~18 ms median and up to ~70 ms for the default grids on the 2-core development machine (xarray
+~18-21 ms median and up to ~70 ms for the default grids on the 2-core development machine (xarray
 over the full stimulus x parameter x outcome array), and rebuilding its state from a history
 replays one xarray update per trial; the p99 bar is 20 ms per trial. This module gives the same
 next stimulus and posterior (tests/adaptive/test_quest_plus_vs_package.py) in about 1 ms.
@@ -27,6 +27,7 @@ from typing import Sequence
 
 import numpy as np
 from scipy.special import ndtr, xlogy
+from threadpoolctl import ThreadpoolController
 
 from psyop.adaptive.history import Observation
 from psyop.adaptive.state import ProcedureState
@@ -105,6 +106,9 @@ class QuestPlus:
         self._LlogL_rows = xlogy(self._L, self._L)                    # (2S, P)
         self._log_prior = np.full(self._t.size, -math.log(self._t.size))
         self.parameter_shape = t.shape
+        # One BLAS thread for the per-trial step: the matrices are small (2S x P), and a
+        # multi-threaded BLAS on a busy 2-core machine turned a 1 ms step into 60-95 ms at p99.
+        self._blas = ThreadpoolController()
 
     def _p_correct(self, x: np.ndarray) -> np.ndarray:
         g = self.spec.guess
@@ -124,7 +128,8 @@ class QuestPlus:
             on_grid = np.abs(self._stim[closer] - levels) <= _ON_GRID_TOL
             np.add.at(counts, closer[on_grid] + S * wrong[on_grid], 1.0)
             off_grid = [o for o, ok in zip(history, on_grid) if not ok]
-        log_post = self._log_prior + counts @ self._logL
+        rows = np.flatnonzero(counts)
+        log_post = self._log_prior + counts[rows] @ self._logL[rows]
         for obs in off_grid:
             p = self._p_correct(np.asarray(obs.level))
             log_post = log_post + np.log(np.maximum(p if obs.correct else 1.0 - p, _TINY))
@@ -144,7 +149,28 @@ class QuestPlus:
         S = self._stim.size
         return -(total[:S] + total[S:])
 
+    def expected_entropy_batch(self, posteriors: np.ndarray) -> np.ndarray:
+        """:meth:`expected_entropy` for many posteriors at once: (n, P) -> (n, S) (simulation sweeps)."""
+        p = posteriors.reshape(posteriors.shape[0], -1).T               # (P, n)
+        pk = self._L @ p                                              # (2S, n)
+        total = self._L @ xlogy(p, p) + self._LlogL_rows @ p - xlogy(pk, pk)
+        S = self._stim.size
+        return -(total[:S] + total[S:]).T
+
+    def log_likelihood(self, stimulus_index: np.ndarray, correct: np.ndarray) -> np.ndarray:
+        """log p(response | stimulus grid point, theta) for each (index, correct) pair: (n, P)."""
+        rows = np.asarray(stimulus_index) + self._stim.size * (~np.asarray(correct, dtype=bool))
+        return self._logL[rows]
+
+    @property
+    def log_prior(self) -> np.ndarray:
+        return self._log_prior.copy()
+
     def state(self, history: Sequence[Observation]) -> ProcedureState:
+        with self._blas.limit(limits=1, user_api="blas"):
+            return self._state(history)
+
+    def _state(self, history: Sequence[Observation]) -> ProcedureState:
         post = self.posterior(history)
         marginal = post.sum(axis=(1, 2))
         thresholds = np.asarray(self.spec.threshold)
