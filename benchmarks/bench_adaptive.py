@@ -137,8 +137,9 @@ def per_observer_stop(means: np.ndarray, sds: np.ndarray, truth: np.ndarray, che
     first = np.where(any_reached, reached.argmax(axis=1), checkpoints.size - 1)
     trials = checkpoints[first]
     errors = means[np.arange(means.shape[0]), first] - truth
-    return {"median": float(np.median(np.where(any_reached, trials, np.inf))), "p90": float(np.percentile(
-        np.where(any_reached, trials, np.inf), 90)), "censored": int((~any_reached).sum()), "n": int(trials.size),
+    censored = np.where(any_reached, trials, np.inf)
+    return {"median": float(np.percentile(censored, 50, method="higher")),
+            "p90": float(np.percentile(censored, 90, method="higher")), "censored": int((~any_reached).sum()), "n": int(trials.size),
         "bias": float(errors[any_reached].mean()) if any_reached.any() else float("nan"),
         "error_sd": float(errors[any_reached].std(ddof=1)) if any_reached.sum() > 1 else float("nan")}
 
@@ -247,7 +248,7 @@ def run(out_dir: Path, quick: bool) -> str:
         "thresholds <= 0.9 D, which the constant-stimulus levels bracket.",
         "",
         f"**Per observer**: trials until the threshold's posterior SD <= {TARGET_SD_D} D (checked every 5 trials;",
-        "'not reached' = more than half the observers never got there); bias and SD of the error",
+        "'not reached': more than half (p90: a tenth) of the observers never got there); bias and SD of the error",
         "(estimate - true threshold) at that point, over the observers who got there.",
         "",
         "| method | observers | median trials | ratio to constant | p90 trials | not reached | bias (D) | error SD (D) |",
