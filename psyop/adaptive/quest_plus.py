@@ -60,6 +60,7 @@ class QuestPlusSpec:
     lapse: tuple[float, ...] = (0.0, 0.01, 0.02, 0.04)
     guess: float = 0.5
     stop: StopRule = field(default_factory=lambda: StopRule(max_trials=64))
+    first_level: float | None = None  # the first trial's level (None: QUEST+'s own choice)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "stimulus", _grid(self.stimulus, "stimulus grid"))
@@ -74,7 +75,7 @@ class QuestPlusSpec:
     @classmethod
     def default(cls, min_level: float, max_level: float, stop: StopRule | None = None,
                 stimulus_count: int = 101, threshold_count: int = 101,
-                width: Sequence[float] | None = None) -> "QuestPlusSpec":
+                width: Sequence[float] | None = None, first_level: float | None = None) -> "QuestPlusSpec":
         """Stimulus and threshold grids of 101 points over [min, max]; widths 13 log-spaced
         values from 2.5 % to 40 % of the range; lapse 0, 1, 2, 4 %. For a 0-2 D range that is
         0.02 D steps and widths 0.05-0.8 D (P = 101 x 13 x 4 = 5252 parameter points)."""
@@ -84,7 +85,7 @@ class QuestPlusSpec:
         widths = np.geomspace(0.025 * span, 0.4 * span, 13) if width is None else width
         return cls(stimulus=tuple(np.linspace(min_level, max_level, stimulus_count)),
                    threshold=tuple(np.linspace(min_level, max_level, threshold_count)),
-                   width=tuple(widths), stop=stop or StopRule(max_trials=64))
+                   width=tuple(widths), stop=stop or StopRule(max_trials=64), first_level=first_level)
 
 
 class QuestPlus:
@@ -176,7 +177,10 @@ class QuestPlus:
         thresholds = np.asarray(self.spec.threshold)
         mean = float(marginal @ thresholds)
         sd = float(math.sqrt(max(float(marginal @ (thresholds - mean) ** 2), 0.0)))
-        next_level = float(self._stim[int(np.argmin(self.expected_entropy(post)))])
+        if not history and self.spec.first_level is not None:
+            next_level = float(self.spec.first_level)
+        else:
+            next_level = float(self._stim[int(np.argmin(self.expected_entropy(post)))])
         reason = self.spec.stop.reason(len(history), sd)
         return ProcedureState(procedure=self.name, trials=len(history), next_level=next_level,
                               finished=bool(reason), stop_reason=reason, estimate_mean=mean, estimate_sd=sd)
