@@ -100,3 +100,36 @@ def test_adaptive_factor_must_be_the_response_level(tmp_path: Path) -> None:
     path.write_text(text)
     with pytest.raises(UserError, match="must be response.level_factor"):
         load_protocol(path)
+
+
+def test_fits_accept_adaptive_levels_and_report_the_procedure_estimate(tmp_path: Path) -> None:
+    from psyop.adaptive.results import final_estimates, with_procedure_estimates
+    from psyop.statistics.psychometric import FitOptions, fit_psychometric_table
+
+    protocol = adaptive_detection(tmp_path, "{procedure: quest_plus, start: 0.5, min: 0, max: 1.5}", 40,
+                                  backs="[1, 2]", between_sd=0.0)
+    trials = _run(protocol, tmp_path / "data", "F1")
+    assert trials["level_D"].nunique() > 5  # off the constant-stimulus grid
+    fits = fit_psychometric_table(trials, "level_D", ["participant", "back_D"], options=FitOptions(n_bootstrap=50))
+    table = with_procedure_estimates(fits, trials, ["participant", "back_D"])
+    assert len(table) == 2 and table["threshold_D"].notna().all()
+    assert (table["procedure"] == "quest_plus").all() and (table["procedure_trials"] == 40).all()
+    last = trials.sort_values("trial").groupby("back_D").tail(1).set_index("back_D")["adaptive_estimate_D"]
+    assert table.set_index("back_D")["procedure_estimate_D"].to_dict() == last.to_dict()
+    # psignifit and the procedure see the same trials: their thresholds agree within the CIs
+    for _, row in table.iterrows():
+        assert abs(row["threshold_D"] - row["procedure_estimate_D"]) < 2 * row["procedure_estimate_sd_D"] + 0.1
+    with pytest.raises(ValueError, match="no adaptive levels"):
+        final_estimates(trials.drop(columns="adaptive_procedure"), ["participant"])
+
+
+def test_psyop_simulate_runs_an_adaptive_protocol(tmp_path: Path) -> None:
+    protocol = adaptive_detection(tmp_path, "{procedure: staircase, start: 1.0, min: 0, max: 1.5}", 3, backs="[1]")
+    data = tmp_path / "data"
+    assert cli_main(["simulate", "--protocols", str(protocol), "--data", str(data), "--jobs", "1"]) == 0
+    sessions = sorted((data / "detection").glob("sub-*/ses-1/trials.parquet"))
+    assert len(sessions) == 6
+    for path in sessions:
+        trials = pd.read_parquet(path)
+        assert len(trials) == 3 and trials["level_D"].notna().all()
+        assert (trials["adaptive_procedure"] == "staircase_1u3d").all()
