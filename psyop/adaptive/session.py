@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 import pandas as pd
@@ -35,6 +35,9 @@ from psyop.adaptive.quest_plus import QuestPlusSpec
 from psyop.adaptive.staircase import StaircaseSpec
 from psyop.adaptive.state import ProcedureState
 from psyop.adaptive.stopping import StopRule
+
+if TYPE_CHECKING:
+    from psyop.protocol.model import Protocol
 
 _RULES = {"1u2d": (1, 2), "1u3d": (1, 3)}
 
@@ -60,7 +63,7 @@ class AdaptivePlan:
                 f"adaptive_estimate_sd_{u}": math.nan}
 
 
-def adaptive_plan(protocol) -> AdaptivePlan | None:
+def adaptive_plan(protocol: "Protocol") -> AdaptivePlan | None:
     """The plan of the protocol's adaptive factor (validated by psyop.protocol.semantics), or None."""
     for name, factor in protocol.design.factors.items():
         a = factor.adaptive

@@ -5,8 +5,10 @@ an unknown key or a bad value is a user error, not an ignored setting."""
 from __future__ import annotations
 
 import yaml
+from pydantic import ValidationError
 
 from psyop.errors import UserError
+from psyop.protocol.model import Protocol
 
 
 def parse_effects(specs: list[str]) -> tuple[tuple[str, object], ...]:
@@ -26,7 +28,7 @@ def parse_effects(specs: list[str]) -> tuple[tuple[str, object], ...]:
     return tuple(out)
 
 
-def apply_effects(protocol, effects: tuple[tuple[str, object], ...]):
+def apply_effects(protocol: Protocol, effects: tuple[tuple[str, object], ...]) -> Protocol:
     """A copy of ``protocol`` whose observer has ``effects`` set (validated)."""
     if not effects:
         return protocol
@@ -42,6 +44,6 @@ def apply_effects(protocol, effects: tuple[tuple[str, object], ...]):
         data[key] = value
     try:
         observer = observer_type.model_validate(data)
-    except Exception as exc:  # pydantic.ValidationError
+    except ValidationError as exc:
         raise UserError(f"--effect: the changed observer is invalid: {exc}", "--effect") from None
     return protocol.model_copy(update={"observer": observer})

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import pandas as pd
 
 from psyop.errors import UserError
+from psyop.protocol.model import Protocol
 
 REALISM_PAIRS = [("ocular", "conventional"), ("reversed", "conventional"), ("ocular", "reversed")]
 
@@ -38,16 +39,16 @@ def _not_computed(test: str, exc: Exception) -> TestOutcome:
     return TestOutcome(test, math.nan, f"not computed: {exc}")
 
 
-def threshold_condition(protocol) -> str:
+def threshold_condition(protocol: Protocol) -> str:
     """The crossed factor thresholds are compared over (first non-level, non-adaptive factor)."""
     level = protocol.response.level_factor
-    for name, factor in protocol.design.factors.items():
+    for name in protocol.design.factors:
         if name != level:
             return name
     raise UserError("a threshold study needs a condition factor besides the level factor", "protocol design")
 
 
-def two_interval_tests(protocol, trials: pd.DataFrame) -> list[TestOutcome]:
+def two_interval_tests(protocol: Protocol, trials: pd.DataFrame) -> list[TestOutcome]:
     from psyop.statistics.anova import rm_anova
     from psyop.statistics.psychometric import FitOptions, fit_psychometric_table
     from psyop.statistics.regression import linear_fit
@@ -108,7 +109,7 @@ def reach_tests(trials: pd.DataFrame, reference: str = "disabled") -> list[TestO
             TestOutcome(names[2], float(c.joint_p))]
 
 
-def study_tests(protocol, trials: pd.DataFrame) -> list[TestOutcome]:
+def study_tests(protocol: Protocol, trials: pd.DataFrame) -> list[TestOutcome]:
     """Every reported test of the protocol's study on ``trials`` (one simulated study)."""
     kind = protocol.response.kind
     if kind == "two_interval":
