@@ -8,7 +8,7 @@ factor's level (``depends_on`` + ``levels_by``), or ``adaptive`` (filled while t
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
@@ -30,22 +30,41 @@ class SteppedLevels(StrictModel):
 
 
 class AdaptiveLevel(StrictModel):
-    """A level chosen at run time by an adaptive procedure (staircase, QUEST+, ...).
+    """A level chosen at run time by an adaptive procedure (psyop.adaptive; docs/adaptive.md).
 
-    The schedule leaves the factor's column empty (NaN) and marks the trial ``adaptive``; the
-    session's procedure named here fills it before the trial starts. Procedures are not part
-    of the schedule compiler. An adaptive factor is not crossed: every condition of the other
-    factors gets ``repetitions`` adaptive trials."""
+    The schedule leaves the factor's column empty (NaN) and marks the trial ``adaptive``; before
+    each trial the session asks the condition's procedure, rebuilt from the logged trials, for the
+    level. An adaptive factor is not crossed: every condition of the other factors gets
+    ``repetitions`` adaptive trials, randomly interleaved by the schedule (one procedure per
+    condition). ``start`` is the first trial's level; levels stay within [min, max].
 
-    procedure: str = Field(min_length=1, description="name of the procedure the session runs")
+    - ``quest_plus``: QUEST+ (2AFC cumulative normal); ``grid_points`` levels/thresholds over
+      [min, max] (default 101).
+    - ``staircase``: ``rule`` 1u2d, 1u3d (default) or weighted (Kaernbach, ``target`` p correct,
+      default 0.75); ``step_sizes`` after 0, 1, 2, ... reversals (default: range/10, /20, /40).
+    """
+
+    procedure: str = Field(min_length=1, description="quest_plus or staircase")
     start: Number
     min: Number
     max: Number
+    grid_points: Integer | None = Field(default=None, ge=5, le=1001, description="quest_plus only")
+    rule: Literal["1u2d", "1u3d", "weighted"] | None = Field(default=None, description="staircase only")
+    step_sizes: list[Annotated[Number, Field(gt=0)]] | None = Field(default=None, min_length=1,
+                                                                    description="staircase only")
+    target: Number | None = Field(default=None, gt=0.5, lt=1, description="weighted staircase only")
 
     @model_validator(mode="after")
     def _range(self) -> "AdaptiveLevel":
-        if not self.min <= self.start <= self.max:
-            raise ValueError("need min <= start <= max")
+        if not self.min <= self.start <= self.max or not self.min < self.max:
+            raise ValueError("need min <= start <= max and min < max")
+        staircase_only = [n for n in ("rule", "step_sizes", "target") if getattr(self, n) is not None]
+        if self.procedure == "quest_plus" and staircase_only:
+            raise ValueError(f"{', '.join(staircase_only)}: staircase settings; quest_plus does not use them")
+        if self.procedure == "staircase" and self.grid_points is not None:
+            raise ValueError("grid_points is a quest_plus setting; a staircase does not use it")
+        if self.target is not None and self.rule != "weighted":
+            raise ValueError("target is the weighted staircase's p(correct); give rule: weighted or drop target")
         return self
 
 

@@ -26,13 +26,10 @@ from psyop.protocol.trial import Blank, Interval, ResponsePhase
 #: 1.3k tries, 45 % about 3.3k, 50 % about 15k. Above 40 % a per-trial placement gets slow.
 MAX_RANDOM_COVERAGE = 0.4
 
-# ---- ADAPTIVE LEVELS: REFUSED HERE, AND ONLY HERE ---------------------------------------------
-#: Names of the adaptive procedures the session can run (``level_D: {adaptive: {procedure: ...}}``).
-#: None exists yet, so every adaptive factor is refused at validation with its file:line (a
-#: session would otherwise stop mid-run on a NaN level). The adaptive models in
-#: psyop.protocol.design stay; registering a procedure's name here (and running it in the session
-#: plan) re-enables them.
-ADAPTIVE_PROCEDURES: frozenset[str] = frozenset()
+# ---- ADAPTIVE LEVELS ----------------------------------------------------------------------------
+#: Names of the adaptive procedures the session runs (``level_D: {adaptive: {procedure: ...}}``,
+#: psyop.adaptive.session); any other name is refused at validation with its file:line.
+ADAPTIVE_PROCEDURES: frozenset[str] = frozenset({"quest_plus", "staircase"})
 
 
 
@@ -79,6 +76,8 @@ class _Checker:
                 self.add(path + ("adaptive", "procedure"),
                          f"adaptive procedure '{factor.adaptive.procedure}' is not available (available: {known}); "
                          "give fixed levels instead, e.g. levels: {start: 0, step: 0.25, count: 7}")
+            elif factor.adaptive is not None:
+                self.check_adaptive(name, path)
             if factor.is_numeric and not has_unit_suffix(name):
                 self.add(path, f"numeric factor '{name}' must say its unit in its name: end it with one of "
                                f"{', '.join(UNIT_SUFFIXES)} (e.g. '{name}_D')")
@@ -127,6 +126,16 @@ class _Checker:
                                              "a single factor in metres (_m) with no D")
                 ok = False
         return ok
+
+    def check_adaptive(self, name: str, path: tuple[Any, ...]) -> None:
+        """The procedures model a 2AFC psychometric function of the response's level."""
+        response = self.p.response
+        if response.kind != "two_interval" or response.level_factor != name:
+            self.add(path + ("adaptive",), f"adaptive procedures place the level of a two_interval response; "
+                                           f"'{name}' must be response.level_factor of a two_interval response")
+        adaptive = [n for n, f in self.factors.items() if f.adaptive is not None]
+        if len(adaptive) > 1 and name == adaptive[1]:
+            self.add(path + ("adaptive",), f"only one adaptive factor per protocol (found {', '.join(adaptive)})")
 
     def check_scene(self, conditions: list[dict[str, Any]]) -> None:
         ids: dict[str, int] = {}

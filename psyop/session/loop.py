@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from psyop.adaptive.session import AdaptiveLevels
 from psyop.session.clock import Clock
 from psyop.session.frames import Display, FrameRecorder, FrameRenderer, latency_summary
 from psyop.session.gaze.filter import GazeConditioner
@@ -120,12 +121,14 @@ class TrialLoop:
         pose: PoseSource | None = None,
         response: ResponsePlan | None = None,
         announce: Callable[[str], None] | None = None,
+        adaptive: AdaptiveLevels | None = None,
     ) -> None:
         self.identity = dict(identity)  # study, participant, session
         self.phases = phases
         # the plan's response phase (timeout, display off); None: wait, blank display
         self.response_plan = response
         self.announce = announce  # where a live session shows the response prompt (experimenter console)
+        self.adaptive = adaptive  # adaptive levels: chosen before each trial from the logged history
         self.clock, self.gaze, self.responses = clock, gaze, responses
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
         self.conditioner = GazeConditioner(config.confidence_threshold)
@@ -150,10 +153,16 @@ class TrialLoop:
         try:
             for row in rows:
                 bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
+                if self.adaptive is not None:
+                    row = self.adaptive.fill(row)
                 record, frames = self.run_trial(row)
+                if self.adaptive is not None:
+                    record = self.adaptive.complete(record)
                 self.state = TrialState.RECORD
                 with _sigint_deferred():  # Ctrl-C never tears a record half-written
                     self.store.append_trial(record, frames.table() if len(frames) else None)
+                if self.adaptive is not None:
+                    self.adaptive.commit(record)
                 self.state = TrialState.DONE
                 n_done += 1
                 bar.update(1)

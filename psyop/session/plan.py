@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from psyop.adaptive.session import AdaptivePlan, adaptive_plan
 from psyop.datacontract import TIMEOUT_RESPONSE
 from psyop.optics.display import DisplayProfile
 from psyop.optics.rig import EyeRig
@@ -96,6 +97,7 @@ class SessionPlan:
     display: DisplayProfile
     rig: EyeRig
     fixation: FixationPath | None
+    adaptive: AdaptivePlan | None = None  # the adaptive level factor's procedure (psyop.adaptive.session)
 
     @property
     def kind(self) -> ResponseKind:
@@ -131,6 +133,8 @@ class SessionPlan:
             "display": {k: (v if not isinstance(v, float) or math.isfinite(v) else "inf")
                         for k, v in self.display.__dict__.items()},
             "fixation_path": None if self.fixation is None else dict(self.fixation.__dict__),
+            "adaptive": None if self.adaptive is None else {"factor": self.adaptive.factor,
+                                                            "procedure": type(self.adaptive.spec).__name__},
         }
 
 
@@ -208,4 +212,5 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
         phase=PhaseSpec("response", 0.0, "off" if display_off else "blank", "none"),
     )
     return SessionPlan(study=protocol.study.name, protocol=protocol, phases=phases, response=response,
-                       observer=protocol.observer, display=resolve_display_profile(spec), rig=rig, fixation=path)
+                       observer=protocol.observer, display=resolve_display_profile(spec), rig=rig, fixation=path,
+                       adaptive=adaptive_plan(protocol))

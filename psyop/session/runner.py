@@ -24,6 +24,7 @@ from psyop.session.frames import CameraRenderer, HeadlessDisplay
 from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, seed_for
 from psyop.session.log.layout import session_paths, write_dataset_description
 from psyop.session.log.schema import trial_schema
+from psyop.adaptive.session import AdaptiveLevels, add_log_columns
 from psyop.session.log.store import SessionStore, recover_tables
 from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
@@ -182,6 +183,8 @@ def run_session(
     check_options(clock=options.clock, responses=options.responses, tracker=options.tracker)
     seed = resolve_seed(paths, options.seed, seed_for(study, options.participant, options.session))
     schedule = compile_schedule(protocol, seed)
+    if plan.adaptive is not None:  # the adaptive level and the procedure's state are logged per trial
+        schedule = add_log_columns(schedule, plan.adaptive)
     display_profile = plan.display
 
     if options.clock == "virtual":
@@ -231,10 +234,11 @@ def run_session(
         sync = getattr(gaze, "sync", None)
         metadata["clock_sync"] = sync.as_dict() if sync is not None else None
         completed = store.open(metadata)
-        if isinstance(clock, VirtualClock) and completed:
-            trials, _ = recover_tables(paths)
-            if trials is not None and len(trials):
-                clock.sleep_until(float(trials["trial_end_s"].max()))
+        logged = recover_tables(paths)[0] if completed else None
+        if isinstance(clock, VirtualClock) and logged is not None and len(logged):
+            clock.sleep_until(float(logged["trial_end_s"].max()))
+        # adaptive procedures are rebuilt from the logged trials: no state of their own to lose
+        adaptive = AdaptiveLevels.from_log(plan.adaptive, logged) if plan.adaptive is not None else None
         path = plan.fixation
         every_frame = (not (clock.virtual and not responses.needs_images)) if options.every_frame is None \
             else options.every_frame
@@ -261,7 +265,7 @@ def run_session(
             identity={"study": study, "participant": options.participant, "session": options.session},
             phases=plan.phases, clock=clock, gaze=gaze, responses=responses,
             renderer=renderer, display=display, store=store, config=config, pose=pose,
-            response=plan.response, announce=announce,
+            response=plan.response, announce=announce, adaptive=adaptive,
         )
         outcome = loop.run(schedule, completed)
     finally:

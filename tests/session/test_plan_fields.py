@@ -94,17 +94,17 @@ def test_depth_range_is_the_optics_range(tmp_path: Path, depth: str, ok: bool) -
             load_protocol(path)
 
 
-# -- adaptive levels: refused, located -------------------------------------------------------------
+# -- unknown adaptive procedures: refused, located (quest_plus and staircase run: tests/adaptive) ---
 def test_adaptive_levels_are_refused_with_their_location(tmp_path: Path) -> None:
     text = (PROTOCOLS / "detection.yaml").read_text()
     text, n = re.subn(r"(?m)^      levels: \[0, 0.25, 0.5, 0.75, 1\].*$",
-                      "      adaptive: {procedure: quest_plus, start: 0.5, min: 0, max: 1.5}", text)
+                      "      adaptive: {procedure: quest, start: 0.5, min: 0, max: 1.5}", text)
     assert n == 1
     path = tmp_path / "adaptive.yaml"
     path.write_text(text)
-    with pytest.raises(UserError, match="adaptive procedure 'quest_plus' is not available") as error:
+    with pytest.raises(UserError, match="adaptive procedure 'quest' is not available") as error:
         load_protocol(path)
-    line = next(i for i, t in enumerate(text.splitlines(), 1) if "quest_plus" in t)
+    line = next(i for i, t in enumerate(text.splitlines(), 1) if "procedure: quest" in t)
     assert error.value.location.startswith(f"{path}:{line}:")
 
 

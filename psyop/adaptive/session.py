@@ -1,0 +1,168 @@
+"""Adaptive levels in a session: the protocol's ``adaptive:`` factor -> one procedure per condition.
+
+Before each trial the session asks :meth:`AdaptiveLevels.fill` for the row's level: the
+condition's procedure is rebuilt from that condition's logged history (non-practice trials with
+an answer, in trial order) and its ``next_level`` goes into the level column (and into the
+``<level>_interval1/2`` columns where the response sets a fixed reference level). After the
+response, :meth:`AdaptiveLevels.complete` adds the procedure's state after this trial to the
+record; only once the record is durable does :meth:`AdaptiveLevels.commit` add it to the history.
+A resumed session starts from the logged trials (:meth:`AdaptiveLevels.from_log`), so after a
+crash the next level is exactly what an uninterrupted session would have chosen: there is no
+procedure state to save or lose.
+
+Logged per trial (``U`` = the level factor's unit suffix, e.g. ``D``):
+``adaptive_procedure`` (e.g. ``quest_plus``, ``staircase_1u3d``) and ``adaptive_trials`` (this
+condition's counted trials before this one: the history the level came from); then, after this
+trial's response: ``adaptive_step_U`` and ``adaptive_reversals`` (the staircase's step for its next
+change and its reversals so far; NaN and 0 for QUEST+), ``adaptive_estimate_U`` and
+``adaptive_estimate_sd_U`` (the running threshold estimate: QUEST+ posterior mean/SD; staircase
+reversal mean and its standard error, inf before two reversals). The last counted trial of a
+condition holds the procedure's final estimate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Mapping
+
+import numpy as np
+import pandas as pd
+
+from psyop.adaptive.history import Observation
+from psyop.adaptive.procedure import Procedure, make_procedure
+from psyop.adaptive.quest_plus import QuestPlusSpec
+from psyop.adaptive.staircase import StaircaseSpec
+from psyop.adaptive.state import ProcedureState
+from psyop.adaptive.stopping import StopRule
+
+if TYPE_CHECKING:
+    from psyop.protocol.model import Protocol
+
+_RULES = {"1u2d": (1, 2), "1u3d": (1, 3)}
+
+
+@dataclass(frozen=True)
+class AdaptivePlan:
+    """What the session runs for the protocol's adaptive factor."""
+
+    factor: str
+    spec: QuestPlusSpec | StaircaseSpec
+    test_level: float | None  # response.test.set[factor], if the test interval has a fixed level
+    reference_level: float | None  # response.reference.set[factor], e.g. 0 for discrimination
+
+    @property
+    def unit(self) -> str:
+        return self.factor.rsplit("_", 1)[-1]
+
+    def log_columns(self) -> dict[str, Any]:
+        """The per-trial log columns and their empty schedule values (they fix the log's types)."""
+        u = self.unit
+        return {"adaptive_procedure": "", "adaptive_trials": np.int64(-1), f"adaptive_step_{u}": math.nan,
+                "adaptive_reversals": np.int64(0), f"adaptive_estimate_{u}": math.nan,
+                f"adaptive_estimate_sd_{u}": math.nan}
+
+
+def adaptive_plan(protocol: "Protocol") -> AdaptivePlan | None:
+    """The plan of the protocol's adaptive factor (validated by psyop.protocol.semantics), or None."""
+    for name, factor in protocol.design.factors.items():
+        a = factor.adaptive
+        if a is None:
+            continue
+        stop = StopRule(max_trials=int(protocol.design.repetitions))
+        if a.procedure == "quest_plus":
+            points = int(a.grid_points or 101)
+            spec: QuestPlusSpec | StaircaseSpec = QuestPlusSpec.default(
+                float(a.min), float(a.max), stop=stop, stimulus_count=points, threshold_count=points,
+                first_level=float(a.start))
+        elif a.procedure == "staircase":
+            span = float(a.max) - float(a.min)
+            steps = tuple(float(s) for s in a.step_sizes) if a.step_sizes else (span / 10, span / 20, span / 40)
+            rule = a.rule or "1u3d"
+            up, down = _RULES.get(rule, (1, 1))
+            spec = StaircaseSpec(start=float(a.start), min=float(a.min), max=float(a.max),
+                                 rule="weighted" if rule == "weighted" else "transformed", up=up, down=down,
+                                 target=float(a.target) if a.target is not None else 0.75, step_sizes=steps,
+                                 stop_reversals=None, stop=stop)
+        else:  # semantics refuses other names; reaching here is a programming error
+            raise ValueError(f"unknown adaptive procedure {a.procedure!r}")
+        response = protocol.response
+        test_set = getattr(getattr(response, "test", None), "set", {}) or {}
+        ref_set = getattr(getattr(response, "reference", None), "set", {}) or {}
+        return AdaptivePlan(name, spec, _maybe_float(test_set.get(name)), _maybe_float(ref_set.get(name)))
+    return None
+
+
+def _maybe_float(value: Any) -> float | None:
+    return None if value is None else float(value)
+
+
+def add_log_columns(schedule: pd.DataFrame, plan: AdaptivePlan) -> pd.DataFrame:
+    out = schedule.copy()
+    for name, value in plan.log_columns().items():
+        out[name] = pd.Series([value] * len(out), index=out.index,
+                              dtype=object if isinstance(value, str) else type(value))
+    return out
+
+
+def _counts(row: Mapping[str, Any], factor: str) -> bool:
+    """A trial the procedure learns from: not practice, answered, with a finite level."""
+    correct = row.get("correct")
+    if bool(row.get("practice", False)) or correct is None or (isinstance(correct, float) and math.isnan(correct)):
+        return False
+    level = row.get(factor)
+    return level is not None and math.isfinite(float(level))
+
+
+class AdaptiveLevels:
+    """The session's adaptive levels (see the module docstring)."""
+
+    def __init__(self, plan: AdaptivePlan) -> None:
+        self.plan = plan
+        self.procedure: Procedure = make_procedure(plan.spec)
+        self.history: dict[str, list[Observation]] = {}
+
+    @classmethod
+    def from_log(cls, plan: AdaptivePlan, logged: pd.DataFrame | None) -> "AdaptiveLevels":
+        levels = cls(plan)
+        if logged is not None and len(logged):
+            for row in logged.sort_values("trial").to_dict("records"):
+                levels.commit(row)
+        return levels
+
+    def state(self, condition: str) -> ProcedureState:
+        return self.procedure.state(self.history.get(condition, []))
+
+    def fill(self, row: Mapping[str, Any]) -> dict[str, Any]:
+        """``row`` with the level the condition's procedure chooses now."""
+        plan, out = self.plan, dict(row)
+        state = self.state(str(row["condition"]))
+        level = float(state.next_level)
+        out[plan.factor] = level
+        for k in (1, 2):
+            column = f"{plan.factor}_interval{k}"
+            if column in out:
+                is_test = int(out.get("correct_interval", 1)) == k
+                fixed = plan.test_level if is_test else plan.reference_level
+                out[column] = level if fixed is None else fixed
+        out.update(adaptive_procedure=state.procedure, adaptive_trials=np.int64(state.trials))
+        return out
+
+    def complete(self, record: Mapping[str, Any]) -> dict[str, Any]:
+        """``record`` with the running estimate after this trial (before it is made durable)."""
+        out = dict(record)
+        history = list(self.history.get(str(record["condition"]), []))
+        if _counts(record, self.plan.factor):
+            history.append(Observation(float(record[self.plan.factor]), bool(record["correct"])))
+        state = self.procedure.state(history)
+        out[f"adaptive_estimate_{self.plan.unit}"] = float(state.estimate_mean)
+        out[f"adaptive_estimate_sd_{self.plan.unit}"] = float(state.estimate_sd)
+        out["adaptive_reversals"] = np.int64(state.reversals)
+        out[f"adaptive_step_{self.plan.unit}"] = float(state.step)
+        return out
+
+    def commit(self, record: Mapping[str, Any]) -> None:
+        """Add a durable trial to its condition's history."""
+        if _counts(record, self.plan.factor):
+            self.history.setdefault(str(record["condition"]), []).append(
+                Observation(float(record[self.plan.factor]), bool(record["correct"])))

@@ -1,0 +1,123 @@
+"""The tests a study reports, computed on one simulated study's trials with the same
+``psyop.statistics`` calls the analysis scripts (analysis/*.py) make.
+
+- two-interval threshold studies (detection, discrimination): psignifit fits per participant and
+  condition (analysis/fit_psychometric.py options), then the rm-ANOVA of thresholds over the
+  condition (analysis/fig_detection_thresholds.py) and the linear slope of threshold against the
+  condition (analysis/fig_discrimination_thresholds.py); flagged fits are left out as there;
+- left/right nearer (ordinal): rm-ANOVA of proportion correct over mode x separation and the
+  Bonferroni post-hoc tests per separation (analysis/fig_ordinal_depth.py);
+- pairwise preference (realism): one-tailed binomial tests per pair (analysis/fig_realism.py);
+- reach (egocentric): the multiple regression's slope, intercept and joint differences
+  (analysis/fig_egocentric_reach.py).
+A test that cannot be computed (too few complete participants, ...) gets p = nan and the reason.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import pandas as pd
+
+from psyop.errors import UserError
+from psyop.protocol.model import Protocol
+
+REALISM_PAIRS = [("ocular", "conventional"), ("reversed", "conventional"), ("ocular", "reversed")]
+
+
+@dataclass(frozen=True)
+class TestOutcome:
+    test: str
+    p: float
+    note: str = ""  # why p is nan
+
+    __test__ = False  # not a pytest class
+
+
+def _not_computed(test: str, exc: Exception) -> TestOutcome:
+    return TestOutcome(test, math.nan, f"not computed: {exc}")
+
+
+def threshold_condition(protocol: Protocol) -> str:
+    """The crossed factor thresholds are compared over (first non-level, non-adaptive factor)."""
+    level = protocol.response.level_factor
+    for name in protocol.design.factors:
+        if name != level:
+            return name
+    raise UserError("a threshold study needs a condition factor besides the level factor", "protocol design")
+
+
+def two_interval_tests(protocol: Protocol, trials: pd.DataFrame) -> list[TestOutcome]:
+    from psyop.statistics.anova import rm_anova
+    from psyop.statistics.psychometric import FitOptions, fit_psychometric_table
+    from psyop.statistics.regression import linear_fit
+
+    condition = threshold_condition(protocol)
+    level = protocol.response.level_factor
+    fits = fit_psychometric_table(trials, level, ["participant", condition], options=FitOptions(), n_jobs=1)
+    clean = fits[fits["flags"].fillna("") == ""]
+    out = []
+    name = f"rm-ANOVA: threshold ~ {condition}"
+    try:
+        out.append(TestOutcome(name, float(rm_anova(clean, "threshold_D", condition).table.iloc[0]["p_gg"])))
+    except ValueError as exc:
+        out.append(_not_computed(name, exc))
+    name = f"regression slope: threshold ~ {condition}"
+    try:
+        out.append(TestOutcome(name, float(linear_fit(clean, condition, "threshold_D").slope_p)))
+    except (ValueError, ZeroDivisionError) as exc:
+        out.append(_not_computed(name, exc))
+    return out
+
+
+def ordinal_tests(trials: pd.DataFrame) -> list[TestOutcome]:
+    from psyop.statistics.anova import cell_means, posthoc_paired, rm_anova
+
+    cells = cell_means(trials, "correct", ["mode", "separation_D"])
+    out = []
+    try:
+        for _, r in rm_anova(cells, "correct", ["mode", "separation_D"]).table.iterrows():
+            out.append(TestOutcome(f"rm-ANOVA: {r['effect']}", float(r["p_gg"])))
+    except ValueError as exc:
+        out.append(_not_computed("rm-ANOVA", exc))
+    for _, r in posthoc_paired(cells, "correct", "mode", by="separation_D").iterrows():
+        out.append(TestOutcome(f"post-hoc at {r['separation_D']:g} D: {r['A']} vs {r['B']}", float(r["p_bonf"])))
+    return out
+
+
+def realism_tests(trials: pd.DataFrame) -> list[TestOutcome]:
+    from psyop.statistics.binomial import pairwise_preferences
+
+    prefs = pairwise_preferences(trials, REALISM_PAIRS)
+    return [TestOutcome(f"binomial: {r['first']} over {r['second']}", float(r["p"])) for _, r in prefs.iterrows()]
+
+
+def reach_tests(trials: pd.DataFrame, reference: str = "disabled") -> list[TestOutcome]:
+    from psyop.statistics.regression import condition_interaction
+
+    t = trials.copy()
+    if "reach_fraction" not in t:
+        t["reach_fraction"] = t["reach_m"] / t["arm_reach_m"]
+    t = t[t["reach_fraction"].notna()]
+    names = ("regression: slope difference", "regression: intercept difference", "regression: joint difference")
+    try:
+        c = condition_interaction(t, "target_fraction", "reach_fraction", "rendering", reference)
+    except ValueError as exc:
+        return [_not_computed(n, exc) for n in names]
+    return [TestOutcome(names[0], float(c.slope_diff_p)), TestOutcome(names[1], float(c.intercept_diff_p)),
+            TestOutcome(names[2], float(c.joint_p))]
+
+
+def study_tests(protocol: Protocol, trials: pd.DataFrame) -> list[TestOutcome]:
+    """Every reported test of the protocol's study on ``trials`` (one simulated study)."""
+    kind = protocol.response.kind
+    if kind == "two_interval":
+        return two_interval_tests(protocol, trials)
+    if kind == "left_right_nearer":
+        return ordinal_tests(trials)
+    if kind == "pairwise_preference":
+        return realism_tests(trials)
+    if kind == "reach":
+        return reach_tests(trials)
+    raise UserError(f"no power analysis for response kind {kind!r}", "protocol response")
