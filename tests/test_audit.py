@@ -178,3 +178,16 @@ def test_occlusion_geometry_knows_optical_infinity():
     assert hidden_by((far, far_later), np.array([0.03, 0.01, -0.02])) == {0: 1}
     assert hidden_by((far_later, far), np.zeros(3)) == {}
     assert mask_scene(Scene((far, wall)), 0, 8).primitives[1].material == Solid((1 / 65, 0, 0))
+
+
+def test_the_old_zero_dioptre_placement_fails_the_audit(ctx, monkeypatch):
+    """Emulate the code before the fix: 0 D placed at 1e4 m and the camera's 100 m far plane
+    kept. The discrimination study's red back disc and fixation target then never show."""
+    import psyop.rendering.renderer as renderer_module
+    import psyop.stimulus.build as build_module
+
+    monkeypatch.setattr(build_module, "INFINITY_M", 1.0e4)
+    monkeypatch.setattr(renderer_module, "_finite_extent_m", lambda scene: 0.0)
+    report = run_audit(load_protocol(PROTOCOLS / "discrimination.yaml"), FAST, ctx=ctx)
+    never = sorted(f.split()[1] for f in report.failures if "never visible" in f)
+    assert never == ["back", "fixation_inner", "fixation_outer"], report.failures
