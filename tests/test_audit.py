@@ -191,3 +191,24 @@ def test_the_old_zero_dioptre_placement_fails_the_audit(ctx, monkeypatch):
     report = run_audit(load_protocol(PROTOCOLS / "discrimination.yaml"), FAST, ctx=ctx)
     never = sorted(f.split()[1] for f in report.failures if "never visible" in f)
     assert never == ["back", "fixation_inner", "fixation_outer"], report.failures
+
+
+def test_masks_sample_every_edge_alike_so_the_packing_decodes(ctx):
+    """A room's primitives carry a 4 x 4 edge effort; the masks ignore it, so each packed channel
+    still decodes to coverages in [0, 1] that sum to at most one pixel per pixel."""
+    from psyop.audit.masks import slots
+    from psyop.rendering.builders import room_with_pencil
+
+    room = Scene(room_with_pencil(0.5))
+    assert any(p.edge_samples_per_axis for p in room.primitives)
+    assert all(p.edge_samples_per_axis is None for p in mask_scene(room, 0, 8).primitives)
+    measurer = FrameMeasurer(ctx, RenderSettings(reuse_tolerance_px=None, samples_per_axis=8))
+    try:
+        from psyop.rendering.camera_math import crop_camera
+
+        crop = crop_camera(right_eye_camera(0.0, -10.0, "ocular"), 600, 900, 96, 96)  # corners of table and floor
+        areas = measurer.visible_areas_px(room, crop)
+        assert slots(room) == 2
+        assert areas.sum() == pytest.approx(96 * 96, abs=0.5)  # the room encloses the eye: every pixel covered
+    finally:
+        measurer.release()

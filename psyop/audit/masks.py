@@ -12,7 +12,9 @@ S^2. Each colour channel carries two primitives, one painted 1 and one painted 1
 the channel's value times S^2 is ``n1 + n0 / (S^2 + 1)`` with ``n0, n1`` their sample counts,
 which decodes exactly (float32 keeps the sum to ~1e-4 of a sample). Six primitives per render.
 A scene with an aperture (whose edge coverage scales every channel continuously) uses one
-primitive per channel, three per render.
+primitive per channel, three per render. Mask scenes drop the primitives' own edge effort
+(``edge_samples_per_axis``, e.g. a room's 4 x 4), so every edge pixel takes the same S x S
+grid: the areas are at least as accurate as the participant's frame's edges.
 """
 
 from __future__ import annotations
@@ -48,7 +50,9 @@ def mask_scene(scene: Scene, first: int, samples_per_axis: int) -> Scene:
         rgb[k // per] = 1.0 if k % per == 0 else low
         return (rgb[0], rgb[1], rgb[2])
 
-    prims = tuple(dataclasses.replace(p, material=Solid(colour(i))) for i, p in enumerate(scene.primitives))
+    # every edge pixel on the same S x S grid (no per-primitive effort), so the packing decodes
+    prims = tuple(dataclasses.replace(p, material=Solid(colour(i)), edge_samples_per_axis=None)
+                  for i, p in enumerate(scene.primitives))
     aperture: Aperture | None = (dataclasses.replace(scene.aperture, colour=BLACK)
                                  if scene.aperture is not None else None)
     return Scene(prims, background=BLACK, aperture=aperture)
