@@ -146,10 +146,11 @@ def fixation_target(
     origin_m: Sequence[float] = ORIGIN,
     diameter_deg: float = 0.5,
 ) -> tuple[Primitive, Primitive]:
-    """A small red-and-white fixation target: a white disc with a red centre a hair in front."""
+    """A small red-and-white fixation target: a white disc with a coplanar red centre listed after it."""
     outer = frontoparallel_disc(distance_m, diameter_deg, Solid((1.0, 1.0, 1.0)), azimuth_deg, elevation_deg,
                                 origin_m, name="fixation_outer")
-    inner = frontoparallel_disc(distance_m * 0.999, diameter_deg * 0.4 / 0.999, Solid((1.0, 0.0, 0.0)),
+    # coplanar with the outer disc and listed after it: drawn on top (the coplanar rule), at any distance
+    inner = frontoparallel_disc(distance_m, diameter_deg * 0.4, Solid((1.0, 0.0, 0.0)),
                                 azimuth_deg, elevation_deg, origin_m, name="fixation_inner")
     return outer, inner
 
