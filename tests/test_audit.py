@@ -212,3 +212,13 @@ def test_masks_sample_every_edge_alike_so_the_packing_decodes(ctx):
         assert areas.sum() == pytest.approx(96 * 96, abs=0.5)  # the room encloses the eye: every pixel covered
     finally:
         measurer.release()
+
+
+def test_a_scene_the_renderer_cannot_take_is_a_located_error(tmp_path, capsys):
+    text = (PROTOCOLS / "realism.yaml").read_text().replace("count: 25 ", "count: 200 ").replace(
+        "field_deg: 60 ", "field_deg: 170 ")
+    path = tmp_path / "many.yaml"
+    path.write_text(text)
+    assert main(["audit", str(path), "--gazes", "1", "--scale", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert "many.yaml" in err and "cannot render condition" in err and "at most 128 primitives" in err

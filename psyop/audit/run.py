@@ -140,8 +140,12 @@ def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir:
             origin = scene_origin_m(protocol, centre)
             fixation = fixation_point(scene, fixation_prefix, origin, frame.gaze_index, settings.gazes)
             camera = plan.rig.camera(display, frame.eye, fixation, frame.mode)
-            image = measurer.colour(scene, camera)
-            areas = measurer.visible_areas_px(scene, camera) / px_scale
+            try:
+                image = measurer.colour(scene, camera)
+                areas = measurer.visible_areas_px(scene, camera) / px_scale
+            except ValueError as error:  # e.g. more primitives than the renderer takes
+                raise UserError(f"{protocol.source_name or protocol.study.name}: cannot render {frame.label}: "
+                                f"{error}") from None
             names = tuple(p.name for p in scene.primitives)
             records.append(FrameRecord(frame, names, tuple(item_of(n, item_ids) for n in names),
                                        tuple(float(a) for a in areas),
