@@ -1,8 +1,9 @@
-"""Which frames ``psyop audit`` renders: every condition x interval x eye x gaze.
+"""Which frames ``psyop audit`` renders: every condition x phase x eye x gaze.
 
 One representative trial per condition (its first non-practice trial in the schedule of the
-given seed), each interval phase of it in that interval's rendering mode, each eye the protocol
-shows, and ``gazes`` gaze directions: along the fixation target's path when the scene has a
+given seed), each phase of it that draws the stimulus (every interval in its rendering mode,
+and a blank phase that shows primitives, e.g. the realism study's grid, in its own mode), each
+eye the protocol shows, and ``gazes`` gaze directions: along the fixation target's path when the scene has a
 moving fixation target (the target's position at ``k / gazes`` of the interval), otherwise a
 grid (straight ahead, then a ring at :data:`GRID_ECCENTRICITY_DEG`).
 """
@@ -24,12 +25,16 @@ GRID_FIXATION_DISTANCE_M = 1.0
 
 @dataclass(frozen=True)
 class AuditFrame:
-    """One frame to check. ``gaze_index`` numbers the gazes of a (condition, interval, eye);
-    the same index means the same gaze and time in every interval."""
+    """One frame to check. ``phase``: the plan phase's name (``interval<k>`` or ``blank``);
+    ``interval``: whose factor values the scene uses; ``phase_index``: its place in the trial.
+    ``gaze_index`` numbers the gazes of a (condition, phase, eye); the same index means the same
+    gaze and time in every phase."""
 
     condition: str
     trial: int
     row: Mapping[str, Any]
+    phase: str
+    phase_index: int
     interval: int
     mode: str
     eye: str
@@ -37,8 +42,12 @@ class AuditFrame:
     time_s: float
 
     @property
+    def is_interval(self) -> bool:
+        return self.phase.startswith("interval")
+
+    @property
     def label(self) -> str:
-        return (f"condition {self.condition}, trial {self.trial}, interval {self.interval} ({self.mode}), "
+        return (f"condition {self.condition}, trial {self.trial}, {self.phase} ({self.mode}), "
                 f"{self.eye} eye, gaze {self.gaze_index} (t = {self.time_s:.3g} s)")
 
 

@@ -33,7 +33,7 @@ def format_table(report: AuditReport) -> str:
     head = f"{'primitive':<{width}}  {'item':<{item_width}}" + "".join(
         f"  {m + ' px^2 min..max (hid/frames)':>40}" for m in modes)
     lines = [f"psyop audit: {report.protocol_name}: {len(report.records)} frames at scale {report.settings.scale:g}, "
-             f"{report.settings.gazes} gaze(s) per interval and eye; areas in display pixels", head, "-" * len(head)]
+             f"{report.settings.gazes} gaze(s) per phase and eye; areas in display pixels", head, "-" * len(head)]
     for name, item in names.items():
         cells = []
         for m in modes:
@@ -50,7 +50,7 @@ def format_table(report: AuditReport) -> str:
 
 
 def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> None:
-    """A PNG of every audited frame: one row per (condition, eye), columns interval x gaze,
+    """A PNG of every audited frame: one row per (condition, eye), columns phase x gaze,
     with the row's condition and eye written at its left."""
     import matplotlib
 
@@ -67,7 +67,7 @@ def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> Non
     label_px = 260
     sheet = np.ones((len(rows) * (h + gap_px) + gap_px, label_px + n_cols * (w + gap_px) + gap_px, 3), np.float32)
     for r, recs in enumerate(rows.values()):
-        for c, rec in enumerate(sorted(recs, key=lambda x: (x.frame.interval, x.frame.gaze_index))):
+        for c, rec in enumerate(sorted(recs, key=lambda x: (x.frame.phase_index, x.frame.gaze_index))):
             y, x = gap_px + r * (h + gap_px), label_px + gap_px + c * (w + gap_px)
             sheet[y:y + h, x:x + w] = np.clip(rec.image, 0.0, 1.0)
     dpi = 100

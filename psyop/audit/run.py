@@ -1,7 +1,7 @@
 """Render every audited frame of a protocol and check what the participant would see.
 
 The frames come from the session plan (``psyop.session.plan.compile_plan``): its interval
-phases with their modes, durations and ``show:`` lists, its eye rig (eyes, ipd, eye model,
+phases and the blank phases that show primitives, with their modes, durations and ``show:`` lists, its eye rig (eyes, ipd, eye model,
 cameras) and display, so the audit sees what a session would draw.
 
 Checks (each failure is one line naming the primitive, its scene item and the frame):
@@ -101,17 +101,19 @@ def _fixation_prefix(protocol: Any) -> str | None:
 
 
 def iter_frames(plan: Any, settings: AuditSettings) -> Iterator[tuple[AuditFrame, Any]]:
-    """Every audited frame and its plan phase, in order: condition, interval, eye, gaze."""
+    """Every audited frame and its plan phase, in order: condition, phase, eye, gaze."""
     from psyop.schedule import compile_schedule
 
     schedule = compile_schedule(plan.protocol, settings.seed)
-    phases = [phase for phase in plan.phases if phase.show == "stimulus"]
+    phases = [(i, phase) for i, phase in enumerate(plan.phases)
+              if phase.show == "stimulus" or (phase.show == "blank" and phase.primitives)]
     for row in representative_rows(schedule):
-        for phase in phases:
+        for index, phase in phases:
             mode = plan.mode_for(phase, row)
             for eye in plan.eyes:
                 for k in range(settings.gazes):
-                    yield AuditFrame(str(row["condition"]), int(row["trial"]), row, phase.interval, mode, eye, k,
+                    yield AuditFrame(str(row["condition"]), int(row["trial"]), row, phase.name, index,
+                                     max(1, phase.interval), mode, eye, k,
                                      float(phase.duration_s) * k / settings.gazes), phase
 
 
@@ -183,7 +185,7 @@ def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float) 
     shown = set(item_of_name.values())
     for item in item_ids:
         if item not in shown:
-            notes.append(f"note: item {item} has no primitive in any interval (an aperture, or not in any show:)")
+            notes.append(f"note: item {item} has no primitive in any audited frame (an aperture, or in no show:)")
     failures += _identical_intervals(records)
     return failures, notes
 
@@ -194,6 +196,8 @@ def _identical_intervals(records: list[FrameRecord]) -> list[str]:
     by_key: dict[tuple[str, str], dict[int, dict[int, FrameRecord]]] = {}
     for rec in records:
         f = rec.frame
+        if not f.is_interval:
+            continue
         by_key.setdefault((f.condition, f.eye), {}).setdefault(f.interval, {})[f.gaze_index] = rec
     failures = []
     for (condition, eye), intervals in by_key.items():
