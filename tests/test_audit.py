@@ -39,6 +39,12 @@ def test_shipped_protocols_pass_the_audit(ctx, name):
     report = run_audit(load_protocol(PROTOCOLS / f"{name}.yaml"), FAST, ctx=ctx, base_dir=PROTOCOLS)
     assert report.passed, "\n".join(report.failures)
     assert all(any(area > 0 for area in areas) for areas in zip(*(r.visible_px2 for r in report.records)))
+    blanks = [r for r in report.records if r.frame.phase == "blank"]
+    if name == "realism":  # the blank phase shows the grid alone, conventionally
+        assert blanks and all(r.frame.mode == "conventional" and all(n.startswith("grid_") for n in r.names)
+                              for r in blanks)
+    else:
+        assert not blanks
 
 
 def test_audit_shows_the_coplanar_rule_and_the_mode_change_in_detection(ctx):
