@@ -257,8 +257,8 @@ def test_room_height_and_table_height_are_built(tmp_path: Path) -> None:
     scene = build_scene(protocol, row, 0.0, (0.03, 0.0, 0.0))
     by_name = {p.name: p for p in scene.primitives}
     eye_height = 1.2
-    assert by_name["ceiling"].centre_m[1] == pytest.approx(3.1 - eye_height)
-    assert by_name["table_top"].centre_m[1] == pytest.approx(0.9 - eye_height)
+    assert by_name["room_ceiling"].centre_m[1] == pytest.approx(3.1 - eye_height)
+    assert by_name["room_table_top"].centre_m[1] == pytest.approx(0.9 - eye_height)
 
 
 def test_pink_noise_exponent_other_than_one_is_refused(tmp_path: Path) -> None:
