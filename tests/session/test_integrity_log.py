@@ -291,6 +291,10 @@ def test_truncated_session_json_is_a_located_error(reference: tuple[Path, Path],
     assert cli_main(["recover", str(paths.directory)]) == 2
     err = capsys.readouterr().err
     assert "session.json is damaged" in err and "Traceback" not in err
+    paths.metadata.unlink()
+    os.mkfifo(paths.metadata)  # would block forever
+    assert cli_main(["recover", str(paths.directory)]) == 2
+    assert "not a regular file" in capsys.readouterr().err
 
 
 def test_header_crc_covers_every_header_field() -> None:
