@@ -148,7 +148,7 @@ def _largest_design_memory(out_dir: Path, quick: bool) -> list[str]:
     if quick:
         return ["Largest accepted design: skipped in --quick.", ""]
     text = (repo / "protocols" / "detection.yaml").read_text()
-    text = text.replace("levels: [1, 2, 3]", "levels: {start: 0, step: 1, count: 20000}", 1)
+    text = text.replace("levels: [1, 2, 3]", "levels: {start: 0.5, step: 0.001, count: 20000}", 1)
     text = re.sub(r"(?m)^(\s*repetitions:).*$", r"\g<1> 10", text, count=1)
     rows = ["| command | peak RSS MB | wall s |", "|---|---|---|"]
     with tempfile.TemporaryDirectory(prefix="psyop-bench-design-") as tmp:
@@ -157,7 +157,7 @@ def _largest_design_memory(out_dir: Path, quick: bool) -> list[str]:
         for name, extra in (("validate", []), ("compile", ["--seed", "1", "--out", str(Path(tmp) / "s.parquet")])):
             # each in a fresh interpreter that reports its own peak RSS (ru_maxrss, kB on Linux)
             code = ("import resource, sys; from psyop.cli import main; rc = main(sys.argv[1:]); "
-                    "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)")
+                    "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)")
             start = time.perf_counter()
             done = subprocess.run([sys.executable, "-c", code, name, str(protocol), *extra],
                                   capture_output=True, text=True, check=True)

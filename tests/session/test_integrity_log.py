@@ -291,6 +291,10 @@ def test_truncated_session_json_is_a_located_error(reference: tuple[Path, Path],
     assert cli_main(["recover", str(paths.directory)]) == 2
     err = capsys.readouterr().err
     assert "session.json is damaged" in err and "Traceback" not in err
+    paths.metadata.unlink()
+    os.mkfifo(paths.metadata)  # would block forever
+    assert cli_main(["recover", str(paths.directory)]) == 2
+    assert "not a regular file" in capsys.readouterr().err
 
 
 def test_header_crc_covers_every_header_field() -> None:
@@ -301,3 +305,62 @@ def test_header_crc_covers_every_header_field() -> None:
         damaged = bytearray(record)
         damaged[i] ^= 1
         assert _parse_header(bytes(damaged), 0) is None
+
+
+def _old_reader_survives(path: Path) -> bool:
+    """Read ``path`` as the pre-checksum recover did (batches -> pandas) in a forked child;
+    False when the child was killed (pyarrow abort or crash) rather than returning."""
+    import pyarrow as pa
+
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - child
+        import faulthandler
+
+        faulthandler.disable()
+        os.dup2(os.open(os.devnull, os.O_WRONLY), 2)  # the abort message is expected
+        try:
+            with open(path, "rb") as handle:
+                reader = pa.ipc.open_stream(handle)
+                pa.Table.from_batches(list(reader), schema=reader.schema).to_pandas()
+        except BaseException:  # noqa: BLE001 - an exception is survivable; only a kill is not
+            pass
+        os._exit(0)
+    _, status = os.waitpid(pid, 0)
+    return status == 0
+
+
+def test_a_corrupt_legacy_ipc_segment_never_aborts_the_process(reference: tuple[Path, Path], tmp_path: Path) -> None:
+    """Sessions recorded before checksums (plain Arrow IPC, `*.arrows`): a flipped byte made
+    pyarrow abort the process (`Check failed`, exit 134) or crash. They are now read in a
+    child process; what it read before failing is kept."""
+    import pyarrow as pa
+
+    from psyop.session.log.schema import trial_schema
+    from psyop.session.log.stream import read_stream_tolerant
+
+    trials = pd.read_parquet(_paths(reference[1]).trials_parquet).head(3)
+    schema = trial_schema(trials[["trial", "block", "condition", "trial_seed"]])
+    table = pa.Table.from_pandas(trials[schema.names], preserve_index=False).cast(schema)
+    path = tmp_path / "trials-000.arrows"
+    with open(path, "wb") as handle, pa.ipc.new_stream(handle, schema) as writer:
+        ends = [handle.tell()]
+        for batch in table.to_batches(max_chunksize=1):
+            writer.write_batch(batch)
+            ends.append(handle.tell())
+    original = path.read_bytes()
+    read, torn = read_stream_tolerant(path)
+    assert read is not None and read.num_rows == 3 and not torn
+    killers: list[int] = []
+    for offset in range(ends[2] - 120, ends[2]):  # the tail of the second batch: its buffer offsets
+        damaged = bytearray(original)
+        damaged[offset] ^= 0xFF
+        path.write_bytes(bytes(damaged))
+        if not _old_reader_survives(path):
+            killers.append(offset)
+    assert killers, "no flip kills a direct pyarrow reader any more: the hazard guarded against is gone"
+    for offset in killers[:3]:
+        damaged = bytearray(original)
+        damaged[offset] ^= 0xFF
+        path.write_bytes(bytes(damaged))
+        read, _ = read_stream_tolerant(path)  # returns: this process survives
+        assert read is None or read.num_rows <= 3

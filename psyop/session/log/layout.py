@@ -152,8 +152,12 @@ def write_dataset_description(data_root: Path, *, simulated: bool, studies: list
     found_studies: set[str] = set(studies or [])
     for meta_path in sessions:
         try:
+            if not meta_path.is_file() or meta_path.stat().st_size > (64 << 20):
+                continue  # a FIFO or device would block or never end
             meta = json.loads(meta_path.read_text())
-        except (OSError, json.JSONDecodeError):
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            continue
+        if not isinstance(meta, dict):
             continue
         found_studies.add(str(meta.get("study", meta_path.parents[2].name)))
         if meta.get(dc.SIMULATED_KEY):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import os
+import stat
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -164,8 +165,23 @@ class SessionStore:
             self.lock.release()
 
 
+#: session.json holds the protocol text and per-run records: a few hundred kB at most
+MAX_METADATA_BYTES = 64 << 20
+
+
 def read_metadata(paths: SessionPaths) -> dict[str, Any] | None:
-    """session.json as a dict, None if absent; a damaged file is a located UserError."""
+    """session.json as a dict, None if absent; a damaged file is a located UserError.
+
+    It must be a regular file of at most :data:`MAX_METADATA_BYTES` (never a FIFO or device)."""
+    try:
+        info = os.stat(paths.metadata)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise UserError(f"cannot read session.json: {exc.strerror or exc}", str(paths.metadata)) from exc
+    if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_METADATA_BYTES:
+        raise UserError(f"session.json is not a regular file of at most {MAX_METADATA_BYTES} bytes; "
+                        "restore it, or delete it to rebuild it from the log", str(paths.metadata))
     try:
         text = paths.metadata.read_text()
     except FileNotFoundError:

@@ -250,24 +250,67 @@ def is_legacy_ipc(path: Path) -> bool:
     return head == b"\xff\xff\xff\xff" and Path(path).suffix == ".arrows"
 
 
-def _read_legacy_ipc(path: Path) -> tuple[pa.Table | None, bool]:
-    batches: list[pa.RecordBatch] = []
-    with open(path, "rb") as handle:
+#: Reads a legacy Arrow IPC stream in a child process: pyarrow may abort (``Check failed``,
+#: exit 134) or exhaust memory on a corrupt IPC message, which must not take the session or
+#: ``psyop recover`` with it. The child re-serialises each batch it could read, framed as
+#: kind byte + u64 length + bytes; whatever arrived before it failed is kept.
+_LEGACY_CHILD = r"""
+import resource, sys
+import pyarrow as pa
+limit = 4 << 30
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+out = sys.stdout.buffer
+def put(kind, data=b""):
+    out.write(kind + len(data).to_bytes(8, "little") + data)
+    out.flush()
+with open(sys.argv[1], "rb") as handle:
+    try:
+        reader = pa.ipc.open_stream(handle)
+    except Exception:
+        sys.exit(3)
+    put(b"S", reader.schema.serialize().to_pybytes())
+    while True:
         try:
-            reader = pa.ipc.open_stream(handle)
-        except (pa.ArrowInvalid, OSError, EOFError):
-            return None, True
-        torn = False
-        while True:
-            try:
-                batch = reader.read_next_batch()
-            except StopIteration:
-                break
-            except (pa.ArrowInvalid, OSError, EOFError, MemoryError):
-                torn = True
-                break
-            batches.append(batch)
-        return pa.Table.from_batches(batches, schema=reader.schema), torn
+            batch = reader.read_next_batch()
+        except StopIteration:
+            put(b"E")
+            break
+        except BaseException:
+            put(b"T")
+            break
+        put(b"B", batch.serialize().to_pybytes())
+"""
+
+
+def _read_legacy_ipc(path: Path, timeout_s: float = 120.0) -> tuple[pa.Table | None, bool]:
+    import subprocess
+    import sys
+
+    try:
+        done = subprocess.run([sys.executable, "-c", _LEGACY_CHILD, str(path)], capture_output=True,
+                              timeout=timeout_s, check=False)
+        data = done.stdout
+    except subprocess.TimeoutExpired as exc:
+        data = exc.stdout or b""
+    schema: pa.Schema | None = None
+    batches: list[pa.RecordBatch] = []
+    clean = False
+    pos = 0
+    while pos + 9 <= len(data):
+        kind, length = data[pos:pos + 1], int.from_bytes(data[pos + 1:pos + 9], "little")
+        payload = data[pos + 9:pos + 9 + length]
+        if len(payload) < length:
+            break
+        pos += 9 + length
+        if kind == b"S":
+            schema = pa.ipc.read_schema(pa.py_buffer(payload))
+        elif kind == b"B" and schema is not None:
+            batches.append(pa.ipc.read_record_batch(pa.py_buffer(payload), schema))
+        elif kind == b"E":
+            clean = True
+    if schema is None:
+        return None, True
+    return pa.Table.from_batches(batches, schema=schema), not clean
 
 
 def _fsync_dir(directory: Path) -> None:
