@@ -35,7 +35,11 @@ def test_no_test_reads_a_duration_clock_or_sleeps_to_wait() -> None:
     for path in _sources():
         text = path.read_text()
         lines = text.splitlines()
-        tree = ast.parse(text)
+        try:
+            tree = ast.parse(text)
+        except SyntaxError as exc:
+            problems.append(f"{path.relative_to(TESTS.parent)}:{exc.lineno}: does not parse ({exc.msg})")
+            continue
         parents = {child: parent for parent in ast.walk(tree) for child in ast.iter_child_nodes(parent)}
         for node in ast.walk(tree):
             if not isinstance(node, ast.Call) or not isinstance(node.func, ast.Attribute):

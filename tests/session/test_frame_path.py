@@ -72,7 +72,7 @@ def test_a_session_frame_is_checked_without_reading_the_frame_back(monkeypatch: 
     monkeypatch.setattr(Renderer, "image", no_readback)
     try:
         row = compile_schedule(protocol, 1).iloc[0].to_dict()
-        interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1")
+        interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)
         check = renderer.render(row, interval, "ocular", 0.1, (0.032, 0.0, -1.0))
         assert check.checked and check.ok
         blank = renderer.render(row, PhaseSpec("blank", 0.5, "blank", "cross"), "conventional", 0.1, (0.032, 0.0, -1.0))
@@ -95,7 +95,7 @@ def test_image_surfaces_are_decoded_once_per_session(tmp_path: Path, monkeypatch
     renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=IPD_M), scale=0.1)
     try:
         row = compile_schedule(protocol, 1).iloc[0].to_dict()
-        interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1")
+        interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)
         for k in range(5):
             assert renderer.render(row, interval, "ocular", 0.05 * k, (0.032, 0.0, -1.0)).ok
         textures = [p.material for p in renderer._renderer.scene.primitives  # noqa: SLF001
