@@ -156,15 +156,17 @@ def _make_renderer(mode: str, plan: SessionPlan, scale: float, max_images: int |
         return CameraRenderer(plan.display, plan.rig), "cameras only"
     try:
         from psyop.rendering.renderer import create_headless_context
-        from psyop.session.scene_renderer import SceneRenderer
+        from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
 
         ctx = create_headless_context()
     except Exception as exc:  # noqa: BLE001 - any OpenGL/EGL failure
         if mode == "images":
             raise UserError(f"cannot create an OpenGL context for rendering: {exc}", "--render") from exc
         return CameraRenderer(plan.display, plan.rig), f"cameras only (no OpenGL context: {exc})"
-    limit = "every stimulus frame" if max_images is None else f"first {max_images} stimulus frames checked"
-    return (SceneRenderer(plan, scale=scale, ctx=ctx, max_images=max_images),
+    limit = (f"every stimulus frame, each eye's first and every {WATCHED_CHECK_EVERY}th rendered image checked"
+             if max_images is None else f"first {max_images} stimulus frames checked")
+    return (SceneRenderer(plan, scale=scale, ctx=ctx, max_images=max_images,
+                          check_every=WATCHED_CHECK_EVERY if max_images is None else 1),
             f"images at scale {scale:g}, {limit}")
 
 
@@ -243,11 +245,13 @@ def run_session(
         every_frame = (not (clock.virtual and not responses.needs_images)) if options.every_frame is None \
             else options.every_frame
         if window is not None and options.render != "cameras":
-            from psyop.session.scene_renderer import SceneRenderer
+            from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
 
-            renderer = SceneRenderer(plan, scale=window.scale, ctx=window.ctx, owns_ctx=False)
+            renderer = SceneRenderer(plan, scale=window.scale, ctx=window.ctx, owns_ctx=False,
+                                     check_every=WATCHED_CHECK_EVERY)
             window.source = renderer
-            rendering = f"images at scale {window.scale:g} in the window"
+            rendering = (f"images at scale {window.scale:g} in the window, each eye's first and every "
+                         f"{WATCHED_CHECK_EVERY}th rendered image checked")
         else:
             renderer, rendering = _make_renderer(options.render, plan, 1.0 if every_frame else options.check_scale,
                                                  None if every_frame else options.check_images)

@@ -22,6 +22,12 @@ from psyop.session.phases import PhaseSpec
 from psyop.session.plan import SessionPlan
 
 
+#: A real session (every frame rendered) checks each eye's first image of every phase and then
+#: every 8th rendered one: the GPU reduction is cheap on a GPU but a full pass over the frame on llvmpipe
+#: (benchmarks/bench_frame_path.py). Frames are logged with ``image_checked``.
+WATCHED_CHECK_EVERY = 8
+
+
 class SceneRenderer:
     """Implements the loop's FrameRenderer with real images, for the plan's eye(s).
 
@@ -33,7 +39,7 @@ class SceneRenderer:
     """
 
     def __init__(self, plan: SessionPlan, *, scale: float = 1.0, ctx: Any = None, max_images: int | None = None,
-                 owns_ctx: bool = True) -> None:
+                 owns_ctx: bool = True, check_every: int | None = None) -> None:
         self.plan = plan
         self.protocol = plan.protocol
         display_profile = plan.display
@@ -48,7 +54,14 @@ class SceneRenderer:
         self.last_eye: str | None = None
         self._renderer: Any = None
         self._checker: Any = None
-        self._summaries: dict[str, Any] = {}  # per eye: the check summary of its current image
+        self._summaries: dict[str, Any] = {}  # per eye: the check summary of its current image (None: unchecked)
+        self._rendered: dict[str, int] = {}  # per eye: images rendered (not reused) in the current phase
+        self._shown: dict[str, Any] = {}  # per eye: (trial, phase) of the current image
+        # 1: every rendered image is checked; n: each eye's first image of every phase and then
+        # every n-th rendered one (a real session uses WATCHED_CHECK_EVERY; checked frames are logged)
+        self.check_every = int(check_every) if check_every is not None else 1
+        if self.check_every < 1:
+            raise ValueError("check_every must be >= 1")
         self._base_dir = Path(plan.protocol.source_name).parent if plan.protocol.source_name else None
         from psyop.rendering.textures import ImageFiles
 
@@ -89,7 +102,7 @@ class SceneRenderer:
 
         cameras_ok = True
         ok = True
-        images = 0
+        images = checked = 0
         for eye in self.eyes:
             camera = self.rig.camera(self.display, eye, fixation_m, mode)
             cameras_ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
@@ -106,11 +119,21 @@ class SceneRenderer:
             self.images_rendered += 1
             self.last_eye = eye
             images += 1
-            if result.rendered or eye not in self._summaries:  # a reused frame keeps its checked image
-                self._summaries[eye] = self._check(eye)
-            # a bare blank is uniform by design
-            ok &= self._summaries[eye].ok(blank_by_design=phase.show == "blank" and not phase.primitives)
-        return FrameCheck(images > 0, ok and cameras_ok)
+            shown = (row.get("trial"), phase.name)
+            if self._shown.get(eye) != shown:  # a new phase: its first image is checked
+                self._shown[eye], self._rendered[eye] = shown, 0
+                result_is_new = True
+            else:
+                result_is_new = result.rendered
+            if result_is_new or eye not in self._summaries:  # a reused frame keeps its check (or none)
+                n = self._rendered[eye] = self._rendered.get(eye, 0) + 1
+                self._summaries[eye] = self._check(eye) if (n - 1) % self.check_every == 0 else None
+            summary = self._summaries[eye]
+            if summary is not None:
+                checked += 1
+                # a bare blank is uniform by design
+                ok &= summary.ok(blank_by_design=phase.show == "blank" and not phase.primitives)
+        return FrameCheck(checked > 0, ok and cameras_ok)
 
     def _check(self, eye: str) -> Any:
         """The frame's check summary, reduced on the GPU (no full readback)."""

@@ -129,3 +129,23 @@ def test_stereo_frames_are_reused_like_mono_ones(ctx) -> None:
                       background=(0.5,) * 3)
         renderer.set_scene(moved)
         assert renderer.render(cameras["left"]).rendered
+
+
+def test_a_real_session_checks_a_sample_of_its_frames_and_says_which() -> None:
+    """Real sessions check each eye's first image of every phase and then every
+    WATCHED_CHECK_EVERY-th rendered one (the reduction is a full pass over the frame on llvmpipe)."""
+    from psyop.session.scene_renderer import WATCHED_CHECK_EVERY
+
+    protocol = load_protocol(REPO / "protocols" / "detection.yaml")
+    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=IPD_M), scale=0.1, check_every=WATCHED_CHECK_EVERY)
+    try:
+        row = compile_schedule(protocol, 1).iloc[0].to_dict()
+        interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)
+        checked = [renderer.render(row, interval, "ocular", 0.0, (0.032 + 0.01 * k, 0.0, -1.0)).checked
+                   for k in range(2 * WATCHED_CHECK_EVERY + 1)]  # a moving gaze: every frame renders
+        assert [k for k, c in enumerate(checked) if c] == [0, WATCHED_CHECK_EVERY, 2 * WATCHED_CHECK_EVERY]
+        blank = PhaseSpec("blank", 0.5, "blank", "cross")
+        assert renderer.render(row, blank, "conventional", 0.0, (0.032, 0.0, -1.0)).checked  # a new phase
+        assert renderer.render(row, interval, "ocular", 0.0, (0.05, 0.0, -1.0)).checked  # and back
+    finally:
+        renderer.close()
