@@ -52,7 +52,7 @@ def _kill_once(argv: list[str], after_s: float) -> set[int]:
     process = mp.get_context("fork").Process(target=_child, args=(argv, write_fd))
     process.start()
     os.close(write_fd)
-    time.sleep(after_s)
+    time.sleep(after_s)  # not a wait: the random moment of the kill
     if process.is_alive():
         os.kill(process.pid, signal.SIGKILL)
     process.join()
