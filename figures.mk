@@ -10,9 +10,9 @@ DATA ?= data
 RESULTS ?= results
 FIGDIR ?= figures
 
-OPTICS_SRC := $(wildcard psyop/optics/*.py) psyop/figures/optics_figures.py
+OPTICS_SRC := $(wildcard psyop/optics/*.py) psyop/figures/optics_figures.py psyop/figures/labels.py
 STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py
-DRAW_SRC := $(STATS_SRC) psyop/figures/study_figures.py
+DRAW_SRC := $(STATS_SRC) psyop/figures/study_figures.py psyop/figures/labels.py
 trials_of = $(wildcard $(DATA)/$(1)/sub-*/ses-*/trials.parquet)
 
 MODEL_FIGURES := $(FIGDIR)/fig03_parallax_vs_eccentricity.png $(FIGDIR)/supp_linearity.png
@@ -102,6 +102,6 @@ $(FIGDIR)/realism_preferences.png: analysis/fig_realism.py $(call trials_of,real
 	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
 
 # The results table collects the JSON each figure script writes beside its figure.
-$(RESULTS)/summary.md: analysis/results_table.py $(STUDY_FIGURES) $(STATS_SRC)
+$(RESULTS)/summary.md: analysis/results_table.py analysis/paper_values.py $(STUDY_FIGURES) $(STATS_SRC)
 	@echo "[psyop] $@"
 	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@

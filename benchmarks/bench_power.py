@@ -19,7 +19,7 @@ PROTOCOL = Path(__file__).resolve().parents[1] / "protocols" / "discrimination.y
 
 def plain_resimulation(replications: int, participants: int, seed: int) -> tuple[int, int]:
     """(significant, replications) of the slope test on trial tables drawn without sessions."""
-    from psyop.statistics.psychometric import FitOptions, fit_psychometric_table
+    from psyop.statistics.psychometric import FitOptions, fit_psychometric_table, usable_for_analysis
     from psyop.statistics.regression import linear_fit
     from psyop.statistics.simulate import simulate_discrimination
 
@@ -31,7 +31,7 @@ def plain_resimulation(replications: int, participants: int, seed: int) -> tuple
                                          slope=observer.threshold_slope, sigma_D=observer.width_D,
                                          lapse=observer.lapse, between_subject_sd_D=observer.between_subject_sd_D)
         fits = fit_psychometric_table(trials, "level_D", ["participant", "offset_D"], options=FitOptions())
-        clean = fits[fits["flags"].fillna("") == ""]
+        clean, _ = usable_for_analysis(fits)  # the documented status rule (censored etc. left out)
         significant += bool(linear_fit(clean, "offset_D", "threshold_D").slope_p < 0.05)
     return significant, replications
 

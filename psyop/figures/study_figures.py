@@ -2,6 +2,12 @@
 
 No file reading here: ``analysis/`` scripts load data, call :mod:`psyop.statistics`, and pass
 the tidy tables in. :func:`psyop.figures.output.save_figure` writes the PNG and a PDF beside it.
+
+Rules every figure follows (docs/statistics.md, "Figures"): readable condition names
+(:mod:`psyop.figures.labels`), the error-bar type in a legend or the caption line, every
+colour in a legend, text >= 9 pt at the saved size (:data:`STYLE`), confidence intervals
+clipped at 0 D with a marker, censored thresholds drawn as bounds, and one "simulated data"
+label when the data came from simulated sessions.
 """
 
 from __future__ import annotations
@@ -9,22 +15,28 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.lines import Line2D
 
-from psyop.statistics.psychometric import predicted_pc
+from psyop.figures.labels import STYLE, condition_label, mode_label, participant_label
+from psyop.statistics.psychometric import USABLE_STATUSES, predicted_pc
 
 MODE_COLOURS = {"conventional": "#7f7f7f", "ocular": "#1f77b4", "reversed": "#ff7f0e",
                 "enabled": "#1f77b4", "disabled": "#7f7f7f"}
-SIMULATED_LABEL = "SIMULATED DATA"
+SIMULATED_LABEL = "simulated data"
+SUBJECT_GREY = "#8c8c8c"
 
 
 def mark_simulated(fig: plt.Figure, simulated: bool) -> None:
-    """Say so above the title and in it when the data came from simulated sessions."""
+    """One label above the title when the data came from simulated sessions."""
     if not simulated:
         return
-    fig.text(0.5, 1.0, SIMULATED_LABEL, ha="center", va="bottom", fontsize=8, color="#b00020",  # the tight bbox grows to fit
-             fontweight="bold", alpha=0.9)
-    title = fig._suptitle.get_text() if fig._suptitle is not None else ""
-    fig.suptitle(f"{title} ({SIMULATED_LABEL.lower()})" if title else SIMULATED_LABEL.lower(), fontsize=10)
+    fig.text(0.5, 1.0, SIMULATED_LABEL, ha="center", va="bottom", fontsize=10, color="#b00020",  # the tight bbox grows to fit
+             fontweight="bold")
+
+
+def caption(fig: plt.Figure, text: str, y: float = 0.0) -> None:
+    """A caption under the axes (error-bar types, tests), >= 9 pt; ``y`` in figure coordinates."""
+    fig.text(0.5, y, text, ha="center", va="top", fontsize=9)
 
 
 def _sem(values: pd.Series) -> float:
@@ -32,152 +44,236 @@ def _sem(values: pd.Series) -> float:
     return float(v.std(ddof=1) / np.sqrt(len(v))) if len(v) > 1 else float("nan")
 
 
+def _usable(fits: pd.DataFrame) -> pd.Series:
+    if "status" in fits:
+        return fits["status"].isin(USABLE_STATUSES)
+    return fits["flags"].fillna("") == ""
+
+
 def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, title: str,
                     line: tuple[float, float] | None = None, simulated: bool = False) -> plt.Figure:
-    """Per-subject thresholds with 95 % CIs (small, jittered) and the subject mean +- SE.
+    """Per-participant thresholds with 95 % CIs (grey, jittered) and the mean ± SE across participants.
 
-    ``line`` = (slope, intercept) draws the linear fit (discrimination). Flagged fits are
-    drawn hollow and left out of the mean.
+    CIs are clipped at 0 D (a down-triangle marks a clipped lower bound) and an infinite upper
+    bound is drawn as an up-arrow. Censored fits are drawn at their bound as open triangles
+    (below the lowest / above the highest level) and, like other unusable fits, left out of the
+    mean. ``line`` = (slope, intercept) draws the linear fit (discrimination).
     """
-    fig, ax = plt.subplots(figsize=(4.2, 3.4))
-    conds = sorted(fits[condition_column].unique())
-    subjects = sorted(fits["participant"].unique())
-    jitter = dict(zip(subjects, np.linspace(-0.12, 0.12, max(len(subjects), 1))))
-    for _, r in fits.iterrows():
-        x = r[condition_column] + jitter[r["participant"]]
-        clean = not r["flags"] if isinstance(r["flags"], str) else True
-        ax.errorbar(x, r["threshold_D"], yerr=[[r["threshold_D"] - r["threshold_ci_low_D"]],
-                                               [r["threshold_ci_high_D"] - r["threshold_D"]]],
-                    fmt="o", ms=3, color="#999999", mfc="#999999" if clean else "white", lw=0.8, zorder=1)
-    ok = fits[fits["flags"].fillna("") == ""] if "flags" in fits else fits
-    means = ok.groupby(condition_column)["threshold_D"].agg(["mean", _sem]).reindex(conds)
-    ax.errorbar(conds, means["mean"], yerr=means["_sem"], fmt="s-", color="k", ms=6, capsize=4, lw=1.5,
-                zorder=3, label="mean +- SE")
-    if line is not None:
-        xs = np.linspace(min(conds) - 0.2, max(conds) + 0.2, 50)
-        ax.plot(xs, line[1] + line[0] * xs, "--", color="#1f77b4", lw=1.2,
-                label=f"fit: {line[0]:.2f} x + {line[1]:.2f} D", zorder=2)
-    ax.set_xticks(conds)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("threshold (D)")
-    ax.set_ylim(bottom=min(0.0, ax.get_ylim()[0]))
-    ax.legend(fontsize=7, loc="upper left", frameon=False)
-    fig.suptitle(title, fontsize=10)
-    mark_simulated(fig, simulated)
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(5.0, 4.0))
+        conds = sorted(fits[condition_column].unique())
+        subjects = sorted(fits["participant"].unique())
+        jitter = dict(zip(subjects, np.linspace(-0.15, 0.15, max(len(subjects), 1))))
+        usable = _usable(fits)
+        top = max([0.0] + [float(v) for v in fits["threshold_ci_high_D"] if np.isfinite(v)]
+                  + [float(v) for v in fits.get("threshold_bound_D", pd.Series(dtype=float)) if np.isfinite(v)])
+        ymax = max(1.0, top * 1.1)
+        n_clipped = n_open = n_censored = 0
+        for (_, r), ok in zip(fits.iterrows(), usable):
+            x = r[condition_column] + jitter[r["participant"]]
+            status = r.get("status", "ok")
+            if status in ("censored_below", "censored_above", "lapse_at_bound"):
+                below = status == "censored_below"
+                ax.plot(x, r["threshold_bound_D"], "v" if below else "^", ms=6, mfc="white", mec="#b00020", zorder=2,
+                        clip_on=False)
+                n_censored += 1
+                continue
+            if not np.isfinite(r["threshold_D"]):
+                continue
+            lo, hi = r["threshold_ci_low_D"], r["threshold_ci_high_D"]
+            lo_c = max(lo, 0.0)
+            hi_c = hi if np.isfinite(hi) else ymax
+            ax.plot([x, x], [lo_c, hi_c], color=SUBJECT_GREY, lw=0.9, zorder=1)
+            ax.plot(x, r["threshold_D"], "o", ms=3.5, color=SUBJECT_GREY, mfc=SUBJECT_GREY if ok else "white", zorder=1)
+            if lo < 0.0:
+                ax.plot(x, 0.0, "v", ms=5, color=SUBJECT_GREY, zorder=1, clip_on=False)
+                n_clipped += 1
+            if not np.isfinite(hi):
+                ax.annotate("", (x, ymax), (x, ymax * 0.93), arrowprops=dict(arrowstyle="->", color=SUBJECT_GREY, lw=0.9))
+                n_open += 1
+        ok = fits[usable]
+        means = ok.groupby(condition_column)["threshold_D"].agg(["mean", _sem]).reindex(conds)
+        ax.errorbar(conds, means["mean"], yerr=means["_sem"], fmt="s-", color="k", ms=6, capsize=4, lw=1.5, zorder=3)
+        handles = [
+            Line2D([], [], color=SUBJECT_GREY, marker="o", ms=4, lw=0.9, label="participant: threshold ± 95 % CI"),
+            Line2D([], [], color="k", marker="s", ms=6, lw=1.5, label="mean ± SE across participants"),
+        ]
+        if n_clipped:
+            handles.append(Line2D([], [], color=SUBJECT_GREY, marker="v", ls="", ms=5, label="CI clipped at 0 D"))
+        if n_open:
+            handles.append(Line2D([], [], color=SUBJECT_GREY, marker="$\\uparrow$", ls="", ms=7, label="CI without upper bound"))
+        if n_censored:
+            handles.append(Line2D([], [], color="#b00020", marker="v", mfc="white", ls="", ms=6,
+                                  label="censored: beyond tested levels (left out)"))
+        if line is not None:
+            xs = np.linspace(min(conds) - 0.2, max(conds) + 0.2, 50)
+            ax.plot(xs, line[1] + line[0] * xs, "--", color="#1f77b4", lw=1.2, zorder=2)
+            handles.append(Line2D([], [], color="#1f77b4", ls="--", label=f"linear fit: {line[0]:.2f} x + {line[1]:.2f} D"))
+        ax.set_xticks(conds, [f"{c:g}" for c in conds])
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("threshold (D)")
+        ax.set_ylim(0.0, ymax)
+        ax.legend(handles=handles, loc="upper left", frameon=False)
+        ax.set_title(title)
+        mark_simulated(fig, simulated)
     return fig
 
 
 def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_column: str,
                            title: str, simulated: bool = False) -> plt.Figure:
-    """Every subject (rows) x condition (columns): proportion correct, fitted curve, threshold and CI.
+    """Every participant (rows) x condition (columns): proportion correct, fitted curve, threshold and 95 % CI.
 
-    ``blocks`` has participant, condition, ``level_D``, ``n_correct``, ``n_total``.
+    ``blocks`` has participant, condition, ``level_D``, ``n_correct``, ``n_total``. A fit whose
+    status is not 'ok' names its status in the panel.
     """
     subjects = sorted(fits["participant"].unique())
     conds = sorted(fits[condition_column].unique())
-    fig, axes = plt.subplots(len(subjects), len(conds), figsize=(2.3 * len(conds), 1.6 * len(subjects)),
-                             sharey=True, squeeze=False)
-    for i, s in enumerate(subjects):
-        for j, c in enumerate(conds):
-            ax = axes[i, j]
-            b = blocks[(blocks["participant"] == s) & (blocks[condition_column] == c)]
-            f = fits[(fits["participant"] == s) & (fits[condition_column] == c)]
-            ax.plot(b["level_D"], b["n_correct"] / b["n_total"], "o", ms=3, color="k")
-            if not f.empty and np.isfinite(f["threshold_D"].iloc[0]):
-                r = f.iloc[0]
-                xs = np.linspace(r["level_min_D"], r["level_max_D"], 100)
-                ax.plot(xs, predicted_pc(xs, r["location_D"], r["width_D"], r["lapse"]), color="#1f77b4", lw=1)
-                ax.plot([r["threshold_D"]] * 2, [0.5, 0.75], color="#d62728", lw=0.8)
-                ax.plot([r["threshold_ci_low_D"], r["threshold_ci_high_D"]], [0.75, 0.75], color="#d62728", lw=0.8)
-                if r["flags"]:
-                    ax.text(0.02, 0.95, r["flags"], transform=ax.transAxes, fontsize=5, va="top", color="#b00020")
-            ax.set_ylim(0.0, 1.02)  # below-chance points must stay visible
-            ax.tick_params(labelsize=6)
-            if i == 0:
-                ax.set_title(f"{condition_column} = {c:g}", fontsize=7)
-            if j == 0:
-                ax.set_ylabel(f"sub-{s}\nP(correct)", fontsize=6)
-            if i == len(subjects) - 1:
-                ax.set_xlabel("level (D)", fontsize=6)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    mark_simulated(fig, simulated)
+    with plt.rc_context(STYLE):
+        fig, axes = plt.subplots(len(subjects), len(conds), figsize=(3.0 * len(conds), 2.1 * len(subjects) + 0.8),
+                                 sharey=True, squeeze=False)
+        for i, s in enumerate(subjects):
+            for j, c in enumerate(conds):
+                ax = axes[i, j]
+                b = blocks[(blocks["participant"] == s) & (blocks[condition_column] == c)]
+                f = fits[(fits["participant"] == s) & (fits[condition_column] == c)]
+                ax.plot(b["level_D"], b["n_correct"] / b["n_total"], "o", ms=4, color="k")
+                if not f.empty:
+                    r = f.iloc[0]
+                    if np.isfinite(r["location_D"]):
+                        xs = np.linspace(r["level_min_D"], r["level_max_D"], 100)
+                        ax.plot(xs, predicted_pc(xs, r["location_D"], r["width_D"], r["lapse"]), color="#1f77b4", lw=1.2)
+                    if np.isfinite(r["threshold_D"]):
+                        hi = r["threshold_ci_high_D"] if np.isfinite(r["threshold_ci_high_D"]) else r["level_max_D"]
+                        ax.plot([r["threshold_D"]] * 2, [0.5, 0.75], color="#d62728", lw=1)
+                        ax.plot([max(r["threshold_ci_low_D"], r["level_min_D"]), hi], [0.75, 0.75], color="#d62728", lw=1)
+                    status = r.get("status", "ok")
+                    if status != "ok":
+                        ax.text(0.03, 0.05, status.replace("_", " "), transform=ax.transAxes, fontsize=9,
+                                va="bottom", color="#b00020")
+                ax.set_ylim(0.0, 1.02)  # below-chance points must stay visible
+                if i == 0:
+                    ax.set_title(condition_label(condition_column, c))
+                if j == 0:
+                    ax.set_ylabel(f"{participant_label(s)}\nP(correct)")
+                if i == len(subjects) - 1:
+                    ax.set_xlabel("level (D)")
+        handles = [Line2D([], [], color="k", marker="o", ls="", label="proportion correct"),
+                   Line2D([], [], color="#1f77b4", label="fitted function (MAP)"),
+                   Line2D([], [], color="#d62728", label="75 % threshold and 95 % CI")]
+        fig.suptitle(title)
+        fig.tight_layout(rect=(0, 0.04, 1, 0.975))
+        fig.legend(handles=handles, loc="lower center", ncol=3, frameon=False, bbox_to_anchor=(0.5, 0.0))
+        mark_simulated(fig, simulated)
     return fig
 
 
 def plot_ordinal(cells: pd.DataFrame, posthoc: pd.DataFrame, dv: str = "correct",
                  simulated: bool = False) -> plt.Figure:
-    """Proportion correct by mode at each separation: subject means +- SE and Bonferroni stars."""
-    fig, ax = plt.subplots(figsize=(4.4, 3.4))
-    seps = sorted(cells["separation_D"].unique())
-    modes = [m for m in ("conventional", "ocular", "reversed") if m in set(cells["mode"])]
-    width = 0.8 / len(modes)
-    summary = cells.groupby(["separation_D", "mode"])[dv].agg(["mean", _sem])
-    top = 0.0
-    xpos = {}
-    for k, mode in enumerate(modes):
-        xs = np.arange(len(seps)) + (k - (len(modes) - 1) / 2) * width
-        m = [summary.loc[(s, mode), "mean"] for s in seps]
-        e = [summary.loc[(s, mode), "_sem"] for s in seps]
-        ax.bar(xs, m, width * 0.95, yerr=e, capsize=3, color=MODE_COLOURS.get(mode), label=mode)
-        top = max(top, max(np.add(m, e)))
-        for s, x in zip(seps, xs):
-            xpos[(s, mode)] = x
-    level = top + 0.03
-    for s in seps:
-        rows = posthoc[(posthoc["separation_D"] == s) & (posthoc["stars"] != "")]
-        for n, (_, r) in enumerate(rows.iterrows()):
-            x0, x1 = xpos[(s, r["A"])], xpos[(s, r["B"])]
-            y = level + 0.05 * n
-            ax.plot([x0, x0, x1, x1], [y - 0.01, y, y, y - 0.01], color="k", lw=0.8)
-            ax.text((x0 + x1) / 2, y, r["stars"], ha="center", va="bottom", fontsize=8)
-    ax.axhline(0.5, color="k", ls=":", lw=0.8)
-    ax.set_xticks(range(len(seps)), [f"{s:g} D" for s in seps])
-    ax.set_xlabel("separation")
-    ax.set_ylabel("proportion correct")
-    ax.set_ylim(0.0, max(1.0, level + 0.2))
-    ax.legend(fontsize=7, frameon=False, loc="upper left", ncol=3)
-    fig.suptitle("Ordinal depth", fontsize=10)
-    mark_simulated(fig, simulated)
+    """Proportion correct by mode at each separation: mean ± SE across participants; Bonferroni stars."""
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(5.2, 4.0))
+        seps = sorted(cells["separation_D"].unique())
+        modes = [m for m in ("conventional", "ocular", "reversed") if m in set(cells["mode"])]
+        width = 0.8 / len(modes)
+        summary = cells.groupby(["separation_D", "mode"])[dv].agg(["mean", _sem])
+        top = 0.0
+        xpos = {}
+        for k, mode in enumerate(modes):
+            xs = np.arange(len(seps)) + (k - (len(modes) - 1) / 2) * width
+            m = [summary.loc[(s, mode), "mean"] for s in seps]
+            e = [summary.loc[(s, mode), "_sem"] for s in seps]
+            ax.bar(xs, m, width * 0.95, yerr=e, capsize=3, color=MODE_COLOURS.get(mode), label=mode_label(mode))
+            top = max(top, max(np.add(m, e)))
+            for s, x in zip(seps, xs):
+                xpos[(s, mode)] = x
+        level = top + 0.03
+        m_family = int(posthoc["m"].iloc[0]) if len(posthoc) else 0
+        for s in seps:
+            rows = posthoc[(posthoc["separation_D"] == s) & (posthoc["stars"] != "")]
+            for n, (_, r) in enumerate(rows.iterrows()):
+                x0, x1 = xpos[(s, r["A"])], xpos[(s, r["B"])]
+                y = level + 0.06 * n
+                ax.plot([x0, x0, x1, x1], [y - 0.01, y, y, y - 0.01], color="k", lw=0.8)
+                ax.text((x0 + x1) / 2, y, r["stars"], ha="center", va="bottom", fontsize=10)
+        ax.axhline(0.5, color="k", ls=":", lw=0.8)
+        ax.set_xticks(range(len(seps)), [f"{s:g} D" for s in seps])
+        ax.set_xlabel("separation of the two surfaces")
+        ax.set_ylabel("proportion correct")
+        ax.set_ylim(0.0, max(1.0, level + 0.25))
+        handles, labels = ax.get_legend_handles_labels()
+        handles.append(Line2D([], [], color="k", ls=":", lw=0.8))
+        labels.append("chance")
+        ax.legend(handles, labels, frameon=False, loc="upper left", ncol=2)
+        ax.set_title("Ordinal depth")
+        caption(fig, f"Bars: mean ± SE across participants. Stars: paired t-tests, Bonferroni over m = {m_family}\n"
+                     "(* p ≤ 0.05, ** p ≤ 0.01, *** p ≤ 0.001).")
+        mark_simulated(fig, simulated)
     return fig
 
 
 def plot_reach(reaches: pd.DataFrame, lines: pd.DataFrame, x: str = "target_fraction", y: str = "reach_fraction",
                condition: str = "rendering", simulated: bool = False) -> plt.Figure:
-    """Reach against target (fractions of arm reach) per condition, with each condition's line."""
-    fig, ax = plt.subplots(figsize=(4.2, 3.6))
-    for k, (cond, sub) in enumerate(sorted(reaches.groupby(condition), key=lambda t: str(t[0]))):
-        colour = MODE_COLOURS.get(cond, f"C{k}")
-        per = sub.groupby(["participant", x])[y].mean().reset_index()
-        dx = (k - 0.5) * 0.008
-        ax.plot(per[x] + dx, per[y], "o", ms=2.5, alpha=0.5, color=colour)
-        r = lines[lines[condition] == cond].iloc[0]
-        xs = np.linspace(reaches[x].min() - 0.03, reaches[x].max() + 0.03, 20)
-        ax.plot(xs, r["intercept"] + r["slope"] * xs, color=colour, lw=1.5,
-                label=f"{cond}: {r['slope']:.3f} x + {r['intercept']:.3f}")
-    lim = [0.4, max(1.3, float(reaches[y].max()) + 0.05)]
-    ax.plot(lim, lim, "k:", lw=0.8, label="veridical")
-    ax.set_xlabel("target distance (fraction of arm reach)")
-    ax.set_ylabel("reach (fraction of arm reach)")
-    ax.legend(fontsize=7, frameon=False, loc="upper left")
-    fig.suptitle("Egocentric blind reaching", fontsize=10)
-    mark_simulated(fig, simulated)
+    """Reach against target (fractions of arm reach): one panel per condition with each participant's
+    mean reach per target (dots) and the condition's fitted line; the other condition's line dashed."""
+    conds = sorted(reaches[condition].astype(str).unique())
+    with plt.rc_context(STYLE):
+        fig, axes = plt.subplots(1, len(conds), figsize=(4.0 * len(conds), 4.2), sharex=True, sharey=True, squeeze=False)
+        per = reaches.groupby([condition, "participant", x])[y].mean().reset_index()
+        x_lo, x_hi = float(reaches[x].min()) - 0.05, float(reaches[x].max()) + 0.05
+        y_lo = min(x_lo, float(per[y].min()) - 0.05)
+        y_hi = max(x_hi, float(per[y].max()) + 0.05)
+        xs = np.linspace(x_lo, x_hi, 20)
+        n_per = int(reaches.groupby([condition, "participant", x]).size().median())
+        handles = {}
+        for ax, cond in zip(axes[0], conds):
+            sub = per[per[condition].astype(str) == cond]
+            colour = MODE_COLOURS.get(cond, "C0")
+            handles[f"participant mean ({n_per} reaches), {mode_label(cond)}"] = ax.plot(
+                sub[x], sub[y], "o", ms=3.5, alpha=0.6, color=colour)[0]
+            for other in conds:
+                r = lines[lines[condition].astype(str) == other].iloc[0]
+                style = dict(color=MODE_COLOURS.get(other, "C1"), lw=1.8) if other == cond else \
+                    dict(color=MODE_COLOURS.get(other, "C1"), lw=1.2, ls="--")
+                h = ax.plot(xs, r["intercept"] + r["slope"] * xs, **style)[0]
+                if other == cond:
+                    handles[f"fit, {mode_label(other)}: {r['slope']:.3f} x + {r['intercept']:.3f}"] = h
+            handles["other condition's fit (dashed, in its colour)"] = Line2D([], [], color="k", lw=1.2, ls="--")
+            handles["veridical (reach = target)"] = ax.plot([x_lo, x_hi], [x_lo, x_hi], "k:", lw=0.8)[0]
+            ax.set_xlim(x_lo, x_hi)
+            ax.set_ylim(y_lo, y_hi)
+            ax.set_title(mode_label(cond))
+            ax.set_xlabel("target distance (fraction of arm reach)")
+            ax.grid(True, alpha=0.3)
+        axes[0, 0].set_ylabel("reach (fraction of arm reach)")
+        fig.suptitle("Egocentric blind reaching")
+        fig.tight_layout(rect=(0, 0.2, 1, 1))
+        fig.legend(list(handles.values()), list(handles.keys()), loc="lower center", ncol=2, frameon=False,
+                   bbox_to_anchor=(0.5, 0.04))
+        caption(fig, "Distances along the horizontal eye-to-target direction. Lines: linear fits to all reaches of a "
+                     "condition;\nthe condition test is a mixed model with participants random (results/summary.md).")
+        mark_simulated(fig, simulated)
     return fig
 
 
 def plot_preferences(prefs: pd.DataFrame, simulated: bool = False) -> plt.Figure:
-    """Percent of trials the first mode of each pair was chosen, SE across subjects, stars."""
-    fig, ax = plt.subplots(figsize=(4.2, 3.4))
-    labels = [f"{a}\nover {b}" for a, b in zip(prefs["first"], prefs["second"])]
-    xs = np.arange(len(prefs))
-    se = prefs["se_subjects"].fillna(prefs["se"]) * 100
-    ax.bar(xs, prefs["proportion"] * 100, yerr=se, capsize=4, color=[MODE_COLOURS.get(m, "C0") for m in prefs["first"]])
-    for x, p, e, s in zip(xs, prefs["proportion"] * 100, se, prefs["stars"]):
-        ax.text(x, p + e + 1.5, s, ha="center", fontsize=9)
-    ax.axhline(50, color="k", ls=":", lw=0.8)
-    ax.set_xticks(xs, labels, fontsize=7)
-    ax.set_ylabel("% of trials chosen")
-    ax.set_ylim(0, 100)
-    fig.suptitle("Perceptual realism (pairwise preference)", fontsize=10)
-    mark_simulated(fig, simulated)
+    """Percent of trials the first mode of each pair was chosen: error bars ± SE across participants;
+    stars: one-tailed binomial test against 50 % over all trials."""
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        labels = [f"{mode_label(a)}\nover\n{mode_label(b)}" for a, b in zip(prefs["first"], prefs["second"])]
+        xs = np.arange(len(prefs))
+        se = prefs["se_subjects"].fillna(prefs["se"]) * 100
+        ax.bar(xs, prefs["proportion"] * 100, yerr=se, capsize=4, color="#1f77b4", label="% chosen, mean ± SE across participants")
+        for x, p, e, s in zip(xs, prefs["proportion"] * 100, se, prefs["stars"]):
+            ax.text(x, p + e + 1.5, s, ha="center", fontsize=10)
+        ax.axhline(50, color="k", ls=":", lw=0.8, label="no preference (50 %)")
+        ax.set_xticks(xs, labels)
+        ax.set_ylabel("% of trials the first mode was chosen")
+        ax.set_ylim(0, 110)
+        ax.legend(loc="upper right", frameon=False)
+        ax.set_title("Perceptual realism (pairwise preference)")
+        fig.tight_layout(rect=(0, 0.1, 1, 1))
+        caption(fig, "Stars: one-tailed binomial test against 50 % over all trials\n(* p ≤ 0.05, ** p ≤ 0.01, *** p ≤ 0.001).",
+                y=0.08)
+        mark_simulated(fig, simulated)
     return fig

@@ -50,13 +50,13 @@ def threshold_condition(protocol: Protocol) -> str:
 
 def two_interval_tests(protocol: Protocol, trials: pd.DataFrame) -> list[TestOutcome]:
     from psyop.statistics.anova import rm_anova
-    from psyop.statistics.psychometric import FitOptions, fit_psychometric_table
+    from psyop.statistics.psychometric import FitOptions, fit_psychometric_table, usable_for_analysis
     from psyop.statistics.regression import linear_fit
 
     condition = threshold_condition(protocol)
     level = protocol.response.level_factor
     fits = fit_psychometric_table(trials, level, ["participant", condition], options=FitOptions(), n_jobs=1)
-    clean = fits[fits["flags"].fillna("") == ""]
+    clean, _ = usable_for_analysis(fits)  # the documented status rule (censored etc. left out)
     out = []
     name = f"rm-ANOVA: threshold ~ {condition}"
     try:

@@ -105,6 +105,7 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                                                  "threshold_slope", "threshold_offset_column", "between_subject_sd_D")},
     "OrdinalAccuracy": {"kind": "observer", "p_correct": "observer", "between_subject_sd": "observer"},
     "PairwisePreference": {"kind": "observer", "strength": "observer"},
-    "Reach": {"kind": "observer", "arm_reach_m": "observer", "arm_reach_sd_m": "observer", "by_condition": "observer"},
+    "Reach": {"kind": "observer", "arm_reach_m": "observer", "arm_reach_sd_m": "observer", "by_condition": "observer",
+              "slope_sd": "observer", "intercept_sd_m": "observer", "max_reach_fraction": "observer"},
     "ReachCondition": {"slope": "observer", "intercept_m": "observer", "noise_sd_m": "observer"},
 }

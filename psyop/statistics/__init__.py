@@ -3,11 +3,14 @@
 Modules (one job each):
 
 - :mod:`psyop.statistics.dataset`: load every session's ``trials.parquet`` of a study.
-- :mod:`psyop.statistics.psychometric`: 2AFC psychometric fits with psignifit 4.3.
+- :mod:`psyop.statistics.psychometric`: 2AFC psychometric fits with psignifit 4.3; a status per fit
+  (censored thresholds are bounds, not numbers) and the rule analyses use (``usable_for_analysis``).
 - :mod:`psyop.statistics.goodness`: deviance and its parametric-bootstrap p-value.
-- :mod:`psyop.statistics.anova`: repeated-measures ANOVA (pingouin), listwise deletion made visible.
+- :mod:`psyop.statistics.anova`: repeated-measures ANOVA (pingouin), listwise deletion made visible,
+  degenerate data flagged or refused.
 - :mod:`psyop.statistics.binomial`: one-tailed binomial tests of pairwise preferences.
-- :mod:`psyop.statistics.regression`: linear fits and the condition-interaction regression.
+- :mod:`psyop.statistics.regression`: linear fits, the condition-interaction regression and its
+  subject-aware mixed-model counterpart.
 - :mod:`psyop.statistics.formatting`: each test in the paper's written form.
 - :mod:`psyop.statistics.simulate`: simulated tidy tables with known effects (tests, power).
 """

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 import pingouin as pg
+from scipy.stats import f as f_dist
 
 from psyop.errors import UserError
 
@@ -203,6 +204,8 @@ def _row(name: str, effect: pd.Series, df1: int, df2: int, n: int, zero_error: b
         status = "eps_undefined"
     f_value, p_unc = float(effect.get("F", nan)), float(effect.get("p_unc", nan))
     p_gg = float(effect.get("p_GG_corr", nan)) if df1 > 1 else p_unc  # pingouin leaves it empty for one df
+    if df1 > 1 and np.isfinite(eps) and not np.isfinite(p_gg) and np.isfinite(f_value) and f_value >= 0:
+        p_gg = float(f_dist.sf(f_value, df1 * eps, df2 * eps))  # when pingouin gives none: never a blank p
     if zero_error or not np.isfinite(f_value) or f_value < 0:
         status, f_value, p_unc, p_gg, eps = "zero_error_variance", nan, nan, nan, nan
     return {

@@ -1,0 +1,40 @@
+"""Readable names for code names in figures, and the figure text style (>= 9 pt at saved size)."""
+
+from __future__ import annotations
+
+#: matplotlib rc settings every psyop figure is drawn under (``plt.rc_context(STYLE)``): no text
+#: below 9 pt at the saved size (figures are saved at 1:1, ``bbox_inches='tight'``).
+STYLE = {
+    "font.size": 10, "axes.titlesize": 11, "axes.labelsize": 10, "xtick.labelsize": 9, "ytick.labelsize": 9,
+    "legend.fontsize": 9, "figure.titlesize": 11,
+}
+
+MODE_LABELS = {
+    "conventional": "conventional", "ocular": "ocular parallax", "reversed": "reversed ocular parallax",
+    "enabled": "ocular parallax enabled", "disabled": "ocular parallax disabled",
+}
+CONDITION_LABELS = {"back_D": "back surface at {v:g} D", "offset_D": "offset {v:g} D", "separation_D": "separation {v:g} D"}
+
+
+def mode_label(mode: str) -> str:
+    """'ocular' -> 'ocular parallax'; unknown names pass through with underscores as spaces."""
+    return MODE_LABELS.get(str(mode), str(mode).replace("_", " "))
+
+
+def condition_label(column: str, value: float) -> str:
+    """('back_D', 1.0) -> 'back surface at 1 D'."""
+    template = CONDITION_LABELS.get(column)
+    return template.format(v=value) if template else f"{column.replace('_', ' ')} {value:g}"
+
+
+def participant_label(participant: str) -> str:
+    """'S01' / '01' -> 'participant S01' / 'participant 01' (never 'sub-S01')."""
+    return f"participant {participant}"
+
+
+DISPLAY_LABELS = {"vive_pro": "HTC Vive Pro"}
+
+
+def display_label(name: str) -> str:
+    """'vive_pro' -> 'HTC Vive Pro'."""
+    return DISPLAY_LABELS.get(name, name.replace("_", " "))
