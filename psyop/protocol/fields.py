@@ -10,7 +10,8 @@ Every field of every protocol model is listed here with the part of psyop that r
   the whole ``observer:`` section);
 - ``summary``: ``psyop show`` and session.json's copy of the protocol text (descriptive fields);
 - ``validation``: a field that only selects or checks (discriminators, the format version);
-- ``refused``: validated structurally, then refused with its file:line (not available yet).
+- ``refused``: validated structurally, then refused with its file:line (not available yet);
+- ``adaptive``: the session's adaptive levels (psyop.adaptive.session builds each procedure).
 
 tests/protocol/test_protocol_fields.py walks the pydantic schema and checks that every field is
 listed, and that each listed field's name appears in its user's source.
@@ -29,6 +30,7 @@ USERS: dict[str, tuple[str, ...]] = {
                    "psyop/protocol/trial.py", "psyop/protocol/response.py", "psyop/protocol/observer.py",
                    "psyop/protocol/design.py", "psyop/protocol/display.py"),
     "refused": ("psyop/protocol/semantics.py",),
+    "adaptive": ("psyop/adaptive/session.py",),
 }
 
 _SCENE_COMMON = {"id": "stimulus", "kind": "validation"}
@@ -86,11 +88,12 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                       "display_off": "plan"},
     "Design": {"factors": "schedule", "repetitions": "schedule", "practice_trials": "schedule",
                "randomisation": "schedule"},
-    "Factor": {"levels": "schedule", "depends_on": "schedule", "levels_by": "schedule", "adaptive": "refused",
+    "Factor": {"levels": "schedule", "depends_on": "schedule", "levels_by": "schedule", "adaptive": "adaptive",
                "description": "summary"},
     "SteppedLevels": {"start": "schedule", "step": "schedule", "count": "schedule"},
-    # adaptive levels: refused in semantics.py (ADAPTIVE_PROCEDURES) until a procedure exists
-    "AdaptiveLevel": {"procedure": "refused", "start": "refused", "min": "refused", "max": "refused"},
+    # adaptive levels: procedure names outside ADAPTIVE_PROCEDURES are refused in semantics.py
+    "AdaptiveLevel": {k: "adaptive" for k in ("procedure", "start", "min", "max", "grid_points", "rule", "step_sizes",
+                                              "target")},
     "Randomisation": {"kind": "schedule", "by": "schedule", "block_order": "schedule"},
     "TwoIntervalResponse": {"kind": "plan", "question": "plan", "test": "schedule", "reference": "schedule",
                             "level_factor": "plan", "order": "schedule"},
