@@ -16,6 +16,7 @@ def plot_power(table: pd.DataFrame, title: str) -> Figure:
                     marker="o", capsize=3, label=str(test))
     alpha = float(table["alpha"].iloc[0]) if len(table) else 0.05
     ax.axhline(0.8, color="0.6", lw=0.8, ls="--")
+    ax.set_xticks(sorted(int(n) for n in table["participants"].unique()))
     ax.set_xlabel("participants")
     ax.set_ylabel(f"power (share of replications with p < {alpha:g})")
     ax.set_ylim(0, 1.02)
