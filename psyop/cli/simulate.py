@@ -35,7 +35,9 @@ def main(args: argparse.Namespace) -> int:
         raise UserError("no protocol files found", str(args.protocols))
     sizes = {k: args.participants for k in PAPER_PARTICIPANTS} if args.participants else None
     start = time.perf_counter()
-    results = simulate_dataset(paths, args.data, jobs=max(1, args.jobs), base_seed=args.seed, participants=sizes)
+    # --participants applies to every study, also those without a paper size (e.g. protocols/examples)
+    results = simulate_dataset(paths, args.data, jobs=max(1, args.jobs), base_seed=args.seed, participants=sizes,
+                               default_participants=args.participants or 6)
     bad = [r for r in results if r[2] not in ("complete", "already complete")]
     n_trials = sum(r[3] for r in results)
     print(f"psyop simulate: {len(results)} sessions, {n_trials} new trials in {time.perf_counter() - start:.1f} s "

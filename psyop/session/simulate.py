@@ -32,8 +32,10 @@ class SimulatedJob:
     seed: int
 
 
-def plan_jobs(protocol_paths: list[Path], base_seed: int, participants: dict[str, int] | None = None) -> list[SimulatedJob]:
-    """One job per (study, participant); studies without a paper size get 6 participants."""
+def plan_jobs(protocol_paths: list[Path], base_seed: int, participants: dict[str, int] | None = None,
+              default_participants: int = 6) -> list[SimulatedJob]:
+    """One job per (study, participant); studies without a paper size (or one in ``participants``)
+    get ``default_participants``."""
     from psyop.protocol import load_protocol
 
     sizes = dict(PAPER_PARTICIPANTS, **(participants or {}))
@@ -43,7 +45,7 @@ def plan_jobs(protocol_paths: list[Path], base_seed: int, participants: dict[str
         study = protocol.study.name
         if protocol.observer is None:
             continue
-        for i in range(1, sizes.get(study, 6) + 1):
+        for i in range(1, sizes.get(study, default_participants) + 1):
             participant = f"S{i:02d}"
             jobs.append(SimulatedJob(path, study, participant, seed_for(base_seed, study, participant)))
     return jobs
@@ -68,11 +70,12 @@ def run_job(job: SimulatedJob, data_root: Path) -> tuple[str, str, str, int]:
 
 
 def simulate_dataset(protocol_paths: list[Path], data_root: Path, *, jobs: int = 2, base_seed: int = 2020,
-                     participants: dict[str, int] | None = None) -> list[tuple[str, str, str, int]]:
+                     participants: dict[str, int] | None = None,
+                     default_participants: int = 6) -> list[tuple[str, str, str, int]]:
     """Run every job (``jobs`` worker processes) and mark the dataset simulated."""
     from psyop.session.log.layout import write_dataset_description
 
-    planned = plan_jobs(protocol_paths, base_seed, participants)
+    planned = plan_jobs(protocol_paths, base_seed, participants, default_participants)
     start = time.perf_counter()
     if jobs <= 1:
         results = [run_job(job, data_root) for job in planned]

@@ -128,7 +128,12 @@ def test_psyop_simulate_runs_an_adaptive_protocol(tmp_path: Path) -> None:
     data = tmp_path / "data"
     assert cli_main(["simulate", "--protocols", str(protocol), "--data", str(data), "--jobs", "1"]) == 0
     sessions = sorted((data / "detection").glob("sub-*/ses-1/trials.parquet"))
-    assert len(sessions) == 6
+    assert len(sessions) == 6  # detection: the paper's six
+    renamed = tmp_path / "renamed.yaml"  # a study without a paper size takes --participants too (was: always 6)
+    renamed.write_text(protocol.read_text().replace("name: detection\n", "name: detection_staircase\n", 1))
+    assert cli_main(["simulate", "--protocols", str(renamed), "--data", str(data), "--jobs", "1",
+                     "--participants", "2"]) == 0
+    assert len(sorted((data / "detection_staircase").glob("sub-*/ses-1/trials.parquet"))) == 2
     for path in sessions:
         trials = pd.read_parquet(path)
         assert len(trials) == 3 and trials["level_D"].notna().all()
