@@ -5,11 +5,11 @@ psyop's simulated observers and psignifit's 2AFC fit use (``threshold`` is the 7
 lapse). The posterior lives on a threshold x width x lapse grid; the next level is the point of
 the stimulus grid that minimises the expected posterior entropy after the next response.
 
-Vectorised numpy rather than the ``questplus`` package: that package's next-stimulus step takes
-~18-21 ms median and up to ~70 ms for the default grids on the 2-core development machine (xarray
-over the full stimulus x parameter x outcome array), and rebuilding its state from a history
-replays one xarray update per trial; the p99 bar is 20 ms per trial. This module gives the same
-next stimulus and posterior (tests/adaptive/test_quest_plus_vs_package.py) in about 1 ms.
+Vectorised numpy rather than the ``questplus`` package: that package's next stimulus plus one
+update took 18x longer at the median than this module's whole per-trial step for the default grids
+(xarray over the full stimulus x parameter x outcome array; benchmarks/bench_adaptive.py, figures
+in docs/adaptive.md), and rebuilding its state from a history replays one update per trial. This
+module gives the same next stimulus and posterior (tests/adaptive/test_quest_plus_vs_package.py).
 
 The expected entropy uses, for each stimulus s and outcome o with likelihood L = L(o|s, theta) and
 posterior p(theta), pk = sum_theta L p and
