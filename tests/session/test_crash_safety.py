@@ -8,8 +8,6 @@ returned, so the test knows which trials were recorded before the kill.
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
 import random
 import signal
 import subprocess
@@ -24,44 +22,10 @@ from psyop.cli import main as cli_main
 from psyop.session.log.layout import SessionPaths
 from psyop.session.log.schema import TIMING_COLUMNS
 from psyop.session.log.store import finalise_session
+from kill_helpers import kill_once, run_args
 from session_helpers import small_protocol
 
 SEED = 7
-
-
-def _child(argv: list[str], announce_fd: int) -> None:
-    """Run `psyop run` in this (forked) process, announcing each durable trial."""
-    from psyop.session.log import store
-
-    original = store.SessionStore.append_trial
-
-    def append_and_announce(self, row, frames):  # type: ignore[no-untyped-def]
-        original(self, row, frames)
-        os.write(announce_fd, f"{int(row['trial'])}\n".encode())
-
-    store.SessionStore.append_trial = append_and_announce  # instrumentation only, after the real append
-    os._exit(cli_main(argv))
-
-
-def _run_args(protocol: Path, data: Path, participant: str, delay_s: float) -> list[str]:
-    return ["run", str(protocol), "--participant", participant, "--seed", str(SEED), "--data", str(data),
-            "--clock", "virtual", "--no-progress", "--phase-delay-s", str(delay_s), "--render", "cameras"]
-
-
-def _kill_once(argv: list[str], after_s: float) -> set[int]:
-    read_fd, write_fd = os.pipe()
-    process = mp.get_context("fork").Process(target=_child, args=(argv, write_fd))
-    process.start()
-    os.close(write_fd)
-    time.sleep(after_s)  # not a wait: the random moment of the kill
-    if process.is_alive():
-        os.kill(process.pid, signal.SIGKILL)
-    process.join()
-    announced = b""
-    while chunk := os.read(read_fd, 65536):
-        announced += chunk
-    os.close(read_fd)
-    return {int(x) for x in announced.split()}
 
 
 def _comparable(trials: pd.DataFrame) -> pd.DataFrame:
@@ -74,7 +38,7 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
     protocol = small_protocol(tmp_path, "detection", 2)
     n = 30
     reference_data = tmp_path / "reference"
-    assert cli_main(_run_args(protocol, reference_data, "R1", 0.0)) == 0
+    assert cli_main(run_args(protocol, reference_data, "R1", SEED, 0.0)) == 0
     reference = pd.read_parquet(reference_data / "detection" / "sub-R1" / "ses-1" / "trials.parquet")
     assert len(reference) == n
 
@@ -84,7 +48,7 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
         paths = SessionPaths(data, "detection", participant, 1)
         recorded_before: set[int] = set()
         while len(recorded_before) < n and kills < 60:
-            announced = _kill_once(_run_args(protocol, data, participant, 0.01), rng.uniform(0.01, 0.3))
+            announced = kill_once(run_args(protocol, data, participant, SEED, 0.01), rng.uniform(0.01, 0.3))
             kills += 1
             if not paths.metadata.exists():
                 assert not announced
@@ -97,7 +61,7 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
             assert got == set(range(len(got))), "trials are recorded in schedule order without holes"
             recorded_before = got
         if len(recorded_before) < n:
-            assert cli_main(_run_args(protocol, data, participant, 0.0)) == 0
+            assert cli_main(run_args(protocol, data, participant, SEED, 0.0)) == 0
         final = pd.read_parquet(paths.trials_parquet)
         assert final["trial"].tolist() == list(range(n)), "no duplicate and no missing trial after resume"
         if participant == "R1":
@@ -111,7 +75,7 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
 def test_sigkill_of_the_psyop_command_then_recover_and_resume(detection_small: Path, tmp_path: Path) -> None:
     """The real console entry point (`python -m psyop run`), killed, then `psyop recover` and resume."""
     data = tmp_path / "data"
-    argv = [sys.executable, "-m", "psyop", *_run_args(detection_small, data, "K1", 0.25)]
+    argv = [sys.executable, "-m", "psyop", *run_args(detection_small, data, "K1", SEED, 0.25)]
     process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     paths = SessionPaths(data, "detection", "K1", 1)
     deadline = time.monotonic() + 60
@@ -128,7 +92,7 @@ def test_sigkill_of_the_psyop_command_then_recover_and_resume(detection_small: P
     assert "incomplete (resumable)" in recover.stdout
     partial = pd.read_parquet(paths.trials_parquet)
     assert 0 < len(partial) < 15
-    resume = subprocess.run([sys.executable, "-m", "psyop", *_run_args(detection_small, data, "K1", 0.0)],
+    resume = subprocess.run([sys.executable, "-m", "psyop", *run_args(detection_small, data, "K1", SEED, 0.0)],
                             capture_output=True, text=True)
     assert resume.returncode == 0, resume.stderr
     final = pd.read_parquet(paths.trials_parquet)
@@ -138,7 +102,7 @@ def test_sigkill_of_the_psyop_command_then_recover_and_resume(detection_small: P
 
 def test_ctrl_c_discards_the_current_trial_and_finalises(detection_small: Path, tmp_path: Path) -> None:
     data = tmp_path / "data"
-    argv = [sys.executable, "-m", "psyop", *_run_args(detection_small, data, "C1", 0.25)]
+    argv = [sys.executable, "-m", "psyop", *run_args(detection_small, data, "C1", SEED, 0.25)]
     # a parent started in the background may have SIGINT ignored; a terminal's Ctrl-C is not
     process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
