@@ -7,6 +7,7 @@ model, display, tracker clock-sync, host.
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import platform
 import sys
@@ -65,13 +66,20 @@ class SessionOptions:
 
 
 def package_versions() -> dict[str, str]:
-    versions = {}
+    """Installed versions of the packages a session depends on (read once per process: the
+    metadata scan costs ~50 ms, and installed versions do not change under a running process)."""
+    return dict(_package_versions())
+
+
+@functools.cache
+def _package_versions() -> tuple[tuple[str, str], ...]:
+    versions = []
     for name in _PACKAGES:
         try:
-            versions[name] = importlib.metadata.version(name)
+            versions.append((name, importlib.metadata.version(name)))
         except importlib.metadata.PackageNotFoundError:
-            versions[name] = "not installed"
-    return versions
+            versions.append((name, "not installed"))
+    return tuple(versions)
 
 
 def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig) -> Any:

@@ -31,12 +31,18 @@ N_EXAMPLES = int(__import__("os").environ.get("PSYOP_GENERATED_EXAMPLES", "200")
 
 
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def workdir(tmp_path_factory: pytest.TempPathFactory):
+    """A folder for the generated protocols and their data; in memory (/dev/shm) where there is
+    one, since every session fsyncs its metadata a few times."""
+    import tempfile
+
     import matplotlib.image as mpimg
 
-    root = tmp_path_factory.mktemp("generated")
+    shm = Path("/dev/shm")
+    root = Path(tempfile.mkdtemp(prefix="psyop-generated-", dir=shm)) if shm.is_dir() else tmp_path_factory.mktemp("generated")
     mpimg.imsave(root / TEXTURE, np.random.default_rng(0).uniform(size=(8, 8, 3)))
-    return root
+    yield root
+    shutil.rmtree(root, ignore_errors=True)
 
 
 def analyse(kind: str, trials: pd.DataFrame, protocol) -> pd.DataFrame | dict:
