@@ -80,7 +80,8 @@ def test_a_generated_protocol_runs_end_to_end_or_is_refused_with_its_location(wo
         assert re.match(rf"^{re.escape(str(path))}:\d+:\d+$", error.location or ""), (error.location, str(error))
         return
     assert mistake is None, f"a protocol with mistake {mistake!r} validated:\n{text}"
-    event(f"ran: {protocol.response.kind}")
+    adaptive = [f.adaptive.procedure for f in protocol.design.factors.values() if f.adaptive is not None]
+    event(f"ran: {protocol.response.kind}" + (f" (adaptive {adaptive[0]})" if adaptive else ""))
     plan = compile_plan(protocol)
     assert plan.response.protocol_kind == protocol.response.kind
     root = workdir / "data"
