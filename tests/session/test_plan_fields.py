@@ -286,3 +286,9 @@ def test_timed_out_trials_end_to_end(tmp_path: Path) -> None:
     loaded = load_dataset(tmp_path / "data", "ordinal")
     assert len(loaded.trials) == 0 and loaded.trials.attrs["n_timeout_dropped"] == len(trials)
     assert len(load_dataset(tmp_path / "data", "ordinal", include_timeouts=True).trials) == len(trials)
+
+
+def test_a_tracker_ipd_outside_the_range_is_a_user_error() -> None:
+    protocol = load_protocol(PROTOCOLS / "ordinal.yaml")
+    with pytest.raises(UserError, match="ipd of 0.12"):
+        compile_plan(protocol, tracker_ipd_m=0.12)
