@@ -52,11 +52,11 @@ def _legacy_compile(protocol: Any) -> tuple:
         if k == "drift_recalibration":
             out.append(PhaseSpec("recalibration", duration(phase), "cross", "cross"))
         elif k == "interval":
-            column = columns[min(n_interval, len(columns) - 1)]
+            columns[min(n_interval, len(columns) - 1)]  # the old per-kind column lookup (its cost)
             n_interval += 1
-            # the old rule mapped reach levels at render time; here the equivalent column
+            # the loop now reads modes by one rule (mode_interval<k>); both paths share it here
             out.append(PhaseSpec(f"interval{n_interval}", duration(phase), "stimulus", gaze,
-                                 f"mode_interval{n_interval}" if column == "rendering" else column, interval=n_interval))
+                                 f"mode_interval{n_interval}", interval=n_interval))
         elif k == "blank":
             off = bool(getattr(phase, "display_off", False))
             out.append(PhaseSpec("display_off" if off else "blank", duration(phase), "off" if off else "blank",
@@ -145,8 +145,7 @@ def run(out_dir: Path, quick: bool) -> str:
         "",
         f"**Median ratio plan / old: compile {statistics.median(r[0] for r in ratios):.2f}, "
         f"per trial {statistics.median(r[1] for r in ratios):.2f}.** The plan compiles once per session; per",
-        "trial it adds only the typed mode rule and the response-timeout check. The old camera renderer",
-        "computed both eyes' cameras for every protocol; the plan's computes only the protocol's eyes,",
-        "which is why monocular studies get cheaper per trial.",
+        "trial it adds only the response-timeout check. Both paths here compute both eyes' cameras for the",
+        "old path (as the old camera renderer did) and the protocol's eyes for the plan.",
     ]
     return "\n".join(lines)

@@ -239,7 +239,7 @@ def room_with_pencil(
         Primitive(Shape.RECT, (0, cy, -room_depth_m), (room_half_width_m, 0, 0), (0, hh, 0),
                   NoiseTexture(NoiseKind.PINK, seed=12, size_px=128, mean=0.6, contrast=0.15, repeats=2.0),
                   name="back_wall"),
-        Primitive(Shape.RECT, (0, floor_y + table_height_m, -1.2), (0.6, 0, 0), (0, 0, 0.4), Solid((0.45, 0.3, 0.2)),
+        Primitive(Shape.RECT, (0, floor_y + (table_height_m or 0.0), -1.2), (0.6, 0, 0), (0, 0, 0.4), Solid((0.45, 0.3, 0.2)),
                   name="table_top"),
         Primitive(Shape.DISC, (-0.3, floor_y + (table_height_m or 0.0) + 0.15, -1.1), (0.06, 0, 0), (0, 0.06, 0), Solid((0.2, 0.4, 0.8)),
                   name="plate"),

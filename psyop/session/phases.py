@@ -6,6 +6,7 @@ these; the loop runs them in order and then the response phase.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -43,9 +44,12 @@ class PhaseSpec:
             raise ValueError(f"phase {self.name!r}: show must be cross, stimulus, blank or off, got {self.show!r}")
         if self.mode not in RENDERING_MODES:
             raise ValueError(f"phase {self.name!r}: unknown rendering mode {self.mode!r}")
-        if self.mode_column is not None and (self.interval < 1 or self.mode_column != f"mode_interval{self.interval}"):
-            raise ValueError(f"phase {self.name!r}: mode_column must be mode_interval<interval> with interval >= 1, "
-                             f"got {self.mode_column!r} and interval {self.interval}")
+        if self.mode_column is not None:
+            match = re.fullmatch(r"mode_interval([1-9][0-9]*)", self.mode_column)
+            if match is None or self.interval not in (0, int(match.group(1))):
+                raise ValueError(f"phase {self.name!r}: mode_column must be mode_interval<k> (k = interval), "
+                                 f"got {self.mode_column!r} with interval {self.interval}")
+            object.__setattr__(self, "interval", int(match.group(1)))  # interval 0: taken from the column
 
     @property
     def renders(self) -> bool:

@@ -22,7 +22,9 @@ from typing import Any
 
 from psyop.adaptive.session import AdaptivePlan, adaptive_plan
 from psyop.datacontract import TIMEOUT_RESPONSE
+from psyop.errors import UserError
 from psyop.optics.display import DisplayProfile
+from psyop.optics.ranges import IPD_M
 from psyop.optics.rig import EyeRig
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
@@ -192,6 +194,9 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
     if isinstance(spec.ipd, FixedIpd):
         ipd_m, source = spec.ipd.mm / 1000.0, "protocol"
     elif tracker_ipd_m is not None:
+        if not IPD_M.contains(tracker_ipd_m):
+            raise UserError(f"the tracker reports an ipd of {tracker_ipd_m!r} m, outside {IPD_M.describe()}; recalibrate "
+                            "the headset's ipd or fix it in the protocol (display.ipd: {mm: ...})", "--tracker")
         ipd_m, source = float(tracker_ipd_m), "tracker"
     else:
         ipd_m, source = DEFAULT_IPD_M, "default (ipd: tracker, none reported)"

@@ -7,6 +7,7 @@ model, display, tracker clock-sync, host.
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import platform
 import sys
@@ -61,17 +62,25 @@ class SessionOptions:
 
     @property
     def simulated(self) -> bool:
-        return self.tracker == "sim" and self.responses == "sim"
+        """No person took part: simulated gaze, and a simulated observer or nobody answering."""
+        return self.tracker == "sim" and self.responses in ("sim", "none")
 
 
 def package_versions() -> dict[str, str]:
-    versions = {}
+    """Installed versions of the packages a session depends on (read once per process: the
+    metadata scan costs ~50 ms, and installed versions do not change under a running process)."""
+    return dict(_package_versions())
+
+
+@functools.cache
+def _package_versions() -> tuple[tuple[str, str], ...]:
+    versions = []
     for name in _PACKAGES:
         try:
-            versions[name] = importlib.metadata.version(name)
+            versions.append((name, importlib.metadata.version(name)))
         except importlib.metadata.PackageNotFoundError:
-            versions[name] = "not installed"
-    return versions
+            versions.append((name, "not installed"))
+    return tuple(versions)
 
 
 def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig) -> Any:
@@ -127,6 +136,14 @@ def _make_responses(spec: str, plan: SessionPlan, seed: int, participant: str, c
         if params is None:
             raise UserError("--responses sim needs an observer: section in the protocol", "protocol")
         return make_observer(params, seed=seed, participant=participant)
+    if name == "none":
+        if plan.response.timeout_s is None:
+            raise UserError("--responses none: nobody answers, and the protocol's response phase has no timeout_s, "
+                            "so the session would wait forever; add timeout_s to it or use --responses sim",
+                            "--responses")
+        from psyop.session.responses.none import NoResponses
+
+        return NoResponses()
     if name == "serial":
         from psyop.session.responses.serial_box import SerialResponseBox
 
@@ -140,7 +157,7 @@ def _make_responses(spec: str, plan: SessionPlan, seed: int, participant: str, c
         from psyop.session.responses.keyboard import KeyboardResponses
 
         return KeyboardResponses(window, kind)
-    raise UserError(f"unknown response source {spec!r}; use sim, keyboard or serial:DEVICE", "--responses")
+    raise UserError(f"unknown response source {spec!r}; use sim, keyboard, serial:DEVICE or none", "--responses")
 
 
 def _make_renderer(mode: str, plan: SessionPlan, scale: float, max_images: int | None) -> tuple[Any, str]:
@@ -223,7 +240,7 @@ def run_session(
         raise UserError(f"unknown display {options.display!r}; use headless or window", "--display")
     responses = _make_responses(options.responses, plan, seed, options.participant, clock, window)
     announce = None
-    if options.responses != "sim":  # a person answers: the experimenter reads the question and prompts
+    if options.responses not in ("sim", "none"):  # a person answers: the experimenter reads the question and prompts
         print(f"psyop run: question for the participant: {plan.response.question}", file=sys.stderr)
 
         def announce(text: str) -> None:

@@ -131,8 +131,8 @@ class SceneRenderer:
             summary = self._summaries[eye]
             if summary is not None:
                 checked += 1
-                # a bare blank is uniform by design
-                ok &= summary.ok(blank_by_design=phase.show == "blank" and not phase.primitives)
+                # a blank may be uniform by design (nothing shown, or only e.g. an aperture's surround)
+                ok &= summary.ok(blank_by_design=phase.show == "blank")
         return FrameCheck(checked > 0, ok and cameras_ok)
 
     def _check(self, eye: str) -> Any:

@@ -31,7 +31,7 @@ def surfaces(draw: Any) -> dict[str, Any]:
     if kind == "white_noise":
         return {"kind": "white_noise", "grain_deg": draw(st.sampled_from([0.05, 0.1, 0.5])), "seed": draw(st.integers(0, 3))}
     if kind == "one_over_f":
-        return {"kind": "one_over_f", "exponent": draw(st.sampled_from([0.5, 1.0, 2.0])), "contrast": 0.8}
+        return {"kind": "one_over_f", "exponent": 1, "contrast": 0.8}  # only 1/f is rendered
     return {"kind": "image", "path": TEXTURE, **draw(st.sampled_from([{}, {"tile_deg": 2.0}]))}
 
 
@@ -106,6 +106,9 @@ def designs(draw: Any, kind: str) -> tuple[dict[str, Any], dict[str, Any], dict[
         level = draw(levels([0.0, 0.5, 1.0][: draw(st.integers(2, 3))]))
         if "back_D" in factors and draw(st.booleans()):
             level = {"depends_on": "back_D", "levels_by": {b: [0.0, 0.25 * (1 + i)] for i, b in enumerate(back)}}
+        adaptive = draw(st.sampled_from([None, None, "staircase", "quest_plus"]))
+        if adaptive is not None:  # the level chosen while the session runs (psyop.adaptive)
+            level = {"adaptive": {"procedure": adaptive, "start": 0.5, "min": 0, "max": 1.5}}
         factors["level_D"] = level
         depth_factors.append("level_D")
         test: dict[str, Any] = {"mode": draw(st.sampled_from(MODES))}
@@ -252,7 +255,7 @@ def protocols(draw: Any) -> tuple[str, str | None]:
     elif mistake == "unknown_show":
         doc["trial"]["phases"].insert(0, {"kind": "blank", "duration_s": 0.1, "show": ["nope"]})
     elif mistake == "adaptive":
-        doc["design"]["factors"]["extra_D"] = {"adaptive": {"procedure": "staircase", "start": 1, "min": 0, "max": 2}}
+        doc["design"]["factors"]["extra_D"] = {"adaptive": {"procedure": "bisection", "start": 1, "min": 0, "max": 2}}
     elif mistake == "depth_101":
         doc["scene"].append({"id": "far", "kind": "disc", "size_deg": 1, "depth": {"D": 101},
                              "surface": {"kind": "solid", "rgb": [1, 1, 1]}})

@@ -31,12 +31,18 @@ N_EXAMPLES = int(__import__("os").environ.get("PSYOP_GENERATED_EXAMPLES", "200")
 
 
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def workdir(tmp_path_factory: pytest.TempPathFactory):
+    """A folder for the generated protocols and their data; in memory (/dev/shm) where there is
+    one, since every session fsyncs its metadata a few times."""
+    import tempfile
+
     import matplotlib.image as mpimg
 
-    root = tmp_path_factory.mktemp("generated")
+    shm = Path("/dev/shm")
+    root = Path(tempfile.mkdtemp(prefix="psyop-generated-", dir=shm)) if shm.is_dir() else tmp_path_factory.mktemp("generated")
     mpimg.imsave(root / TEXTURE, np.random.default_rng(0).uniform(size=(8, 8, 3)))
-    return root
+    yield root
+    shutil.rmtree(root, ignore_errors=True)
 
 
 def analyse(kind: str, trials: pd.DataFrame, protocol) -> pd.DataFrame | dict:
@@ -74,7 +80,8 @@ def test_a_generated_protocol_runs_end_to_end_or_is_refused_with_its_location(wo
         assert re.match(rf"^{re.escape(str(path))}:\d+:\d+$", error.location or ""), (error.location, str(error))
         return
     assert mistake is None, f"a protocol with mistake {mistake!r} validated:\n{text}"
-    event(f"ran: {protocol.response.kind}")
+    adaptive = [f.adaptive.procedure for f in protocol.design.factors.values() if f.adaptive is not None]
+    event(f"ran: {protocol.response.kind}" + (f" (adaptive {adaptive[0]})" if adaptive else ""))
     plan = compile_plan(protocol)
     assert plan.response.protocol_kind == protocol.response.kind
     root = workdir / "data"
@@ -88,3 +95,47 @@ def test_a_generated_protocol_runs_end_to_end_or_is_refused_with_its_location(wo
     assert dataset.simulated and len(dataset.trials) == len(compile_schedule(protocol, 1)) - protocol.design.practice_trials
     result = analyse(protocol.response.kind, dataset.trials, protocol)
     assert len(result) > 0
+
+
+N_RENDERED = int(__import__("os").environ.get("PSYOP_GENERATED_RENDERED", "20"))
+
+
+@pytest.fixture(scope="module")
+def gl_context():
+    from psyop.rendering.renderer import create_headless_context
+
+    try:
+        context = create_headless_context()
+    except Exception as exc:  # noqa: BLE001 - no OpenGL here
+        pytest.skip(f"no OpenGL context: {exc}")
+    yield context
+    context.release()
+
+
+@settings(max_examples=N_RENDERED, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.large_base_example,
+                                 HealthCheck.function_scoped_fixture])
+@given(generated=protocols())
+def test_every_phase_of_a_generated_protocol_renders_for_a_watching_participant(workdir: Path, gl_context,
+                                                                              generated) -> None:
+    """What a watching participant sees: each phase of the first trial, each eye, drawn from the plan
+    (small images; finite, and not empty where the phase shows a stimulus)."""
+    from psyop.session.scene_renderer import SceneRenderer
+
+    text, _ = generated
+    path = workdir / "rendered.yaml"
+    path.write_text(text)
+    try:
+        protocol = load_protocol(path)
+    except UserError:
+        return
+    plan = compile_plan(protocol)
+    row = compile_schedule(protocol, 1).iloc[-1].to_dict()
+    renderer = SceneRenderer(plan, scale=0.25, ctx=gl_context, owns_ctx=False)
+    try:
+        for phase in (*plan.phases, plan.response.phase):
+            check = renderer.render(row, phase, plan.mode_for(phase, row), 0.05, (0.0, 0.0, -1.0))
+            assert check.ok or not check.checked, (phase, text)
+            assert check.checked == phase.renders, phase
+    finally:
+        renderer.close()

@@ -265,3 +265,30 @@ def test_pink_noise_exponent_other_than_one_is_refused(tmp_path: Path) -> None:
     path = _variant(tmp_path, "ordinal", ("left: {kind: one_over_f, exponent: 1,", "left: {kind: one_over_f, exponent: 2,"))
     with pytest.raises(UserError, match="only 1/f"):
         load_protocol(path)
+
+
+def test_timed_out_trials_end_to_end(tmp_path: Path) -> None:
+    """--responses none: every response phase runs to timeout_s; the log says so and the loader
+    leaves those trials out of the analysis, counted."""
+    from psyop.statistics.dataset import load_dataset
+
+    path = _variant(tmp_path, "ordinal", ("      expected_s: 1.5                   # assumed",
+                                          "      expected_s: 1.5\n      timeout_s: 2"))
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    with pytest.raises(UserError, match="timeout_s"):  # nobody answers and nothing ends the wait
+        _run(small_protocol(plain, "ordinal"), tmp_path / "refused", responses="none")
+    assert _run(path, tmp_path / "data", responses="none").status == "complete"
+    trials = pd.read_parquet(tmp_path / "data" / "ordinal" / "sub-P1" / "ses-1" / "trials.parquet")
+    assert (trials["response"] == TIMEOUT_RESPONSE).all() and trials["correct"].isna().all()
+    assert np.allclose(trials["trial_end_s"] - trials["trial_start_s"],
+                       sum(p.duration_s for p in compile_plan(load_protocol(path)).phases) + 2.0)
+    loaded = load_dataset(tmp_path / "data", "ordinal")
+    assert len(loaded.trials) == 0 and loaded.trials.attrs["n_timeout_dropped"] == len(trials)
+    assert len(load_dataset(tmp_path / "data", "ordinal", include_timeouts=True).trials) == len(trials)
+
+
+def test_a_tracker_ipd_outside_the_range_is_a_user_error() -> None:
+    protocol = load_protocol(PROTOCOLS / "ordinal.yaml")
+    with pytest.raises(UserError, match="ipd of 0.12"):
+        compile_plan(protocol, tracker_ipd_m=0.12)
