@@ -12,7 +12,10 @@ import re
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
+
+from psyop.protocol.trial import MIN_VALID_GAZE_SHARE
 
 # ---- layout: data/<study>/sub-<ID>/ses-<N>/ (Psych-DS spirit) -------------------------------------
 DATASET_DESCRIPTION_FILE = "dataset_description.json"
@@ -73,6 +76,24 @@ def drop_timeouts(trials: pd.DataFrame) -> pd.DataFrame:
     out.attrs.update(trials.attrs)
     out.attrs["n_timeout_dropped"] = int(timed_out.sum())
     return out
+
+
+#: Per trial: the share of rendered frames with valid gaze, and whether it reached the
+#: protocol's ``trial.min_valid_gaze_share`` (null: no frame of the trial measured gaze).
+GAZE_VALID_FRACTION = "gaze_valid_fraction"
+GAZE_OK = "gaze_ok"
+
+
+def low_gaze_mask(trials: pd.DataFrame, legacy_threshold: float = MIN_VALID_GAZE_SHARE) -> pd.Series:
+    """True for the trials marked low-gaze: ``gaze_ok`` false. Rows without a ``gaze_ok``
+    value (sessions logged before the column existed) are judged by ``gaze_valid_fraction <
+    legacy_threshold`` (the default threshold); rows with neither are not marked."""
+    ok = trials[GAZE_OK] if GAZE_OK in trials else pd.Series(pd.NA, index=trials.index, dtype="object")
+    marked = ok.map(lambda value: not pd.isna(value) and not bool(value))
+    share = pd.to_numeric(trials[GAZE_VALID_FRACTION], errors="coerce") if GAZE_VALID_FRACTION in trials \
+        else pd.Series(np.nan, index=trials.index)
+    legacy = ok.isna() & (share < legacy_threshold)
+    return (marked.astype(bool) | legacy).rename(None)
 
 
 # ---- dataset_description.json -------------------------------------------------------------------------

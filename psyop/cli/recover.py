@@ -69,7 +69,8 @@ def describe_integrity(report: dict) -> list[str]:  # type: ignore[type-arg]
     low = report.get("low_gaze_trials") or []
     if low:
         lines.append(f"warning: {len(low)} trials had less than {report.get('min_valid_gaze_share', 0.5):.0%} valid "
-                     f"gaze (tracker lost the eye or its clock): {low[:20]}{' ...' if len(low) > 20 else ''}")
+                     f"gaze (tracker lost the eye or its clock): {low[:20]}{' ...' if len(low) > 20 else ''}; "
+                     "marked gaze_ok false in trials.parquet, kept and counted by the analysis")
     for segment in report.get("torn_segments") or []:
         lines.append(f"{segment}: torn tail (the run was killed mid-record; that trial was not recorded)")
     return lines

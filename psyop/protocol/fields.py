@@ -78,7 +78,7 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                    eye_height_m="stimulus"),
     "ReachTarget": _scene(object="stimulus", size_m="stimulus", distance_fraction="stimulus", height_m="stimulus"),
     "FactorRef": {"factor": "stimulus"},
-    "TrialSpec": {"phases": "plan"},
+    "TrialSpec": {"phases": "plan", "min_valid_gaze_share": "plan"},
     "DriftRecalibration": {"kind": "validation", "target_size_deg": "plan", "expected_s": "plan"},
     "Interval": {"kind": "validation", "duration_s": "plan", "min_duration_s": "plan", "expected_s": "plan",
                  "show": "plan"},

@@ -78,10 +78,19 @@ class ResponsePhase(StrictModel):
 Phase = Annotated[Union[DriftRecalibration, Interval, Blank, ResponsePhase], Field(discriminator="kind")]
 
 
+#: default of ``trial.min_valid_gaze_share``
+MIN_VALID_GAZE_SHARE = 0.5
+
+
 class TrialSpec(StrictModel):
-    """The phases of every trial, in order."""
+    """The phases of every trial, in order. ``min_valid_gaze_share``: a trial whose rendered
+    frames had a smaller share of valid gaze is marked (trials.parquet ``gaze_ok`` false),
+    counted and warned about (docs/protocols.md, "Gaze quality")."""
 
     phases: list[Phase] = Field(min_length=1)
+    min_valid_gaze_share: Number = Field(
+        default=MIN_VALID_GAZE_SHARE, ge=0, le=1,
+        description="trials with a smaller share of frames with valid gaze are marked gaze_ok: false")
 
     @property
     def intervals(self) -> list[Interval]:

@@ -72,6 +72,13 @@ class LoopConfig:
     phase_delay_s: float = 0.0  # real sleep per phase; only for crash-safety tests
     progress: bool = True
     hand_last_n: int = 10  # reach = mean of the last N hand samples (protocol response.average_last_samples)
+    min_valid_gaze_share: float = 0.5  # protocol trial.min_valid_gaze_share: below it gaze_ok is False
+
+
+def gaze_ok(valid: int, total: int, min_share: float) -> bool | None:
+    """Whether a trial's share of frames with valid gaze reached ``min_share`` (None: no frame
+    of the trial measured gaze, e.g. an unsampled trial on the virtual clock)."""
+    return None if total == 0 else valid / total >= min_share
 
 
 @dataclass
@@ -216,6 +223,7 @@ class TrialLoop:
             chosen_mode=response.chosen_mode, trial_start_s=start_s, trial_end_s=end,
             response_time_s=response.response_time_s, drift_correction_deg=drift_deg,
             gaze_valid_fraction=(valid / total) if total else None, n_frames=len(frames),
+            gaze_ok=gaze_ok(valid, total, self.config.min_valid_gaze_share),
             run=self.store.run_index,
         )
         record.update(dict(response.extras))

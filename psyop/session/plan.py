@@ -100,6 +100,8 @@ class SessionPlan:
     rig: EyeRig
     fixation: FixationPath | None
     adaptive: AdaptivePlan | None = None  # the adaptive level factor's procedure (psyop.adaptive.session)
+    #: protocol ``trial.min_valid_gaze_share``: a trial below it is logged with ``gaze_ok`` false
+    min_valid_gaze_share: float = 0.5
 
     @property
     def kind(self) -> ResponseKind:
@@ -137,6 +139,7 @@ class SessionPlan:
             "fixation_path": None if self.fixation is None else dict(self.fixation.__dict__),
             "adaptive": None if self.adaptive is None else {"factor": self.adaptive.factor,
                                                             "procedure": type(self.adaptive.spec).__name__},
+            "min_valid_gaze_share": self.min_valid_gaze_share,
         }
 
 
@@ -218,4 +221,5 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
     )
     return SessionPlan(study=protocol.study.name, protocol=protocol, phases=phases, response=response,
                        observer=protocol.observer, display=resolve_display_profile(spec), rig=rig, fixation=path,
-                       adaptive=adaptive_plan(protocol))
+                       adaptive=adaptive_plan(protocol),
+                       min_valid_gaze_share=float(protocol.trial.min_valid_gaze_share))

@@ -281,6 +281,7 @@ def run_session(
             phase_delay_s=options.phase_delay_s,
             progress=options.progress,
             hand_last_n=plan.response.average_last_samples,
+            min_valid_gaze_share=plan.min_valid_gaze_share,
         )
         loop = TrialLoop(
             identity={"study": study, "participant": options.participant, "session": options.session},

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -10,6 +11,10 @@ import pandas as pd
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
+
+
+class LowGazeWarning(UserWarning):
+    """The loaded trials include trials marked low-gaze (trials.parquet ``gaze_ok`` false)."""
 
 
 @dataclass(frozen=True)
@@ -55,13 +60,17 @@ def load_trials(data_root: Path, study: str, include_practice: bool = False) -> 
 
 
 def load_dataset(data_root: Path, study: str, include_practice: bool = False,
-                 include_timeouts: bool = False) -> Dataset:
+                 include_timeouts: bool = False, drop_low_gaze: bool = False) -> Dataset:
     """Like :func:`load_trials` but returns a :class:`Dataset` with the simulated flag.
 
     Practice trials (a true ``practice`` column) are left out unless ``include_practice``;
     how many were left out is in ``trials.attrs["n_practice_dropped"]``. Timed-out trials
     (response ``timeout``, psyop.datacontract) are left out unless ``include_timeouts``;
-    how many in ``trials.attrs["n_timeout_dropped"]``.
+    how many in ``trials.attrs["n_timeout_dropped"]``. Low-gaze trials (``gaze_ok`` false:
+    less valid gaze than the protocol's ``trial.min_valid_gaze_share``; see
+    :func:`psyop.datacontract.low_gaze_mask`) are kept and counted in
+    ``trials.attrs["n_low_gaze"]``, with a :class:`LowGazeWarning` naming the count;
+    ``drop_low_gaze`` leaves them out (``trials.attrs["n_low_gaze_dropped"]``).
     """
     files = session_files(data_root, study)
     if not files:
@@ -84,7 +93,18 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
     if not include_timeouts:
         trials = dc.drop_timeouts(trials)
         n_timeout = trials.attrs["n_timeout_dropped"]
+    low = dc.low_gaze_mask(trials)
+    n_low = int(low.sum())
+    if n_low:
+        what = "left out (drop_low_gaze)" if drop_low_gaze else "kept in the analysis (drop_low_gaze=True leaves them out)"
+        warnings.warn(LowGazeWarning(
+            f"{study}: {n_low} of {len(trials)} trials had less valid gaze than the protocol's "
+            f"trial.min_valid_gaze_share (gaze_ok false); {what}"), stacklevel=2)
+    if drop_low_gaze:
+        trials = trials[~low].reset_index(drop=True)
     simulated = is_simulated(data_root)
+    trials.attrs["n_low_gaze"] = n_low
+    trials.attrs["n_low_gaze_dropped"] = n_low if drop_low_gaze else 0
     trials.attrs["n_timeout_dropped"] = n_timeout
     trials.attrs["n_practice_dropped"] = n_practice
     trials.attrs["simulated"] = simulated

@@ -19,6 +19,8 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
     pa.field("response_time_s", pa.float64()),
     pa.field("drift_correction_deg", pa.float64()),
     pa.field("gaze_valid_fraction", pa.float64()),
+    # gaze_valid_fraction >= the protocol's trial.min_valid_gaze_share (null: no frame measured gaze)
+    pa.field("gaze_ok", pa.bool_()),
     pa.field("n_frames", pa.int64()),
     pa.field("run", pa.int64()),
     # egocentric (reach) trials: the participant's arm reach, the target distance and the
@@ -42,7 +44,7 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
 #: everything else in trials.parquet is a pure function of (protocol, seed, participant).
 TIMING_COLUMNS: tuple[str, ...] = (
     "trial_start_s", "trial_end_s", "response_time_s", "n_frames", "run", "gaze_valid_fraction",
-    "hand_sample_t_s",
+    "gaze_ok", "hand_sample_t_s",
 )
 
 def pose_fields(prefix: str) -> list[pa.Field]:

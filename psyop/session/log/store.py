@@ -15,6 +15,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from psyop.datacontract import MIN_VALID_GAZE_SHARE, low_gaze_mask
 from psyop.errors import UserError
 from psyop.session.lock import SessionLock
 from psyop.session.log.layout import SessionPaths, exclusive_temp, stale_temp_files, write_json_atomic
@@ -305,17 +306,13 @@ def recover_tables(paths: SessionPaths) -> tuple[pd.DataFrame | None, pd.DataFra
     return found.trials, found.frames
 
 
-#: a trial whose frames had a smaller share of valid gaze is listed in session.json's
-#: ``integrity.low_gaze_trials`` and warned about (the tracker lost the eye, or its clock)
-MIN_VALID_GAZE_SHARE = 0.5
-
-
 def low_gaze_report(trials: pd.DataFrame, threshold: float = MIN_VALID_GAZE_SHARE) -> dict[str, Any]:
-    """Trials whose ``gaze_valid_fraction`` is below ``threshold`` (NaN: no frames, not listed)."""
-    if "gaze_valid_fraction" not in trials or not len(trials):
+    """Trials marked low-gaze (``gaze_ok`` false; older logs: ``gaze_valid_fraction`` below
+    ``threshold``), as session.json's ``integrity`` records them. ``threshold``: the protocol's
+    ``trial.min_valid_gaze_share`` (recorded in session.json)."""
+    if not len(trials):
         return {"low_gaze_trials": [], "min_valid_gaze_share": threshold}
-    share = pd.to_numeric(trials["gaze_valid_fraction"], errors="coerce")
-    low = trials.loc[share < threshold, "trial"]
+    low = trials.loc[low_gaze_mask(trials, threshold), "trial"]
     return {"low_gaze_trials": [int(t) for t in low.tolist()], "min_valid_gaze_share": threshold}
 
 
@@ -370,7 +367,8 @@ def _finalise_locked(
         meta["status"] = status
         meta["n_trials_recorded"] = int(len(trials))
         meta["finalised"] = _now()
-        meta["integrity"] = {**found.report, **low_gaze_report(trials)}
+        threshold = float(meta.get("min_valid_gaze_share", MIN_VALID_GAZE_SHARE))
+        meta["integrity"] = {**found.report, **low_gaze_report(trials, threshold)}
         if summary:
             meta["summary"] = dict(summary)
         write_json_atomic(paths.metadata, meta)
