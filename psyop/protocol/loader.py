@@ -3,13 +3,12 @@ where (file:line:column), which key, and what to do."""
 
 from __future__ import annotations
 
-import os
-import stat
 from pathlib import Path
 
 from pydantic import ValidationError
 
 from psyop.errors import UserError
+from psyop.input_files import InputFile
 from psyop.protocol.messages import format_validation_error
 from psyop.protocol.model import Protocol
 from psyop.protocol.semantics import check_protocol
@@ -50,39 +49,16 @@ def parse_protocol(text: str, source_name: str = "<protocol>", base_dir: Path | 
 #: the largest protocol file read (real ones are a few kB); bounds memory for any input
 MAX_PROTOCOL_BYTES = 1 << 20
 
+PROTOCOL_FILE = InputFile(
+    what="the protocol file", give="give a protocol .yaml file", max_bytes=MAX_PROTOCOL_BYTES,
+    typical="a protocol is a few kB of YAML",
+    not_found="protocol file not found: {path}; check the path (protocols live in protocols/)")
+
 
 def read_protocol_bytes(path: Path) -> bytes:
-    """The file's bytes: a regular file of at most :data:`MAX_PROTOCOL_BYTES`, else a UserError.
-
-    A FIFO would block forever and a device (``/dev/zero``) never ends: both are refused
-    from ``stat`` before they are opened.
-    """
-    try:
-        info = os.stat(path)
-    except FileNotFoundError:
-        raise UserError(f"protocol file not found: {path}; check the path (protocols live in protocols/)") from None
-    except OSError as error:
-        raise UserError(f"cannot read {path}: {error.strerror}") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise UserError(f"{path} is a folder; give a protocol .yaml file")
-    if not stat.S_ISREG(info.st_mode):
-        kind = "a FIFO (named pipe)" if stat.S_ISFIFO(info.st_mode) else \
-            "a device" if stat.S_ISCHR(info.st_mode) or stat.S_ISBLK(info.st_mode) else "not a regular file"
-        raise UserError(f"{path} is {kind}; give a protocol .yaml file", str(path))
-    if info.st_size > MAX_PROTOCOL_BYTES:
-        raise UserError(f"the protocol file is {info.st_size} bytes, over the {MAX_PROTOCOL_BYTES} byte limit; "
-                        "a protocol is a few kB of YAML", str(path))
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
-        with os.fdopen(fd, "rb") as handle:
-            if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):  # swapped after the stat
-                raise UserError(f"{path} is not a regular file; give a protocol .yaml file", str(path))
-            raw = handle.read(MAX_PROTOCOL_BYTES + 1)
-    except OSError as error:
-        raise UserError(f"cannot read {path}: {error.strerror}") from None
-    if len(raw) > MAX_PROTOCOL_BYTES:
-        raise UserError(f"the protocol file is over the {MAX_PROTOCOL_BYTES} byte limit", str(path))
-    return raw
+    """The file's bytes: a regular file of at most :data:`MAX_PROTOCOL_BYTES`, else a UserError
+    (a FIFO or a device is refused from ``stat`` before it is opened: psyop.input_files)."""
+    return PROTOCOL_FILE.read_bytes(path)
 
 
 def load_protocol(path: str | Path) -> Protocol:

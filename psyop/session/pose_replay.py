@@ -16,7 +16,6 @@ pairs each trial with the next unused logged trial of the same condition instead
 from __future__ import annotations
 
 import bisect
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from psyop.errors import UserError
+from psyop.input_files import read_logged_table, read_session_json
 from psyop.session.pose import IDENTITY_WXYZ, PoseSample
 
 HEAD_COLUMNS = ("head_sample_t_s", "head_x_m", "head_y_m", "head_z_m", "head_qw", "head_qx", "head_qy", "head_qz", "head_valid")
@@ -129,16 +129,14 @@ class ReplayPose:
         if not path.is_dir():
             raise UserError("pose replay: no such session directory; give data/<study>/sub-<ID>/ses-<N> of a "
                             "finished session (frames.parquet)", str(path))
-        if not frames_path.is_file():
+        if not frames_path.exists():
             raise UserError("pose replay: expected a session directory with frames.parquet (run `psyop recover` "
                             "on a crashed session first)", str(path))
-        try:
-            frames = pd.read_parquet(frames_path)
-            trials = pd.read_parquet(trials_path) if trials_path.is_file() else None
-            meta_path = path / "session.json"
-            meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-        except Exception as exc:  # noqa: BLE001 - an unreadable log is the user's input
-            raise UserError(f"pose replay: cannot read the session's logs: {exc}", str(path)) from exc
+        context = "--pose replay"
+        frames = read_logged_table(frames_path, context)
+        trials = read_logged_table(trials_path, context) if trials_path.exists() else None
+        meta_path = path / "session.json"
+        meta = read_session_json(meta_path, context) if meta_path.exists() else {}
         pairs = None
         if target is not None and trials is not None:
             pairs = pair_trials(meta, trials, target, by_condition, str(path))

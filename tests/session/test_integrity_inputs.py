@@ -211,3 +211,40 @@ def test_resume_with_another_clock_is_refused(protocol: Path, tmp_path: Path, ca
     _fails_cleanly(capsys, _run(protocol, data, "--clock", "real"), "clock differs", "'virtual' there, 'real' now")
     runs = json.loads(paths.metadata.read_text())["runs"]
     assert runs[0]["clock"] == "virtual" and runs[0]["tracker"] == "sim" and runs[0]["responses"] == "sim"
+
+
+@pytest.mark.parametrize("spec", ["--tracker=replay:{dir}/frames.parquet", "--tracker=replay:{dir}",
+                                  "--pose=replay:{dir}", "--pose=replay-by-condition:{dir}"])
+@pytest.mark.parametrize("bad", ["fifo", "oversize", "not_parquet"])
+def test_replay_inputs_are_bounded_and_regular(protocol: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                               spec: str, bad: str) -> None:
+    """A FIFO as frames.parquet blocked forever; a huge or non-parquet file gave a traceback."""
+    from psyop.input_files import MAX_LOG_TABLE_BYTES
+
+    source = tmp_path / "source"
+    source.mkdir()
+    frames = source / "frames.parquet"
+    if bad == "fifo":
+        os.mkfifo(frames)
+        expected = "is a FIFO (named pipe)"
+    elif bad == "oversize":
+        with frames.open("wb") as handle:
+            handle.truncate(MAX_LOG_TABLE_BYTES + 1)  # sparse: no disk used
+        expected = f"over the {MAX_LOG_TABLE_BYTES} byte limit"
+    else:
+        frames.write_text("gaze,x\n1,2\n")
+        expected = "not a parquet table"
+    data = tmp_path / "data"
+    _fails_cleanly(capsys, ["run", str(protocol), "--participant", "R1", "--data", str(data), "--no-progress",
+                            spec.format(dir=source)], expected, str(frames))
+    assert not list(data.rglob("trials-*"))  # nothing recorded
+
+
+def test_replayed_session_json_must_be_a_regular_file(protocol: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    source = tmp_path / "source"
+    source.mkdir()
+    pd.DataFrame({"trial": [0]}).to_parquet(source / "frames.parquet")
+    os.mkfifo(source / "session.json")
+    _fails_cleanly(capsys, ["run", str(protocol), "--participant", "R1", "--data", str(tmp_path / "data"),
+                            "--no-progress", f"--pose=replay:{source}"], "session.json is a FIFO")

@@ -9,6 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from psyop.errors import UserError
+from psyop.input_files import read_logged_table
 from psyop.session.gaze.sample import GazeSample
 
 
@@ -40,7 +41,7 @@ class ReplayTracker:
             path = path / "frames.parquet"
         if not path.exists():
             raise UserError("replay: no frames.parquet here (run `psyop recover` on a crashed session first)", str(path))
-        return cls(pd.read_parquet(path))
+        return cls(read_logged_table(path, "--tracker replay"))
 
     def start(self) -> None:
         return None
