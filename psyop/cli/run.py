@@ -24,7 +24,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="head/hand pose: sim (simulated from the seed) | replay:SESSION_DIR (a logged session with "
                         "the same schedule: protocol, seed, conditions) | replay-by-condition:SESSION_DIR (each trial "
                         "replays a logged trial of the same condition)")
-    parser.add_argument("--responses", default="sim", help="sim | keyboard | serial:DEVICE")
+    parser.add_argument("--responses", default="sim",
+                        help="who answers: sim (the protocol's simulated observer) | keyboard (needs --display window) "
+                        "| serial:DEVICE (a response box) | none (nobody: every response phase runs to the protocol's "
+                        "timeout_s and is logged as a timeout; a dry run of the timing, needs timeout_s)")
     parser.add_argument("--display", default="headless", choices=["headless", "window"])
     parser.add_argument("--clock", default="virtual", choices=["virtual", "real"])
     parser.add_argument("--window-scale", type=float, default=0.25, metavar="S",
