@@ -37,6 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--render", default="auto", choices=["auto", "images", "cameras"],
                         help="images: ray-cast the stimulus; cameras: eye cameras only; auto: images if OpenGL works")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--allow-protocol-change", action="store_true",
+                        help="resume a session with a protocol file whose comments or layout were edited (another "
+                        "SHA-256, the same validated values); any change to a value is still refused")
     # testing aids (crash-safety tests): hidden from --help
     parser.add_argument("--phase-delay-s", type=float, default=0.0, help=argparse.SUPPRESS)
     parser.add_argument("--sim-nan-burst-rate-hz", type=float, default=0.0, help=argparse.SUPPRESS)
@@ -57,7 +60,7 @@ def main(args: argparse.Namespace) -> int:
         participant=args.participant, session=args.session, seed=args.seed, tracker=args.tracker,
         responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
         window_scale=args.window_scale,
-        progress=not args.no_progress, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
+        progress=not args.no_progress, allow_protocol_change=args.allow_protocol_change, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),
     )

@@ -15,11 +15,19 @@ Resuming with another protocol, seed or clock is refused by the store
 (:class:`psyop.session.log.store.SessionStore`), which compares them with session.json
 or, without it, with the identity written into the log. Each run's clock, tracker,
 responses and display are recorded in session.json's ``runs``.
+
+- :func:`accept_protocol_change` is the one documented override (``psyop run
+  --allow-protocol-change``): a protocol file edited only in its comments or layout (another
+  SHA-256, the same validated protocol, hence the same schedule, plan and scene) may resume
+  the session; any change to a value is still refused, naming the sections that differ.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from psyop.errors import UserError
+from psyop.protocol.model import Protocol
 from psyop.session.lock import SessionLock
 from psyop.session.log.layout import SessionPaths
 from psyop.session.log.store import log_identity, read_metadata
@@ -76,3 +84,40 @@ def _as_seed(value: object, location: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise UserError(f"the recorded seed {value!r} is not an integer", location)
     return value
+
+
+def accept_protocol_change(paths: SessionPaths, protocol: Protocol) -> str:
+    """The protocol hash the session keeps when ``protocol`` resumes it under
+    ``--allow-protocol-change`` (see the module docstring).
+
+    No existing session, or the same file: ``protocol``'s own hash. Otherwise the recorded
+    protocol text (session.json ``protocol_text``) is validated again and must equal
+    ``protocol`` field by field; then the session keeps its recorded hash (each run records its
+    file's hash in ``runs``). Anything else is a UserError naming the difference.
+    """
+    from psyop.protocol.loader import parse_protocol
+
+    meta = read_metadata(paths)
+    if meta is None:
+        if paths.segments("trials"):
+            raise UserError("--allow-protocol-change needs session.json's copy of the protocol to compare with; "
+                            "it is lost, so only the identical protocol file can resume this session",
+                            str(paths.directory))
+        return protocol.source_sha256
+    recorded_sha = meta.get("protocol_sha256")
+    if recorded_sha == protocol.source_sha256:
+        return protocol.source_sha256
+    text = meta.get("protocol_text")
+    if not isinstance(text, str) or not text:
+        raise UserError("--allow-protocol-change: session.json holds no protocol_text to compare with",
+                        str(paths.metadata))
+    base_dir = Path(protocol.source_name).parent if protocol.source_name else None
+    recorded = parse_protocol(text, f"{paths.metadata} (protocol_text)", base_dir=base_dir)
+    before, now = recorded.model_dump(mode="json"), protocol.model_dump(mode="json")
+    changed = [key for key in sorted(set(before) | set(now)) if before.get(key) != now.get(key)]
+    if changed:
+        raise UserError(
+            f"cannot resume: the protocol's values changed, not only its comments (sections {changed} differ "
+            "from the session's protocol); --allow-protocol-change only accepts edits to comments and layout: "
+            "undo the change, or use another --session", str(paths.metadata))
+    return str(recorded_sha)

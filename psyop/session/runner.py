@@ -29,7 +29,7 @@ from psyop.adaptive.session import AdaptiveLevels, add_log_columns
 from psyop.session.log.store import SessionStore, recover_tables
 from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
-from psyop.session.resume import check_options, resolve_seed
+from psyop.session.resume import accept_protocol_change, check_options, resolve_seed
 from psyop.session.responses.simulated import make_observer
 
 __all__ = ["DEFAULT_IPD_M", "SessionOptions", "print_outcome", "run_session"]
@@ -58,6 +58,7 @@ class SessionOptions:
     check_scale: float = 0.25  # resolution of the sampled check frames of headless simulated sessions
     check_images: int = 2  # images rendered and checked per headless simulated session
     window_scale: float = 0.25  # window size as a fraction of the display profile's pixels
+    allow_protocol_change: bool = False  # resume with a protocol edited only in comments (resume.py)
     pose: str = "sim"  # sim | replay:SESSION_DIR (head and hand pose; docs/sessions.md)
 
     @property
@@ -201,6 +202,8 @@ def run_session(
     paths = session_paths(options.data_root, study, options.participant, options.session)
     check_options(clock=options.clock, responses=options.responses, tracker=options.tracker)
     seed = resolve_seed(paths, options.seed, seed_for(study, options.participant, options.session))
+    protocol_sha256 = accept_protocol_change(paths, protocol) if options.allow_protocol_change \
+        else protocol.source_sha256
     schedule = compile_schedule(protocol, seed)
     if plan.adaptive is not None:  # the adaptive level and the procedure's state are logged per trial
         schedule = add_log_columns(schedule, plan.adaptive)
@@ -216,7 +219,8 @@ def run_session(
     store = SessionStore(paths, trial_schema(schedule), fsync=options.fsync)
     metadata = {
         "study": study, "participant": options.participant, "session": options.session, "seed": seed,
-        "simulated": options.simulated, "protocol_sha256": protocol.source_sha256,
+        "simulated": options.simulated, "protocol_sha256": protocol_sha256,
+        "protocol_file_sha256": protocol.source_sha256,
         "protocol_text": protocol.source_text, "protocol_file": protocol.source_name,
         "n_trials_scheduled": int(len(schedule)), **plan.metadata(), "packages": package_versions(),
         "python": platform.python_version(), "host": platform.node(),

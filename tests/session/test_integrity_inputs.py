@@ -248,3 +248,65 @@ def test_replayed_session_json_must_be_a_regular_file(protocol: Path, tmp_path: 
     os.mkfifo(source / "session.json")
     _fails_cleanly(capsys, ["run", str(protocol), "--participant", "R1", "--data", str(tmp_path / "data"),
                             "--no-progress", f"--pose=replay:{source}"], "session.json is a FIFO")
+
+
+def _interrupted_session(protocol: Path, data: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from psyop.session.log import store
+
+    original = store.SessionStore.append_trial
+
+    def stop_after_three(self, row, frames):  # type: ignore[no-untyped-def]
+        if int(row["trial"]) >= 3:
+            raise KeyboardInterrupt
+        original(self, row, frames)
+
+    monkeypatch.setattr(store.SessionStore, "append_trial", stop_after_three)
+    assert cli_main(_run(protocol, data)) == 130
+    monkeypatch.setattr(store.SessionStore, "append_trial", original)
+
+
+def test_resume_with_a_protocol_edited_only_in_comments_needs_the_flag(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """--allow-protocol-change: comments may change (another hash); the session keeps its hash
+    and trials, each run records its file's hash, and the result equals an uninterrupted run."""
+    original = small_protocol(tmp_path, "detection")
+    data = tmp_path / "data"
+    _interrupted_session(original, data, monkeypatch)
+    edited = tmp_path / "edited.yaml"
+    edited.write_text("# fixed a typo in a comment\n" + original.read_text().replace("# assumed", "# an assumption"))
+    capsys.readouterr()
+    _fails_cleanly(capsys, _run(edited, data), "protocol_sha256 differs")
+    assert cli_main([*_run(edited, data), "--allow-protocol-change"]) == 0
+    paths = SessionPaths(data, "detection", "P1", 1)
+    meta = json.loads(paths.metadata.read_text())
+    first_sha = meta["runs"][0]["protocol_file_sha256"]
+    assert meta["status"] == "complete" and meta["protocol_sha256"] == first_sha
+    assert meta["runs"][-1]["protocol_file_sha256"] != first_sha
+    assert cli_main(_run(original, tmp_path / "whole")) == 0
+    whole = pd.read_parquet(SessionPaths(tmp_path / "whole", "detection", "P1", 1).trials_parquet)
+    resumed = pd.read_parquet(paths.trials_parquet)
+    from psyop.session.log.schema import TIMING_COLUMNS
+
+    def stable(trials: pd.DataFrame) -> pd.DataFrame:
+        return trials.drop(columns=[c for c in TIMING_COLUMNS if c in trials]).reset_index(drop=True)
+
+    pd.testing.assert_frame_equal(stable(resumed), stable(whole))
+
+
+@pytest.mark.parametrize("pattern, replacement, section", [
+    (r"(?m)^(\s*duration_s:)\s*2\b", r"\g<1> 3", "trial"),  # same schedule, other stimulus timing
+    (r"(?m)^(\s*repetitions:)\s*\d+", r"\g<1> 2", "design"),  # another schedule
+    (r"(?m)^(\s*title:)\s*.*$", r"\g<1> Another title", "study"),
+])
+def test_allow_protocol_change_still_refuses_changed_values(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        pattern: str, replacement: str, section: str) -> None:
+    original = small_protocol(tmp_path, "detection")
+    data = tmp_path / "data"
+    _interrupted_session(original, data, monkeypatch)
+    text, n = re.subn(pattern, replacement, original.read_text(), count=1)
+    assert n == 1
+    edited = tmp_path / "edited.yaml"
+    edited.write_text(text)
+    capsys.readouterr()
+    _fails_cleanly(capsys, [*_run(edited, data), "--allow-protocol-change"], "values changed", f"'{section}'")

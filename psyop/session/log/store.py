@@ -25,7 +25,7 @@ from psyop.session.log.stream import DurableStreamWriter, is_legacy_ipc, read_se
 #: session.json keys that must match when a session is resumed (also written into the log).
 _IDENTITY_KEYS = ("protocol_sha256", "seed", "study", "participant", "session", "simulated", "clock")
 #: options recorded per run (a resume may change them, e.g. another tracker host).
-_RUN_OPTION_KEYS = ("clock", "tracker", "responses", "display_mode", "pose", "render")
+_RUN_OPTION_KEYS = ("clock", "tracker", "responses", "display_mode", "pose", "render", "protocol_file_sha256")
 
 
 class SessionStore:
