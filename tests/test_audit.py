@@ -227,4 +227,6 @@ def test_a_scene_the_renderer_cannot_take_is_a_located_error(tmp_path, capsys):
     path.write_text(text)
     assert main(["audit", str(path), "--gazes", "1", "--scale", "0.05"]) == 2
     err = capsys.readouterr().err
-    assert "many.yaml" in err and "cannot render condition" in err and "at most 128 primitives" in err
+    # refused at validation now (psyop.limits.MAX_PRIMITIVES), before anything is rendered
+    line = next(i for i, s in enumerate(text.splitlines(), 1) if "count: 200" in s)
+    assert f"many.yaml:{line}:" in err and "204 primitives" in err and "limit of 128" in err

@@ -12,10 +12,12 @@ from dataclasses import dataclass
 from pathlib import Path as FsPath
 from typing import Any
 
+from psyop.limits import MAX_PRIMITIVES
 from psyop.optics.ranges import DEPTH_D
 from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
+from psyop.protocol.primitive_count import primitive_count
 from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, PinkNoiseSurface,
                                   ReachTarget, Room, SinusoidalBorder, TargetField)
@@ -181,6 +183,27 @@ class _Checker:
                     if name not in ids:
                         self.add(("trial", "phases", index, "show", j),
                                  f"no scene primitive has id '{name}'.{_suggest(name, list(ids))} Ids: {', '.join(ids)}")
+
+    def check_primitive_limit(self) -> None:
+        """Each phase's scene (its ``show:`` items) must fit the renderer's MAX_PRIMITIVES; the
+        error points at the item that adds the most primitives (first phase over the limit only)."""
+        for index, phase in enumerate(self.p.trial.phases):
+            if not isinstance(phase, (Interval, Blank)) or getattr(phase, "display_off", False):
+                continue
+            shown = [(i, item) for i, item in enumerate(self.p.scene) if phase.show == "all" or item.id in phase.show]
+            counts = [(primitive_count(item), i, item) for i, item in shown]
+            total = sum(c for c, _, _ in counts)
+            if total <= MAX_PRIMITIVES:
+                continue
+            most, i, item = max(counts, key=lambda t: t[0])
+            where = ("scene", i, "count") if isinstance(item, TargetField) else ("scene", i)
+            fix = (f"lower count to at most {most - (total - MAX_PRIMITIVES)}" if isinstance(item, TargetField)
+                   else "draw fewer scene items")
+            self.add(where, f"phase trial.phases[{index}] ({phase.kind}) draws {total} primitives, more than the "
+                            f"renderer's limit of {MAX_PRIMITIVES} (psyop.limits.MAX_PRIMITIVES); '{item.id}' "
+                            f"({item.kind}) adds {most} of them. Fix: {fix}, or show fewer items in that phase "
+                            "(its show: list)")
+            return
 
     def check_depth_values(self, depth: Depth, path: tuple[Any, ...], conditions: list[dict[str, Any]]) -> None:
         for condition in conditions:
@@ -360,6 +383,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None) -> list[Issue]:
         checker.add(("design", "repetitions"), f"{len(conditions)} conditions x {protocol.design.repetitions} "
                                                "repetitions is over 10 million trials; reduce them")
     checker.check_scene(conditions)
+    checker.check_primitive_limit()
     checker.check_response()
     checker.check_observer()
     return checker.issues

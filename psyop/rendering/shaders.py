@@ -33,9 +33,9 @@ from __future__ import annotations
 
 from enum import Enum
 
+from psyop.limits import MAX_PRIMITIVES  # shared with protocol validation
 from psyop.rendering.scene import COPLANAR_RELATIVE_DEPTH
 
-MAX_PRIMITIVES = 128
 TEXELS_PER_PRIMITIVE = 7
 
 
