@@ -66,9 +66,10 @@ class ResponsePlan:
 
     ``timeout_s`` None: wait for the answer; else a trial without an answer by then is logged
     with response :data:`TIMEOUT_RESPONSE` and ``correct`` null. ``question``: what the study
-    asks (said by the experimenter / printed at the session start); ``prompt``: the response
-    phase's own line (printed on the experimenter's console at each response phase of a live
-    session). Both are recorded in session.json. ``phase``: what the display shows while
+    asks (printed at the session start); ``prompt``: the response phase's own line (printed on the
+    experimenter's console at each response phase of a live session). The participant reads the
+    prompt, else the question, in the headset during the response phase (:attr:`participant_text`).
+    Both are recorded in session.json. ``phase``: what the display shows while
     waiting (blank, or off for blind reaching)."""
 
     kind: ResponseKind
@@ -80,6 +81,14 @@ class ResponsePlan:
     average_last_samples: int = 10
     level_factor: str | None = None  # two_interval: the factor whose level the observer must detect
     phase: PhaseSpec = field(default_factory=lambda: PhaseSpec("response", 0.0, "blank", "none"))
+
+    @property
+    def participant_text(self) -> str | None:
+        """What the participant reads in the headset during the response phase: the ``prompt``, else the
+        ``question``; None when the display is off (docs/protocols.md, "Trial phases")."""
+        if self.display_off or self.phase.show == "off":
+            return None
+        return self.prompt or self.question or None
 
     def as_dict(self) -> dict[str, Any]:
         return {"kind": self.kind.value, "protocol_kind": self.protocol_kind, "question": self.question,

@@ -33,7 +33,8 @@ class SceneRenderer:
 
     Intervals build the trial's scene at the time into the interval. When a person watches
     (``max_images`` None), the recalibration phase shows the central cross (its
-    ``target_size_deg``) and a blank phase its ``show:`` primitives (or the background);
+    ``target_size_deg``), the response phase its text (the prompt, else the question: a head-fixed
+    panel, psyop.stimulus.text_scene) and a blank phase its ``show:`` primitives (or the background);
     headless sampled checks (``max_images`` set) render interval frames only. Other phases
     compute cameras only. Cameras and eye centres come from the plan's eye rig.
     """
@@ -66,6 +67,9 @@ class SceneRenderer:
         from psyop.rendering.textures import ImageFiles
 
         self._images = ImageFiles(self._base_dir)  # image surfaces decoded once per session
+        from psyop.rendering.text import TextImages
+
+        self._texts = TextImages()  # the response phase's text, rasterised once per session
         self.images_rendered = 0
         self.max_images = max_images  # None: every stimulus frame; n: only the first n (sampled checks)
         from psyop.rendering import AntiAliasing, RenderSettings
@@ -77,12 +81,15 @@ class SceneRenderer:
                head_pose: HeadPose | None) -> Any:
         """The scene this eye sees in this phase, or None when nothing is drawn (cameras only)."""
         from psyop.rendering.transform import scene_in_head
-        from psyop.stimulus import blank_scene, build_scene, recalibration_cross_scene
+        from psyop.stimulus import blank_scene, build_scene, recalibration_cross_scene, scene_origin_m, text_scene
 
         centre = self.rig.centre_m(eye)
         watched = self.max_images is None
         if phase.show == "cross":
             return recalibration_cross_scene(centre, arm_deg=phase.target_size_deg) if watched else None
+        text = self.plan.response.participant_text
+        if phase == self.plan.response.phase and text is not None:  # head-fixed, like the cross
+            return text_scene(self._texts.image(text), scene_origin_m(self.protocol, centre)) if watched else None
         if phase.show == "blank" and not phase.primitives:
             return blank_scene() if watched else None
         if phase.show == "blank" and not watched:

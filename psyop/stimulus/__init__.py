@@ -8,9 +8,10 @@ from psyop.stimulus.build import (
     interval_phases,
     recalibration_cross_scene,
     scene_origin_m,
+    text_scene,
 )
 
 __all__ = [
     "INFINITY_M", "blank_scene", "build_scene", "interval_mode", "interval_phases", "recalibration_cross_scene",
-    "scene_origin_m",
+    "scene_origin_m", "text_scene",
 ]

@@ -27,6 +27,7 @@ import numpy as np
 from psyop.errors import UserError
 from psyop.protocol import scene as ps
 from psyop.rendering import builders
+from psyop.rendering.text import TextImage
 from psyop.rendering.textures import ImageFiles
 from psyop.rendering.scene import (
     Aperture,
@@ -292,6 +293,33 @@ def recalibration_cross_scene(
         builders.frontoparallel_rect(distance_m, thickness_deg, arm_deg, ink, origin_m=origin, name="cross_v"),
     )
     return Scene(bars, background=background)
+
+
+#: Where the participant reads the response phase's text (docs/protocols.md, "Trial phases"): straight ahead of
+#: the scene origin at 1 m (1 D, well inside the renderer's range; the response phase draws no stimulus to hide it),
+#: one em of the font subtending 1 deg.
+TEXT_DISTANCE_M = 1.0
+TEXT_LETTER_HEIGHT_DEG = 1.0
+TEXT_PRIMITIVE_NAME = "response_text"
+
+
+def text_scene(
+    text: TextImage,
+    origin_m: Any,
+    distance_m: float = TEXT_DISTANCE_M,
+    letter_height_deg: float = TEXT_LETTER_HEIGHT_DEG,
+    background: tuple[float, float, float] = (0.5, 0.5, 0.5),
+) -> Scene:
+    """A head-fixed panel with ``text`` (psyop.rendering.text), straight ahead of ``origin_m`` at
+    ``distance_m``: one em subtends ``letter_height_deg`` there and the panel keeps the image's aspect ratio.
+    ``origin_m``: :func:`scene_origin_m` (the eye's centre when monocular, the head origin in stereo, so both
+    eyes see one panel at ``distance_m`` with its disparity)."""
+    origin = np.asarray(origin_m, dtype=np.float64).reshape(3)
+    em_m = 2.0 * distance_m * math.tan(math.radians(letter_height_deg) / 2.0)
+    half_w, half_h = text.width_em * em_m / 2.0, text.height_em * em_m / 2.0
+    panel = Primitive(Shape.RECT, tuple(origin + np.array([0.0, 0.0, -distance_m])), (half_w, 0.0, 0.0),
+                      (0.0, half_h, 0.0), text.texture, name=TEXT_PRIMITIVE_NAME)
+    return Scene((panel,), background=background)
 
 
 def blank_scene(background: tuple[float, float, float] = (0.5, 0.5, 0.5)) -> Scene:

@@ -1,0 +1,96 @@
+"""Text for the participant: a string rasterised once to an RGB image, drawn as a textured quad.
+
+psyop's renderer draws analytic primitives only; a line of text (the response phase's prompt,
+docs/protocols.md) becomes an :class:`ImageTexture` of light ink on a dark panel, rasterised by
+matplotlib's Agg canvas (already a dependency; the bundled DejaVu Sans font) and cached per string
+for the session (:class:`TextImages`), like image surfaces (psyop.rendering.textures.ImageFiles).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import textwrap
+from dataclasses import dataclass
+
+import numpy as np
+
+from psyop.rendering.scene import Colour, ImageTexture
+
+#: Texels per em (the font size) of a rasterised string: about twice a Vive Pro's pixels per degree
+#: at the default 1 deg letter height, so nearest-neighbour fetches keep the glyphs' strokes.
+EM_PX = 32
+#: Strings are wrapped at this many characters per line (on spaces).
+WRAP_CHARS = 40
+LINE_SPACING_EM = 1.2
+#: Panel margin around the text, in em.
+PADDING_EM = 0.5
+INK_RGB: Colour = (1.0, 1.0, 1.0)
+PANEL_RGB: Colour = (0.15, 0.15, 0.15)
+
+
+@dataclass(frozen=True)
+class TextImage:
+    """A rasterised string: ``texture`` (ink over panel), its ``ink_fraction`` (share of texels with any ink) and
+    its size in em (``width_em`` x ``height_em``, panel included: the quad's aspect ratio)."""
+
+    text: str
+    texture: ImageTexture
+    ink_fraction: float
+
+    @property
+    def width_em(self) -> float:
+        return self.texture.pixels.shape[1] / EM_PX
+
+    @property
+    def height_em(self) -> float:
+        return self.texture.pixels.shape[0] / EM_PX
+
+
+def ink_coverage(text: str, em_px: int = EM_PX) -> np.ndarray:
+    """(H, W) ink coverage in [0, 1] of ``text`` wrapped at :data:`WRAP_CHARS`, centred, with a
+    :data:`PADDING_EM` margin."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    lines = textwrap.wrap(text, WRAP_CHARS) or [text]
+    dpi = 72.0  # 1 point = 1 pixel: fontsize in points is the em in pixels
+    fig = Figure(figsize=(1.0, 1.0), dpi=dpi)
+    canvas = FigureCanvasAgg(fig)
+    fig.patch.set_alpha(0.0)
+    artist = fig.text(0.5, 0.5, "\n".join(lines), fontsize=em_px, family="DejaVu Sans", color="white",
+                      ha="center", va="center", multialignment="center", linespacing=LINE_SPACING_EM)
+    extent = artist.get_window_extent(canvas.get_renderer())
+    pad = PADDING_EM * em_px
+    width_px = int(math.ceil(extent.width + 2 * pad))
+    height_px = int(math.ceil(max(extent.height, len(lines) * LINE_SPACING_EM * em_px) + 2 * pad))
+    fig.set_size_inches(width_px / dpi, height_px / dpi)
+    canvas.draw()
+    rgba = np.asarray(canvas.buffer_rgba(), dtype=np.float64)
+    return rgba[:, :, 3] / 255.0
+
+
+def text_image(text: str, ink_rgb: Colour = INK_RGB, panel_rgb: Colour = PANEL_RGB) -> TextImage:
+    """``text`` as ink over a panel (one rasterisation; use :class:`TextImages` to cache)."""
+    if not text.strip():
+        raise ValueError("text to draw must not be empty")
+    alpha = ink_coverage(text)[:, :, None]
+    pixels = np.asarray(panel_rgb, dtype=np.float64) * (1.0 - alpha) + np.asarray(ink_rgb, dtype=np.float64) * alpha
+    digest = hashlib.sha256(f"{text}|{ink_rgb}|{panel_rgb}".encode()).hexdigest()[:16]
+    return TextImage(text, ImageTexture(pixels, key=f"text:{digest}"), float((alpha > 0).mean()))
+
+
+class TextImages:
+    """Rasterised strings of one session: each string is rasterised once and the same immutable
+    texture handed out every frame (so the renderer keeps it uploaded). ``rasterisations`` counts them."""
+
+    def __init__(self) -> None:
+        self._images: dict[str, TextImage] = {}
+        self.rasterisations = 0
+
+    def image(self, text: str) -> TextImage:
+        cached = self._images.get(text)
+        if cached is None:
+            cached = self._images[text] = text_image(text)
+            self.rasterisations += 1
+        return cached
