@@ -26,6 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("protocol", help="protocol YAML file")
     parser.add_argument("--trial", type=int, default=0, help="trial number (0-based, execution order)")
     parser.add_argument("--interval", type=int, default=1, help="interval phase of the trial (1-based)")
+    parser.add_argument("--phase", choices=("interval", "response"), default="interval",
+                        help="interval: the stimulus of --interval; response: what the participant sees while "
+                             "answering (the prompt, else the question, on a head-fixed panel; conventional mode)")
     parser.add_argument("--gaze-deg", default="0,0", metavar="AZ,EL",
                         help="gaze direction from the rendered eye's centre of rotation, degrees "
                              "(azimuth right-positive, elevation up-positive)")
@@ -105,7 +108,15 @@ def run(args: argparse.Namespace) -> int:
     az, el = _parse_gaze(args.gaze_deg)
     row = schedule.iloc[args.trial].to_dict()
     eye = args.eye or (protocol.eyes if protocol.eyes in ("right", "left") else "right")
-    mode = args.mode or interval_mode(protocol, row, args.interval)
+    response_text = None
+    if args.phase == "response":
+        from psyop.session.plan import compile_plan
+
+        response = compile_plan(protocol, tracker_ipd_m=args.ipd_mm / 1000.0).response
+        response_text = response.participant_text
+        mode = args.mode or response.phase.mode
+    else:
+        mode = args.mode or interval_mode(protocol, row, args.interval)
     display = resolve_display_profile(protocol.display)
     eye_model = resolve_eye_model(protocol.display)
     ipd_spec = protocol.display.ipd
@@ -118,7 +129,16 @@ def run(args: argparse.Namespace) -> int:
 
         x0, y0, w, h = _parse_crop(args.crop, camera.width_px, camera.height_px)
         camera = crop_camera(camera, x0, y0, w, h)
-    scene = build_scene(protocol, row, args.time_s, centre, interval=args.interval, base_dir=protocol_path.parent)
+    if args.phase == "response":
+        from psyop.rendering.text import em_px_for_display, text_image
+        from psyop.stimulus import blank_scene, scene_origin_m, text_scene
+        from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
+
+        em_px = em_px_for_display(display, TEXT_LETTER_HEIGHT_DEG)
+        scene = (blank_scene() if response_text is None
+                 else text_scene(text_image(response_text, em_px), scene_origin_m(protocol, centre)))
+    else:
+        scene = build_scene(protocol, row, args.time_s, centre, interval=args.interval, base_dir=protocol_path.parent)
     with Renderer(scene, RenderSettings(antialiasing=args.antialiasing, reuse_tolerance_px=None)) as renderer:
         renderer.render(camera)
         image = renderer.image_uint8(eye)
@@ -127,7 +147,8 @@ def run(args: argparse.Namespace) -> int:
     write_png(out, image)
     sidecar = {
         "protocol": str(protocol_path), "protocol_sha256": protocol.source_sha256, "seed": args.seed,
-        "trial": args.trial, "interval": args.interval, "time_s": args.time_s,
+        "trial": args.trial, "phase": args.phase, "interval": args.interval, "time_s": args.time_s,
+        "response_text": response_text,
         "eye": eye, "mode": mode, "gaze_deg": [az, el], "fixation_m": fixation.tolist(),
         "camera_valid": bool(camera.valid),
         "centre_of_projection_m": np.asarray(camera.centre_of_projection_m).tolist(),

@@ -15,11 +15,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from psyop.optics.display import DisplayProfile
 from psyop.rendering.scene import Colour, ImageTexture
 
-#: Texels per em (the font size) of a rasterised string: about twice a Vive Pro's pixels per degree
-#: at the default 1 deg letter height, so nearest-neighbour fetches keep the glyphs' strokes.
+#: Texels per em (the font size) of a rasterised string when no display is given. A session rasterises at
+#: its display's central pixel density (:func:`em_px_for_display`): the texture is fetched nearest-neighbour,
+#: and one texel per pixel keeps the glyphs' strokes (a finer texture drops some when minified).
 EM_PX = 32
+MIN_EM_PX = 8
 #: Strings are wrapped at this many characters per line (on spaces).
 WRAP_CHARS = 40
 LINE_SPACING_EM = 1.2
@@ -37,14 +40,22 @@ class TextImage:
     text: str
     texture: ImageTexture
     ink_fraction: float
+    em_px: int = EM_PX
 
     @property
     def width_em(self) -> float:
-        return self.texture.pixels.shape[1] / EM_PX
+        return self.texture.pixels.shape[1] / self.em_px
 
     @property
     def height_em(self) -> float:
-        return self.texture.pixels.shape[0] / EM_PX
+        return self.texture.pixels.shape[0] / self.em_px
+
+
+def em_px_for_display(display: DisplayProfile, letter_height_deg: float) -> int:
+    """Texels per em so that the text texture is about one texel per display pixel at the image centre
+    (at least :data:`MIN_EM_PX`)."""
+    px_per_tan = display.height_px / (display.tan_top - display.tan_bottom)
+    return max(MIN_EM_PX, int(round(px_per_tan * 2.0 * math.tan(math.radians(letter_height_deg) / 2.0))))
 
 
 def ink_coverage(text: str, em_px: int = EM_PX) -> np.ndarray:
@@ -70,27 +81,28 @@ def ink_coverage(text: str, em_px: int = EM_PX) -> np.ndarray:
     return rgba[:, :, 3] / 255.0
 
 
-def text_image(text: str, ink_rgb: Colour = INK_RGB, panel_rgb: Colour = PANEL_RGB) -> TextImage:
-    """``text`` as ink over a panel (one rasterisation; use :class:`TextImages` to cache)."""
+def text_image(text: str, em_px: int = EM_PX, ink_rgb: Colour = INK_RGB, panel_rgb: Colour = PANEL_RGB) -> TextImage:
+    """``text`` as ink over a panel, ``em_px`` texels per em (one rasterisation; :class:`TextImages` caches)."""
     if not text.strip():
         raise ValueError("text to draw must not be empty")
-    alpha = ink_coverage(text)[:, :, None]
+    alpha = ink_coverage(text, em_px)[:, :, None]
     pixels = np.asarray(panel_rgb, dtype=np.float64) * (1.0 - alpha) + np.asarray(ink_rgb, dtype=np.float64) * alpha
-    digest = hashlib.sha256(f"{text}|{ink_rgb}|{panel_rgb}".encode()).hexdigest()[:16]
-    return TextImage(text, ImageTexture(pixels, key=f"text:{digest}"), float((alpha > 0).mean()))
+    digest = hashlib.sha256(f"{text}|{em_px}|{ink_rgb}|{panel_rgb}".encode()).hexdigest()[:16]
+    return TextImage(text, ImageTexture(pixels, key=f"text:{digest}"), float((alpha > 0).mean()), int(em_px))
 
 
 class TextImages:
     """Rasterised strings of one session: each string is rasterised once and the same immutable
     texture handed out every frame (so the renderer keeps it uploaded). ``rasterisations`` counts them."""
 
-    def __init__(self) -> None:
+    def __init__(self, em_px: int = EM_PX) -> None:
+        self.em_px = int(em_px)
         self._images: dict[str, TextImage] = {}
         self.rasterisations = 0
 
     def image(self, text: str) -> TextImage:
         cached = self._images.get(text)
         if cached is None:
-            cached = self._images[text] = text_image(text)
+            cached = self._images[text] = text_image(text, self.em_px)
             self.rasterisations += 1
         return cached

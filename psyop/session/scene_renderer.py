@@ -67,9 +67,11 @@ class SceneRenderer:
         from psyop.rendering.textures import ImageFiles
 
         self._images = ImageFiles(self._base_dir)  # image surfaces decoded once per session
-        from psyop.rendering.text import TextImages
+        from psyop.rendering.text import TextImages, em_px_for_display
+        from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
 
-        self._texts = TextImages()  # the response phase's text, rasterised once per session
+        # the response phase's text, rasterised once per session at the display's pixel density
+        self._texts = TextImages(em_px_for_display(self.display, TEXT_LETTER_HEIGHT_DEG))
         self.images_rendered = 0
         self.max_images = max_images  # None: every stimulus frame; n: only the first n (sampled checks)
         from psyop.rendering import AntiAliasing, RenderSettings

@@ -66,7 +66,8 @@ def _response_frames(plan, gl_context) -> dict[str, tuple[np.ndarray, np.ndarray
             with Renderer(blank_scene(), ctx=gl_context, settings=renderer.settings) as blank:
                 blank.render(camera)
                 without = blank.image(eye).copy()
-            panel = text_scene(text_image(PROMPT), scene_origin_m(plan.protocol, plan.rig.centre_m(eye))).primitives[0]
+            shown = renderer._texts.image(PROMPT)  # noqa: SLF001  (the cached image, at the display's density)
+            panel = text_scene(shown, scene_origin_m(plan.protocol, plan.rig.centre_m(eye))).primitives[0]
             c, u, v = (np.asarray(x, dtype=np.float64) for x in (panel.centre_m, panel.half_u_m, panel.half_v_m))
             corners = np.array([c - u - v, c + u - v, c - u + v, c + u + v])
             out[eye] = (seen, without, _screen_rect_px(camera, corners))
@@ -135,3 +136,33 @@ def test_without_a_prompt_the_question_is_shown_and_display_off_shows_nothing() 
     egocentric = compile_plan(parse_protocol((REPO / "protocols" / "egocentric.yaml").read_text(), "egocentric.yaml"),
                               tracker_ipd_m=0.064)
     assert egocentric.response.display_off and egocentric.response.participant_text is None
+
+
+def test_render_command_shows_the_response_text(tmp_path) -> None:
+    import json
+
+    import matplotlib.image as mpimg
+
+    from psyop.cli import main
+
+    out = tmp_path / "response.png"
+    assert main(["render", str(REPO / "protocols" / "realism.yaml"), "--phase", "response", "--ipd-mm", "64",
+                 "--antialiasing", "none", "--out", str(out)]) == 0
+    side = json.loads(Path(str(out) + ".json").read_text())
+    assert side["phase"] == "response" and side["response_text"] == PROMPT and side["primitives"] == ["response_text"]
+    img = mpimg.imread(out)[:, :, :3]
+    h, w, _ = img.shape
+    centre = img[h // 2 - 10:h // 2 + 10, w // 2 - 40:w // 2 + 40]
+    assert (centre.max(axis=2) > 0.9).any() and (centre.max(axis=2) < 0.2).any()  # ink on the dark panel
+    assert np.allclose(img[0, 0], 0.5, atol=0.01)  # background elsewhere
+
+
+def test_text_is_rasterised_at_the_display_pixel_density() -> None:
+    from psyop.optics.display import get_display_profile as display_profile
+    from psyop.rendering.text import em_px_for_display
+
+    display = display_profile("vive_pro")
+    em_px = em_px_for_display(display, 1.0)
+    # one em (1 deg at 1 m straight ahead) covers about em_px display pixels at the image centre
+    em_on_screen_px = display.height_px / (display.tan_top - display.tan_bottom) * 2 * math.tan(math.radians(0.5))
+    assert abs(em_px - em_on_screen_px) <= 0.5 and em_px >= 8
