@@ -88,7 +88,10 @@ class ResponsePlan:
         ``question``; None when the display is off (docs/protocols.md, "Trial phases")."""
         if self.display_off or self.phase.show == "off":
             return None
-        return self.prompt or self.question or None
+        for text in (self.prompt, self.question):
+            if text is not None and text.strip():
+                return text.strip()
+        return None
 
     def as_dict(self) -> dict[str, Any]:
         return {"kind": self.kind.value, "protocol_kind": self.protocol_kind, "question": self.question,

@@ -166,3 +166,8 @@ def test_text_is_rasterised_at_the_display_pixel_density() -> None:
     # one em (1 deg at 1 m straight ahead) covers about em_px display pixels at the image centre
     em_on_screen_px = display.height_px / (display.tan_top - display.tan_bottom) * 2 * math.tan(math.radians(0.5))
     assert abs(em_px - em_on_screen_px) <= 0.5 and em_px >= 8
+
+
+def test_a_blank_prompt_falls_back_to_the_question() -> None:
+    plan = _plan(REALISM.replace("      prompt: " + PROMPT, '      prompt: "   "', 1))
+    assert plan.response.participant_text == plan.response.question
