@@ -230,3 +230,13 @@ def test_a_scene_the_renderer_cannot_take_is_a_located_error(tmp_path, capsys):
     # refused at validation now (psyop.limits.MAX_PRIMITIVES), before anything is rendered
     line = next(i for i, s in enumerate(text.splitlines(), 1) if "count: 200" in s)
     assert f"many.yaml:{line}:" in err and "204 primitives" in err and "limit of 128" in err
+
+
+def test_modes_with_the_same_centre_of_projection_are_a_note_not_a_failure(ctx):
+    """At a single straight-ahead gaze ocular and reversed parallax put the centre of projection at
+    the same point (N has no x, y part), so their frames are identical by geometry: a note that says
+    so, not a FAIL (this failed before the audit compared centres of projection)."""
+    report = run_audit(load_protocol(REPO / "protocols" / "realism.yaml"),
+                       AuditSettings(scale=0.05, gazes=1, samples_per_axis=4), ctx=ctx)
+    assert not report.failures, report.failures
+    assert any("ocular|reversed" in note and "render identically" in note for note in report.notes)
