@@ -18,6 +18,14 @@ change and its reversals so far; NaN and 0 for QUEST+), ``adaptive_estimate_U`` 
 ``adaptive_estimate_sd_U`` (the running threshold estimate: QUEST+ posterior mean/SD; staircase
 reversal mean and its standard error, inf before two reversals). The last counted trial of a
 condition holds the procedure's final estimate.
+
+Stopping (``target_sd``): before each trial :meth:`AdaptiveLevels.stopped` asks the condition's
+procedure, rebuilt from the log, whether it has finished; if so the trial is not run and not
+logged (it is absent from the trial log). :meth:`AdaptiveLevels.stop_summary` says, per
+condition, why it stopped and how many scheduled trials were not run; session.json records it as
+``adaptive_stop`` and the completeness check counts those trials as done. Because the decision
+is a function of the logged trials only, a resumed session skips exactly the trials an
+uninterrupted one skips.
 """
 
 from __future__ import annotations
@@ -69,7 +77,9 @@ def adaptive_plan(protocol: "Protocol") -> AdaptivePlan | None:
         a = factor.adaptive
         if a is None:
             continue
-        stop = StopRule(max_trials=int(protocol.design.repetitions))
+        stop = StopRule(max_trials=int(protocol.design.repetitions),
+                        target_sd=None if a.target_sd is None else float(a.target_sd),
+                        min_trials=int(a.min_trials or 1))
         if a.procedure == "quest_plus":
             points = int(a.grid_points or 101)
             spec: QuestPlusSpec | StaircaseSpec = QuestPlusSpec.default(
@@ -121,6 +131,7 @@ class AdaptiveLevels:
         self.plan = plan
         self.procedure: Procedure = make_procedure(plan.spec)
         self.history: dict[str, list[Observation]] = {}
+        self._states: dict[tuple[str, int], ProcedureState] = {}  # (condition, counted trials): a history only grows
 
     @classmethod
     def from_log(cls, plan: AdaptivePlan, logged: pd.DataFrame | None) -> "AdaptiveLevels":
@@ -131,7 +142,11 @@ class AdaptiveLevels:
         return levels
 
     def state(self, condition: str) -> ProcedureState:
-        return self.procedure.state(self.history.get(condition, []))
+        history = self.history.get(condition, [])
+        key = (condition, len(history))
+        if key not in self._states:
+            self._states[key] = self.procedure.state(history)
+        return self._states[key]
 
     def fill(self, row: Mapping[str, Any]) -> dict[str, Any]:
         """``row`` with the level the condition's procedure chooses now."""
@@ -155,6 +170,7 @@ class AdaptiveLevels:
         if _counts(record, self.plan.factor):
             history.append(Observation(float(record[self.plan.factor]), bool(record["correct"])))
         state = self.procedure.state(history)
+        self._states[(str(record["condition"]), len(history))] = state  # the state once committed
         out[f"adaptive_estimate_{self.plan.unit}"] = float(state.estimate_mean)
         out[f"adaptive_estimate_sd_{self.plan.unit}"] = float(state.estimate_sd)
         out["adaptive_reversals"] = np.int64(state.reversals)
@@ -166,3 +182,30 @@ class AdaptiveLevels:
         if _counts(record, self.plan.factor):
             self.history.setdefault(str(record["condition"]), []).append(
                 Observation(float(record[self.plan.factor]), bool(record["correct"])))
+
+    def stopped(self, row: Mapping[str, Any]) -> bool:
+        """Whether ``row``'s condition has met its stop rule, so the (non-practice) trial is not run."""
+        if bool(row.get("practice", False)):
+            return False
+        return self.state(str(row["condition"])).finished
+
+    def stop_summary(self, schedule: pd.DataFrame, recorded: set[int]) -> dict[str, Any]:
+        """Per condition that has stopped: why, after how many counted trials, its estimate, and
+        which of its scheduled trials are not run; plus their count (session.json's
+        ``adaptive_stop``)."""
+        u = self.plan.unit
+        conditions: dict[str, Any] = {}
+        not_run = 0
+        for condition, rows in schedule.groupby(schedule["condition"].astype(str), sort=True):
+            state = self.state(str(condition))
+            if not state.finished:
+                continue
+            practice = rows["practice"].astype(bool) if "practice" in rows else pd.Series(False, index=rows.index)
+            trials = rows["trial"].astype(int)
+            skipped = sorted(int(t) for t in trials[~trials.isin(recorded) & ~practice])
+            not_run += len(skipped)
+            conditions[str(condition)] = {"reason": state.stop_reason, "trials": int(state.trials),
+                                          f"estimate_{u}": float(state.estimate_mean),
+                                          f"estimate_sd_{u}": float(state.estimate_sd), "trials_not_run": skipped}
+        return {"target_sd": self.plan.spec.stop.target_sd, "max_trials": self.plan.spec.stop.max_trials,
+                "conditions": conditions, "n_trials_not_run": not_run}

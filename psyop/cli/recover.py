@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from psyop.session.log.store import finalise_session, find_sessions, read_metadata
+    from psyop.session.log.store import expected_trial_count, finalise_session, find_sessions, read_metadata
 
     if not args.path.exists():
         raise UserError("no such directory", str(args.path))
@@ -42,9 +42,11 @@ def main(args: argparse.Namespace) -> int:
             print(f"psyop recover: error: {error}", file=sys.stderr)
             errors.append(error)
             continue
-        n_expected = meta.get("n_trials_scheduled")
+        n_expected = expected_trial_count(meta)
+        not_run = int((meta.get("adaptive_stop") or {}).get("n_trials_not_run", 0))
         state = "complete" if meta.get("status") == "complete" else "incomplete (resumable)"
-        print(f"{paths.directory}: {len(trials)}/{n_expected} trials, {state}", file=sys.stdout)
+        stopped = f" ({not_run} more scheduled, not run: adaptive stop rule)" if not_run else ""
+        print(f"{paths.directory}: {len(trials)}/{n_expected} trials{stopped}, {state}", file=sys.stdout)
         for line in describe_integrity(meta.get("integrity") or {}):
             print(f"  {line}", file=sys.stdout)
     if errors:

@@ -42,6 +42,10 @@ class AdaptiveLevel(StrictModel):
       [min, max] (default 101).
     - ``staircase``: ``rule`` 1u2d, 1u3d (default) or weighted (Kaernbach, ``target`` p correct,
       default 0.75); ``step_sizes`` after 0, 1, 2, ... reversals (default: range/10, /20, /40).
+
+    Stopping: each condition runs at most ``repetitions`` trials; with ``target_sd`` (in the
+    factor's unit) a condition stops as soon as its running estimate's SD is at most that
+    (after at least ``min_trials`` counted trials, default 1) and its remaining trials are not run.
     """
 
     procedure: str = Field(min_length=1, description="quest_plus or staircase")
@@ -53,6 +57,9 @@ class AdaptiveLevel(StrictModel):
     step_sizes: list[Annotated[Number, Field(gt=0)]] | None = Field(default=None, min_length=1,
                                                                     description="staircase only")
     target: Number | None = Field(default=None, gt=0.5, lt=1, description="weighted staircase only")
+    target_sd: Number | None = Field(default=None, gt=0, description="stop a condition once its estimate's SD "
+                                                                     "is at most this (factor's unit)")
+    min_trials: Integer | None = Field(default=None, ge=1, description="target_sd applies after this many trials")
 
     @model_validator(mode="after")
     def _range(self) -> "AdaptiveLevel":
@@ -65,6 +72,12 @@ class AdaptiveLevel(StrictModel):
             raise ValueError("grid_points is a quest_plus setting; a staircase does not use it")
         if self.target is not None and self.rule != "weighted":
             raise ValueError("target is the weighted staircase's p(correct); give rule: weighted or drop target")
+        if self.min_trials is not None and self.target_sd is None:
+            raise ValueError("min_trials delays the target_sd stop; give target_sd or drop min_trials")
+        prior_sd = (float(self.max) - float(self.min)) / 12 ** 0.5  # QUEST+'s uniform prior on [min, max]
+        if self.procedure == "quest_plus" and self.target_sd is not None and self.target_sd >= prior_sd:
+            raise ValueError(f"target_sd {self.target_sd:g} is not below the SD of QUEST+'s uniform prior over "
+                             f"[min, max] ({prior_sd:.3g}): it would stop before learning anything; give a smaller one")
         return self
 
 

@@ -93,7 +93,7 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "SteppedLevels": {"start": "schedule", "step": "schedule", "count": "schedule"},
     # adaptive levels: procedure names outside ADAPTIVE_PROCEDURES are refused in semantics.py
     "AdaptiveLevel": {k: "adaptive" for k in ("procedure", "start", "min", "max", "grid_points", "rule", "step_sizes",
-                                              "target")},
+                                              "target", "target_sd", "min_trials")},
     "Randomisation": {"kind": "schedule", "by": "schedule", "block_order": "schedule"},
     "TwoIntervalResponse": {"kind": "plan", "question": "plan", "test": "schedule", "reference": "schedule",
                             "level_factor": "plan", "order": "schedule"},

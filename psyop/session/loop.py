@@ -154,13 +154,18 @@ class TrialLoop:
         rows = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
         n_total = len(schedule)
         n_done = len(completed)
+        recorded = set(completed)
         bar = session_progress(n_total, n_done, f"{self.identity['study']} sub-{self.identity['participant']}",
                                enabled=self.config.progress)
         status, message = "complete", f"all {n_total} trials recorded"
+        n_stopped = self._record_stops(schedule, recorded, -1)
         try:
             for row in rows:
                 bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
                 if self.adaptive is not None:
+                    if self.adaptive.stopped(row):  # its condition met the stop rule: not run, not logged
+                        bar.update(1)
+                        continue
                     row = self.adaptive.fill(row)
                 record, frames = self.run_trial(row)
                 if self.adaptive is not None:
@@ -168,11 +173,17 @@ class TrialLoop:
                 self.state = TrialState.RECORD
                 with _sigint_deferred():  # Ctrl-C never tears a record half-written
                     self.store.append_trial(record, frames.table() if len(frames) else None)
+                recorded.add(int(record["trial"]))
                 if self.adaptive is not None:
                     self.adaptive.commit(record)
+                    if self.adaptive.state(str(record["condition"])).finished:
+                        n_stopped = self._record_stops(schedule, recorded, n_stopped)
                 self.state = TrialState.DONE
                 n_done += 1
                 bar.update(1)
+            if n_done < n_total:
+                message = (f"{n_done} of {n_total} trials recorded; the other {n_total - n_done} were not run: "
+                           "their conditions met the adaptive stop rule (session.json adaptive_stop)")
         except KeyboardInterrupt:
             status = "interrupted"
             message = f"interrupted during trial (state {self.state.value}); that trial was discarded, {n_done}/{n_total} recorded"
@@ -187,6 +198,17 @@ class TrialLoop:
         latency = latency_summary(np.array(self._ages), self.frame_period_s)
         latency["n_frames_held"] = self._n_held
         return SessionOutcome(status, n_done, n_total, message, latency)
+
+    def _record_stops(self, schedule: pd.DataFrame, recorded: set[int], n_stopped: int) -> int:
+        """Write session.json's ``adaptive_stop`` whenever another condition has stopped (so the
+        completeness check of `psyop recover` counts its trials as not to be run); the number of
+        stopped conditions."""
+        if self.adaptive is None:
+            return 0
+        summary = self.adaptive.stop_summary(schedule, recorded)
+        if len(summary["conditions"]) != n_stopped:
+            self.store.update_metadata(adaptive_stop=summary)
+        return len(summary["conditions"])
 
     # trial ---------------------------------------------------------------------------
     def run_trial(self, row: dict[str, Any]) -> tuple[dict[str, Any], FrameRecorder]:

@@ -161,7 +161,7 @@ class SessionStore:
                 self.metadata["runs"][-1]["status"] = status
             write_json_atomic(self.paths.metadata, self.metadata)
             return finalise_session(self.paths, status=status, summary=summary,
-                                    expected_trials=self.metadata.get("n_trials_scheduled"), lock=self.lock)
+                                    expected_trials=expected_trial_count(self.metadata), lock=self.lock)
         finally:
             self.lock.release()
 
@@ -316,6 +316,16 @@ def low_gaze_report(trials: pd.DataFrame, threshold: float = MIN_VALID_GAZE_SHAR
     return {"low_gaze_trials": [int(t) for t in low.tolist()], "min_valid_gaze_share": threshold}
 
 
+def expected_trial_count(meta: Mapping[str, Any]) -> int | None:
+    """The trials a complete session records: the scheduled ones less those its adaptive stop
+    rule left out (session.json ``adaptive_stop.n_trials_not_run``, psyop.adaptive.session)."""
+    scheduled = meta.get("n_trials_scheduled")
+    if scheduled is None:
+        return None
+    stop = meta.get("adaptive_stop") or {}
+    return int(scheduled) - int(stop.get("n_trials_not_run", 0))
+
+
 def finalise_session(
     paths: SessionPaths,
     *,
@@ -354,7 +364,7 @@ def _finalise_locked(
     trials, frames = found.trials, found.frames
     if trials is None:
         trials = pd.DataFrame({"trial": pd.Series([], dtype="int64")})
-    expected = expected_trials if expected_trials is not None else meta.get("n_trials_scheduled")
+    expected = expected_trials if expected_trials is not None else expected_trial_count(meta)
     if status == "complete" and expected is not None and len(trials) < int(expected):
         status = "incomplete"
     if status == "complete" and expected is None and "rebuilt_from_log" in meta:
@@ -369,6 +379,10 @@ def _finalise_locked(
         meta["finalised"] = _now()
         threshold = float(meta.get("min_valid_gaze_share", MIN_VALID_GAZE_SHARE))
         meta["integrity"] = {**found.report, **low_gaze_report(trials, threshold)}
+        not_run = {t for c in ((meta.get("adaptive_stop") or {}).get("conditions") or {}).values()
+                   for t in c.get("trials_not_run", [])}
+        if not_run:  # left out by the adaptive stop rule, not lost
+            meta["integrity"]["lost_trials"] = [t for t in meta["integrity"].get("lost_trials", []) if t not in not_run]
         if summary:
             meta["summary"] = dict(summary)
         write_json_atomic(paths.metadata, meta)
