@@ -33,14 +33,21 @@ COMPARED = ["trial", "condition", "level_D", "correct", "response", "adaptive_pr
 @pytest.mark.parametrize("adaptive", [
     "{procedure: quest_plus, start: 0.5, min: 0, max: 1.5, grid_points: 51}",
     "{procedure: staircase, rule: weighted, target: 0.75, start: 1.0, min: 0, max: 1.5, step_sizes: [0.1, 0.05]}",
+    # the stop rule: conditions stop early (target SD), their remaining trials are skipped alike after resumes
+    "{procedure: quest_plus, start: 0.5, min: 0, max: 1.5, grid_points: 51, target_sd: 0.2}",
 ])
 def test_sigkill_gives_the_levels_of_an_uninterrupted_run(tmp_path: Path, adaptive: str) -> None:
     protocol = adaptive_detection(tmp_path, adaptive, 12, backs="[1, 3]")
-    n = 24
     reference = tmp_path / "reference"
     assert cli_main(run_args(protocol, reference, "K1", SEED, 0.0)) == 0
     expected = pd.read_parquet(SessionPaths(reference, "detection", "K1", 1).trials_parquet)
-    assert len(expected) == n
+    expected_meta = json.loads(SessionPaths(reference, "detection", "K1", 1).metadata.read_text())
+    n = len(expected)
+    if "target_sd" in adaptive:
+        stop = expected_meta["adaptive_stop"]  # seed 9: both conditions stop early, trials 17, 19-23 not run
+        assert n == 18 and stop["n_trials_not_run"] == 6 and {c["reason"] for c in stop["conditions"].values()} == {"target_sd"}
+    else:
+        assert n == 24
 
     data = tmp_path / "killed"
     paths = SessionPaths(data, "detection", "K1", 1)
@@ -57,6 +64,8 @@ def test_sigkill_gives_the_levels_of_an_uninterrupted_run(tmp_path: Path, adapti
     if json.loads(paths.metadata.read_text()).get("status") != "complete":  # a kill may land after the end
         assert cli_main(run_args(protocol, data, "K1", SEED, 0.0)) == 0  # resume to the end
     final = pd.read_parquet(paths.trials_parquet)
-    assert final["trial"].tolist() == list(range(n))
+    assert final["trial"].tolist() == expected["trial"].tolist()
+    meta = json.loads(paths.metadata.read_text())
+    assert meta["status"] == "complete" and meta["adaptive_stop"] == expected_meta["adaptive_stop"]
     pd.testing.assert_frame_equal(final[COMPARED].reset_index(drop=True), expected[COMPARED].reset_index(drop=True),
                                   check_dtype=False)
