@@ -22,7 +22,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from psyop.session.log.store import expected_trial_count, finalise_session, find_sessions, read_metadata
+    from psyop.adaptive.recorded_stop import rebuilt_stop_record
+    from psyop.session.log.store import expected_trial_count, finalise_session, find_sessions, read_metadata, salvage
 
     if not args.path.exists():
         raise UserError("no such directory", str(args.path))
@@ -36,7 +37,8 @@ def main(args: argparse.Namespace) -> int:
             if meta.get("status") == "complete" and paths.trials_parquet.is_file() and paths.frames_parquet.is_file():
                 print(f"{paths.directory}: complete and finalised; left untouched", file=sys.stdout)
                 continue
-            trials, _ = finalise_session(paths, status="complete", summary=meta.get("summary"))
+            trials, _ = finalise_session(paths, status="complete", summary=meta.get("summary"),
+                                         adaptive_stop=rebuilt_stop_record(meta, salvage(paths).trials))
             meta = read_metadata(paths) or {}
         except UserError as error:
             print(f"psyop recover: error: {error}", file=sys.stderr)

@@ -131,3 +131,22 @@ def test_psyop_simulate_and_power_run_a_stopping_protocol(tmp_path: Path) -> Non
     assert sum(m["n_trials_recorded"] for m in metas) < 2 * 80  # some condition stopped early
     _, results = run_power(PowerRun(protocol_path=protocol, participants=(2,), replications=1, seed=3))
     assert len(results) == 1 and results[0].n_trials < 2 * 80
+
+
+def test_recover_rebuilds_a_stop_record_the_kill_left_stale(stopped_session: tuple[Path, SessionPaths],
+                                                             tmp_path: Path) -> None:
+    """Killed after the stopping trial was durable but before session.json said so: recover
+    rebuilds ``adaptive_stop`` from the protocol, seed and log, and calls the session complete."""
+    import shutil
+
+    _, source = stopped_session
+    paths = SessionPaths(tmp_path / "data", "detection", "T1", 1)
+    shutil.copytree(source.directory, paths.directory)
+    meta = json.loads(paths.metadata.read_text())
+    recorded = meta.pop("adaptive_stop")
+    meta["status"] = "running"
+    paths.metadata.write_text(json.dumps(meta))
+    paths.trials_parquet.unlink()
+    assert cli_main(["recover", str(paths.directory)]) == 0
+    meta = json.loads(paths.metadata.read_text())
+    assert meta["status"] == "complete" and meta["adaptive_stop"] == recorded

@@ -333,19 +333,23 @@ def finalise_session(
     summary: Mapping[str, Any] | None = None,
     expected_trials: int | None = None,
     lock: SessionLock | None = None,
+    adaptive_stop: Mapping[str, Any] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Write trials.parquet / frames.parquet atomically from the streams; update session.json.
 
     ``status`` is 'complete' only when every scheduled trial is recorded; otherwise the
     session stays resumable ('incomplete'). Takes the session lock unless ``lock`` (held
     by the caller) is given; removes temporary files of an interrupted finalisation.
-    session.json's ``integrity`` records what the salvage found.
+    session.json's ``integrity`` records what the salvage found. ``adaptive_stop`` (rebuilt by
+    psyop.adaptive.recorded_stop) replaces session.json's record of the trials an adaptive stop
+    rule left out.
     """
     own_lock = lock is None
     held = SessionLock(paths.lock_file) if lock is None else lock
     held.acquire("finalise")
     try:
-        return _finalise_locked(paths, status=status, summary=summary, expected_trials=expected_trials)
+        return _finalise_locked(paths, status=status, summary=summary, expected_trials=expected_trials,
+                                adaptive_stop=adaptive_stop)
     finally:
         if own_lock:
             held.release()
@@ -353,6 +357,7 @@ def finalise_session(
 
 def _finalise_locked(
     paths: SessionPaths, *, status: str, summary: Mapping[str, Any] | None, expected_trials: int | None,
+    adaptive_stop: Mapping[str, Any] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     meta = read_metadata(paths)
     if meta is None:
@@ -364,6 +369,8 @@ def _finalise_locked(
     trials, frames = found.trials, found.frames
     if trials is None:
         trials = pd.DataFrame({"trial": pd.Series([], dtype="int64")})
+    if adaptive_stop is not None:
+        meta["adaptive_stop"] = dict(adaptive_stop)
     expected = expected_trials if expected_trials is not None else expected_trial_count(meta)
     if status == "complete" and expected is not None and len(trials) < int(expected):
         status = "incomplete"
