@@ -109,6 +109,8 @@ def designs(draw: Any, kind: str) -> tuple[dict[str, Any], dict[str, Any], dict[
         adaptive = draw(st.sampled_from([None, None, "staircase", "quest_plus"]))
         if adaptive is not None:  # the level chosen while the session runs (psyop.adaptive)
             level = {"adaptive": {"procedure": adaptive, "start": 0.5, "min": 0, "max": 1.5}}
+            if draw(st.booleans()):  # a condition may stop early (its remaining trials are not run)
+                level["adaptive"]["target_sd"] = 0.42 if adaptive == "quest_plus" else 0.3  # prior SD 0.433
         factors["level_D"] = level
         depth_factors.append("level_D")
         test: dict[str, Any] = {"mode": draw(st.sampled_from(MODES))}
