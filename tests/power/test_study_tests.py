@@ -18,8 +18,8 @@ def test_every_study_kind_reports_its_tests() -> None:
     assert [o.test for o in ordinal[:3]] == ["rm-ANOVA: mode", "rm-ANOVA: separation_D", "rm-ANOVA: mode * separation_D"]
     assert len(ordinal) == 3 + 6 and all(0 <= o.p <= 1 for o in ordinal)
     reach = reach_tests(simulate.simulate_reach(rng, 5))
-    assert [o.test for o in reach] == ["regression: slope difference", "regression: intercept difference",
-                                       "regression: joint difference"]
+    assert [o.test for o in reach] == [f"{kind}: {what} difference" for kind in ("mixed model", "pooled regression")
+                                       for what in ("slope", "intercept", "joint")]
     realism = realism_tests(simulate.simulate_realism(rng, 5))
     assert realism[0].test == "binomial: ocular over conventional" and realism[0].p < 0.05
     protocol = load_protocol(ROOT / "protocols" / "discrimination.yaml")
@@ -34,3 +34,34 @@ def test_a_test_that_cannot_be_computed_says_why() -> None:
     outcomes = study_tests(protocol, simulate.simulate_detection(rng, 1))
     anova = outcomes[0]
     assert math.isnan(anova.p) and anova.note.startswith("not computed:")
+
+
+def test_reach_power_reports_the_analysis_primary_mixed_model_and_the_pooled_one_beside_it() -> None:
+    """The primary reach test is the MixedLM of analysis/fig_egocentric_reach.py, not the pooled OLS."""
+    from psyop.statistics.regression import condition_interaction, mixed_condition_comparison
+
+    rng = np.random.default_rng(8)
+    trials = simulate.simulate_reach(rng, 6, slope_sd=0.15, subject_sd=0.08)
+    trials["reach_fraction"] = trials["reach_m"] / trials["arm_reach_m"]
+    outcomes = {o.test: o for o in reach_tests(trials)}
+    mixed = mixed_condition_comparison(trials, "target_fraction", "reach_fraction", "rendering", reference="disabled")
+    pooled = condition_interaction(trials, "target_fraction", "reach_fraction", "rendering", "disabled")
+    assert outcomes["mixed model: slope difference"].p == mixed.slope_diff_p
+    assert outcomes["mixed model: intercept difference"].p == mixed.intercept_diff_p
+    assert outcomes["mixed model: joint difference"].p == mixed.joint_p
+    assert outcomes["pooled regression: joint difference"].p == pooled.joint_p
+    assert mixed.joint_p != pooled.joint_p
+    assert list(outcomes)[0] == "mixed model: slope difference"
+
+
+def test_a_mixed_model_fallback_is_flagged_and_counted() -> None:
+    from psyop.power.replicate import ReplicationResult
+    from psyop.power.summary import power_table
+
+    rng = np.random.default_rng(9)
+    outcomes = reach_tests(simulate.simulate_reach(rng, 2))  # two participants: no mixed model, clustered OLS
+    primary = [o for o in outcomes if o.test.startswith("mixed model")]
+    assert primary and all(o.flag.startswith("fallback to OLS") and not math.isnan(o.p) for o in primary)
+    assert all(o.flag == "" for o in outcomes if o.test.startswith("pooled"))
+    table = power_table([ReplicationResult(2, 0, tuple(outcomes), 1)])
+    assert table.set_index("test").loc["mixed model: joint difference", "n_flagged"] == 1

@@ -1,0 +1,62 @@
+"""The plain re-simulation of one replication, paired with ``psyop power``'s on identical seeds.
+
+For a protocol with constant stimuli and an observer whose answer depends only on the trial row
+(two-interval, left/right-nearer, pairwise preference), a replication can skip the session: compile
+each participant's schedule with the session seed :func:`psyop.power.replicate.session_seed` gives,
+ask the same observer (same seed and participant) for each main trial's answer, and run the same
+:func:`psyop.power.study_tests.study_tests` on the table. Its p values must equal the session path's
+exactly; a difference means the session (logging, scoring, dataset loading, rendering order) changed
+what the analysis sees. Reach observers depend on the rendered geometry and adaptive levels on the
+procedure, so those protocols are refused.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from psyop.errors import UserError
+from psyop.power.replicate import ReplicationResult, ReplicationTask, session_seed
+from psyop.power.study_tests import study_tests
+
+
+def direct_trials(task: ReplicationTask) -> pd.DataFrame:
+    """The trial table the session path would log for ``task``, drawn without sessions."""
+    from psyop.power.effects import apply_effects
+    from psyop.protocol import parse_protocol
+    from psyop.schedule import compile_schedule
+    from psyop.session.plan import compile_plan
+    from psyop.session.responses.base import ResponseKind
+    from psyop.session.responses.simulated import make_observer
+
+    protocol = apply_effects(parse_protocol(task.protocol_text, task.protocol_name), task.effects)
+    if protocol.response.kind == "reach":
+        raise UserError("the direct re-simulation needs an observer that answers from the trial row; "
+                        "reach answers depend on the rendered geometry", "protocol response")
+    plan = compile_plan(protocol)
+    if plan.kind is ResponseKind.REACH or plan.adaptive is not None:
+        raise UserError("the direct re-simulation covers constant stimuli answered from the trial row only",
+                        "protocol design")
+    frames = []
+    for j in range(task.participants):
+        participant = f"S{j + 1:02d}"
+        seed = session_seed(task.seed, task.participants, task.replication, j)
+        schedule = compile_schedule(protocol, seed)
+        observer = make_observer(plan.observer_params(), seed=seed, participant=participant)
+        main = schedule[~schedule["practice"].astype(bool)] if "practice" in schedule else schedule
+        answers = [observer.collect(row, 0.0) for row in main.to_dict("records")]
+        table = main.reset_index(drop=True).copy()
+        table["study"], table["participant"], table["session"] = protocol.study.name, participant, 1
+        table["response"] = [a.response for a in answers]
+        table["correct"] = [a.correct for a in answers]
+        table["chosen_mode"] = [a.chosen_mode for a in answers]
+        frames.append(table)
+    return pd.concat(frames, ignore_index=True)
+
+
+def run_direct_replication(task: ReplicationTask) -> ReplicationResult:
+    from psyop.power.effects import apply_effects
+    from psyop.protocol import parse_protocol
+
+    protocol = apply_effects(parse_protocol(task.protocol_text, task.protocol_name), task.effects)
+    trials = direct_trials(task)
+    return ReplicationResult(task.participants, task.replication, tuple(study_tests(protocol, trials)), len(trials))
