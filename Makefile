@@ -12,7 +12,7 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 export MPLBACKEND := Agg
 export PYTHONHASHSEED := 0
 
-.PHONY: figures test bench clean venv sysdeps help
+.PHONY: figures test bench power power-run clean venv sysdeps help
 
 help:
 	@echo "make figures  - simulate sessions if data/ is empty, say which sessions are used, rebuild every figure and table"
@@ -20,7 +20,9 @@ help:
 	@echo "make resimulate - delete the simulated sessions in data/ (refused if any is real), then make figures"
 	@echo "make test     - run the whole test suite"
 	@echo "make bench    - run the benchmarks; results in bench/"
-	@echo "make clean    - remove generated figures, results, benchmarks, demo/ and the venv (never data/)"
+	@echo "make power    - power curves of the five shipped studies by simulation; results in power/"
+	@echo "                (POWER_REPLICATIONS=N simulated studies per sample size, default $(POWER_REPLICATIONS))"
+	@echo "make clean    - remove generated figures, results, benchmarks, power/, demo/ and the venv (never data/)"
 
 venv: $(STAMP)
 
@@ -53,7 +55,27 @@ bench: $(STAMP) $(SYSDEPS_STAMP)
 	@mkdir -p bench
 	$(PY) -m benchmarks --out bench
 
+# Power curves of the five shipped studies (psyop power: whole simulated studies through compile ->
+# session -> analysis). Too slow for `make figures` (docs/adaptive.md says how long), so a target
+# of its own. Sample sizes bracket each paper's (detection/discrimination 6, ordinal/realism 19,
+# egocentric 13); one progress bar per protocol. Writes POWER/NAME/power.{csv,png,txt}.
+POWER ?= power
+POWER_REPLICATIONS ?= 40
+POWER_SIZES := detection:4,6,12 discrimination:4,6,12 ordinal:6,12,19 egocentric:6,13,19 realism:6,12,19
+
+power: $(STAMP) $(SYSDEPS_STAMP)
+	@$(MAKE) --no-print-directory power-run
+
+power-run:
+	@i=0; for spec in $(POWER_SIZES); do \
+	  i=$$((i + 1)); name=$${spec%%:*}; sizes=$${spec#*:}; mkdir -p $(POWER)/$$name; \
+	  echo "[psyop] power $$i/5: protocols/$$name.yaml, $$sizes participants, $(POWER_REPLICATIONS) replications each"; \
+	  $(PY) -m psyop power protocols/$$name.yaml --participants $$sizes --replications $(POWER_REPLICATIONS) \
+	    --seed 0 --jobs $(JOBS) --out $(POWER)/$$name | tee $(POWER)/$$name/power.txt; \
+	  test $${PIPESTATUS[0]} -eq 0 || exit 1; \
+	done; echo "[psyop] power curves in $(POWER)/ (NAME/power.png, power.csv, power.txt)"
+
 include figures.mk
 
 clean:
-	rm -rf figures results bench demo $(VENV) build *.egg-info .pytest_cache .hypothesis
+	rm -rf figures results bench power demo $(VENV) build *.egg-info .pytest_cache .hypothesis

@@ -1,0 +1,14 @@
+"""Smoke runs of the benchmarks whose --quick size fits the suite (bench_power's does not: its
+agreement check is tests/power/test_direct_pairing.py)."""
+
+from pathlib import Path
+
+
+def test_bench_adaptive_quick_writes_every_table(tmp_path: Path) -> None:
+    from benchmarks import bench_adaptive
+
+    report = bench_adaptive.run(tmp_path, quick=True)
+    assert "20 simulated 2AFC observers" in report
+    for table in ("| method | observers | median trials", "| method | all: trials", "trials for constant stimuli's SD",
+                  "psyop.adaptive.QuestPlus (history -> next level), wall"):
+        assert table in report
