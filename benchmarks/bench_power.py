@@ -29,22 +29,26 @@ PROTOCOL = Path(__file__).resolve().parents[1] / "protocols" / "discrimination.y
 SLOPE_TEST = "regression slope: threshold ~ offset_D"
 
 
-def plain_resimulation(replications: int, participants: int, seed: int) -> tuple[int, int]:
-    """(significant, replications) of the slope test on trial tables drawn without sessions."""
+def plain_replication(task: tuple[int, int, int]) -> bool:
+    """Is the slope significant in one trial table drawn without sessions (replication, participants,
+    seed; seeded on its own like psyop power's replications)?"""
     from psyop.power.study_tests import study_tests
     from psyop.statistics.simulate import simulate_discrimination
 
+    replication, participants, seed = task
     protocol = load_protocol(PROTOCOL)
     observer = protocol.observer
-    rng = np.random.default_rng(seed)
-    significant = 0
-    for _ in range(replications):
-        trials = simulate_discrimination(rng, participants, intercept_D=observer.threshold_D,
-                                         slope=observer.threshold_slope, sigma_D=observer.width_D,
-                                         lapse=observer.lapse, between_subject_sd_D=observer.between_subject_sd_D)
-        slope = {o.test: o for o in study_tests(protocol, trials)}[SLOPE_TEST]
-        significant += bool(slope.p < 0.05)
-    return significant, replications
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(participants, replication)))
+    trials = simulate_discrimination(rng, participants, intercept_D=observer.threshold_D,
+                                     slope=observer.threshold_slope, sigma_D=observer.width_D,
+                                     lapse=observer.lapse, between_subject_sd_D=observer.between_subject_sd_D)
+    return bool({o.test: o for o in study_tests(protocol, trials)}[SLOPE_TEST].p < 0.05)
+
+
+def plain_resimulation(replications: int, participants: int, seed: int, jobs: int = 1) -> tuple[int, int]:
+    """(significant, replications) of the slope test on trial tables drawn without sessions."""
+    tasks = [(r, participants, seed) for r in range(replications)]
+    return sum(run_local(plain_replication, tasks, jobs)), replications
 
 
 def _ci(k: int, n: int) -> str:
@@ -67,7 +71,7 @@ def run(out_dir: Path, quick: bool) -> str:
         raise AssertionError(f"bench_power: the session path and the direct re-simulation on identical seeds give "
                              f"different p values in replications {differing}")
     start = time.perf_counter()
-    k_plain, n_plain = plain_resimulation(replications, 6, seed=2020)
+    k_plain, n_plain = plain_resimulation(replications, 6, seed=2020, jobs=jobs)
     t_plain = time.perf_counter() - start
     table.to_csv(out_dir / "power_discrimination_6.csv", index=False)
     slope = table[table["test"] == SLOPE_TEST].iloc[0]
@@ -104,6 +108,6 @@ def run(out_dir: Path, quick: bool) -> str:
         f"Fisher exact p = {fisher_p:.2f}.",
         "",
         f"Time (context): psyop power {t_power:.0f} s on {jobs} process(es), direct {t_direct:.0f} s on {jobs}, "
-        f"plain re-simulation {t_plain:.0f} s on 1.",
+        f"plain re-simulation {t_plain:.0f} s on {jobs}.",
     ]
     return "\n".join(lines)
