@@ -6,10 +6,9 @@ the compiler scales) and absolute times as context only.
 
 from __future__ import annotations
 
-import statistics
-import time
 from pathlib import Path
 
+from benchmarks.timing import median_s
 from psyop.protocol import load_protocol, parse_protocol
 from psyop.schedule import compile_schedule, write_schedule
 
@@ -25,15 +24,6 @@ def scaled_detection_text(n_back: int = 20, n_level: int = 50, repetitions: int 
     return text.replace("repetitions: 15 ", f"repetitions: {repetitions} ")
 
 
-def _median_time(function, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
-
-
 def run(out_dir: Path, quick: bool) -> str:
     small = load_protocol(PROTOCOLS / "detection.yaml")
     large = parse_protocol(scaled_detection_text(), "detection_100k.yaml")
@@ -41,12 +31,12 @@ def run(out_dir: Path, quick: bool) -> str:
     n_large = len(compile_schedule(large, 0))
     assert n_large == 100_000, n_large
     repeats_small, repeats_large = (20, 3) if quick else (100, 7)
-    t_small = _median_time(lambda: compile_schedule(small, 1), repeats_small)
-    t_large = _median_time(lambda: compile_schedule(large, 1), repeats_large)
-    t_parse = _median_time(lambda: load_protocol(PROTOCOLS / "detection.yaml"), repeats_small)
+    t_small = median_s(lambda: compile_schedule(small, 1), repeats_small)
+    t_large = median_s(lambda: compile_schedule(large, 1), repeats_large)
+    t_parse = median_s(lambda: load_protocol(PROTOCOLS / "detection.yaml"), repeats_small)
     schedule = compile_schedule(large, 1)
     path = out_dir / "schedule_100k.parquet"
-    t_write = _median_time(lambda: write_schedule(schedule, large, 1, path), 3)
+    t_write = median_s(lambda: write_schedule(schedule, large, 1, path), 3)
     per_small, per_large = t_small / n_small, t_large / n_large
     return "\n".join([
         "## Schedule compilation (bench_schedule_compile)",

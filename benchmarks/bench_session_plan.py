@@ -17,6 +17,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchmarks.timing import median_s
+
 PROTOCOLS = Path(__file__).resolve().parents[1] / "protocols"
 STUDIES = ("detection", "discrimination", "ordinal", "egocentric", "realism")
 
@@ -71,15 +73,6 @@ def _legacy_compile(protocol: Any) -> tuple:
 
 
 # ---- measurements ----------------------------------------------------------------------------------------
-def _median_s(function: Any, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
-
-
 class _NoStore:
     run_index = 0
 
@@ -123,8 +116,8 @@ def run(out_dir: Path, quick: bool) -> str:
     ratios = []
     for study in STUDIES:
         protocol = load_protocol(PROTOCOLS / f"{study}.yaml")
-        t_old = _median_s(lambda: _legacy_compile(protocol), repeats)
-        t_plan = _median_s(lambda: compile_plan(protocol), repeats)
+        t_old = median_s(lambda: _legacy_compile(protocol), repeats)
+        t_plan = median_s(lambda: compile_plan(protocol), repeats)
         plan = compile_plan(protocol)
         phases_old, display, eye, ipd, observer, _ = _legacy_compile(protocol)
         rig_old = EyeRig(eye, ipd, ("left", "right"))  # the old camera renderer computed both eyes
