@@ -36,18 +36,31 @@ def _child(argv: list[str], announce_fd: int) -> None:
     os._exit(cli_main(argv))
 
 
-def kill_once(argv: list[str], after_s: float) -> set[int]:
-    """Start `psyop run argv` in a forked child, SIGKILL it after ``after_s``; the trials it
-    announced as durable."""
+def kill_once(argv: list[str], after_s: float, after_trials: int = 0, deadline_s: float = 120.0) -> set[int]:
+    """Start `psyop run argv` in a forked child and SIGKILL it ``after_s`` after it announced
+    ``after_trials`` durable trials (0: after its start); the trials it announced as durable.
+
+    Waiting for announced trials (polled with a generous deadline) puts the kill inside the
+    session however slowly a loaded machine starts the child; ``after_s`` is the random moment."""
+    import select
+
     read_fd, write_fd = os.pipe()
     process = mp.get_context("fork").Process(target=_child, args=(argv, write_fd))
     process.start()
     os.close(write_fd)
+    announced = b""
+    deadline = time.monotonic() + deadline_s
+    while len(announced.split()) < after_trials and process.is_alive() and time.monotonic() < deadline:
+        ready, _, _ = select.select([read_fd], [], [], 0.05)
+        if ready:
+            chunk = os.read(read_fd, 65536)
+            if not chunk:
+                break
+            announced += chunk
     time.sleep(after_s)  # not a wait: the random moment of the kill
     if process.is_alive():
         os.kill(process.pid, signal.SIGKILL)
     process.join()
-    announced = b""
     while chunk := os.read(read_fd, 65536):
         announced += chunk
     os.close(read_fd)
