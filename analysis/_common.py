@@ -11,18 +11,36 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 
-def parser(description: str, default_out: str) -> argparse.ArgumentParser:
+def parser(description: str, default_out: str, study: str | None = None) -> argparse.ArgumentParser:
+    """The common arguments; with ``study``, also ``--study`` (the data/<study> folder, i.e. the
+    protocol's ``study.name``; default ``study``), so a user's own protocol of that kind can be analysed."""
     p = argparse.ArgumentParser(description=description)
     p.add_argument("--data", type=Path, default=Path("data"), help="data root (data/<study>/sub-*/ses-*/trials.parquet)")
     p.add_argument("--out", type=Path, default=Path(default_out), help="output file")
     p.add_argument("--results", type=Path, default=Path("results"), help="directory for CSV/JSON statistics")
+    if study is not None:
+        p.add_argument("--study", default=study, help=f"study name (the protocol's study.name; default {study})")
     return p
+
+
+def run(main: Callable[[], int]) -> int:
+    """Run a script's ``main``; bad input (a UserError) is one line on stderr and its exit code
+    (2), not a traceback."""
+    from psyop.errors import UserError
+
+    try:
+        return main()
+    except UserError as error:
+        print(f"{Path(sys.argv[0]).name}: error: {error}", file=sys.stderr)
+        return error.exit_code
 
 
 def _clean(value):

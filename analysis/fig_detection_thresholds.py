@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from _common import parser, read_fits, write_json
+from _common import parser, read_fits, run, write_json
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_thresholds
@@ -60,4 +60,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

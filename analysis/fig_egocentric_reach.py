@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 
-from _common import parser, write_json
+from _common import parser, run, write_json
 
 from psyop.errors import UserError
 from psyop.figures.output import save_figure
@@ -22,10 +22,10 @@ from psyop.statistics.regression import condition_interaction, linear_fits_by, m
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser(__doc__, "figures/fig_egocentric_reach.png")
+    p = parser(__doc__, "figures/fig_egocentric_reach.png", study="egocentric")
     p.add_argument("--reference", default="disabled", help="reference rendering condition")
     args = p.parse_args(argv)
-    ds = load_dataset(args.data, "egocentric")
+    ds = load_dataset(args.data, args.study)
     t = ds.trials.copy()
     if "reach_fraction" not in t:
         if "arm_reach_m" not in t:
@@ -52,4 +52,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

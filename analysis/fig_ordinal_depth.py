@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import sys
 
-from _common import parser, write_json
+from _common import parser, run, write_json
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_ordinal
@@ -18,12 +18,12 @@ from psyop.statistics.formatting import format_anova, format_ttest
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser(__doc__, "figures/fig_ordinal_depth.png")
+    p = parser(__doc__, "figures/fig_ordinal_depth.png", study="ordinal")
     p.add_argument("--bonferroni-family", choices=["per_level", "all"], default="per_level",
                    help="per_level: correct over the 3 mode pairs within each separation (the paper's "
                         "'pairwise t-tests between rendering modes at each separation distance'); all: over all 6")
     args = p.parse_args(argv)
-    ds = load_dataset(args.data, "ordinal")
+    ds = load_dataset(args.data, args.study)
     cells = cell_means(ds.trials, "correct", ["mode", "separation_D"])
     aov = rm_anova(cells, "correct", ["mode", "separation_D"])
     posthoc = posthoc_paired(cells, "correct", "mode", by="separation_D", family=args.bonferroni_family)
@@ -51,4 +51,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import sys
 
-from _common import parser, write_json
+from _common import parser, run, write_json
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_preferences
@@ -18,8 +18,8 @@ PAIRS = [("ocular", "conventional"), ("reversed", "conventional"), ("ocular", "r
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parser(__doc__, "figures/fig_realism.png").parse_args(argv)
-    ds = load_dataset(args.data, "realism")
+    args = parser(__doc__, "figures/fig_realism.png", study="realism").parse_args(argv)
+    ds = load_dataset(args.data, args.study)
     prefs = pairwise_preferences(ds.trials, PAIRS)
     args.results.mkdir(parents=True, exist_ok=True)
     prefs.to_csv(args.results / "realism_preferences.csv", index=False)
@@ -33,4 +33,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from _common import parser
+from _common import parser, run
 
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric_table
@@ -48,4 +48,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

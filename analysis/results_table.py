@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 
-from _common import parser, write_json
+from _common import parser, run, write_json
 from paper_values import rows_for
 
 STUDY_FILES = ["detection_thresholds", "discrimination_fit", "ordinal", "egocentric", "realism"]
@@ -88,4 +88,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

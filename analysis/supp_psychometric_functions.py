@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from _common import parser, read_fits
+from _common import parser, read_fits, run
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_psychometric_grid
@@ -37,4 +37,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

@@ -114,3 +114,22 @@ def test_simulated_mark_only_when_simulated(simulated):
     fig = plot_preferences(prefs, simulated=simulated)
     texts = [t.get_text() for t in fig.texts]
     assert (SIMULATED_LABEL in texts) is simulated
+
+
+@pytest.mark.parametrize("script, study", [("fig_ordinal_depth", "ordinal"), ("fig_egocentric_reach", "egocentric"),
+                                           ("fig_realism", "realism")])
+def test_study_scripts_take_a_user_study_name_and_refuse_a_missing_one_in_one_line(tmp_path, script, study):
+    """A user's own protocol of a shipped kind has its own study name (data/<name>/); the script takes
+    it with --study, and a study with no sessions is one located line and exit 2, not a traceback."""
+    import subprocess
+
+    rng = np.random.default_rng(1)
+    table = {"ordinal": lambda: sim.simulate_ordinal(rng, n_subjects=4), "egocentric": lambda: sim.simulate_reach(rng, n_subjects=4),
+             "realism": lambda: sim.simulate_realism(rng, n_subjects=4)}[study]()
+    table["study"] = "mystudy"
+    write_dataset(tmp_path / "data", {"mystudy": table}, simulated=True)
+    common = ["--data", str(tmp_path / "data"), "--results", str(tmp_path / "res"), "--out", str(tmp_path / "f.png")]
+    missing = subprocess.run([sys.executable, str(ANALYSIS / f"{script}.py"), *common], capture_output=True, text=True)
+    assert missing.returncode == 2 and "Traceback" not in missing.stderr
+    assert f"no sessions found for study '{study}'" in missing.stderr
+    assert _script(script).main([*common, "--study", "mystudy"]) == 0
