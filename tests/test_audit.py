@@ -20,6 +20,7 @@ from psyop.rendering.builders import detection_stimulus, frontoparallel_disc, fr
 from psyop.rendering.exact import visible_back_area_px
 from psyop.rendering.measure import GAZE_DEG, RIGHT_CENTRE_M, right_eye_camera
 from psyop.rendering.renderer import create_headless_context
+from protocol_texts import TWO_INTERVAL_TAIL
 
 REPO = Path(__file__).resolve().parents[1]
 PROTOCOLS = REPO / "protocols"
@@ -79,23 +80,7 @@ scene:
     height_deg: 30
     depth: {D: 3}
     surface: {kind: solid, rgb: [0.4, 0.4, 0.4]}
-trial:
-  phases:
-    - {kind: interval, duration_s: 1}
-    - {kind: interval, duration_s: 1}
-    - {kind: response, expected_s: 1}
-design:
-  factors:
-    level_D: {levels: [0, 1]}
-  repetitions: 1
-  randomisation: {kind: full}
-response:
-  kind: two_interval
-  test: {mode: ocular}
-  reference: {mode: conventional}
-  level_factor: level_D
-  order: balanced
-"""
+""" + TWO_INTERVAL_TAIL
 
 
 def test_a_disc_behind_an_opaque_plane_fails_with_a_clear_line(tmp_path, capsys):

@@ -20,6 +20,7 @@ from psyop.rendering.camera_math import crop_camera, project_points_px
 from psyop.rendering.transform import scene_in_head
 from psyop.schedule import compile_schedule
 from psyop.stimulus import build_scene, interval_mode
+from protocol_texts import TWO_INTERVAL_TAIL
 
 REPO = Path(__file__).resolve().parents[2]
 PROTOCOLS = REPO / "protocols"
@@ -170,23 +171,7 @@ scene:
     centre_deg: [3, -2]
     depth: {D: 2}
     surface: {kind: solid, rgb: [1, 1, 1]}
-trial:
-  phases:
-    - {kind: interval, duration_s: 1}
-    - {kind: interval, duration_s: 1}
-    - {kind: response, expected_s: 1}
-design:
-  factors:
-    level_D: {levels: [0, 1]}
-  repetitions: 1
-  randomisation: {kind: full}
-response:
-  kind: two_interval
-  test: {mode: ocular}
-  reference: {mode: conventional}
-  level_factor: level_D
-  order: balanced
-"""
+""" + TWO_INTERVAL_TAIL
 
 
 def test_stereo_disc_at_2D_has_the_exact_disparity(gl_context, tmp_path):

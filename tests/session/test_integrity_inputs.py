@@ -195,18 +195,7 @@ def test_resume_with_another_clock_is_refused(protocol: Path, tmp_path: Path, ca
     """A virtual-clock session resumed with --clock real restarted trial_start_s at 0."""
     data = tmp_path / "data"
     paths = SessionPaths(data, "detection", "P1", 1)
-    from psyop.session.log import store
-
-    original = store.SessionStore.append_trial
-
-    def stop_after_three(self, row, frames):  # type: ignore[no-untyped-def]
-        if int(row["trial"]) >= 3:
-            raise KeyboardInterrupt
-        original(self, row, frames)
-
-    monkeypatch.setattr(store.SessionStore, "append_trial", stop_after_three)
-    assert cli_main(_run(protocol, data, "--clock", "virtual")) == 130
-    monkeypatch.setattr(store.SessionStore, "append_trial", original)
+    _interrupted_session(protocol, data, monkeypatch, "--clock", "virtual")
     capsys.readouterr()
     _fails_cleanly(capsys, _run(protocol, data, "--clock", "real"), "clock differs", "'virtual' there, 'real' now")
     runs = json.loads(paths.metadata.read_text())["runs"]
@@ -250,7 +239,8 @@ def test_replayed_session_json_must_be_a_regular_file(protocol: Path, tmp_path: 
                             "--no-progress", f"--pose=replay:{source}"], "session.json is a FIFO")
 
 
-def _interrupted_session(protocol: Path, data: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def _interrupted_session(protocol: Path, data: Path, monkeypatch: pytest.MonkeyPatch, *options: str) -> None:
+    """Run ``psyop run`` with ``options`` and stop it (Ctrl-C) after three durable trials."""
     from psyop.session.log import store
 
     original = store.SessionStore.append_trial
@@ -261,7 +251,7 @@ def _interrupted_session(protocol: Path, data: Path, monkeypatch: pytest.MonkeyP
         original(self, row, frames)
 
     monkeypatch.setattr(store.SessionStore, "append_trial", stop_after_three)
-    assert cli_main(_run(protocol, data)) == 130
+    assert cli_main(_run(protocol, data, *options)) == 130
     monkeypatch.setattr(store.SessionStore, "append_trial", original)
 
 
