@@ -62,7 +62,7 @@ def _frame_path_ms(with_camera: bool, n: int, with_pose: bool = False) -> np.nda
     rig = EyeRig(get_eye_model("gullstrand_emsley_relaxed"), 0.063, ("left", "right"))
     renderer = CameraRenderer(VIVE_PRO, rig) if with_camera else None
     loop = TrialLoop(identity={"study": "bench", "participant": "B", "session": 1}, phases=(), clock=clock,
-                     gaze=_LiveSource(clock), responses=None, renderer=renderer, display=HeadlessDisplay(clock),
+                     gaze=_LiveSource(clock), responses=None, renderer=renderer, display=HeadlessDisplay(clock, 90.0),
                      store=None, config=LoopConfig(progress=False),  # type: ignore[arg-type]
                      pose=SimulatedPose(seed=0) if with_pose else None)
     phase = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)

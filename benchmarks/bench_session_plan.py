@@ -88,7 +88,7 @@ def _per_trial_s(protocol: Any, rows: list[dict], phases: tuple, response: Any, 
     clock = VirtualClock()
     loop = TrialLoop(identity={"study": "bench", "participant": "B", "session": 1}, phases=phases, clock=clock,
                      gaze=SimulatedTracker(1), responses=make_observer(observer, seed=1, participant="B"),
-                     renderer=CameraRenderer(display, rig), display=HeadlessDisplay(clock), store=_NoStore(),
+                     renderer=CameraRenderer(display, rig), display=HeadlessDisplay(clock, 90.0), store=_NoStore(),
                      config=LoopConfig(progress=False, every_frame=False), response=response)
     start = time.perf_counter()
     for row in rows:

@@ -19,16 +19,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--participant", required=True, help="participant ID (letters and digits)")
     parser.add_argument("--session", type=int, default=1, help="session number (default 1)")
     parser.add_argument("--seed", type=int, default=None, help="schedule/observer seed (default: from IDs, or the session's)")
-    parser.add_argument("--tracker", default="sim", help="sim | replay:FILE | pupil:HOST:PORT | serial:DEVICE")
+    parser.add_argument("--tracker", default="sim", help="sim | replay:FILE | pupil:HOST:PORT | serial:DEVICE | openxr "
+                        "(eye gaze through the OpenXR runtime, XR_EXT_eye_gaze_interaction; needs --display openxr)")
     parser.add_argument("--pose", default="sim",
                         help="head/hand pose: sim (simulated from the seed) | replay:SESSION_DIR (a logged session with "
                         "the same schedule: protocol, seed, conditions) | replay-by-condition:SESSION_DIR (each trial "
-                        "replays a logged trial of the same condition)")
+                        "replays a logged trial of the same condition) | openxr (head pose from the OpenXR runtime, needs "
+                        "--display openxr) | openxr:HAND (also the hand: left, right or vive_tracker:ROLE)")
     parser.add_argument("--responses", default="sim",
                         help="who answers: sim (the protocol's simulated observer) | keyboard (needs --display window) "
                         "| serial:DEVICE (a response box) | none (nobody: every response phase runs to the protocol's "
-                        "timeout_s and is logged as a timeout; a dry run of the timing, needs timeout_s)")
-    parser.add_argument("--display", default="headless", choices=["headless", "window"])
+                        "timeout_s and is logged as a timeout; a dry run of the timing, needs timeout_s) | openxr (controller "
+                        "buttons through the OpenXR runtime, needs --display openxr)")
+    parser.add_argument("--display", default="headless", choices=["headless", "window", "openxr"],
+                        help="headless (no screen) | window (a desktop window) | openxr (a VR headset through its "
+                             "OpenXR runtime: pip install 'psyop[xr]'; docs/headset.md)")
     parser.add_argument("--clock", default="virtual", choices=["virtual", "real"])
     parser.add_argument("--window-scale", type=float, default=0.25, metavar="S",
                         help="--display window: render and show each eye at S x the display's resolution "

@@ -261,3 +261,116 @@ def paper_frustum_near_plane(
     factor = (near_m + nz) / (1.0 + nz * inv_d)  # (z_near + Nz) d / (d + Nz), with d tan / d
     return np.stack([factor * (l + nx * inv_d), factor * (r + nx * inv_d),
                      factor * (b + ny * inv_d), factor * (t + ny * inv_d)], axis=-1)
+
+
+@dataclass(frozen=True)
+class ViewGeometry:
+    """One eye's view as a headset runtime reports it for one frame (OpenXR ``xrLocateViews`` in the
+    head's VIEW space): the eye's centre of rotation C in head space (metres), the orientation of
+    its image (unit quaternion w, x, y, z, eye -> head; identity for a display that is not canted)
+    and the field of view as tangents (left, right, bottom, top) seen from C in the eye's own frame.
+    The image is at optical infinity (a runtime's field of view is a set of directions)."""
+
+    eye: str
+    centre_m: tuple[float, float, float]
+    orientation_wxyz: tuple[float, float, float, float]
+    tangents: tuple[float, float, float, float]
+
+    def __post_init__(self) -> None:
+        values = (*self.centre_m, *self.orientation_wxyz, *self.tangents)
+        if len(self.centre_m) != 3 or len(self.orientation_wxyz) != 4 or len(self.tangents) != 4:
+            raise ValueError(f"view of the {self.eye} eye: need 3 centre, 4 quaternion and 4 tangent values")
+        if not all(math.isfinite(float(v)) for v in values):
+            raise ValueError(f"view of the {self.eye} eye is not finite: {values}")
+        l, r, b, t = self.tangents
+        if not (l < r and b < t):
+            raise ValueError(f"view of the {self.eye} eye: tangents {self.tangents} need left < right and bottom < top")
+        q = np.asarray(self.orientation_wxyz, dtype=np.float64)
+        if abs(float(np.linalg.norm(q)) - 1.0) > 1e-3:
+            raise ValueError(f"view of the {self.eye} eye: orientation {self.orientation_wxyz} is not a unit quaternion")
+
+    def rotation(self) -> np.ndarray:
+        """3x3 rotation eye -> head (columns: the eye frame's x, y, z axes in head space)."""
+        w, x, y, z = (float(v) for v in self.orientation_wxyz)
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w / n, x / n, y / n, z / n
+        return np.array([
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ])
+
+    @property
+    def canted(self) -> bool:
+        return not np.allclose(self.rotation(), np.eye(3), atol=1e-12, rtol=0.0)
+
+
+def make_view_camera(
+    view: ViewGeometry,
+    width_px: int,
+    height_px: int,
+    fixation_m: ArrayLike,
+    nc_m: float,
+    mode: RenderingMode | str,
+    near_m: float = 0.01,
+    far_m: float = 100.0,
+    fallback_direction: ArrayLike | None = None,
+) -> EyeCamera:
+    """The camera of one eye for a frame whose view (centre, orientation, field of view) comes
+    from a headset runtime rather than from a display profile and an ipd.
+
+    The centre of projection is placed exactly as :func:`make_eye_camera` places it (C, C + N or
+    C + (-Nx, -Ny, Nz), with the gaze direction from C to the fixation), C being the view's centre.
+    For a view that is not canted, centred at (+-ipd/2, 0, 0) with a profile's tangents, the result
+    equals :func:`make_eye_camera` (tests/optics/test_view_camera.py). A canted view rotates the
+    image's rays and the view matrix by the view's orientation.
+
+    Examples
+    --------
+    >>> v = ViewGeometry("right", (0.032, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (-1.0, 1.0, -1.0, 1.0))
+    >>> cam = make_view_camera(v, 100, 100, (0.032, 0.0, -1.0), 0.0077, "ocular")
+    >>> [round(float(x), 4) for x in cam.centre_of_projection_m]
+    [0.032, 0.0, -0.0077]
+    """
+    NC_M.check(nc_m)
+    near, far = float(near_m), float(far_m)
+    if not (math.isfinite(near) and math.isfinite(far) and 0.0 < near < far):
+        raise ValueError(f"need finite 0 < near_m < far_m, got near_m={near_m!r}, far_m={far_m!r}")
+    eye_ = parse_eye(view.eye)
+    mode_ = parse_mode(mode)
+    cx, cy, cz = (float(v) for v in view.centre_m)
+    fix = np.asarray(fixation_m, dtype=np.float64).reshape(-1)
+    if fix.shape not in ((3,), (4,)):
+        raise ValueError(f"fixation_m must have shape (3,) or (4,), got {fix.shape}")
+    if fix.shape == (4,) and fix[3] == 0.0:
+        shifted = fix  # a direction at infinity does not depend on where the eye is
+    else:
+        w = fix[3] if fix.shape == (4,) else 1.0
+        shifted = np.array([fix[0] / w, fix[1] / w - cy, fix[2] / w - cz])
+    (ux, uy, uz), valid = gaze_direction_single(shifted, cx, fallback_direction)
+    if mode_ is RenderingMode.CONVENTIONAL:
+        ox = oy = oz = 0.0
+    elif mode_ is RenderingMode.OCULAR:
+        ox, oy, oz = nc_m * ux, nc_m * uy, nc_m * uz
+    else:
+        ox, oy, oz = -nc_m * ux, -nc_m * uy, nc_m * uz
+    l, r, b, t = (float(v) for v in view.tangents)
+    # at optical infinity the angular extents stay fixed: only the camera translates
+    projection = np.array([
+        [2.0 / (r - l), 0.0, (r + l) / (r - l), 0.0],
+        [0.0, 2.0 / (t - b), (t + b) / (t - b), 0.0],
+        [0.0, 0.0, -(far + near) / (far - near), -2.0 * far * near / (far - near)],
+        [0.0, 0.0, -1.0, 0.0],
+    ])
+    px, py, pz = cx + ox, cy + oy, cz + oz
+    pixel_to_ray = np.array([[r - l, 0.0, l], [0.0, -(t - b), t], [0.0, 0.0, -1.0]])
+    view_m = np.array([[1.0, 0.0, 0.0, -px], [0.0, 1.0, 0.0, -py], [0.0, 0.0, 1.0, -pz], [0.0, 0.0, 0.0, 1.0]])
+    if view.canted:
+        rot = view.rotation()
+        pixel_to_ray = rot @ pixel_to_ray
+        turn = np.eye(4)
+        turn[:3, :3] = rot.T
+        view_m = turn @ view_m
+    return EyeCamera(eye=eye_, mode=mode_, valid=valid, centre_of_projection_m=np.array([px, py, pz]),
+                     width_px=int(width_px), height_px=int(height_px), view=view_m, projection=projection,
+                     pixel_to_ray=pixel_to_ray)

@@ -5,8 +5,10 @@ distance ``d_m`` in front of that eye's centre of rotation C. Its extent is give
 tangents of the half-angles seen from C (OpenVR's ``GetProjectionRaw`` convention, with
 bottom negative and top positive): x from ``d * tan_left`` to ``d * tan_right``, y from
 ``d * tan_bottom`` to ``d * tan_top``. The tangents are stored for the right eye; the left
-eye is mirrored in x (left/right swap and change sign). ``d_m = inf`` (the paper's choice)
-means the image is at optical infinity: only directions matter.
+eye is mirrored in x (left/right swap and change sign) unless ``left_tangents`` gives the left
+eye's own (left, right, bottom, top): a headset's two frusta are rarely mirror images (an
+OpenXR runtime reports each eye's field of view, psyop.session.xr). ``d_m = inf`` (the paper's
+choice) means the image is at optical infinity: only directions matter.
 """
 
 from __future__ import annotations
@@ -34,9 +36,20 @@ class DisplayProfile:
     tan_bottom: float
     tan_top: float
     d_m: float = math.inf
+    #: the left eye's own (left, right, bottom, top) tangents; None: the right eye's, mirrored in x
+    left_tangents: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         problems = []
+        if self.left_tangents is not None:
+            lt = tuple(self.left_tangents)
+            if len(lt) != 4 or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                       and math.isfinite(v) for v in lt):
+                problems.append(f"left_tangents must be 4 finite numbers (left, right, bottom, top), got {self.left_tangents!r}")
+            elif not (lt[0] < lt[1] and lt[2] < lt[3]):
+                problems.append(f"left_tangents {lt}: need left < right and bottom < top")
+            else:
+                object.__setattr__(self, "left_tangents", tuple(float(v) for v in lt))
         for field in ("width_px", "height_px"):
             value = getattr(self, field)
             if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
@@ -63,6 +76,8 @@ class DisplayProfile:
         if str(eye) == "right":
             return (self.tan_left, self.tan_right, self.tan_bottom, self.tan_top)
         if str(eye) == "left":
+            if self.left_tangents is not None:
+                return self.left_tangents
             return (-self.tan_right, -self.tan_left, self.tan_bottom, self.tan_top)
         raise ValueError(f"eye must be 'left' or 'right', got {eye!r}")
 
@@ -127,7 +142,7 @@ def get_display_profile(name: str) -> DisplayProfile:
 
 _TANGENT_KEYS = ("tan_left", "tan_right", "tan_bottom", "tan_top")
 _ALLOWED_KEYS = {"name", "width_px", "height_px", "refresh_hz", "d_m", "horizontal_fov_deg", "vertical_fov_deg",
-                 *_TANGENT_KEYS}
+                 "left_tangents", *_TANGENT_KEYS}
 
 
 def _parse_distance(value: Any) -> float:
@@ -144,7 +159,8 @@ def display_profile_from_mapping(mapping: Mapping[str, Any]) -> DisplayProfile:
     """Validate a user-defined profile (e.g. read from protocol YAML) and build it.
 
     Required: ``name``, ``width_px``, ``height_px``, ``refresh_hz``, and either all four of
-    ``tan_left, tan_right, tan_bottom, tan_top`` (right eye) or ``horizontal_fov_deg``
+    ``tan_left, tan_right, tan_bottom, tan_top`` (right eye; optional ``left_tangents``: the left
+    eye's own four, else mirrored) or ``horizontal_fov_deg``
     (symmetric; optional ``vertical_fov_deg``, else aspect-matched). Optional ``d_m``
     (metres, ``inf``/``null`` = optical infinity, the default). Raises ``ValueError`` naming
     every problem; the protocol layer adds file:line:column.
@@ -168,9 +184,16 @@ def display_profile_from_mapping(mapping: Mapping[str, Any]) -> DisplayProfile:
     if not isinstance(name, str) or not name:
         raise ValueError(f"display profile: name must be a non-empty string, got {name!r}")
     d_m = _parse_distance(mapping.get("d_m"))
+    left = mapping.get("left_tangents")
+    if left is not None and not has_tangents:
+        raise ValueError("display profile: left_tangents needs the right eye's four tangents (tan_left, tan_right, "
+                         "tan_bottom, tan_top), not horizontal_fov_deg")
+    if left is not None and (not isinstance(left, (list, tuple)) or len(left) != 4):
+        raise ValueError(f"display profile: left_tangents must be a list of 4 numbers [left, right, bottom, top], got {left!r}")
     if has_tangents:
         return DisplayProfile(name, mapping["width_px"], mapping["height_px"], mapping["refresh_hz"],
-                              *(mapping[k] for k in _TANGENT_KEYS), d_m=d_m)
+                              *(mapping[k] for k in _TANGENT_KEYS), d_m=d_m,
+                              left_tangents=None if left is None else tuple(left))
     for k in ("width_px", "height_px"):
         if isinstance(mapping[k], bool) or not isinstance(mapping[k], int) or mapping[k] <= 0:
             raise ValueError(f"display profile {name!r}: {k} must be a positive integer, got {mapping[k]!r}")

@@ -8,12 +8,13 @@ one; the renderers take their eye centres and cameras from it.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from psyop.optics.camera import EyeCamera, make_eye_camera
+from psyop.optics.camera import EyeCamera, ViewGeometry, make_eye_camera, make_view_camera
 from psyop.optics.display import DisplayProfile
 from psyop.optics.eye_models import EyeModel
 from psyop.optics.ranges import IPD_M, NC_M
@@ -60,6 +61,35 @@ class EyeRig:
                **kwargs: float) -> EyeCamera:
         """The camera of ``eye`` for this frame (``psyop.optics.camera.make_eye_camera``)."""
         return make_eye_camera(display, eye, fixation_m, self.ipd_m, self.nc_m, mode, **kwargs)
+
+    def view_camera(self, view: ViewGeometry, width_px: int, height_px: int, fixation_m: ArrayLike,
+                    mode: str, **kwargs: float) -> EyeCamera:
+        """The camera of a view a headset runtime reported (``psyop.optics.camera.make_view_camera``),
+        with this rig's NC. Place the views with :meth:`place_views` first."""
+        return make_view_camera(view, width_px, height_px, fixation_m, self.nc_m, mode, **kwargs)
+
+    def place_views(self, views: tuple[ViewGeometry, ...]) -> tuple[ViewGeometry, ...]:
+        """The runtime's views with each eye's centre of rotation C where this rig says it is.
+
+        The runtime's view position of an eye is taken to be that eye's centre of rotation C
+        (docs/headset.md). With the ipd from the tracker (``ipd: tracker``, ``ipd_source``
+        'runtime') the views are used as reported. With an ipd the protocol fixes, the two
+        centres are moved symmetrically along the line joining the runtime's two view
+        positions, about their mid-point, to ``ipd_m`` apart (orientations and fields of view
+        unchanged); a single view is then left where the runtime put it."""
+        if self.ipd_source != "protocol" or len(views) != 2:
+            return views
+        by_eye = {v.eye: v for v in views}
+        if set(by_eye) != set(EYE_NAMES):
+            return views
+        left, right = (np.asarray(by_eye[e].centre_m, dtype=np.float64) for e in EYE_NAMES)
+        mid, axis = 0.5 * (left + right), right - left
+        norm = float(np.linalg.norm(axis))
+        if not norm > 0.0:
+            raise ValueError("the runtime reported both eyes at the same position; cannot place a fixed ipd")
+        half = 0.5 * self.ipd_m * axis / norm
+        placed = {"left": mid - half, "right": mid + half}
+        return tuple(dataclasses.replace(v, centre_m=tuple(float(x) for x in placed[v.eye])) for v in views)
 
     def as_dict(self) -> dict[str, object]:
         """What session.json records."""

@@ -54,6 +54,9 @@ class InlineDisplayProfile(StrictModel):
     tan_right: Number | None = None
     tan_bottom: Number | None = None
     tan_top: Number | None = None
+    left_tangents: list[Number] | None = Field(
+        default=None, min_length=4, max_length=4,
+        description="the left eye's own [tan_left, tan_right, tan_bottom, tan_top]; default: the right eye's mirrored")
     d_m: Number | Literal["inf"] = Field(default="inf", description="virtual-image distance, metres, or 'inf'")
 
     @field_validator("d_m")
@@ -75,6 +78,12 @@ class InlineDisplayProfile(StrictModel):
             raise ValueError("give horizontal_fov_deg (symmetric) or the four tangents tan_left/right/bottom/top")
         if all(given) and not (self.tan_left < self.tan_right and self.tan_bottom < self.tan_top):
             raise ValueError("tan_left must be < tan_right and tan_bottom < tan_top")
+        if self.left_tangents is not None:
+            if not all(given):
+                raise ValueError("left_tangents needs the right eye's four tangents tan_left/right/bottom/top")
+            lt = self.left_tangents
+            if not (lt[0] < lt[1] and lt[2] < lt[3]):
+                raise ValueError("left_tangents [left, right, bottom, top]: need left < right and bottom < top")
         return self
 
     @property

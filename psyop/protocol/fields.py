@@ -47,7 +47,7 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "DisplaySpec": {"profile": "display", "eye_model": "display", "ipd": "plan"},
     "InlineDisplayProfile": {k: "display" for k in ("name", "width_px", "height_px", "refresh_hz", "horizontal_fov_deg",
                                                       "vertical_fov_deg", "tan_left", "tan_right", "tan_bottom",
-                                                      "tan_top", "d_m")},
+                                                      "tan_top", "left_tangents", "d_m")},
     "InlineEyeModel": {"nc_mm": "display", "name": "display"},
     "FixedIpd": {"mm": "plan"},
     "Disc": _scene(size_deg="stimulus", depth="stimulus", surface="stimulus", centre_deg="stimulus"),

@@ -399,6 +399,16 @@ class Renderer:
         """The eye's resolved framebuffer (for presenting in a window)."""
         return self._eyes[eye].fbo
 
+    def copy_to(self, eye: str, framebuffer: Any) -> None:
+        """Copy the eye's last frame into another framebuffer of the same size (a display's image,
+        e.g. an OpenXR swapchain image): a blit that converts the float image to the target's
+        format (8-bit unsigned normalised for RGBA8: values pass unchanged, no sRGB encoding)."""
+        state = self._eyes[eye]
+        if tuple(framebuffer.size) != (state.width_px, state.height_px):
+            raise ValueError(f"target {framebuffer.size} differs from the {eye} eye's image "
+                             f"{(state.width_px, state.height_px)}")
+        self.ctx.copy_framebuffer(framebuffer, state.fbo)
+
     def colour_texture(self, eye: str) -> Any:
         """The eye's resolved float colour texture (for a GPU-side check: psyop.rendering.frame_check)."""
         return self._eyes[eye].colour

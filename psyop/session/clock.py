@@ -25,13 +25,18 @@ class Clock(Protocol):
 
 
 class RealClock:
-    """Monotonic wall clock (``perf_counter_ns``), optionally locked to display flips."""
+    """Monotonic wall clock (``perf_counter_ns``; on Linux that is ``CLOCK_MONOTONIC``, the clock an
+    OpenXR runtime converts its times from: psyop.session.xr)."""
 
     virtual = False
 
     def __init__(self) -> None:
         self._epoch_ns = time.perf_counter_ns()
-        self.flips = FlipSync()
+
+    @property
+    def epoch_ns(self) -> int:
+        """The session clock's zero as a ``perf_counter_ns`` reading."""
+        return self._epoch_ns
 
     def now_s(self) -> float:
         return (time.perf_counter_ns() - self._epoch_ns) * 1e-9
@@ -44,12 +49,6 @@ class RealClock:
                 return
             if remaining > 0.0015:
                 time.sleep(remaining - 0.001)
-
-    def on_flip(self) -> float:
-        """Record a display flip (call right after swap_buffers returns); return its time."""
-        t_s = self.now_s()
-        self.flips.add(t_s)
-        return t_s
 
 
 class VirtualClock:

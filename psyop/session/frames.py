@@ -1,19 +1,36 @@
-"""Per-frame records: rendering (or its stand-in), submission, and latency accounting.
+"""The frame seam: where frames go (:class:`Display`), what renders them (:class:`FrameRenderer`),
+per-frame records and latency accounting.
+
+Every frame goes through the same two calls, whatever the display (headless, a desktop window, an
+OpenXR headset):
+
+1. ``request = display.begin_frame(not_before_s)``: the display paces the loop (a headless display
+   waits on the session clock until ``not_before_s``; a headset runtime blocks in ``xrWaitFrame``
+   until it wants the next frame) and says when the frame will be shown (``display_time_s``,
+   session clock), the display period, whether to render at all, and, for a headset, each eye's
+   view (centre, orientation, field of view: :class:`psyop.optics.camera.ViewGeometry`) and the
+   render target (a swapchain image) each eye must be drawn into;
+2. the renderer draws the eyes for that request (into the targets it was handed, if any);
+3. ``submit_s = display.end_frame(request, images)``: the display presents the frame (a window
+   shows ``images``, the renderer's eye textures; a headset releases its swapchain images and
+   ends the frame) and returns the time the frame was handed over.
 
 A frame's latency is the age of the gaze sample it used at the moment the frame was
-submitted (``submit_s - gaze_sample_t_s``): tracker latency + waiting + the software path.
+submitted (``submit_s - gaze_sample_t_s``): tracker latency + waiting + the software path; its
+gaze-to-photon estimate is the age at the predicted display time (``display_time_s - gaze_sample_t_s``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 import pyarrow as pa
 
+from psyop.optics.camera import ViewGeometry
 from psyop.optics.display import DisplayProfile
 from psyop.optics.rig import EyeRig
 from psyop.session.log.schema import FRAME_SCHEMA
@@ -31,21 +48,91 @@ class FrameCheck:
     ok: bool
 
 
+@dataclass(frozen=True)
+class RenderTarget:
+    """Where one eye's image must go: a framebuffer the display owns (an OpenXR swapchain image,
+    wrapped as a moderngl framebuffer) and its size in pixels. The renderer draws the eye at this
+    size and copies the finished image into it."""
+
+    framebuffer: Any  # moderngl.Framebuffer (moderngl is imported only where a context exists)
+    width_px: int
+    height_px: int
+
+
+@dataclass(frozen=True)
+class FrameRequest:
+    """What the display asks for the next frame (see the module docstring).
+
+    ``views`` (per eye, in head space) is empty when the protocol's display profile and eye rig
+    place the cameras (headless, window); ``targets`` is empty when the images stay in the
+    renderer's own buffers. ``missed_frames``: display periods the display skipped before this
+    frame (0 when it cannot tell)."""
+
+    index: int
+    display_time_s: float
+    period_s: float
+    should_render: bool = True
+    views: tuple[ViewGeometry, ...] = ()
+    targets: Mapping[str, RenderTarget] = field(default_factory=dict, compare=False)
+    missed_frames: int = 0
+
+    def view(self, eye: str) -> ViewGeometry | None:
+        """This eye's view from the display, or None (the profile and rig place it)."""
+        for v in self.views:
+            if v.eye == eye:
+                return v
+        return None
+
+
+class DisplayInterrupted(Exception):
+    """The display cannot show the trial in progress (an OpenXR session lost focus, or the runtime
+    is stopping). The trial is discarded like a crashed one. ``rerun``: the display will be ready
+    again (``wait_until_ready``) and the loop re-runs the trial; otherwise the session ends,
+    finalised incomplete and resumable."""
+
+    def __init__(self, reason: str, *, rerun: bool) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.rerun = rerun
+
+
 class FrameRenderer(Protocol):
     """Renders one frame for a fixation; returns a check of the result.
 
     ``phase`` says what is shown (its ``name``: 'interval1', 'blank', ...; ``show``),
-    ``mode`` the loop's rendering mode for it, ``t_in_phase_s`` the time since the phase began.
+    ``mode`` the loop's rendering mode for it, ``t_in_phase_s`` the time since the phase began
+    at the frame's display time, ``frame`` the display's request (views and targets).
     """
 
     def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
-               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None) -> FrameCheck: ...
+               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
+               frame: FrameRequest | None = None) -> FrameCheck: ...
+
+    def eye_textures(self) -> list[Any]: ...
+
+    def close(self) -> None: ...
 
 
 class Display(Protocol):
-    """Where frames go: ``submit`` presents the frame and returns the flip time (session clock)."""
+    """Where frames go (module docstring). ``name``: what session.json records as the display;
+    ``gl_context``: the OpenGL context frames must be rendered in (None: the renderer makes its own);
+    ``summary``: what the display measured, for session.json; ``paced``: True when
+    ``begin_frame`` itself waits for the display's next frame slot (a headset runtime), so the loop
+    never sleeps between frames."""
 
-    def submit(self) -> float: ...
+    name: str
+    paced: bool
+
+    @property
+    def gl_context(self) -> Any: ...
+
+    def wait_until_ready(self) -> None: ...
+
+    def begin_frame(self, not_before_s: float) -> FrameRequest: ...
+
+    def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float: ...
+
+    def summary(self) -> dict[str, Any]: ...
 
     def close(self) -> None: ...
 
@@ -58,22 +145,52 @@ class CameraRenderer:
         self.display, self.rig = display, rig
 
     def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
-               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None) -> FrameCheck:
+               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
+               frame: FrameRequest | None = None) -> FrameCheck:
         ok = True  # cameras are in head space: the head pose changes no camera
         for eye in self.rig.eyes:
-            camera = self.rig.camera(self.display, eye, fixation_m, mode)
+            view = frame.view(eye) if frame is not None else None
+            camera = (self.rig.camera(self.display, eye, fixation_m, mode) if view is None
+                      else self.rig.view_camera(view, self.display.width_px, self.display.height_px, fixation_m, mode))
             ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
         return FrameCheck(False, ok)  # no image was made
 
+    def eye_textures(self) -> list[Any]:
+        return []
+
+    def close(self) -> None:
+        return None
+
 
 class HeadlessDisplay:
-    """No screen: a frame is 'submitted' when the renderer returns."""
+    """No screen: the loop is paced by the session clock (a virtual clock jumps, a real one
+    sleeps) and a frame is 'submitted' when the renderer returns."""
 
-    def __init__(self, clock: Any) -> None:
+    name = "headless"
+    paced = False
+
+    def __init__(self, clock: Any, refresh_hz: float) -> None:
         self._clock = clock
+        self._period_s = 1.0 / float(refresh_hz)
+        self._index = 0
 
-    def submit(self) -> float:
+    @property
+    def gl_context(self) -> Any:
+        return None
+
+    def wait_until_ready(self) -> None:
+        return None
+
+    def begin_frame(self, not_before_s: float) -> FrameRequest:
+        self._clock.sleep_until(not_before_s)
+        self._index += 1
+        return FrameRequest(self._index - 1, float(not_before_s), self._period_s)
+
+    def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float:
         return self._clock.now_s()
+
+    def summary(self) -> dict[str, Any]:
+        return {"display": self.name, "frames": self._index}
 
     def close(self) -> None:
         return None

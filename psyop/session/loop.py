@@ -33,7 +33,8 @@ import pandas as pd
 
 from psyop.adaptive.session import AdaptiveLevels
 from psyop.session.clock import Clock
-from psyop.session.frames import Display, FrameRecorder, FrameRenderer, latency_summary
+from psyop.session.frames import Display, DisplayInterrupted, FrameRecorder, FrameRenderer, FrameRequest, latency_summary
+from psyop.session.log.schema import VIEW_TANGENTS
 from psyop.session.gaze.filter import GazeConditioner
 from psyop.session.gaze.plan import FixationPlan, circling_target
 from psyop.session.gaze.sample import GazeSample, GazeSource, TrackerLost
@@ -83,7 +84,7 @@ def gaze_ok(valid: int, total: int, min_share: float) -> bool | None:
 
 @dataclass
 class SessionOutcome:
-    status: str  # complete | interrupted | tracker_lost | device_error
+    status: str  # complete | interrupted | tracker_lost | device_error | display_lost
     n_recorded: int
     n_scheduled: int
     message: str
@@ -148,6 +149,8 @@ class TrialLoop:
         self._n_held = 0
         self._phase_start_s = 0.0
         self.state = TrialState.DONE
+        #: trials the display interrupted (discarded; re-run when ``rerun``), as session.json records them
+        self.display_interruptions: list[dict[str, Any]] = []
 
     # session -------------------------------------------------------------------------
     def run(self, schedule: pd.DataFrame, completed: set[int]) -> SessionOutcome:
@@ -167,7 +170,7 @@ class TrialLoop:
                         bar.update(1)
                         continue
                     row = self.adaptive.fill(row)
-                record, frames = self.run_trial(row)
+                record, frames = self._run_trial_on_display(row)
                 if self.adaptive is not None:
                     record = self.adaptive.complete(record)
                 self.state = TrialState.RECORD
@@ -193,11 +196,30 @@ class TrialLoop:
         except ConnectionError as exc:
             status = "device_error"
             message = f"{exc}; the trial in progress was discarded, {n_done}/{n_total} recorded"
+        except DisplayInterrupted as exc:
+            status = "display_lost"
+            message = f"{exc.reason}; the trial in progress was discarded, {n_done}/{n_total} recorded"
         finally:
             bar.close()
         latency = latency_summary(np.array(self._ages), self.frame_period_s)
         latency["n_frames_held"] = self._n_held
         return SessionOutcome(status, n_done, n_total, message, latency)
+
+    def _run_trial_on_display(self, row: dict[str, Any]) -> tuple[dict[str, Any], FrameRecorder]:
+        """Run a trial once the display can show it. A trial the display interrupts (a headset
+        session that lost focus) is discarded like a crashed one, the reason recorded in
+        session.json (``display_interruptions``), and run again once the display is ready; an
+        interruption that ends the display (the runtime stopping) ends the session."""
+        while True:
+            self.display.wait_until_ready()
+            try:
+                return self.run_trial(row)
+            except DisplayInterrupted as exc:
+                self.display_interruptions.append({"trial": int(row["trial"]), "reason": exc.reason,
+                                                   "at_s": self.clock.now_s(), "rerun": exc.rerun})
+                self.store.update_metadata(display_interruptions=list(self.display_interruptions))
+                if not exc.rerun:
+                    raise
 
     def _record_stops(self, schedule: pd.DataFrame, recorded: set[int], n_stopped: int) -> int:
         """Write session.json's ``adaptive_stop`` whenever another condition has stopped (so the
@@ -297,17 +319,20 @@ class TrialLoop:
             return GazeSample(sample.timestamp_s, sample.fixation_m, sample.confidence, False)
         return sample
 
-    def _frame(self, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder, index: int) -> tuple[int, int]:
-        """The software path of one frame: gaze in -> condition -> render -> submit -> log."""
+    def _frame(self, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder, request: FrameRequest) -> tuple[int, int]:
+        """The software path of one frame the display asked for: gaze in -> condition -> render
+        (for the request's display time, views and targets) -> end the frame -> log."""
         sample = self._fresh(self.gaze.latest(self.clock.now_s()))
         gaze = self.conditioner.condition(sample)
         head = self.head_conditioner.condition(self.pose.head(self.clock.now_s()) if self.pose is not None else None)
         render_start = self.clock.now_s()
         check = None
-        if self.renderer is not None and phase.renders:
-            check = self.renderer.render(row, phase, mode_for(phase, row), render_start - self._phase_start_s,
-                                         gaze.fixation_m, head_pose=(head.position_m, head.orientation_wxyz))
-        submit = self.display.submit()
+        if self.renderer is not None and phase.renders and request.should_render:
+            check = self.renderer.render(row, phase, mode_for(phase, row), request.display_time_s - self._phase_start_s,
+                                         gaze.fixation_m, head_pose=(head.position_m, head.orientation_wxyz),
+                                         frame=request)
+        images = self.renderer.eye_textures() if self.renderer is not None else []
+        submit = self.display.end_frame(request, images)
         age = submit - gaze.sample_t_s if math.isfinite(gaze.sample_t_s) else math.nan
         if gaze.valid and math.isfinite(age):
             self._ages.append(age)
@@ -318,24 +343,31 @@ class TrialLoop:
                    fixation_x_m=fx, fixation_y_m=fy, fixation_z_m=fz, gaze_confidence=gaze.confidence,
                    gaze_valid=gaze.valid, gaze_held=gaze.held, render_start_s=render_start, submit_s=submit,
                    sample_age_s=age, image_checked=check.checked if check else False,
-                   image_ok=check.ok if check else None, **_pose_columns("head", head))
+                   image_ok=check.ok if check else None, **_pose_columns("head", head),
+                   display_time_s=request.display_time_s, display_period_s=request.period_s,
+                   display_should_render=request.should_render, display_missed_frames=request.missed_frames,
+                   gaze_age_at_display_s=(request.display_time_s - gaze.sample_t_s
+                                          if math.isfinite(gaze.sample_t_s) else math.nan),
+                   **_view_columns(request))
         if check is not None and check.checked and not check.ok:
             raise RuntimeError(f"trial {row['trial']}: rendered frame failed its check (non-finite or empty)")
         return int(gaze.valid), 1
 
     def _frames_until(self, end_s: float, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
+        """Frames until the phase ends: the display paces them (begin_frame) and says when each is
+        shown; a frame is drawn while the next one would still be shown before ``end_s``."""
         valid = total = 0
         t = self.clock.now_s()
         while t < end_s - 1e-9:
-            v, n = self._frame(row, phase, frames, total)
+            request = self.display.begin_frame(t)
+            v, n = self._frame(row, phase, frames, request)
             valid, total = valid + v, total + n
-            t = min(t + self.frame_period_s, end_s)
-            self.clock.sleep_until(t)
+            t = min(max(t + self.frame_period_s, request.display_time_s + request.period_s), end_s)
+        self.clock.sleep_until(end_s)
         return valid, total
 
     def _sampled_frame(self, at_s: float, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
-        self.clock.sleep_until(at_s)
-        return self._frame(row, phase, frames, 0)
+        return self._frame(row, phase, frames, self.display.begin_frame(at_s))
 
     def _await_response(self, row: Mapping[str, Any], frames: FrameRecorder) -> Response:
         plan = self.response_plan
@@ -352,11 +384,24 @@ class TrialLoop:
                 self.responses.timed_out()
                 return Response(TIMEOUT_RESPONSE, correct=None, response_time_s=math.nan)
             if self.config.every_frame:
-                self._frame(row, prompt, frames, len(frames))
+                self._frame(row, prompt, frames, self.display.begin_frame(self.clock.now_s()))
                 wake_s = self.clock.now_s() + self.frame_period_s
+                if self.display.paced:  # the next begin_frame waits for the display itself
+                    continue
             else:
                 wake_s = self.clock.now_s() + 0.01
             self.clock.sleep_until(wake_s if timeout_s is None else min(wake_s, start_s + timeout_s))
+
+
+def _view_columns(request: FrameRequest) -> dict[str, Any]:
+    """Frame-log columns of the views the display reported (psyop.session.log.schema.view_fields)."""
+    columns: dict[str, Any] = {}
+    for view in request.views:
+        e = view.eye
+        columns.update({f"view_{e}_{a}_m": float(x) for a, x in zip("xyz", view.centre_m)})
+        columns.update({f"view_{e}_q{c}": float(q) for c, q in zip("wxyz", view.orientation_wxyz)})
+        columns.update({f"view_{e}_tan_{side}": float(t) for side, t in zip(VIEW_TANGENTS, view.tangents)})
+    return columns
 
 
 def _pose_columns(prefix: str, pose: ConditionedPose) -> dict[str, Any]:

@@ -33,9 +33,9 @@ from psyop.session.log.layout import SessionPaths
 from psyop.session.log.store import log_identity, read_metadata
 
 #: response sources whose events carry real (wall-clock) time stamps
-REAL_TIME_RESPONSES = ("serial", "keyboard")
+REAL_TIME_RESPONSES = ("serial", "keyboard", "openxr")
 #: trackers that stream in real time
-REAL_TIME_TRACKERS = ("pupil", "serial")
+REAL_TIME_TRACKERS = ("pupil", "serial", "openxr")
 
 
 def check_options(*, clock: str, responses: str, tracker: str) -> None:

@@ -21,7 +21,7 @@ import pandas as pd
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
 from psyop.session.clock import RealClock, VirtualClock
-from psyop.session.frames import CameraRenderer, HeadlessDisplay
+from psyop.session.frames import CameraRenderer, Display, HeadlessDisplay
 from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, seed_for
 from psyop.session.log.layout import session_paths, write_dataset_description
 from psyop.session.log.schema import trial_schema
@@ -84,7 +84,7 @@ def _package_versions() -> tuple[tuple[str, str], ...]:
     return tuple(versions)
 
 
-def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig) -> Any:
+def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig, display: Display) -> Any:
     kind, _, arg = spec.partition(":")
     if kind == "sim":
         return SimulatedTracker(seed_for(seed, "tracker"), faults)
@@ -101,16 +101,21 @@ def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig)
         if not host or not port.isdigit():
             raise UserError(f"expected pupil:HOST:PORT, got {spec!r}", "--tracker")
         return PupilClient(host, int(port), clock=clock.now_s)
+    if kind == "openxr":
+        from psyop.session.xr.tracking import OpenXRGaze
+
+        return OpenXRGaze.on_display(display)
     if kind == "serial":
         from psyop.session.gaze.serial_source import SerialGazeSource
 
         if not arg:
             raise UserError("expected serial:DEVICE", "--tracker")
         return SerialGazeSource(arg, clock=clock.now_s)
-    raise UserError(f"unknown tracker {spec!r}; use sim, replay:FILE, pupil:HOST:PORT or serial:DEVICE", "--tracker")
+    raise UserError(f"unknown tracker {spec!r}; use sim, replay:FILE, pupil:HOST:PORT, serial:DEVICE or openxr", "--tracker")
 
 
-def _make_pose(spec: str, seed: int, protocol_sha256: str = "", schedule: pd.DataFrame | None = None) -> Any:
+def _make_pose(spec: str, seed: int, protocol_sha256: str = "", schedule: pd.DataFrame | None = None,
+               display: Display | None = None) -> Any:
     """The head/hand pose source: simulated (from the seed) or replayed from a logged session
     (checked against this session's schedule: psyop.session.pose_replay.pair_trials)."""
     kind, _, arg = spec.partition(":")
@@ -126,10 +131,16 @@ def _make_pose(spec: str, seed: int, protocol_sha256: str = "", schedule: pd.Dat
         target = None if schedule is None else ReplaySchedule(
             protocol_sha256, seed, tuple(schedule["condition"].astype(str)) if "condition" in schedule else ())
         return ReplayPose.from_path(Path(arg), target, by_condition=kind == "replay-by-condition")
-    raise UserError(f"unknown pose source {spec!r}; use sim, replay:SESSION_DIR or replay-by-condition:SESSION_DIR", "--pose")
+    if kind == "openxr":
+        from psyop.session.xr.tracking import OpenXRPose
+
+        return OpenXRPose.on_display(display, arg)
+    raise UserError(f"unknown pose source {spec!r}; use sim, replay:SESSION_DIR, replay-by-condition:SESSION_DIR, "
+                    "openxr or openxr:HAND_PATH", "--pose")
 
 
-def _make_responses(spec: str, plan: SessionPlan, seed: int, participant: str, clock: Any, window: Any) -> Any:
+def _make_responses(spec: str, plan: SessionPlan, seed: int, participant: str, clock: Any, window: Any,
+                    display: Display | None = None) -> Any:
     name, _, arg = spec.partition(":")
     kind = plan.kind
     if name == "sim":
@@ -158,23 +169,62 @@ def _make_responses(spec: str, plan: SessionPlan, seed: int, participant: str, c
         from psyop.session.responses.keyboard import KeyboardResponses
 
         return KeyboardResponses(window, kind)
-    raise UserError(f"unknown response source {spec!r}; use sim, keyboard, serial:DEVICE or none", "--responses")
+    if name == "openxr":
+        from psyop.session.xr.tracking import OpenXRResponses
+
+        return OpenXRResponses.on_display(display, kind)
+    raise UserError(f"unknown response source {spec!r}; use sim, keyboard, serial:DEVICE, openxr or none", "--responses")
 
 
-def _make_renderer(mode: str, plan: SessionPlan, scale: float, max_images: int | None) -> tuple[Any, str]:
+def _make_display(options: SessionOptions, plan: SessionPlan, clock: Any) -> Display:
+    """Where the session's frames go (psyop.session.frames.Display): headless, a window or an
+    OpenXR headset."""
+    if options.display == "headless":
+        return HeadlessDisplay(clock, float(plan.display.refresh_hz))
+    if options.display == "window":
+        from psyop.session.window import GlfwWindow
+
+        return GlfwWindow(plan.display, clock, scale=options.window_scale, n_eyes=len(plan.rig.eyes))
+    if options.display == "openxr":
+        if clock.virtual:
+            raise UserError("--display openxr shows frames to a person in real time; use --clock real with it",
+                            "--clock")
+        from psyop.session.xr.display import open_openxr_display
+
+        return open_openxr_display(plan, clock)
+    raise UserError(f"unknown display {options.display!r}; use headless, window or openxr", "--display")
+
+
+def _window_type() -> type:
+    from psyop.session.window import GlfwWindow
+
+    return GlfwWindow
+
+
+def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale: float, scale: float,
+                   max_images: int | None) -> tuple[Any, str]:
     """The frame renderer and a description of it for session.json.
 
     'images': the protocol's stimulus ray-cast by psyop.rendering (needs OpenGL/EGL);
     'cameras': only the gaze-dependent eye cameras; 'auto': images if a context can be
-    created, else cameras (recorded, never silent).
+    created, else cameras (recorded, never silent). A display with its own OpenGL context (a
+    window, a headset) is rendered in that context, every frame watched.
     """
     if mode not in ("auto", "images", "cameras"):
         raise UserError(f"unknown render mode {mode!r}; use auto, images or cameras", "--render")
     if mode == "cameras":
         return CameraRenderer(plan.display, plan.rig), "cameras only"
+    from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
+
+    if display.gl_context is not None:
+        scale_used = window_scale if display.name == "window" else 1.0
+        where = "in the window" if display.name == "window" else f"in the {display.name} display's swapchain images"
+        return (SceneRenderer(plan, scale=scale_used, ctx=display.gl_context, owns_ctx=False,
+                              check_every=WATCHED_CHECK_EVERY),
+                f"images at scale {scale_used:g} {where}, each eye's first and every {WATCHED_CHECK_EVERY}th rendered "
+                "image checked")
     try:
         from psyop.rendering.renderer import create_headless_context
-        from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
 
         ctx = create_headless_context()
     except Exception as exc:  # noqa: BLE001 - any OpenGL/EGL failure
@@ -229,20 +279,11 @@ def run_session(
     }
     metadata["pose"] = options.pose
     renderer: Any = None
-    pose = _make_pose(options.pose, seed, protocol.source_sha256, schedule)
-    gaze = _make_gaze(options.tracker, clock, seed, options.tracker_faults)
-    window = None
-    if options.display == "window":
-        from psyop.session.window import GlfwWindow
-
-        window = GlfwWindow(display_profile, clock, scale=options.window_scale,
-                            n_eyes=len(plan.rig.eyes))
-        display: Any = window
-    elif options.display == "headless":
-        display = HeadlessDisplay(clock)
-    else:
-        raise UserError(f"unknown display {options.display!r}; use headless or window", "--display")
-    responses = _make_responses(options.responses, plan, seed, options.participant, clock, window)
+    display = _make_display(options, plan, clock)
+    pose = _make_pose(options.pose, seed, protocol.source_sha256, schedule, display)
+    gaze = _make_gaze(options.tracker, clock, seed, options.tracker_faults, display)
+    window = display if isinstance(display, _window_type()) else None
+    responses = _make_responses(options.responses, plan, seed, options.participant, clock, window, display)
     announce = None
     if options.responses not in ("sim", "none"):  # a person answers: the experimenter reads the question and prompts
         print(f"psyop run: question for the participant: {plan.response.question}", file=sys.stderr)
@@ -265,17 +306,9 @@ def run_session(
         path = plan.fixation
         every_frame = (not (clock.virtual and not responses.needs_images)) if options.every_frame is None \
             else options.every_frame
-        if window is not None and options.render != "cameras":
-            from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
-
-            renderer = SceneRenderer(plan, scale=window.scale, ctx=window.ctx, owns_ctx=False,
-                                     check_every=WATCHED_CHECK_EVERY)
-            window.source = renderer
-            rendering = (f"images at scale {window.scale:g} in the window, each eye's first and every "
-                         f"{WATCHED_CHECK_EVERY}th rendered image checked")
-        else:
-            renderer, rendering = _make_renderer(options.render, plan, 1.0 if every_frame else options.check_scale,
-                                                 None if every_frame else options.check_images)
+        renderer, rendering = _make_renderer(options.render, plan, display, options.window_scale,
+                                             1.0 if every_frame else options.check_scale,
+                                             None if every_frame else options.check_images)
         store.update_metadata(rendering=rendering)
         config = LoopConfig(
             refresh_hz=float(display_profile.refresh_hz),
@@ -295,7 +328,7 @@ def run_session(
         )
         outcome = loop.run(schedule, completed)
     finally:
-        if renderer is not None and hasattr(renderer, "close"):
+        if renderer is not None:
             renderer.close()
         responses.close()
         gaze.close()
@@ -304,10 +337,12 @@ def run_session(
     summary = {"outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
                "tracker": gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held,
                         "hand_trials_reused": getattr(pose, "n_reused_hand_trials", 0)}}
-    flips = getattr(clock, "flips", None)
-    if flips is not None and len(flips.times_s) >= 8:
-        period, _ = flips.estimate(1.0 / float(display_profile.refresh_hz))
-        summary["display_flip_period_s"] = period  # from the flip timestamps (least squares)
+    display_summary = display.summary()
+    if "display_flip_period_s" in display_summary:  # from the flip timestamps (least squares)
+        summary["display_flip_period_s"] = display_summary["display_flip_period_s"]
+    summary["display"] = display_summary
+    if loop.display_interruptions:
+        summary["display_interruptions"] = loop.display_interruptions
     store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
     if options.write_description:
         write_dataset_description(options.data_root, simulated=options.simulated)

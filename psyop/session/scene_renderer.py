@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from psyop.session.frames import FrameCheck, HeadPose
+from psyop.session.frames import FrameCheck, FrameRequest, HeadPose
 from psyop.session.phases import PhaseSpec
 from psyop.session.plan import SessionPlan
 
@@ -102,29 +102,50 @@ class SceneRenderer:
                             base_dir=self._base_dir, show=phase.primitives, images=self._images)
         return scene_in_head(scene, *head_pose) if head_pose is not None else scene
 
+    def _camera(self, eye: str, fixation_m: tuple[float, float, float], mode: str, frame: FrameRequest | None) -> Any:
+        """This eye's camera: from the display's view and at its target's size where the display
+        gives them (a headset runtime), else from the protocol's display profile and the rig."""
+        view = frame.view(eye) if frame is not None else None
+        target = frame.targets.get(eye) if frame is not None else None
+        if view is None:
+            if target is not None and (target.width_px, target.height_px) != (self.display.width_px, self.display.height_px):
+                display = dataclasses.replace(self.display, width_px=target.width_px, height_px=target.height_px)
+                return self.rig.camera(display, eye, fixation_m, mode)
+            return self.rig.camera(self.display, eye, fixation_m, mode)
+        width, height = (target.width_px, target.height_px) if target is not None else (self.display.width_px,
+                                                                                         self.display.height_px)
+        return self.rig.view_camera(view, width, height, fixation_m, mode)
+
     def render(self, row: Mapping[str, Any], phase: PhaseSpec, mode: str, t_in_phase_s: float,
-               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None) -> FrameCheck:
+               fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
+               frame: FrameRequest | None = None) -> FrameCheck:
         """Render this frame for the plan's eye(s) in ``mode`` (the plan's mode of this phase).
         ``head_pose`` (tracked, head -> world) moves the eyes through the world-fixed stimulus;
-        the recalibration cross stays head-fixed."""
+        the recalibration cross stays head-fixed. ``frame``: the display's request; each eye is
+        drawn from its view and copied into its target where the request has them."""
         from psyop.rendering import Renderer
 
         cameras_ok = True
         ok = True
         images = checked = 0
         for eye in self.eyes:
-            camera = self.rig.camera(self.display, eye, fixation_m, mode)
+            camera = self._camera(eye, fixation_m, mode, frame)
             cameras_ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
             if phase.show == "stimulus" and self.max_images is not None and self.images_rendered >= self.max_images:
                 return FrameCheck(False, cameras_ok)
             scene = self._scene(row, phase, t_in_phase_s, eye, head_pose)
+            target = frame.targets.get(eye) if frame is not None else None
             if scene is None:
+                if target is not None:  # nothing drawn: the eye sees the background, not a stale image
+                    target.framebuffer.clear(*self._background(), 1.0)
                 continue
             if self._renderer is None:
                 self._renderer = Renderer(scene, settings=self.settings, ctx=self._ctx)
             else:
                 self._renderer.set_scene(scene)
             result = self._renderer.render(camera)
+            if target is not None:  # the display's image (a swapchain image) gets this eye's frame
+                self._renderer.copy_to(eye, target.framebuffer)
             self.images_rendered += 1
             self.last_eye = eye
             images += 1
@@ -143,6 +164,11 @@ class SceneRenderer:
                 # a blank may be uniform by design (nothing shown, or only e.g. an aperture's surround)
                 ok &= summary.ok(blank_by_design=phase.show == "blank")
         return FrameCheck(checked > 0, ok and cameras_ok)
+
+    def _background(self) -> tuple[float, float, float]:
+        from psyop.stimulus import blank_scene
+
+        return tuple(blank_scene().background) if self._renderer is None else tuple(self._renderer.scene.background)
 
     def _check(self, eye: str) -> Any:
         """The frame's check summary, reduced on the GPU (no full readback)."""
@@ -172,8 +198,3 @@ class SceneRenderer:
         except KeyError:
             return []
 
-    def last_framebuffer(self) -> Any:
-        """The framebuffer of the last rendered eye (for a window to present), or None."""
-        if self._renderer is None or self.last_eye is None:
-            return None
-        return self._renderer.framebuffer(self.last_eye)

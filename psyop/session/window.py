@@ -1,21 +1,28 @@
 """A real window for sessions (``--display window``): presents frames, delivers key presses.
 
-Built on :class:`psyop.rendering.window.Window` (glfw + moderngl). With a
-:class:`~psyop.session.scene_renderer.SceneRenderer` sharing the window's context
-(``source``), each submit presents the newest image of every eye, side by side for a
+Built on :class:`psyop.rendering.window.Window` (glfw + moderngl). It implements the loop's
+:class:`~psyop.session.frames.Display`: frames are rendered in the window's own OpenGL context
+(``gl_context``), and each ``end_frame`` presents the eye images it is given, side by side for a
 stereo protocol (left eye on the left), at the render resolution: ``scale`` 1
-(``psyop run --window-scale 1``) shows the display profile's full resolution per eye.
-Before any image (and when there is no source) the screen is flat grey. Flip times are recorded on the real clock
-(:meth:`RealClock.on_flip`), which estimates the display's refresh period.
+(``psyop run --window-scale 1``) shows the display profile's full resolution per eye. Before any
+image the screen is flat grey. Flip times are recorded (:class:`~psyop.session.clock.FlipSync`),
+which estimates the display's refresh period for session.json.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
+
+from psyop.session.clock import FlipSync
+from psyop.session.frames import FrameRequest
 
 
 class GlfwWindow:
     """Implements the loop's Display and the keyboard's KeyEvents."""
+
+    name = "window"
+    paced = False
 
     def __init__(self, display_profile: Any, clock: Any, *, scale: float = 0.25, n_eyes: int = 1) -> None:
         from psyop.errors import UserError
@@ -34,12 +41,17 @@ class GlfwWindow:
 
         self._glfw = glfw
         self._clock = clock
+        self._period_s = 1.0 / float(display_profile.refresh_hz)
         self._keys: list[tuple[str, float]] = []
         glfw.set_key_callback(self._window._window, self._on_key)
         self.shade = 0.5
         self.scale = scale
-        self.source: Any = None  # a SceneRenderer sharing this window's context
-        self._presented: Any = None
+        self.flips = FlipSync()
+        self._index = 0
+
+    @property
+    def gl_context(self) -> Any:
+        return self._window.ctx
 
     @property
     def ctx(self) -> Any:
@@ -66,18 +78,37 @@ class GlfwWindow:
         keys, self._keys = self._keys, []
         return keys
 
-    def submit(self) -> float:
-        """Present every eye's newest image side by side (flat grey before any) and flip."""
+    def wait_until_ready(self) -> None:
+        return None
+
+    def begin_frame(self, not_before_s: float) -> FrameRequest:
+        """Wait on the session clock until ``not_before_s``; the frame is shown at the next flip
+        (predicted from the flips so far once there are enough of them)."""
+        self._clock.sleep_until(not_before_s)
+        self._index += 1
+        shown_s = float(not_before_s)
+        if len(self.flips.times_s) >= 8:
+            shown_s = max(shown_s, self.flips.next_flip_s(self._clock.now_s(), self._period_s))
+        return FrameRequest(self._index - 1, shown_s, self._period_s)
+
+    def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float:
+        """Present every eye's newest image side by side (flat grey before any) and flip; the flip time."""
         ctx = self._window.ctx
-        textures = self.source.eye_textures() if self.source is not None else []
-        if textures and sum(t.size[0] for t in textures) <= self._window.width_px:
-            self._window.present_side_by_side(textures)
+        if images and sum(t.size[0] for t in images) <= self._window.width_px:
+            self._window.present_side_by_side(list(images))
         else:
             ctx.screen.use()
             ctx.clear(self.shade, self.shade, self.shade)
             self._glfw.swap_buffers(self._window._window)
-        on_flip = getattr(self._clock, "on_flip", None)
-        return on_flip() if on_flip is not None else self._clock.now_s()
+        t_s = self._clock.now_s()
+        self.flips.add(t_s)
+        return t_s
+
+    def summary(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"display": self.name, "frames": self._index}
+        if len(self.flips.times_s) >= 8:  # from the flip timestamps (least squares)
+            out["display_flip_period_s"] = self.flips.estimate(self._period_s)[0]
+        return out
 
     def close(self) -> None:
         self._window.release()

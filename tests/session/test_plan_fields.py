@@ -204,7 +204,7 @@ def test_response_timeout_is_logged_as_such(tmp_path: Path) -> None:
     clock, responses, said = VirtualClock(), _NeverAnswers(), []
     loop = TrialLoop(identity={"study": "ordinal", "participant": "P", "session": 1}, phases=plan.phases,
                      clock=clock, gaze=SimulatedTracker(1), responses=responses, renderer=None,
-                     display=HeadlessDisplay(clock), store=_NoStore(), config=LoopConfig(progress=False, every_frame=False),
+                     display=HeadlessDisplay(clock, 90.0), store=_NoStore(), config=LoopConfig(progress=False, every_frame=False),
                      response=plan.response, announce=said.append)
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
     start = clock.now_s()

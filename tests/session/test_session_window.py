@@ -78,11 +78,10 @@ STEREO_SCRIPT = textwrap.dedent(
     plan = compile_plan(protocol, tracker_ipd_m=0.064)
     window = GlfwWindow(plan.display, RealClock(), scale={scale!r}, n_eyes=len(plan.rig.eyes))
     renderer = SceneRenderer(plan, scale=window.scale, ctx=window.ctx, owns_ctx=False)
-    window.source = renderer
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
     check = renderer.render(row, PhaseSpec("interval1", 1.0, "stimulus", "free", "mode_interval1", interval=1), "ocular", 0.1,
                             (0.0, 0.0, -1.0))
-    window.submit()
+    window.end_frame(window.begin_frame(0.0), renderer.eye_textures())
     screen = window._window.screen_pixels()
     left, right = (renderer._renderer.image_uint8(eye) for eye in ("left", "right"))
     w = left.shape[1]

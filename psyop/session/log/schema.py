@@ -57,6 +57,18 @@ def pose_fields(prefix: str) -> list[pa.Field]:
         pa.field(f"{prefix}_held", pa.bool_()),
     ]
 
+VIEW_TANGENTS: tuple[str, ...] = ("left", "right", "bottom", "top")
+
+
+def view_fields(eye: str) -> list[pa.Field]:
+    """One eye's view columns of the frame log (see FRAME_SCHEMA)."""
+    return [
+        *(pa.field(f"view_{eye}_{axis}_m", pa.float64()) for axis in "xyz"),
+        *(pa.field(f"view_{eye}_q{c}", pa.float64()) for c in "wxyz"),
+        *(pa.field(f"view_{eye}_tan_{side}", pa.float64()) for side in VIEW_TANGENTS),
+    ]
+
+
 FRAME_SCHEMA = pa.schema(
     [
         pa.field("trial", pa.int64()),
@@ -76,6 +88,19 @@ FRAME_SCHEMA = pa.schema(
         pa.field("image_ok", pa.bool_()),
         # head pose the frame used (head space at session start; unit quaternion w, x, y, z)
         *pose_fields("head"),
+        # what the display said of this frame (psyop.session.frames.FrameRequest): predicted display
+        # time and period (session clock), whether the runtime asked for an image, the display
+        # periods it skipped before this frame, and the gaze sample's age at the display time
+        pa.field("display_time_s", pa.float64()),
+        pa.field("display_period_s", pa.float64()),
+        pa.field("display_should_render", pa.bool_()),
+        pa.field("display_missed_frames", pa.int64()),
+        pa.field("gaze_age_at_display_s", pa.float64()),
+        # each eye's view as the display reported it (headset runtimes; null when the protocol's
+        # display profile and eye rig placed the cameras): centre of rotation in head space,
+        # orientation (w, x, y, z) and field of view as tangents (left, right, bottom, top)
+        *view_fields("left"),
+        *view_fields("right"),
     ]
 )
 
