@@ -49,6 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--phase-delay-s", type=float, default=0.0, help=argparse.SUPPRESS)
     parser.add_argument("--sim-nan-burst-rate-hz", type=float, default=0.0, help=argparse.SUPPRESS)
     parser.add_argument("--sim-dropout-rate-hz", type=float, default=0.0, help=argparse.SUPPRESS)
+    parser.add_argument("--xr-request-exit-at-frame", type=int, default=None, help=argparse.SUPPRESS)
     parser.set_defaults(func=main)
 
 
@@ -66,6 +67,7 @@ def main(args: argparse.Namespace) -> int:
         responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
         window_scale=args.window_scale,
         progress=not args.no_progress, allow_protocol_change=args.allow_protocol_change, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
+        xr_request_exit_at_frame=args.xr_request_exit_at_frame,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),
     )

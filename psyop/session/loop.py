@@ -211,8 +211,8 @@ class TrialLoop:
         session.json (``display_interruptions``), and run again once the display is ready; an
         interruption that ends the display (the runtime stopping) ends the session."""
         while True:
-            self.display.wait_until_ready()
             try:
+                self.display.wait_until_ready()
                 return self.run_trial(row)
             except DisplayInterrupted as exc:
                 self.display_interruptions.append({"trial": int(row["trial"]), "reason": exc.reason,

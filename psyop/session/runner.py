@@ -60,6 +60,7 @@ class SessionOptions:
     window_scale: float = 0.25  # window size as a fraction of the display profile's pixels
     allow_protocol_change: bool = False  # resume with a protocol edited only in comments (resume.py)
     pose: str = "sim"  # sim | replay:SESSION_DIR (head and hand pose; docs/sessions.md)
+    xr_request_exit_at_frame: int | None = None  # testing aid: the OpenXR runtime is asked to stop at frame N
 
     @property
     def simulated(self) -> bool:
@@ -191,7 +192,7 @@ def _make_display(options: SessionOptions, plan: SessionPlan, clock: Any) -> Dis
                             "--clock")
         from psyop.session.xr.display import open_openxr_display
 
-        return open_openxr_display(plan, clock)
+        return open_openxr_display(plan, clock, options.xr_request_exit_at_frame)
     raise UserError(f"unknown display {options.display!r}; use headless, window or openxr", "--display")
 
 

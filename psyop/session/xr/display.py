@@ -1,0 +1,261 @@
+"""``--display openxr``: the loop's :class:`~psyop.session.frames.Display` on an OpenXR headset.
+
+Per frame: ``begin_frame`` drains the runtime's events (a session that is no longer focused
+interrupts the trial in progress: :class:`~psyop.session.frames.DisplayInterrupted`), waits in
+``xrWaitFrame`` (the runtime paces the loop), begins the frame, syncs input, locates the head
+(VIEW space in the reference space) and each eye's view (``xrLocateViews`` in the VIEW space:
+head-relative centre, orientation and field of view), and acquires each eye's swapchain image as
+the render target. ``end_frame`` releases the images and submits one projection layer in the
+reference space with the views the runtime gave for that display time.
+
+Eye positions: the runtime's view position of an eye is taken to be that eye's centre of rotation
+C (what the runtime's IPD setting places); the eye rig's ipd rule (``place_views``) then applies
+the protocol's fixed ipd, if it has one, about their mid-point. Swapchains are RGBA8 (linear:
+psyop's pixel values reach the display unchanged, as in its PNGs) at the runtime's recommended
+size per eye.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from psyop.optics.camera import ViewGeometry
+from psyop.session.frames import DisplayInterrupted, FrameRequest, RenderTarget
+from psyop.session.xr.runtime import FOCUS_TIMEOUT_S, XrPose, XrRuntime, quaternion_multiply, rotate, tangents_from_fov, xr_error
+
+GL_RGBA8 = 0x8058
+#: a target is cleared to this grey before each frame (what a phase that draws nothing shows)
+CLEAR_GREY = 0.5
+
+
+@dataclass
+class _EyeSwapchain:
+    handle: Any
+    width_px: int
+    height_px: int
+    framebuffers: list[Any]
+    acquired: bool = False
+
+
+@dataclass(frozen=True)
+class XrFrame:
+    """The runtime's side of a frame: its times (ns) and the views to submit with the layer."""
+
+    predicted_display_time_ns: int
+    predicted_period_ns: int
+    should_render: bool
+    layer_views: tuple[Any, ...]  # XrView in the reference space, per eye (pose + fov for the layer)
+
+
+class OpenXRDisplay:
+    """Implements the loop's Display on an OpenXR runtime (module docstring)."""
+
+    name = "openxr"
+    paced = True
+
+    def __init__(self, plan: Any, clock: Any, *, reference_space: str = "local",
+                 request_exit_at_frame: int | None = None) -> None:
+        import moderngl
+
+        #: a testing aid (``psyop run --xr-request-exit-at-frame N``, hidden): ask the runtime to end the
+        #: session at frame N, so the tests see the real runtime take the session out of focus and stop it
+        self._request_exit_at_frame = request_exit_at_frame
+        self._plan, self._clock = plan, clock
+        self._ctx = moderngl.create_standalone_context(backend="egl")
+        try:
+            self.runtime = XrRuntime(self._ctx, reference_space=reference_space)
+        except BaseException:
+            self._ctx.release()
+            raise
+        self.xr = self.runtime.xr
+        self._eyes = plan.rig.eyes
+        self._index = 0
+        self._frame: XrFrame | None = None
+        self._last_display_ns: int | None = None
+        self.head_pose: XrPose | None = None  # VIEW space in the reference space at the frame's display time
+        self.head_pose_time_s = math.nan
+        self.frame_time_ns: int | None = None  # the current frame's predicted display time (XrTime)
+        self.frames_not_rendered = 0
+        self.frames_missed = 0
+        self._offset_ns = self.runtime.xr_time_now_ns()
+        try:
+            self._swapchains = self._create_swapchains()
+        except Exception as exc:  # noqa: BLE001
+            self.close()
+            raise xr_error("creating the swapchains failed", exc, self.runtime.facts.runtime) from exc
+
+    # -- time ---------------------------------------------------------------------------------------
+    def to_session_s(self, xr_time_ns: int) -> float:
+        """A runtime time on the session clock (RealClock: perf_counter_ns since its epoch)."""
+        return (int(xr_time_ns) - self._offset_ns - self._clock.epoch_ns) * 1e-9
+
+    def to_xr_ns(self, session_s: float) -> int:
+        return int(round(session_s * 1e9)) + self._clock.epoch_ns + self._offset_ns
+
+    # -- set-up ---------------------------------------------------------------------------------------
+    def _create_swapchains(self) -> dict[str, _EyeSwapchain]:
+        xr = self.xr
+        formats = list(xr.enumerate_swapchain_formats(self.runtime.session))
+        if GL_RGBA8 not in formats:
+            raise RuntimeError(f"the runtime offers no RGBA8 swapchain (formats {[hex(f) for f in formats]})")
+        out = {}
+        for eye, (w, h) in zip(("left", "right"), self.runtime.facts.recommended_sizes_px):
+            handle = xr.create_swapchain(self.runtime.session, xr.SwapchainCreateInfo(
+                usage_flags=xr.SwapchainUsageFlags.COLOR_ATTACHMENT_BIT | xr.SwapchainUsageFlags.TRANSFER_DST_BIT,
+                format=GL_RGBA8, sample_count=1, width=w, height=h, face_count=1, array_size=1, mip_count=1))
+            images = xr.enumerate_swapchain_images(handle, xr.SwapchainImageOpenGLKHR)
+            fbos = [self._ctx.framebuffer(color_attachments=[self._ctx.external_texture(img.image, (w, h), 4, 0, "f1")])
+                    for img in images]
+            out[eye] = _EyeSwapchain(handle, w, h, fbos)
+        return out
+
+    @property
+    def gl_context(self) -> Any:
+        return self._ctx
+
+    # -- the frame seam -------------------------------------------------------------------------------
+    def wait_until_ready(self) -> None:
+        """Submit empty frames until the runtime focuses the session (a trial starts only then)."""
+        deadline = time.monotonic() + FOCUS_TIMEOUT_S
+        while True:
+            self.runtime.poll_events()
+            if self.runtime.lost:
+                raise DisplayInterrupted(self.runtime.lost, rerun=False)
+            if self.runtime.focused:
+                return
+            if time.monotonic() > deadline:
+                raise xr_error(f"the session never became FOCUSED within {FOCUS_TIMEOUT_S:g} s (state "
+                               f"{self.runtime.state.name})", "is the headset on and the app in front?",
+                               self.runtime.facts.runtime)
+            if self.runtime.running:
+                self._empty_frame()
+            else:
+                time.sleep(0.005)
+
+    def _empty_frame(self) -> None:
+        xr = self.xr
+        state = xr.wait_frame(self.runtime.session)
+        xr.begin_frame(self.runtime.session)
+        xr.end_frame(self.runtime.session, xr.FrameEndInfo(display_time=state.predicted_display_time,
+                                                           environment_blend_mode=xr.EnvironmentBlendMode.OPAQUE))
+
+    def begin_frame(self, not_before_s: float) -> FrameRequest:
+        xr, rt = self.xr, self.runtime
+        rt.poll_events()
+        if rt.lost:
+            raise DisplayInterrupted(rt.lost, rerun=False)
+        if not rt.focused:
+            raise DisplayInterrupted(f"the headset session lost focus (state {rt.state.name})", rerun=True)
+        if self._request_exit_at_frame is not None and self._index == self._request_exit_at_frame:
+            xr.request_exit_session(rt.session)
+        state = xr.wait_frame(rt.session)
+        xr.begin_frame(rt.session)
+        t_ns, period_ns = int(state.predicted_display_time), int(state.predicted_display_period)
+        missed = 0
+        if self._last_display_ns is not None and period_ns > 0:
+            missed = max(0, int(round((t_ns - self._last_display_ns) / period_ns)) - 1)
+        self._last_display_ns = t_ns
+        self.frames_missed += missed
+        rt.sync_actions()
+        self.frame_time_ns = t_ns
+        self.head_pose = rt.locate(rt.head, rt.world, t_ns)
+        self.head_pose_time_s = self.to_session_s(t_ns)
+        should_render = bool(state.should_render)
+        views: tuple[ViewGeometry, ...] = ()
+        layer_views: tuple[Any, ...] = ()
+        targets: dict[str, RenderTarget] = {}
+        if should_render:
+            _, in_head = xr.locate_views(rt.session, xr.ViewLocateInfo(
+                view_configuration_type=rt.view_config, display_time=t_ns, space=rt.head))
+            _, in_world = xr.locate_views(rt.session, xr.ViewLocateInfo(
+                view_configuration_type=rt.view_config, display_time=t_ns, space=rt.world))
+            views = self._plan.rig.place_views(tuple(_view_geometry(eye, v) for eye, v in zip(("left", "right"), in_head)))
+            layer_views = tuple(in_world)
+            for eye, chain in self._swapchains.items():
+                index = xr.acquire_swapchain_image(chain.handle, xr.SwapchainImageAcquireInfo())
+                xr.wait_swapchain_image(chain.handle, xr.SwapchainImageWaitInfo(timeout=xr.INFINITE_DURATION))
+                chain.acquired = True
+                fbo = chain.framebuffers[index]
+                fbo.clear(CLEAR_GREY, CLEAR_GREY, CLEAR_GREY, 1.0)
+                if eye in self._eyes:
+                    targets[eye] = RenderTarget(fbo, chain.width_px, chain.height_px)
+        else:
+            self.frames_not_rendered += 1
+        self._frame = XrFrame(t_ns, period_ns, should_render, layer_views)
+        self._index += 1
+        return FrameRequest(self._index - 1, self.to_session_s(t_ns), period_ns * 1e-9, should_render,
+                            views=tuple(v for v in views if v.eye in self._eyes), targets=targets, missed_frames=missed)
+
+    def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float:
+        xr, rt = self.xr, self.runtime
+        pending = self._frame
+        self._frame = None
+        layers = []
+        if pending is not None and pending.should_render:
+            self._ctx.finish()  # the images are complete before the runtime reads them
+            projection_views = []
+            for (eye, chain), view in zip(self._swapchains.items(), pending.layer_views):
+                if chain.acquired:
+                    xr.release_swapchain_image(chain.handle, xr.SwapchainImageReleaseInfo())
+                    chain.acquired = False
+                projection_views.append(xr.CompositionLayerProjectionView(
+                    pose=view.pose, fov=view.fov, sub_image=xr.SwapchainSubImage(
+                        swapchain=chain.handle,
+                        image_rect=xr.Rect2Di(extent=xr.Extent2Di(chain.width_px, chain.height_px)))))
+            layer = xr.CompositionLayerProjection(space=rt.world, views=projection_views)
+            layers = [ctypes.byref(layer)]
+        display_ns = pending.predicted_display_time_ns if pending is not None else self.to_xr_ns(self._clock.now_s())
+        xr.end_frame(rt.session, xr.FrameEndInfo(display_time=display_ns,
+                                                 environment_blend_mode=xr.EnvironmentBlendMode.OPAQUE, layers=layers))
+        return self._clock.now_s()
+
+    def summary(self) -> dict[str, Any]:
+        facts = self.runtime.facts
+        return {"display": self.name, "runtime": facts.runtime, "system": facts.system, "extensions": facts.extensions,
+                "eye_gaze_supported": facts.eye_gaze_supported, "swapchain_sizes_px": facts.recommended_sizes_px,
+                "reference_space": facts.reference_space, "frames": self._index,
+                "frames_not_rendered": self.frames_not_rendered, "frames_missed": self.frames_missed,
+                "session_states": list(facts.states)}
+
+    def close(self) -> None:
+        rt = getattr(self, "runtime", None)
+        if rt is not None and rt.session is not None:
+            for chain in getattr(self, "_swapchains", {}).values():
+                if chain.acquired:
+                    try:
+                        self.xr.release_swapchain_image(chain.handle, self.xr.SwapchainImageReleaseInfo())
+                    except Exception:  # noqa: BLE001 - teardown goes on
+                        pass
+            rt.request_exit(self._empty_frame)
+            for chain in getattr(self, "_swapchains", {}).values():
+                for fbo in chain.framebuffers:
+                    fbo.release()
+                try:
+                    self.xr.destroy_swapchain(chain.handle)
+                except Exception:  # noqa: BLE001
+                    pass
+            self._swapchains = {}
+        if rt is not None:
+            rt.close()
+        if self._ctx is not None:
+            self._ctx.release()
+            self._ctx = None
+
+
+def _view_geometry(eye: str, view: Any) -> ViewGeometry:
+    p, q = view.pose.position, view.pose.orientation
+    return ViewGeometry(eye, (float(p.x), float(p.y), float(p.z)), (float(q.w), float(q.x), float(q.y), float(q.z)),
+                        tangents_from_fov(view.fov))
+
+
+def open_openxr_display(plan: Any, clock: Any, request_exit_at_frame: int | None = None) -> OpenXRDisplay:
+    """The OpenXR display for a session of ``plan`` on ``clock`` (a RealClock)."""
+    return OpenXRDisplay(plan, clock, request_exit_at_frame=request_exit_at_frame)
+
+
+__all__ = ["OpenXRDisplay", "open_openxr_display", "quaternion_multiply", "rotate"]

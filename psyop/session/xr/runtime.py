@@ -1,0 +1,416 @@
+"""One OpenXR runtime connection: instance, system, session, spaces, actions, events and time.
+
+Everything psyop asks of an OpenXR runtime goes through :class:`XrRuntime`, built on pyopenxr
+(``pip install 'psyop[xr]'``). The session's graphics binding is made from psyop's own moderngl
+EGL context with ``XR_MNDX_egl_enable`` (headless on Linux: no window system needed). Runtimes
+that offer only ``XR_KHR_opengl_enable`` with a window-system binding (GLX/Xlib, WGL) are refused
+with a line naming the runtime: that binding is not implemented (docs/headset.md).
+
+Spaces: the reference space (``LOCAL``: origin at the head at session start, gravity-aligned; or
+``STAGE``) is psyop's world; the ``VIEW`` space is psyop's head space (x right, y up, -z forward,
+origin between the eyes; docs/architecture.md). Poses come back as (position m, quaternion w, x,
+y, z). Times: the runtime's ``XrTime`` (ns) is converted to the session clock through
+``XR_KHR_convert_timespec_time`` (``CLOCK_MONOTONIC``, the clock psyop's RealClock reads on Linux).
+
+Input: one action set holds the eye-gaze pose (``XR_EXT_eye_gaze_interaction``, when the system
+supports it), each hand's grip pose and select button (khr/simple, htc/vive, valve/index and
+oculus/touch bindings suggested), and Vive tracker grip poses (``XR_HTCX_vive_tracker_interaction``,
+when offered). Actions are synced once per frame, only while the session is focused.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from psyop.errors import UserError
+
+#: exit code of a headset runtime that is absent or fails (a device problem, not bad input)
+XR_EXIT_CODE = 3
+#: how long a runtime may take to reach the FOCUSED state before the session gives up
+FOCUS_TIMEOUT_S = 60.0
+
+HANDS: tuple[str, ...] = ("left", "right")
+_SELECT_BINDINGS = {
+    "/interaction_profiles/khr/simple_controller": "select/click",
+    "/interaction_profiles/htc/vive_controller": "trigger/click",
+    "/interaction_profiles/valve/index_controller": "trigger/click",
+    "/interaction_profiles/oculus/touch_controller": "trigger/value",
+}
+
+
+def xr_error(what: str, exc: BaseException | str, runtime: str = "the OpenXR runtime") -> UserError:
+    """One line, exit 3: what failed, in which runtime, and where to look."""
+    return UserError(f"{runtime}: {what}: {exc}; is a headset connected and its runtime (SteamVR, Monado) running? "
+                     "XR_RUNTIME_JSON selects the runtime (docs/headset.md)", "--display openxr", XR_EXIT_CODE)
+
+
+def import_xr() -> Any:
+    """pyopenxr, or one line naming the extra that brings it."""
+    try:
+        import xr  # noqa: PLC0415 - optional dependency
+        import xr.raw_functions  # noqa: F401
+    except ImportError as exc:
+        raise UserError(f"--display openxr needs pyopenxr: pip install 'psyop[xr]' ({exc})", "--display",
+                        XR_EXIT_CODE) from exc
+    return xr
+
+
+@dataclass(frozen=True)
+class XrPose:
+    """A located pose: position (m) and unit quaternion (w, x, y, z) in the base space; ``valid``
+    when the runtime says both are valid and the orientation is tracked."""
+
+    position_m: tuple[float, float, float]
+    orientation_wxyz: tuple[float, float, float, float]
+    valid: bool
+
+
+@dataclass
+class RuntimeFacts:
+    """What session.json records of the runtime."""
+
+    runtime: str = ""
+    system: str = ""
+    extensions: list[str] = field(default_factory=list)
+    eye_gaze_supported: bool = False
+    vive_trackers: bool = False
+    recommended_sizes_px: list[tuple[int, int]] = field(default_factory=list)
+    reference_space: str = "local"
+    states: list[str] = field(default_factory=list)
+
+
+def _pose(xr: Any, location: Any, valid_bits: int) -> XrPose:
+    p, q = location.pose.position, location.pose.orientation
+    flags = int(location.location_flags)
+    return XrPose((float(p.x), float(p.y), float(p.z)), (float(q.w), float(q.x), float(q.y), float(q.z)),
+                  (flags & valid_bits) == valid_bits)
+
+
+class XrRuntime:
+    """Instance, system and session of the runtime, bound to ``ctx`` (a moderngl EGL context)."""
+
+    def __init__(self, ctx: Any, *, reference_space: str = "local", app_name: str = "psyop") -> None:
+        xr = self.xr = import_xr()
+        self.ctx = ctx
+        self.facts = RuntimeFacts(reference_space=reference_space)
+        self.instance = self.system = self.session = None
+        self._spaces: list[Any] = []
+        self.state = xr.SessionState.UNKNOWN
+        self.running = False
+        self._lost = ""
+        self.sync_count = 0  # input syncs so far (a press is reported once per sync)
+        try:
+            available = {_text(e.extension_name) for e in xr.enumerate_instance_extension_properties()}
+        except Exception as exc:  # noqa: BLE001 - the loader finds no runtime
+            raise xr_error("no OpenXR runtime could be loaded", exc) from exc
+        if "XR_MNDX_egl_enable" not in available or "XR_KHR_opengl_enable" not in available:
+            raise xr_error("the runtime offers no OpenGL-on-EGL binding (XR_MNDX_egl_enable with "
+                           "XR_KHR_opengl_enable); psyop's GLX/Xlib binding is not implemented", "unsupported")
+        wanted = ["XR_KHR_opengl_enable", "XR_MNDX_egl_enable", "XR_KHR_convert_timespec_time",
+                  "XR_EXT_eye_gaze_interaction", "XR_HTCX_vive_tracker_interaction"]
+        enable = [e for e in wanted if e in available]
+        if "XR_KHR_convert_timespec_time" not in enable:
+            raise xr_error("the runtime cannot convert its times to CLOCK_MONOTONIC (XR_KHR_convert_timespec_time)",
+                           "unsupported")
+        self.facts.extensions = enable
+        try:
+            self.instance = xr.create_instance(xr.InstanceCreateInfo(
+                application_info=xr.ApplicationInfo(application_name=app_name, engine_name="psyop",
+                                                    api_version=xr.Version(1, 0, 0)),
+                enabled_extension_names=enable))
+            props = xr.get_instance_properties(self.instance)
+            self.facts.runtime = f"{_text(props.runtime_name)} {xr.Version(props.runtime_version)}"
+            self.system = xr.get_system(self.instance, xr.SystemGetInfo(form_factor=xr.FormFactor.HEAD_MOUNTED_DISPLAY))
+        except Exception as exc:  # noqa: BLE001
+            self.close()
+            raise xr_error("no headset (HMD system) is available", exc, self.facts.runtime or "the OpenXR runtime") from exc
+        try:
+            self._create_session(enable)
+        except UserError:
+            self.close()
+            raise
+        except Exception as exc:  # noqa: BLE001
+            self.close()
+            raise xr_error("creating the session failed", exc, self.facts.runtime) from exc
+
+    # -- set-up ---------------------------------------------------------------------------------
+    def _create_session(self, enable: list[str]) -> None:
+        xr = self.xr
+        gaze_props = xr.SystemEyeGazeInteractionPropertiesEXT()
+        sprops = xr.SystemProperties(next=gaze_props if "XR_EXT_eye_gaze_interaction" in enable else None)
+        xr.raw_functions.xrGetSystemProperties(self.instance, self.system, ctypes.byref(sprops))
+        self.facts.system = _text(sprops.system_name)
+        self.facts.eye_gaze_supported = bool(gaze_props.supports_eye_gaze_interaction)
+        self.facts.vive_trackers = "XR_HTCX_vive_tracker_interaction" in enable
+        self.view_config = xr.ViewConfigurationType.PRIMARY_STEREO
+        views = xr.enumerate_view_configuration_views(self.instance, self.system, self.view_config)
+        self.facts.recommended_sizes_px = [(int(v.recommended_image_rect_width), int(v.recommended_image_rect_height))
+                                           for v in views]
+        xr.get_opengl_graphics_requirements_khr(self.instance, self.system)  # required before xrCreateSession
+        binding = self._egl_binding()
+        self.session = xr.create_session(self.instance, xr.SessionCreateInfo(
+            system_id=self.system, next=ctypes.cast(ctypes.pointer(binding), ctypes.c_void_p)))
+        self._binding = binding  # the runtime keeps pointers into it
+        space_type = {"local": xr.ReferenceSpaceType.LOCAL, "stage": xr.ReferenceSpaceType.STAGE}[self.facts.reference_space]
+        self.world = self._reference_space(space_type)
+        self.head = self._reference_space(xr.ReferenceSpaceType.VIEW)
+        self._create_actions()
+
+    def _reference_space(self, kind: Any) -> Any:
+        xr = self.xr
+        space = xr.create_reference_space(self.session, xr.ReferenceSpaceCreateInfo(
+            reference_space_type=kind, pose_in_reference_space=xr.Posef()))
+        self._spaces.append(space)
+        return space
+
+    def _egl_binding(self) -> Any:
+        xr = self.xr
+        egl = ctypes.CDLL("libEGL.so.1")
+        egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
+        egl.eglGetCurrentContext.restype = ctypes.c_void_p
+        egl.eglQueryContext.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.POINTER(ctypes.c_int)]
+        egl.eglChooseConfig.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_void_p),
+                                        ctypes.c_int, ctypes.POINTER(ctypes.c_int)]
+        dpy, ectx = egl.eglGetCurrentDisplay(), egl.eglGetCurrentContext()
+        config_id = ctypes.c_int()
+        egl.eglQueryContext(dpy, ectx, 0x3028, ctypes.byref(config_id))  # EGL_CONFIG_ID
+        attrs = (ctypes.c_int * 3)(0x3028, config_id.value, 0x3038)  # EGL_CONFIG_ID, id, EGL_NONE
+        config, n = ctypes.c_void_p(), ctypes.c_int()
+        egl.eglChooseConfig(dpy, attrs, ctypes.byref(config), 1, ctypes.byref(n))
+        if not (dpy and ectx and n.value == 1):
+            raise xr_error("psyop's OpenGL context is not a current EGL context", "no EGL display/context/config",
+                           self.facts.runtime)
+        binding = xr.GraphicsBindingEGLMNDX(
+            get_proc_address=ctypes.cast(egl.eglGetProcAddress, xr.PFN_xrEglGetProcAddressMNDX))
+        fields = dict(xr.GraphicsBindingEGLMNDX._fields_)
+        binding.display = ctypes.cast(ctypes.c_void_p(dpy), fields["display"])
+        binding.config = ctypes.cast(ctypes.c_void_p(config.value), fields["config"])
+        binding.context = ctypes.cast(ctypes.c_void_p(ectx), fields["context"])
+        self._egl = egl
+        return binding
+
+    def _path(self, text: str) -> Any:
+        return self.xr.string_to_path(self.instance, text)
+
+    def _create_actions(self) -> None:
+        xr = self.xr
+        self.action_set = xr.create_action_set(self.instance, xr.ActionSetCreateInfo(
+            action_set_name="psyop", localized_action_set_name="psyop", priority=0))
+        hands = [self._path(f"/user/hand/{h}") for h in HANDS]
+        self.hand_paths = dict(zip(HANDS, hands))
+        self.grip = xr.create_action(self.action_set, xr.ActionCreateInfo(
+            action_type=xr.ActionType.POSE_INPUT, action_name="hand_grip", localized_action_name="Hand grip",
+            subaction_paths=hands))
+        self.select = xr.create_action(self.action_set, xr.ActionCreateInfo(
+            action_type=xr.ActionType.BOOLEAN_INPUT, action_name="select", localized_action_name="Select",
+            subaction_paths=hands))
+        for profile, button in _SELECT_BINDINGS.items():
+            bindings = []
+            for h in HANDS:
+                bindings.append(xr.ActionSuggestedBinding(self.grip, self._path(f"/user/hand/{h}/input/grip/pose")))
+                bindings.append(xr.ActionSuggestedBinding(self.select, self._path(f"/user/hand/{h}/input/{button}")))
+            try:
+                xr.suggest_interaction_profile_bindings(self.instance, xr.InteractionProfileSuggestedBinding(
+                    interaction_profile=self._path(profile), suggested_bindings=bindings))
+            except xr.exception.XrException:
+                pass  # a runtime may not know every profile; the others still bind
+        self.gaze_action = None
+        if self.facts.eye_gaze_supported:
+            self.gaze_action = xr.create_action(self.action_set, xr.ActionCreateInfo(
+                action_type=xr.ActionType.POSE_INPUT, action_name="eye_gaze", localized_action_name="Eye gaze"))
+            xr.suggest_interaction_profile_bindings(self.instance, xr.InteractionProfileSuggestedBinding(
+                interaction_profile=self._path("/interaction_profiles/ext/eye_gaze_interaction"),
+                suggested_bindings=[xr.ActionSuggestedBinding(self.gaze_action,
+                                                              self._path("/user/eyes_ext/input/gaze_ext/pose"))]))
+        self.tracker_action = None
+        self.tracker_roles: dict[str, Any] = {}
+        if self.facts.vive_trackers:  # XR_HTCX_vive_tracker_interaction: grip poses by role
+            roles = ["handheld_object", "left_foot", "right_foot", "left_shoulder", "right_shoulder", "left_elbow",
+                     "right_elbow", "left_knee", "right_knee", "waist", "chest", "camera", "keyboard"]
+            self.tracker_roles = {r: self._path(f"/user/vive_tracker_htcx/role/{r}") for r in roles}
+            self.tracker_action = xr.create_action(self.action_set, xr.ActionCreateInfo(
+                action_type=xr.ActionType.POSE_INPUT, action_name="tracker_grip", localized_action_name="Tracker",
+                subaction_paths=list(self.tracker_roles.values())))
+            try:
+                xr.suggest_interaction_profile_bindings(self.instance, xr.InteractionProfileSuggestedBinding(
+                    interaction_profile=self._path("/interaction_profiles/htc/vive_tracker_htcx"),
+                    suggested_bindings=[xr.ActionSuggestedBinding(
+                        self.tracker_action, self._path(f"/user/vive_tracker_htcx/role/{r}/input/grip/pose"))
+                        for r in roles]))
+            except xr.exception.XrException:
+                self.tracker_action = None
+        xr.attach_session_action_sets(self.session, xr.SessionActionSetsAttachInfo(action_sets=[self.action_set]))
+        self.hand_spaces = {h: self._action_space(self.grip, self.hand_paths[h]) for h in HANDS}
+        self.gaze_space = self._action_space(self.gaze_action, xr.NULL_PATH) if self.gaze_action is not None else None
+
+    def _action_space(self, action: Any, subaction: Any) -> Any:
+        xr = self.xr
+        space = xr.create_action_space(self.session, xr.ActionSpaceCreateInfo(
+            action=action, subaction_path=subaction, pose_in_action_space=xr.Posef()))
+        self._spaces.append(space)
+        return space
+
+    def tracker_space(self, role: str) -> Any:
+        """The grip space of the Vive tracker with this role (XR_HTCX_vive_tracker_interaction)."""
+        if self.tracker_action is None:
+            raise xr_error("no Vive tracker poses", "the runtime does not offer XR_HTCX_vive_tracker_interaction",
+                           self.facts.runtime)
+        if role not in self.tracker_roles:
+            raise UserError(f"unknown Vive tracker role {role!r}; use one of {', '.join(self.tracker_roles)}", "--pose")
+        return self._action_space(self.tracker_action, self.tracker_roles[role])
+
+    # -- session state ----------------------------------------------------------------------------
+    def poll_events(self) -> None:
+        """Drain the runtime's events; follow the session state (begin the session when READY,
+        end it when STOPPING). A change that takes the session out of focus ends the drain, so the
+        trial in progress is interrupted for the focus loss itself (the events after it are read on
+        the next poll, in order)."""
+        xr = self.xr
+        while True:
+            try:
+                event = xr.poll_event(self.instance)
+            except xr.EventUnavailable:
+                return
+            kind = xr.StructureType(event.type)
+            if kind == xr.StructureType.EVENT_DATA_SESSION_STATE_CHANGED:
+                changed = ctypes.cast(ctypes.byref(event), ctypes.POINTER(xr.EventDataSessionStateChanged)).contents
+                was_focused = self.state == xr.SessionState.FOCUSED
+                self.state = xr.SessionState(changed.state)
+                self.facts.states.append(self.state.name)
+                if self.state == xr.SessionState.READY and not self.running:
+                    xr.begin_session(self.session, xr.SessionBeginInfo(self.view_config))
+                    self.running = True
+                elif self.state == xr.SessionState.STOPPING and self.running:
+                    xr.end_session(self.session)
+                    self.running = False
+                    self._lost = self._lost or "the runtime is stopping the session (STOPPING)"
+                elif self.state in (xr.SessionState.LOSS_PENDING, xr.SessionState.EXITING):
+                    self._lost = self._lost or f"the runtime ended the session ({self.state.name})"
+                if was_focused and self.state != xr.SessionState.FOCUSED:
+                    return  # the focus loss interrupts the trial before later events are read
+            elif kind == xr.StructureType.EVENT_DATA_INSTANCE_LOSS_PENDING:
+                self._lost = self._lost or "the runtime is going away (instance loss pending)"
+
+    @property
+    def focused(self) -> bool:
+        return self.running and self.state == self.xr.SessionState.FOCUSED
+
+    @property
+    def lost(self) -> str:
+        """Why the session cannot go on ('' while it can)."""
+        return self._lost
+
+    # -- time ---------------------------------------------------------------------------------------
+    def xr_time_now_ns(self) -> int:
+        """The runtime's XrTime of CLOCK_MONOTONIC now, and the monotonic reading it came from."""
+        xr = self.xr
+        mono_ns = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
+        spec = xr.timespec(mono_ns // 1_000_000_000, mono_ns % 1_000_000_000)
+        fn = ctypes.cast(xr.get_instance_proc_addr(self.instance, "xrConvertTimespecTimeToTimeKHR"),
+                         xr.PFN_xrConvertTimespecTimeToTimeKHR)
+        out = xr.Time()
+        result = xr.check_result(fn(self.instance, ctypes.byref(spec), ctypes.byref(out)))
+        if result.is_exception():
+            raise result
+        return int(out.value) - mono_ns  # offset: XrTime = CLOCK_MONOTONIC ns + offset
+
+    # -- locating -------------------------------------------------------------------------------------
+    def locate(self, space: Any, base: Any, xr_time_ns: int, next_struct: Any = None) -> XrPose:
+        xr = self.xr
+        location = xr.SpaceLocation(next=next_struct)
+        xr.raw_functions.xrLocateSpace(space, base, xr_time_ns, ctypes.byref(location))
+        bits = int(xr.SpaceLocationFlags.POSITION_VALID_BIT | xr.SpaceLocationFlags.ORIENTATION_VALID_BIT
+                   | xr.SpaceLocationFlags.ORIENTATION_TRACKED_BIT)
+        return _pose(xr, location, bits)
+
+    def sync_actions(self) -> None:
+        """Sync input once per frame (only delivered while focused)."""
+        xr = self.xr
+        if not self.focused:
+            return
+        try:
+            xr.sync_actions(self.session, xr.ActionsSyncInfo(active_action_sets=[xr.ActiveActionSet(self.action_set,
+                                                                                                    xr.NULL_PATH)]))
+        except xr.SessionNotFocused:
+            return
+        self.sync_count += 1
+
+    def select_pressed(self) -> dict[str, bool]:
+        """Per hand: whether its select button went down since the last sync."""
+        xr = self.xr
+        out = {}
+        for hand, path in self.hand_paths.items():
+            state = xr.get_action_state_boolean(self.session, xr.ActionStateGetInfo(action=self.select,
+                                                                                     subaction_path=path))
+            out[hand] = bool(state.is_active and state.current_state and state.changed_since_last_sync)
+        return out
+
+    # -- teardown -------------------------------------------------------------------------------------
+    def request_exit(self, pump_frame: Any, timeout_s: float = 5.0) -> None:
+        """``xrRequestExitSession`` and follow the states to the end (the runtime only moves on while
+        frames are submitted: ``pump_frame()`` submits an empty one)."""
+        xr = self.xr
+        if self.session is None or not self.running:
+            return
+        try:
+            xr.request_exit_session(self.session)
+        except xr.exception.XrException:
+            return
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.poll_events()
+            if not self.running or self.state in (xr.SessionState.EXITING, xr.SessionState.IDLE):
+                return
+            try:
+                pump_frame()
+            except xr.exception.XrException:
+                return
+
+    def close(self) -> None:
+        xr = self.xr
+        for space in self._spaces:
+            try:
+                xr.destroy_space(space)
+            except Exception:  # noqa: BLE001 - teardown goes on
+                pass
+        self._spaces = []
+        if self.session is not None:
+            try:
+                xr.destroy_session(self.session)
+            except Exception:  # noqa: BLE001
+                pass
+            self.session = None
+        if self.instance is not None:
+            try:
+                xr.destroy_instance(self.instance)
+            except Exception:  # noqa: BLE001
+                pass
+            self.instance = None
+
+
+def _text(value: Any) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def quaternion_multiply(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
+    """Hamilton product of two (w, x, y, z) quaternions."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+def rotate(q: tuple[float, ...], v: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Rotate vector v by the unit quaternion q (w, x, y, z)."""
+    w, x, y, z = q
+    p = quaternion_multiply(quaternion_multiply((w, x, y, z), (0.0, *v)), (w, -x, -y, -z))
+    return (p[1], p[2], p[3])
+
+
+def tangents_from_fov(fov: Any) -> tuple[float, float, float, float]:
+    """OpenXR's XrFovf angles (radians; left and down negative) as (left, right, bottom, top) tangents."""
+    return (math.tan(fov.angle_left), math.tan(fov.angle_right), math.tan(fov.angle_down), math.tan(fov.angle_up))

@@ -1,0 +1,179 @@
+"""Tracking through the OpenXR runtime of an ``--display openxr`` session: head and hand poses
+(``--pose openxr[:HAND]``), eye gaze (``--tracker openxr``) and controller buttons
+(``--responses openxr``). Each reads the runtime at the display time of the frame in progress
+(:attr:`OpenXRDisplay.frame_time_ns`), after the display synced input for that frame, and each may
+be combined with psyop's other backends (e.g. Pupil gaze with OpenXR head pose).
+
+Frames: head poses are the VIEW space in the reference space (psyop's world: LOCAL, the head at
+session start, gravity-aligned); hand poses are grip poses in the reference space; gaze is located
+in the VIEW space (psyop's head space).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from psyop.errors import UserError
+from psyop.session.gaze.sample import GazeSample
+from psyop.session.pose import PoseSample
+from psyop.session.reach import horizontal_reach_m
+from psyop.session.responses.base import ResponseKind
+from psyop.session.responses.keyboard import KeyboardResponses
+from psyop.session.xr.runtime import HANDS, XR_EXIT_CODE, rotate
+
+#: where the fixation is placed on the runtime's gaze ray (XR_EXT_eye_gaze_interaction gives a
+#: direction, not a vergence distance); recorded in session.json with the tracker's stats
+DEFAULT_GAZE_DISTANCE_M = 1.0
+
+
+def _openxr_display(display: Any, option: str) -> Any:
+    from psyop.session.xr.display import OpenXRDisplay
+
+    if not isinstance(display, OpenXRDisplay):
+        raise UserError(f"{option} openxr reads the headset's runtime: use it with --display openxr", option)
+    return display
+
+
+class OpenXRGaze:
+    """A GazeSource from ``XR_EXT_eye_gaze_interaction``: the gaze pose in head space, with the
+    runtime's own sample time (``XrEyeGazeSampleTimeEXT``) on the session clock. The fixation is
+    the point ``distance_m`` along the gaze ray (the extension gives no vergence)."""
+
+    def __init__(self, display: Any, distance_m: float = DEFAULT_GAZE_DISTANCE_M) -> None:
+        self.display = display
+        self.runtime = display.runtime
+        if self.runtime.gaze_space is None:
+            raise UserError(f"{self.runtime.facts.runtime} ({self.runtime.facts.system}) offers no eye gaze "
+                            "(XR_EXT_eye_gaze_interaction); use another --tracker (e.g. pupil:HOST:PORT)",
+                            "--tracker openxr", XR_EXIT_CODE)
+        self.distance_m = float(distance_m)
+        self._n = self._invalid = self._untimed = 0
+
+    @classmethod
+    def on_display(cls, display: Any) -> "OpenXRGaze":
+        return cls(_openxr_display(display, "--tracker"))
+
+    def start(self) -> None:
+        return None
+
+    def set_plan(self, plan: Any) -> None:
+        return None  # a person's eyes follow the stimulus, not a plan
+
+    def latest(self, now_s: float) -> GazeSample | None:
+        t_ns = self.display.frame_time_ns
+        if t_ns is None:
+            return None
+        xr, rt = self.runtime.xr, self.runtime
+        sample_time = xr.EyeGazeSampleTimeEXT()
+        pose = rt.locate(rt.gaze_space, rt.head, t_ns, next_struct=sample_time)
+        self._n += 1
+        if int(sample_time.time) > 0:
+            t_s = self.display.to_session_s(int(sample_time.time))
+        else:  # the runtime gave no sample time: the display time, counted
+            t_s = self.display.to_session_s(t_ns)
+            self._untimed += 1
+        if not pose.valid:
+            self._invalid += 1
+            return GazeSample.invalid(t_s)
+        dx, dy, dz = rotate(pose.orientation_wxyz, (0.0, 0.0, -1.0))
+        ox, oy, oz = pose.position_m
+        d = self.distance_m
+        return GazeSample(t_s, (ox + d * dx, oy + d * dy, oz + d * dz), 1.0, True)
+
+    def stats(self) -> dict[str, Any]:
+        return {"source": "openxr eye gaze (XR_EXT_eye_gaze_interaction)", "samples": self._n,
+                "invalid": self._invalid, "without_sample_time": self._untimed,
+                "fixation_distance_m": self.distance_m}
+
+    def close(self) -> None:
+        return None
+
+
+class OpenXRPose:
+    """A PoseSource from the runtime: the head every frame; the hand (a controller's grip pose or
+    a Vive tracker's) sampled once per frame and kept for the reach."""
+
+    def __init__(self, display: Any, hand: str = "") -> None:
+        self.display = display
+        self.runtime = display.runtime
+        self.hand_name = hand
+        self._hand_space = None
+        if hand in HANDS:
+            self._hand_space = self.runtime.hand_spaces[hand]
+        elif hand.startswith("vive_tracker:"):
+            self._hand_space = self.runtime.tracker_space(hand.partition(":")[2])
+        elif hand:
+            raise UserError(f"unknown OpenXR hand {hand!r}; use openxr, openxr:left, openxr:right or "
+                            "openxr:vive_tracker:ROLE", "--pose")
+        self._hands: deque[PoseSample] = deque(maxlen=4096)
+        self._last_frame_ns: int | None = None
+
+    @classmethod
+    def on_display(cls, display: Any, hand: str = "") -> "OpenXRPose":
+        return cls(_openxr_display(display, "--pose"), hand)
+
+    def head(self, now_s: float) -> PoseSample | None:
+        pose = self.display.head_pose
+        if pose is None:
+            return None
+        t_ns = self.display.frame_time_ns
+        if self._hand_space is not None and t_ns is not None and t_ns != self._last_frame_ns:
+            self._last_frame_ns = t_ns
+            hand = self.runtime.locate(self._hand_space, self.runtime.world, t_ns)
+            self._hands.append(PoseSample(self.display.to_session_s(t_ns), hand.position_m, hand.orientation_wxyz,
+                                          hand.valid))
+        return PoseSample(self.display.head_pose_time_s, pose.position_m, pose.orientation_wxyz, pose.valid)
+
+    def hand(self, row: Mapping[str, Any], end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
+        samples = [s for s in self._hands if s.timestamp_s <= end_s]
+        return samples[-n:]
+
+    def reach_m(self) -> float:
+        """The newest hand sample's horizontal reach (NaN before any)."""
+        if not self._hands:
+            return math.nan
+        return horizontal_reach_m(self._hands[-1].position_m)
+
+    def close(self) -> None:
+        return None
+
+
+class XrButtons:
+    """Key-like events from the controllers' select buttons, once per input sync: the left hand's is
+    'left', the right hand's 'right' (for a reach, either is 'space': confirm)."""
+
+    def __init__(self, display: Any, kind: ResponseKind) -> None:
+        self.display, self.runtime, self.kind = display, display.runtime, kind
+        self._seen_sync = -1
+
+    def poll(self) -> list[tuple[str, float]]:
+        rt = self.runtime
+        if rt.sync_count == self._seen_sync or self.display.frame_time_ns is None:
+            return []
+        self._seen_sync = rt.sync_count
+        t_s = self.display.to_session_s(self.display.frame_time_ns)
+        pressed = rt.select_pressed()
+        names = [("space" if self.kind is ResponseKind.REACH else hand) for hand in HANDS if pressed[hand]]
+        return [(name, t_s) for name in names[:1]]
+
+
+class OpenXRResponses(KeyboardResponses):
+    """Answers from the controllers (XrButtons through the keyboard's key map: 2AFC left = 1,
+    right = 2; near side left/right; preference left = a, right = b; a reach is confirmed by
+    either, its distance from the right controller's grip)."""
+
+    @classmethod
+    def on_display(cls, display: Any, kind: ResponseKind) -> "OpenXRResponses":
+        display = _openxr_display(display, "--responses")
+
+        def right_hand_reach_m() -> float:
+            rt, t_ns = display.runtime, display.frame_time_ns
+            if t_ns is None:
+                return math.nan
+            pose = rt.locate(rt.hand_spaces["right"], rt.world, t_ns)
+            return horizontal_reach_m(pose.position_m) if pose.valid else math.nan
+
+        return cls(XrButtons(display, kind), kind, reach_m=right_hand_reach_m)

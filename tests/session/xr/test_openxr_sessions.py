@@ -1,0 +1,243 @@
+"""Headset sessions against a real OpenXR runtime: Monado, headless (null compositor), with its
+simulated HMD or its remote driver (injected head pose, per-eye poses and fields of view, eye gaze,
+controller buttons). Every test runs psyop in a child process (the runtime lives in the process
+that opens it). Without a runtime the tests skip with the reason (tests/session/xr/monado.py)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from monado import RemoteDriver, RemoteState, free_port, runtime_env
+
+HERE = Path(__file__).parent
+REPO = HERE.parents[2]
+NC_M = 0.0076916  # gullstrand_emsley_relaxed
+
+TINY = """
+psyop_protocol: 1
+study: {name: xr_tiny, title: a red disc in front of a blue wall seen by both eyes}
+display: {profile: vive_pro, eye_model: gullstrand_emsley_relaxed, ipd: tracker}
+eyes: stereo
+scene:
+  - id: target
+    kind: disc
+    size_deg: 8
+    depth: {D: 1}
+    surface: {kind: solid, rgb: [1, 0, 0]}
+  - id: wall
+    kind: quad
+    width_deg: 60
+    height_deg: 60
+    depth: {D: 0.5}
+    surface: {kind: solid, rgb: [0.2, 0.2, 0.6]}
+trial:
+  phases:
+    - {kind: interval, duration_s: INTERVAL_S}
+    - {kind: interval, duration_s: INTERVAL_S}
+    - {kind: response, expected_s: 0.2, timeout_s: 0.2}
+design:
+  factors:
+    level_D: {levels: [0, 1]}
+  repetitions: REPS
+  randomisation: {kind: full}
+response:
+  kind: two_interval
+  test: {mode: ocular}
+  reference: {mode: conventional}
+  level_factor: level_D
+  order: balanced
+"""
+
+
+def _protocol(tmp_path: Path, repetitions: int = 1, interval_s: float = 0.3) -> Path:
+    path = tmp_path / "xr_tiny.yaml"
+    path.write_text(TINY.replace("REPS", str(repetitions)).replace("INTERVAL_S", str(interval_s)))
+    return path
+
+
+def _psyop_run(tmp_path: Path, protocol: Path, *extra: str, env: dict | None = None,
+               timeout_s: float = 240) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1",
+                           "--data", str(tmp_path / "data"), "--display", "openxr", "--pose", "openxr",
+                           "--clock", "real", "--responses", "none", "--no-progress", *extra],
+                          env=env or runtime_env(tmp_path), cwd=REPO, capture_output=True, text=True,
+                          timeout=timeout_s, stdin=subprocess.DEVNULL)
+
+
+def _session_dir(tmp_path: Path) -> Path:
+    return tmp_path / "data" / "xr_tiny" / "sub-H1" / "ses-1"
+
+
+def test_a_session_runs_to_completion_on_the_simulated_hmd(tmp_path):
+    done = _psyop_run(tmp_path, _protocol(tmp_path))
+    assert done.returncode == 0, done.stderr[-3000:]
+    meta = json.loads((_session_dir(tmp_path) / "session.json").read_text())
+    assert meta["status"] == "complete"
+    display = meta["summary"]["display"]
+    assert display["display"] == "openxr" and "Monado" in display["runtime"]
+    assert display["system"] == "Monado: Simulated HMD"
+    assert "FOCUSED" in display["session_states"] and display["session_states"][-1] == "EXITING"
+    assert "openxr display's swapchain images" in meta["rendering"]
+    frames = pd.read_parquet(_session_dir(tmp_path) / "frames.parquet")
+    trials = pd.read_parquet(_session_dir(tmp_path) / "trials.parquet")
+    assert sorted(trials["trial"]) == [0, 1]
+    assert len(frames) >= 6 and frames["display_should_render"].all()
+    assert (np.diff(frames["display_time_s"].to_numpy()) > 0).all()  # the runtime's display times move on
+    assert (frames["display_period_s"] > 0).all()
+    for eye in ("left", "right"):  # every frame logs the runtime's views of both eyes
+        assert frames[[f"view_{eye}_tan_{s}" for s in ("left", "right", "bottom", "top")]].notna().all().all()
+    assert (frames["view_left_x_m"] < 0).all() and (frames["view_right_x_m"] > 0).all()
+    assert frames["head_valid"].all()  # --pose openxr: the head pose of every frame
+    assert frames["image_ok"].dropna().all() and frames["image_checked"].any()
+
+
+def _inject_and_probe(tmp_path: Path, state: RemoteState, n_frames: int = 40, press_after_s: float | None = None
+                      ) -> dict:
+    port = free_port()
+    probe = subprocess.Popen([sys.executable, str(HERE / "probe.py"), "cameras", str(_protocol(tmp_path)),
+                              str(n_frames)], env=runtime_env(tmp_path, port), cwd=REPO,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    try:
+        driver = RemoteDriver(port)
+        start = time.monotonic()
+        while probe.poll() is None and time.monotonic() - start < 200:
+            elapsed = time.monotonic() - start
+            state.right_trigger = press_after_s is not None and press_after_s <= elapsed < press_after_s + 0.3
+            try:
+                driver.send(state)
+            except OSError:  # the probe finished and the runtime closed the connection
+                break
+            time.sleep(0.02)
+        out, err = probe.communicate(timeout=120)
+    finally:
+        if probe.poll() is None:
+            probe.kill()
+    assert probe.returncode == 0, err[-3000:]
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def _quat_wxyz_yaw(deg: float) -> np.ndarray:
+    return np.array([math.cos(math.radians(deg) / 2), 0.0, math.sin(math.radians(deg) / 2), 0.0])
+
+
+def test_injected_fovs_eye_positions_head_yaw_and_gaze_reach_the_cameras_exactly(tmp_path):
+    state = RemoteState()
+    report = _inject_and_probe(tmp_path, state, n_frames=40, press_after_s=1.0)
+    assert report["summary"]["eye_gaze_supported"] is True
+    last = report["frames"][-1]
+    # the head: 30 deg yaw at (0.1, 1.5, -0.2) in the runtime's STAGE space, reported in LOCAL (psyop's
+    # world), whose origin the runtime puts at its own height above the stage (located independently)
+    position, orientation, valid = last["head"]
+    assert valid
+    np.testing.assert_allclose(position, np.add(state.head_position_m, last["stage_in_world"]), atol=1e-6)
+    np.testing.assert_allclose(np.abs(orientation), np.abs(_quat_wxyz_yaw(state.head_yaw_deg)), atol=1e-6)
+    # gaze: 10 deg down in head space, placed 1 m along the ray (XR_EXT_eye_gaze_interaction has no vergence)
+    t_sample, fixation, gaze_valid = last["gaze"]
+    assert gaze_valid and t_sample <= last["display_time_s"] + 1e-9
+    pitch = math.radians(state.gaze_pitch_deg)
+    expected_fixation = np.array([0.0, math.sin(pitch), -math.cos(pitch)])
+    np.testing.assert_allclose(fixation, expected_fixation, atol=1e-5)
+    for i, eye in enumerate(("left", "right")):
+        view = last["views"][eye]
+        angle_l, angle_r, angle_u, angle_d = state.fovs[i]
+        expected_tangents = [math.tan(angle_l), math.tan(angle_r), math.tan(angle_d), math.tan(angle_u)]
+        np.testing.assert_allclose(view["tangents"], expected_tangents, atol=1e-6)
+        centre = np.array(state.eye_positions_m[i])
+        np.testing.assert_allclose(view["centre"], centre, atol=1e-6)
+        conventional, ocular = view["cameras"]["conventional"], view["cameras"]["ocular"]
+        np.testing.assert_allclose(conventional["cop"], centre, atol=1e-6)
+        # the nodal point NC from this eye's centre of rotation, towards the fixation
+        towards = expected_fixation - centre
+        np.testing.assert_allclose(ocular["cop"], centre + NC_M * towards / np.linalg.norm(towards), atol=1e-6)
+        # independent ray geometry: the image's edge midpoints look along the injected half-angles
+        for cam in (conventional, ocular):
+            rays = {k: np.array(v) for k, v in cam["rays"].items()}
+            assert rays["left"][0] / -rays["left"][2] == pytest.approx(math.tan(angle_l), abs=1e-6)
+            assert rays["right"][0] / -rays["right"][2] == pytest.approx(math.tan(angle_r), abs=1e-6)
+            assert rays["top"][1] / -rays["top"][2] == pytest.approx(math.tan(angle_u), abs=1e-6)
+            assert rays["bottom"][1] / -rays["bottom"][2] == pytest.approx(math.tan(angle_d), abs=1e-6)
+    # the right controller's trigger answered "interval 2" exactly once
+    assert [f["response"] for f in report["frames"] if f["response"] is not None] == ["2"]
+    assert report["frames"][-1]["hand"], "the right grip pose was sampled"
+
+
+def test_a_frame_read_back_from_the_swapchain_equals_the_headless_render(tmp_path):
+    done = subprocess.run([sys.executable, str(HERE / "probe.py"), "readback", str(_protocol(tmp_path))],
+                          env=runtime_env(tmp_path), cwd=REPO, capture_output=True, text=True, timeout=240,
+                          stdin=subprocess.DEVNULL)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    assert report["check_ok"]
+    for eye in ("left", "right"):
+        got = report["eyes"][eye]
+        assert got["distinct_colours"] > 10, "an anti-aliased disc and wall, not a flat frame"
+        assert got["max_diff"] == 0 and got["n_diff"] == 0, got
+
+
+def test_teardown_keeps_fd0_and_leaks_no_descriptor(tmp_path):
+    stdin_file = tmp_path / "stdin.txt"
+    stdin_file.write_text("not a terminal\n")
+    with stdin_file.open() as fh:
+        done = subprocess.run([sys.executable, str(HERE / "probe.py"), "teardown", str(_protocol(tmp_path))],
+                              env=runtime_env(tmp_path), cwd=REPO, capture_output=True, text=True, timeout=240,
+                              stdin=fh)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    assert report["fd0_before"] == report["fd0_after"] == str(stdin_file)
+    assert report["fds_after"] == report["fds_before"]
+
+
+def test_the_runtime_stopping_mid_trial_discards_it_and_a_resume_completes(tmp_path):
+    # 4 trials of 2 x 1 s intervals (about 44 frames a trial at the test runtime's 20 Hz; cameras only, so
+    # frames stay cheap under load): frame 50 falls inside a trial after the first
+    protocol = _protocol(tmp_path, repetitions=2, interval_s=1.0)
+    stopped = _psyop_run(tmp_path, protocol, "--xr-request-exit-at-frame", "50", "--render", "cameras")
+    assert stopped.returncode == 3, stopped.stderr[-3000:]
+    assert "Traceback" not in stopped.stderr
+    meta = json.loads((_session_dir(tmp_path) / "session.json").read_text())
+    assert meta["status"] == "incomplete" and meta["summary"]["outcome"] == "display_lost"
+    interruptions = meta["display_interruptions"]
+    # the runtime takes the session out of focus first (FOCUSED -> VISIBLE: the trial is discarded, to be
+    # re-run once focused again), then stops it (STOPPING: the session ends, resumable)
+    assert interruptions[0]["rerun"] is True and "lost focus (state VISIBLE)" in interruptions[0]["reason"]
+    assert interruptions[-1]["rerun"] is False and "STOPPING" in interruptions[-1]["reason"]
+    assert len({i["trial"] for i in interruptions}) == 1
+    before = pd.read_parquet(_session_dir(tmp_path) / "trials.parquet")
+    assert 0 < len(before) < 4 and interruptions[0]["trial"] not in set(before["trial"])
+    resumed = _psyop_run(tmp_path, protocol, "--render", "cameras")
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    after = pd.read_parquet(_session_dir(tmp_path) / "trials.parquet")
+    assert sorted(after["trial"]) == [0, 1, 2, 3]  # each trial once, the discarded one re-run
+    kept = after.set_index("trial").loc[before["trial"], "trial_start_s"].to_numpy()
+    np.testing.assert_array_equal(kept, before["trial_start_s"].to_numpy())  # recorded trials untouched
+
+
+def test_an_absent_runtime_is_one_line_and_exit_3(tmp_path):
+    env = runtime_env(tmp_path)
+    env["XR_RUNTIME_JSON"] = str(tmp_path / "no_such_runtime.json")
+    done = _psyop_run(tmp_path, _protocol(tmp_path), env=env, timeout_s=120)
+    assert done.returncode == 3
+    assert "Traceback" not in done.stderr
+    line = [ln for ln in done.stderr.splitlines() if ln.startswith("psyop")][-1]
+    assert "OpenXR runtime" in line and "XR_RUNTIME_JSON" in line
+    assert not (tmp_path / "data").exists() or not any((tmp_path / "data").rglob("trials.parquet"))
+
+
+def test_openxr_tracking_needs_the_openxr_display(tmp_path):
+    protocol = _protocol(tmp_path)
+    for option in (["--pose", "openxr"], ["--tracker", "openxr"]):
+        done = subprocess.run([sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1",
+                               "--data", str(tmp_path / "data"), "--clock", "real", "--responses", "none",
+                               "--no-progress", *option], cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 2, done.stderr
+        assert "use it with --display openxr" in done.stderr and "Traceback" not in done.stderr
