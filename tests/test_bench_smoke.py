@@ -12,3 +12,11 @@ def test_bench_adaptive_quick_writes_every_table(tmp_path: Path) -> None:
     for table in ("| method | observers | median trials", "| method | all: trials", "trials for constant stimuli's SD",
                   "psyop.adaptive.QuestPlus (history -> next level), wall"):
         assert table in report
+
+
+def test_bench_openxr_frame_quick_reports_the_ratio_or_why_not(tmp_path: Path) -> None:
+    from benchmarks import bench_openxr_frame
+
+    report = bench_openxr_frame.run(tmp_path, quick=True)
+    assert "## OpenXR frame path over headless" in report
+    assert "| ratio openxr / headless |" in report or "Skipped: " in report, report

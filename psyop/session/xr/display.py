@@ -82,6 +82,7 @@ class OpenXRDisplay:
         self.frame_time_ns: int | None = None  # the current frame's predicted display time (XrTime)
         self.frames_not_rendered = 0
         self.frames_missed = 0
+        self.wait_frame_s = 0.0  # time blocked in xrWaitFrame (the runtime pacing the loop)
         self._offset_ns = self.runtime.xr_time_now_ns()
         try:
             self._swapchains = self._create_swapchains()
@@ -153,7 +154,9 @@ class OpenXRDisplay:
             raise DisplayInterrupted(f"the headset session lost focus (state {rt.state.name})", rerun=True)
         if self._request_exit_at_frame is not None and self._index == self._request_exit_at_frame:
             xr.request_exit_session(rt.session)
+        waited = time.perf_counter()
         state = xr.wait_frame(rt.session)
+        self.wait_frame_s += time.perf_counter() - waited
         xr.begin_frame(rt.session)
         t_ns, period_ns = int(state.predicted_display_time), int(state.predicted_display_period)
         missed = 0
@@ -220,6 +223,7 @@ class OpenXRDisplay:
                 "eye_gaze_supported": facts.eye_gaze_supported, "swapchain_sizes_px": facts.recommended_sizes_px,
                 "reference_space": facts.reference_space, "frames": self._index,
                 "frames_not_rendered": self.frames_not_rendered, "frames_missed": self.frames_missed,
+                "wait_frame_s": self.wait_frame_s,
                 "session_states": list(facts.states)}
 
     def close(self) -> None:
