@@ -156,6 +156,30 @@ def eye_camera_arrays(
     return CameraArrays(cop, view, projection_from_tangents(tan, near_m, far_m), ray, tan, gaze.valid)
 
 
+def _checked_frame_inputs(fixation_m: ArrayLike, nc_m: float, near_m: float, far_m: float
+                          ) -> tuple[np.ndarray, float, float]:
+    """The fixation as float64 (3,) or (4,), and the clip distances, validated (``ValueError``)."""
+    NC_M.check(nc_m)
+    fix = np.asarray(fixation_m, dtype=np.float64)
+    if fix.shape not in ((3,), (4,)):
+        raise ValueError(f"fixation_m must have shape (3,) or (4,), got {fix.shape}")
+    near, far = float(near_m), float(far_m)
+    if not (math.isfinite(near) and math.isfinite(far) and 0.0 < near < far):
+        raise ValueError(f"need finite 0 < near_m < far_m, got near_m={near_m!r}, far_m={far_m!r}")
+    return fix, near, far
+
+
+def _mode_offset_m(mode: RenderingMode, nc_m: float, direction: tuple[float, float, float]
+                   ) -> tuple[float, float, float]:
+    """The centre of projection's offset from C: 0 (conventional), N (ocular), (-Nx, -Ny, Nz) (reversed)."""
+    ux, uy, uz = direction
+    if mode is RenderingMode.CONVENTIONAL:
+        return 0.0, 0.0, 0.0
+    if mode is RenderingMode.OCULAR:
+        return nc_m * ux, nc_m * uy, nc_m * uz
+    return -nc_m * ux, -nc_m * uy, nc_m * uz
+
+
 def make_eye_camera(
     display: DisplayProfile,
     eye: Eye | str,
@@ -176,25 +200,14 @@ def make_eye_camera(
     are validated (``ValueError``); the fixation never raises.
     """
     IPD_M.check(ipd_m)
-    NC_M.check(nc_m)
-    fix = np.asarray(fixation_m, dtype=np.float64)
-    if fix.shape not in ((3,), (4,)):
-        raise ValueError(f"fixation_m must have shape (3,) or (4,), got {fix.shape}")
-    near, far = float(near_m), float(far_m)
-    if not (math.isfinite(near) and math.isfinite(far) and 0.0 < near < far):
-        raise ValueError(f"need finite 0 < near_m < far_m, got near_m={near_m!r}, far_m={far_m!r}")
+    fix, near, far = _checked_frame_inputs(fixation_m, nc_m, near_m, far_m)
     eye_ = parse_eye(eye)
     mode_ = parse_mode(mode)
     # Scalar per-frame path (plain floats); eye_camera_arrays is its vectorised twin and the
     # tests check that both agree.
     cx = (-0.5 if eye_ is Eye.LEFT else 0.5) * float(ipd_m)
-    (ux, uy, uz), valid = gaze_direction_single(fix, cx, fallback_direction)
-    if mode_ is RenderingMode.CONVENTIONAL:
-        ox = oy = oz = 0.0
-    elif mode_ is RenderingMode.OCULAR:
-        ox, oy, oz = nc_m * ux, nc_m * uy, nc_m * uz
-    else:
-        ox, oy, oz = -nc_m * ux, -nc_m * uy, nc_m * uz
+    direction, valid = gaze_direction_single(fix, cx, fallback_direction)
+    ox, oy, oz = _mode_offset_m(mode_, nc_m, direction)
     l, r, b, t = display.frustum_tangents(eye_.value)
     inv_d = 0.0 if math.isinf(display.d_m) else 1.0 / display.d_m
     scale = 1.0 / (1.0 + oz * inv_d)
@@ -332,28 +345,17 @@ def make_view_camera(
     >>> [round(float(x), 4) for x in cam.centre_of_projection_m]
     [0.032, 0.0, -0.0077]
     """
-    NC_M.check(nc_m)
-    near, far = float(near_m), float(far_m)
-    if not (math.isfinite(near) and math.isfinite(far) and 0.0 < near < far):
-        raise ValueError(f"need finite 0 < near_m < far_m, got near_m={near_m!r}, far_m={far_m!r}")
+    fix, near, far = _checked_frame_inputs(fixation_m, nc_m, near_m, far_m)
     eye_ = parse_eye(view.eye)
     mode_ = parse_mode(mode)
     cx, cy, cz = (float(v) for v in view.centre_m)
-    fix = np.asarray(fixation_m, dtype=np.float64).reshape(-1)
-    if fix.shape not in ((3,), (4,)):
-        raise ValueError(f"fixation_m must have shape (3,) or (4,), got {fix.shape}")
     if fix.shape == (4,) and fix[3] == 0.0:
         shifted = fix  # a direction at infinity does not depend on where the eye is
     else:
         w = fix[3] if fix.shape == (4,) else 1.0
         shifted = np.array([fix[0] / w, fix[1] / w - cy, fix[2] / w - cz])
-    (ux, uy, uz), valid = gaze_direction_single(shifted, cx, fallback_direction)
-    if mode_ is RenderingMode.CONVENTIONAL:
-        ox = oy = oz = 0.0
-    elif mode_ is RenderingMode.OCULAR:
-        ox, oy, oz = nc_m * ux, nc_m * uy, nc_m * uz
-    else:
-        ox, oy, oz = -nc_m * ux, -nc_m * uy, nc_m * uz
+    direction, valid = gaze_direction_single(shifted, cx, fallback_direction)
+    ox, oy, oz = _mode_offset_m(mode_, nc_m, direction)
     l, r, b, t = (float(v) for v in view.tangents)
     # at optical infinity the angular extents stay fixed: only the camera translates
     projection = np.array([

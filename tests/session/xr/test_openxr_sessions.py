@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import sys
 import time
@@ -18,12 +17,13 @@ import pandas as pd
 import pytest
 
 from monado import RemoteDriver, RemoteState, free_port, runtime_env
+from protocol_texts import TWO_INTERVAL_TAIL
 
 HERE = Path(__file__).parent
 REPO = HERE.parents[2]
 NC_M = 0.0076916  # gullstrand_emsley_relaxed
 
-TINY = """
+TINY_HEAD = """
 psyop_protocol: 1
 study: {name: xr_tiny, title: a red disc in front of a blue wall seen by both eyes}
 display: {profile: vive_pro, eye_model: gullstrand_emsley_relaxed, ipd: tracker}
@@ -40,28 +40,17 @@ scene:
     height_deg: 60
     depth: {D: 0.5}
     surface: {kind: solid, rgb: [0.2, 0.2, 0.6]}
-trial:
-  phases:
-    - {kind: interval, duration_s: INTERVAL_S}
-    - {kind: interval, duration_s: INTERVAL_S}
-    - {kind: response, expected_s: 0.2, timeout_s: 0.2}
-design:
-  factors:
-    level_D: {levels: [0, 1]}
-  repetitions: REPS
-  randomisation: {kind: full}
-response:
-  kind: two_interval
-  test: {mode: ocular}
-  reference: {mode: conventional}
-  level_factor: level_D
-  order: balanced
 """
 
 
 def _protocol(tmp_path: Path, repetitions: int = 1, interval_s: float = 0.3) -> Path:
+    """A small stereo 2IFC study (the shared two-interval tail) with short phases and a response
+    timeout, so ``--responses none`` runs it."""
+    tail = (TWO_INTERVAL_TAIL.replace("duration_s: 1}", f"duration_s: {interval_s}}}")
+            .replace("{kind: response, expected_s: 1}", "{kind: response, expected_s: 0.2, timeout_s: 0.2}")
+            .replace("repetitions: 1", f"repetitions: {repetitions}"))
     path = tmp_path / "xr_tiny.yaml"
-    path.write_text(TINY.replace("REPS", str(repetitions)).replace("INTERVAL_S", str(interval_s)))
+    path.write_text(TINY_HEAD + tail)
     return path
 
 
