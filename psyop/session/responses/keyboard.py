@@ -37,6 +37,7 @@ class KeyboardResponses:
         self.keymap = KEYMAPS[kind]
         self._reach_m = reach_m
         self._prompt_s: float | None = None
+        self.early_presses = 0  # answer keys pressed before the response phase (ignored, never a negative time)
 
     def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None:
         if self._prompt_s is None:
@@ -44,6 +45,9 @@ class KeyboardResponses:
         for key, t_s in self.events.poll():
             answer = self.keymap.get(key.lower())
             if answer is None:
+                continue
+            if t_s < self._prompt_s:  # pressed before the response phase began: not an answer to it
+                self.early_presses += 1
                 continue
             rt = t_s - self._prompt_s
             self._prompt_s = None

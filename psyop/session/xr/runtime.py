@@ -339,14 +339,16 @@ class XrRuntime:
             return
         self.sync_count += 1
 
-    def select_pressed(self) -> dict[str, bool]:
-        """Per hand: whether its select button went down since the last sync."""
+    def select_presses(self) -> dict[str, int]:
+        """Per hand whose select button went down since the last sync: the runtime's time of the
+        press (``lastChangeTime``, XrTime ns)."""
         xr = self.xr
         out = {}
         for hand, path in self.hand_paths.items():
             state = xr.get_action_state_boolean(self.session, xr.ActionStateGetInfo(action=self.select,
                                                                                      subaction_path=path))
-            out[hand] = bool(state.is_active and state.current_state and state.changed_since_last_sync)
+            if state.is_active and state.current_state and state.changed_since_last_sync:
+                out[hand] = int(state.last_change_time)
         return out
 
     # -- teardown -------------------------------------------------------------------------------------

@@ -143,7 +143,8 @@ class OpenXRPose:
 
 class XrButtons:
     """Key-like events from the controllers' select buttons, once per input sync: the left hand's is
-    'left', the right hand's 'right' (for a reach, either is 'space': confirm)."""
+    'left', the right hand's 'right' (for a reach, either is 'space': confirm), each at the time
+    the runtime saw the press."""
 
     def __init__(self, display: Any, kind: ResponseKind) -> None:
         self.display, self.runtime, self.kind = display, display.runtime, kind
@@ -154,10 +155,10 @@ class XrButtons:
         if rt.sync_count == self._seen_sync or self.display.frame_time_ns is None:
             return []
         self._seen_sync = rt.sync_count
-        t_s = self.display.to_session_s(self.display.frame_time_ns)
-        pressed = rt.select_pressed()
-        names = [("space" if self.kind is ResponseKind.REACH else hand) for hand in HANDS if pressed[hand]]
-        return [(name, t_s) for name in names[:1]]
+        presses = rt.select_presses()  # the runtime's own press times: a response time is not frame-quantised
+        events = sorted((self.display.to_session_s(t_ns), "space" if self.kind is ResponseKind.REACH else hand)
+                        for hand, t_ns in presses.items())
+        return [(name, t_s) for t_s, name in events[:1]]
 
 
 class OpenXRResponses(KeyboardResponses):

@@ -43,11 +43,11 @@ scene:
 """
 
 
-def _protocol(tmp_path: Path, repetitions: int = 1, interval_s: float = 0.3) -> Path:
+def _protocol(tmp_path: Path, repetitions: int = 1, interval_s: float = 0.3, timeout_s: float = 0.2) -> Path:
     """A small stereo 2IFC study (the shared two-interval tail) with short phases and a response
     timeout, so ``--responses none`` runs it."""
     tail = (TWO_INTERVAL_TAIL.replace("duration_s: 1}", f"duration_s: {interval_s}}}")
-            .replace("{kind: response, expected_s: 1}", "{kind: response, expected_s: 0.2, timeout_s: 0.2}")
+            .replace("{kind: response, expected_s: 1}", f"{{kind: response, expected_s: 0.2, timeout_s: {timeout_s}}}")
             .replace("repetitions: 1", f"repetitions: {repetitions}"))
     path = tmp_path / "xr_tiny.yaml"
     path.write_text(TINY_HEAD + tail)
@@ -230,3 +230,49 @@ def test_openxr_tracking_needs_the_openxr_display(tmp_path):
                                "--no-progress", *option], cwd=REPO, capture_output=True, text=True, timeout=120)
         assert done.returncode == 2, done.stderr
         assert "use it with --display openxr" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_session_with_injected_views_gaze_and_trigger_logs_them_exactly(tmp_path):
+    """``psyop run`` end to end on the remote driver: every OpenXR source at once."""
+    state = RemoteState()
+    port = free_port()
+    protocol = _protocol(tmp_path, repetitions=1, interval_s=0.5, timeout_s=5.0)
+    cmd = [sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1", "--data",
+           str(tmp_path / "data"), "--display", "openxr", "--pose", "openxr:right", "--tracker", "openxr",
+           "--responses", "openxr", "--clock", "real", "--no-progress"]
+    run = subprocess.Popen(cmd, env=runtime_env(tmp_path, port), cwd=REPO, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    try:
+        driver = RemoteDriver(port)
+        start = time.monotonic()
+        while run.poll() is None and time.monotonic() - start < 200:
+            state.right_trigger = int((time.monotonic() - start) / 0.15) % 2 == 1  # pressed every 0.3 s
+            try:
+                driver.send(state)
+            except OSError:
+                break
+            time.sleep(0.02)
+        out, err = run.communicate(timeout=120)
+    finally:
+        if run.poll() is None:
+            run.kill()
+    assert run.returncode == 0, err[-3000:]
+    trials = pd.read_parquet(_session_dir(tmp_path) / "trials.parquet")
+    assert list(trials["response"]) == ["2", "2"]  # the right trigger answers "interval 2"
+    assert (trials["response_time_s"] > 0).all()
+    frames = pd.read_parquet(_session_dir(tmp_path) / "frames.parquet")
+    last = frames.iloc[-1]
+    for i, eye in enumerate(("left", "right")):
+        angle_l, angle_r, angle_u, angle_d = state.fovs[i]
+        got = [last[f"view_{eye}_tan_{s}"] for s in ("left", "right", "bottom", "top")]
+        np.testing.assert_allclose(got, [math.tan(angle_l), math.tan(angle_r), math.tan(angle_d), math.tan(angle_u)],
+                                   atol=1e-6)
+        np.testing.assert_allclose([last[f"view_{eye}_{a}_m"] for a in "xyz"], state.eye_positions_m[i], atol=1e-6)
+    pitch = math.radians(state.gaze_pitch_deg)
+    np.testing.assert_allclose([last[f"fixation_{a}_m"] for a in "xyz"], [0.0, math.sin(pitch), -math.cos(pitch)],
+                               atol=1e-5)
+    assert last["gaze_valid"] and np.isfinite(last["gaze_age_at_display_s"])
+    np.testing.assert_allclose(np.abs([last[f"head_q{c}"] for c in "wxyz"]), np.abs(_quat_wxyz_yaw(30.0)), atol=1e-6)
+    meta = json.loads((_session_dir(tmp_path) / "session.json").read_text())
+    assert meta["summary"]["display"]["system"] == "Monado: Remote HMD"
+    assert meta["summary"]["tracker"]["fixation_distance_m"] == 1.0
