@@ -159,6 +159,7 @@ class OpenXRDisplay:
         self.wait_frame_s += time.perf_counter() - waited
         xr.begin_frame(rt.session)
         t_ns, period_ns = int(state.predicted_display_time), int(state.predicted_display_period)
+        self._frame = XrFrame(t_ns, period_ns, False, ())  # begun: close() ends it if this frame never is
         missed = 0
         if self._last_display_ns is not None and period_ns > 0:
             missed = max(0, int(round((t_ns - self._last_display_ns) / period_ns)) - 1)
@@ -235,6 +236,14 @@ class OpenXRDisplay:
                         self.xr.release_swapchain_image(chain.handle, self.xr.SwapchainImageReleaseInfo())
                     except Exception:  # noqa: BLE001 - teardown goes on
                         pass
+                    chain.acquired = False
+            if self._frame is not None:  # a frame begun and never ended (Ctrl-C, an error mid-frame)
+                self._frame = None
+                try:
+                    self.xr.end_frame(rt.session, self.xr.FrameEndInfo(
+                        display_time=self._last_display_ns or 0, environment_blend_mode=self.xr.EnvironmentBlendMode.OPAQUE))
+                except Exception:  # noqa: BLE001
+                    pass
             rt.request_exit(self._empty_frame)
             for chain in getattr(self, "_swapchains", {}).values():
                 for fbo in chain.framebuffers:

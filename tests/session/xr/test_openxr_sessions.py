@@ -276,3 +276,37 @@ def test_a_session_with_injected_views_gaze_and_trigger_logs_them_exactly(tmp_pa
     meta = json.loads((_session_dir(tmp_path) / "session.json").read_text())
     assert meta["summary"]["display"]["system"] == "Monado: Remote HMD"
     assert meta["summary"]["tracker"]["fixation_distance_m"] == 1.0
+
+
+def test_ctrl_c_mid_frame_ends_the_headset_session_cleanly_and_it_resumes(tmp_path):
+    import signal
+
+    from psyop.session.log.layout import session_paths
+
+    protocol = _protocol(tmp_path, repetitions=2, interval_s=1.0)
+    argv = [sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1", "--data", str(tmp_path / "data"),
+            "--display", "openxr", "--pose", "openxr", "--clock", "real", "--responses", "none", "--no-progress",
+            "--render", "cameras"]
+    process = subprocess.Popen(argv, env=runtime_env(tmp_path), cwd=REPO, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    segment = session_paths(tmp_path / "data", "xr_tiny", "H1", 1).trial_segment(0)
+    deadline, first_size = time.monotonic() + 120, None
+    while time.monotonic() < deadline and process.poll() is None:  # once the first trial is durable
+        if segment.exists():
+            size = segment.stat().st_size
+            first_size = size if first_size is None else first_size
+            if size > first_size:
+                break
+        time.sleep(0.02)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr[-3000:]
+    assert "Traceback" not in stderr
+    meta = json.loads((_session_dir(tmp_path) / "session.json").read_text())
+    assert meta["status"] == "incomplete" and meta["summary"]["display"]["session_states"][-1] == "EXITING"
+    recorded = pd.read_parquet(_session_dir(tmp_path) / "trials.parquet")
+    assert 1 <= len(recorded) < 4
+    resumed = _psyop_run(tmp_path, protocol, "--render", "cameras")
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert sorted(pd.read_parquet(_session_dir(tmp_path) / "trials.parquet")["trial"]) == [0, 1, 2, 3]
