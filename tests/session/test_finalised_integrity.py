@@ -140,6 +140,10 @@ def test_unrecorded_or_legacy_files_are_refused(data: Path) -> None:
     (session / "session.json").write_text(json.dumps(meta))
     with pytest.raises(UserError, match="reseal"):
         load_dataset(data, "detection")
+    assert _run_cli("reseal", str(session), "--reason", "finalised before checksums") == 0  # on the record
+    [record] = json.loads((session / "session.json").read_text())[RESEALS_KEY]
+    assert {c["change"] for c in record["files"].values()} == {"unrecorded"}
+    load_dataset(data, "detection")
     (session / "session.json").unlink()
     with pytest.raises(UserError, match="without a session.json"):
         load_dataset(data, "detection")
