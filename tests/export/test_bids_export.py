@@ -180,3 +180,36 @@ def test_gaze_lands_on_the_pixel_whose_ray_the_renderer_camera_casts(display: Di
     px = gaze_on_image_px(points, display, eye, ipd_m)
     np.testing.assert_allclose(px, uv * [display.width_px, display.height_px], atol=1e-6)
     assert np.isnan(gaze_on_image_px(np.array([[0.0, 0.0, 1.0]]), display, eye, ipd_m)).all()  # behind the eye
+
+
+def test_an_interrupted_and_resumed_session_exports_one_bids_run_per_psyop_run(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import re
+
+    from psyop.session.log import store
+
+    text = re.sub(r"(?m)^(\s*repetitions:)\s*\d+", r"\g<1> 1", (REPO / "protocols" / "detection.yaml").read_text())
+    protocol = tmp_path / "detection_small.yaml"
+    protocol.write_text(text)
+    data = tmp_path / "data"
+    run = ["run", str(protocol), "--participant", "P1", "--data", str(data), "--no-progress", "--render", "cameras"]
+    original = store.SessionStore.append_trial
+
+    def stop_after_three(self, row, frames):  # type: ignore[no-untyped-def]
+        if int(row["trial"]) >= 3:
+            raise KeyboardInterrupt
+        original(self, row, frames)
+
+    monkeypatch.setattr(store.SessionStore, "append_trial", stop_after_three)
+    assert cli_main(run) == 130
+    monkeypatch.setattr(store.SessionStore, "append_trial", original)
+    assert cli_main(run) == 0  # resumed: a second run
+    trials = pd.read_parquet(data / "detection" / "sub-P1" / "ses-1" / "trials.parquet")
+    assert sorted(trials["run"].unique()) == [0, 1]
+    export_bids(data, tmp_path / "bids")
+    beh = tmp_path / "bids" / "sub-P1" / "ses-1" / "beh"
+    counts = [len(pd.read_csv(beh / f"sub-P1_ses-1_task-detection_run-{r}_events.tsv", sep="\t")) for r in (1, 2)]
+    assert counts == [3, len(trials) - 3]
+    assert (beh / "sub-P1_ses-1_task-detection_run-2_recording-eye1_physio.tsv.gz").is_file()
+    code, issues = _validate(tmp_path / "bids")
+    assert code == 0 and not _errors(issues), dict(issues)
