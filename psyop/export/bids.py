@@ -122,9 +122,12 @@ def _export_session(directory: Path, out: Path) -> ExportedSession:
     trials = pd.read_parquet(directory / dc.TRIALS_FILE)
     where = str(directory / dc.SESSION_METADATA_FILE)
     display = display_from_metadata(meta, where)
-    rig = meta.get("rig") if isinstance(meta.get("rig"), Mapping) else {}
-    eyes = tuple(e for e in ("left", "right") if e in (rig.get("eyes") or ["right"]))
-    ipd_m = float(rig.get("ipd_m", meta.get("ipd_m", 0.063)))
+    rig = meta.get("rig")
+    if not isinstance(rig, Mapping) or not rig.get("eyes") or not isinstance(rig.get("ipd_m"), (int, float)):
+        raise UserError("session.json records no eye rig (\"rig\": eyes and ipd_m): cannot place gaze on each "
+                        "eye's image", where)
+    eyes = tuple(e for e in ("left", "right") if e in rig["eyes"])
+    ipd_m = float(rig["ipd_m"])
     gaze = session_gaze(directory)
     beh = out / f"sub-{participant}" / f"ses-{session}" / "beh"
     beh.mkdir(parents=True, exist_ok=True)
@@ -148,6 +151,8 @@ def _run_samples(samples: pd.DataFrame, run_trials: pd.DataFrame, source: str) -
     """The gaze samples of one run: the frame log's by trial; a raw stream's by the run's time span."""
     if source == FRAME_LOG:
         return samples[samples["trial"].isin(run_trials["trial"])].reset_index(drop=True)
+    if "run" in samples and "run" in run_trials:  # a real clock restarts with each run: times alone overlap
+        return samples[samples["run"].isin(run_trials["run"].unique())].reset_index(drop=True)
     start, end = float(run_trials["trial_start_s"].min()), float(run_trials["trial_end_s"].max())
     t = samples["gaze_sample_t_s"]
     return samples[(t >= start) & (t <= end)].reset_index(drop=True)
@@ -278,7 +283,7 @@ def _write_physio(stem: Path, samples: pd.DataFrame, display: Any, eye: str, ipd
         "SampleCoordinateSystem": "gaze-on-screen",
         "SampleCoordinateUnits": "pixel",
         "EnvironmentCoordinates": "top-left",
-        "Manufacturer": str(meta.get("tracker") or "unknown"),
+        "Manufacturer": _tracker_manufacturer(meta.get("tracker")),
         "SoftwareVersions": f"psyop {__version__}",
         "Description": (f"Eye tracking of the {eye} eye from psyop's {source} ({source_file}). "
                         f"{'Simulated tracker: ' if meta.get(dc.SIMULATED_KEY) else ''}the tracker reports one "
@@ -290,6 +295,13 @@ def _write_physio(stem: Path, samples: pd.DataFrame, display: Any, eye: str, ipd
         **columns,
     }
     _write_json(stem.with_suffix(".json"), sidecar)
+
+
+def _tracker_manufacturer(tracker: Any) -> str:
+    """The tracker kind of psyop's ``--tracker`` (never its host or file argument)."""
+    kind = str(tracker or "").split(":", 1)[0]
+    return {"sim": "none (psyop simulated tracker)", "pupil": "Pupil Labs", "replay": "replayed gaze log",
+            "serial": "serial-line tracker", "lsl": "Lab Streaming Layer stream"}.get(kind, "unknown")
 
 
 def _write_physioevents(stem: Path, trials: pd.DataFrame, phases: Sequence[Mapping[str, Any]], study: str) -> None:

@@ -45,7 +45,8 @@ class SessionGaze:
 
     ``samples`` has ``gaze_sample_t_s``, ``fixation_{x,y,z}_m``, ``gaze_valid``,
     ``gaze_confidence`` (NaN where the source has none), ``trial`` (the frame log's, or -1 for
-    the raw stream) and, from a raw stream only, ``pupil_diameter_{eye}_mm``.
+    the raw stream) and, from a raw stream only, ``run`` (when it has one: which psyop run
+    recorded the sample) and ``pupil_diameter_{eye}_mm``.
     """
 
     source: str  # FRAME_LOG or RAW_STREAM
@@ -88,7 +89,7 @@ def session_gaze(directory: Path) -> SessionGaze:
     table = table[np.isfinite(pd.to_numeric(table["gaze_sample_t_s"], errors="coerce"))]
     table = table.sort_values("gaze_sample_t_s", kind="stable")
     table = table.drop_duplicates(subset="gaze_sample_t_s", keep="first").reset_index(drop=True)
-    keep = [*RAW_GAZE_COLUMNS, "gaze_confidence", "trial",
+    keep = [*RAW_GAZE_COLUMNS, "gaze_confidence", "trial", "run",
             *(c for c in table.columns if c.startswith("pupil_diameter_"))]
     return SessionGaze(source, name, table[[c for c in keep if c in table]])
 
