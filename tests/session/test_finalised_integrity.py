@@ -120,6 +120,7 @@ def test_reseal_records_a_deliberate_edit_with_reason_and_both_hashes(data: Path
 def test_recover_rebuilds_a_deleted_damaged_file_from_the_log(data: Path, pristine: Path) -> None:
     session = _session(data)
     _flip_byte(session / "trials.parquet")
+    assert _run_cli("recover", str(session)) == 2  # never overwrites a changed file on its own
     (session / "trials.parquet").unlink()  # what the refusal tells the user to do
     assert _run_cli("recover", str(session)) == 0
     assert json.loads((session / "session.json").read_text())[FINALISED_KEY]["trials.parquet"]["sha256"] == \
