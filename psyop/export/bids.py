@@ -265,14 +265,17 @@ def _write_physio(stem: Path, samples: pd.DataFrame, display: Any, eye: str, ipd
     _write_tsv_gz(stem.with_suffix(".tsv.gz"), table)
     if source == FRAME_LOG:
         sampling = ("Samples are the gaze samples the rendered frames used (psyop's frame log, frames.parquet): at "
-                    "most one per displayed frame, so SamplingFrequency is the display refresh rate; frames not "
+                    "most one per displayed frame, after psyop's per-trial drift correction, so SamplingFrequency is the display refresh rate; frames not "
                     "rendered or checked (simulated sessions render a few per trial) leave gaps and a sample reused "
                     "by several frames is written once. The timestamp column gives each sample's time. No pupil "
                     "size: the frame log does not record it.")
         rate = float(display.refresh_hz)
     else:
-        sampling = "Samples are every sample of the tracker's raw gaze stream (gaze.parquet)."
-        rate = float(meta.get("tracker_rate_hz") or display.refresh_hz)
+        sampling = ("Samples are every sample of the tracker's raw gaze stream (gaze.parquet), as the tracker "
+                    "delivered them: before psyop's per-trial drift correction.")
+        rate = _median_rate_hz(table["timestamp"].to_numpy())
+        sampling += (f" SamplingFrequency ({rate:.6g} Hz) is 1 / the median interval between samples: psyop does not "
+                     "record the tracker's nominal rate.")
     sidecar = {
         "TaskName": str(meta.get("study", "")),
         "PhysioType": "eyetrack",
@@ -295,6 +298,13 @@ def _write_physio(stem: Path, samples: pd.DataFrame, display: Any, eye: str, ipd
         **columns,
     }
     _write_json(stem.with_suffix(".json"), sidecar)
+
+
+def _median_rate_hz(timestamps_s: np.ndarray) -> float:
+    """1 / median positive interval between samples (a run with fewer than two samples: 0)."""
+    steps = np.diff(np.sort(timestamps_s[np.isfinite(timestamps_s)]))
+    steps = steps[steps > 0]
+    return float(1.0 / np.median(steps)) if len(steps) else 0.0
 
 
 def _tracker_manufacturer(tracker: Any) -> str:

@@ -1,8 +1,8 @@
 """A session's gaze samples for export, and where each eye's line of sight meets its display image.
 
-Source: the raw gaze stream file (:data:`RAW_GAZE_FILE`, every tracker sample) when the session
-has one; otherwise the frame log's gaze samples (``frames.parquet``: the sample each rendered
-frame used, so at most one per frame, held repeats dropped). :func:`session_gaze` says which one
+Source: the raw gaze stream file (:data:`RAW_GAZE_FILE`, every tracker sample, before psyop's
+per-trial drift correction) when the session has one with samples; otherwise the frame log's gaze samples (``frames.parquet``: the sample each rendered
+frame used, after drift correction, so at most one per frame, held repeats dropped). :func:`session_gaze` says which one
 it read; the BIDS sidecar states it.
 
 The tracker reports a fixation point in head space (x right, y up, -z forward, metres, from the
@@ -55,7 +55,7 @@ class SessionGaze:
 
 
 def session_gaze(directory: Path) -> SessionGaze:
-    """The session's gaze samples: the raw stream if present, else the frame log's.
+    """The session's gaze samples: the raw stream if it holds any, else the frame log's.
 
     Examples
     --------
@@ -70,8 +70,8 @@ def session_gaze(directory: Path) -> SessionGaze:
     """
     directory = Path(directory)
     raw = directory / RAW_GAZE_FILE
-    if raw.is_file():
-        table = pd.read_parquet(raw)
+    table = pd.read_parquet(raw) if raw.is_file() else None
+    if table is not None and len(table) >= 2:  # an (almost) empty raw stream: the frame log's samples
         missing = [c for c in RAW_GAZE_COLUMNS if c not in table]
         if missing:
             raise UserError(f"raw gaze stream lacks column(s) {missing}; expected {list(RAW_GAZE_COLUMNS)}", str(raw))

@@ -127,7 +127,7 @@ def test_the_raw_gaze_stream_is_preferred_when_the_session_has_one(simulated: Pa
     shutil.copytree(simulated / "detection" / "sub-S01", data / "detection" / "sub-S01")
     session = data / "detection" / "sub-S01" / "ses-1"
     t = np.arange(0.0, 30.0, 1 / 120)  # a 120 Hz tracker over the first trials
-    pd.DataFrame({"gaze_sample_t_s": t, "fixation_x_m": 0.0315, "fixation_y_m": 0.0, "fixation_z_m": -1.0,
+    pd.DataFrame({"run": 0, "trial": -1, "gaze_sample_t_s": t, "fixation_x_m": 0.0315, "fixation_y_m": 0.0, "fixation_z_m": -1.0,
                   "gaze_confidence": 0.9, "gaze_valid": True, "pupil_diameter_right_mm": 3.5}).to_parquet(
         session / RAW_GAZE_FILE, index=False)
     meta = json.loads((session / "session.json").read_text())
@@ -139,6 +139,8 @@ def test_the_raw_gaze_stream_is_preferred_when_the_session_has_one(simulated: Pa
     beh = tmp_path / "bids" / "sub-S01" / "ses-1" / "beh"
     sidecar = json.loads((beh / "sub-S01_ses-1_task-detection_run-1_recording-eye1_physio.json").read_text())
     assert sidecar["GazeSource"] == RAW_STREAM and "pupil_size" in sidecar["Columns"]
+    assert sidecar["SamplingFrequency"] == pytest.approx(120.0)  # measured from the samples, and said so
+    assert "median interval" in sidecar["Description"]
     physio = pd.read_csv(beh / "sub-S01_ses-1_task-detection_run-1_recording-eye1_physio.tsv.gz", sep="\t",
                          header=None, names=sidecar["Columns"])
     assert len(physio) == len(t) and np.allclose(physio["x_coordinate"], 720.0) and np.allclose(physio["y_coordinate"], 800.0)
