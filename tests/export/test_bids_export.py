@@ -20,7 +20,7 @@ import pytest
 from psyop.cli import main as cli_main
 from psyop.errors import UserError
 from psyop.export.bids import export_bids
-from psyop.export.gaze import RAW_GAZE_FILE, RAW_STREAM, gaze_on_image_px
+from psyop.export.gaze import FRAME_LOG, RAW_GAZE_FILE, RAW_STREAM, gaze_on_image_px
 from psyop.finalised import FINALISED_KEY, record_finalised
 from psyop.optics.camera import make_eye_camera
 from psyop.optics.display import DisplayProfile, VIVE_PRO
@@ -100,7 +100,10 @@ def test_every_session_has_events_and_eyetrack_physio_per_eye(simulated: Path, e
                 screen = sidecar["StimulusPresentation"]
                 assert screen["ScreenResolution"] == [meta["display"]["width_px"], meta["display"]["height_px"]]
                 assert len(screen["ScreenOrigin"]) == 2 and screen["ScreenDistance"] > 0
-                assert len(screen["ScreenSize"]) == 2 and "frame log" in sidecar["Description"]
+                assert len(screen["ScreenSize"]) == 2
+                raw = session_json.parent / RAW_GAZE_FILE
+                source = RAW_STREAM if raw.is_file() and len(pd.read_parquet(raw)) >= 2 else FRAME_LOG
+                assert sidecar["GazeSource"] == source and source in sidecar["Description"]
                 with gzip.open(beh / f"{recording}_physio.tsv.gz", "rt") as handle:
                     first = handle.readline().split("\t")
                 float(first[0])  # headerless: the first line is a sample
@@ -197,10 +200,10 @@ def test_an_interrupted_and_resumed_session_exports_one_bids_run_per_psyop_run(
     run = ["run", str(protocol), "--participant", "P1", "--data", str(data), "--no-progress", "--render", "cameras"]
     original = store.SessionStore.append_trial
 
-    def stop_after_three(self, row, frames):  # type: ignore[no-untyped-def]
+    def stop_after_three(self, row, *rest):  # type: ignore[no-untyped-def]
         if int(row["trial"]) >= 3:
             raise KeyboardInterrupt
-        original(self, row, frames)
+        original(self, row, *rest)
 
     monkeypatch.setattr(store.SessionStore, "append_trial", stop_after_three)
     assert cli_main(run) == 130

@@ -69,8 +69,9 @@ def _run_cli(*argv: str) -> int:
 def test_finalisation_records_the_sha256_of_every_finalised_file(pristine: Path) -> None:
     meta = json.loads((_session(pristine) / "session.json").read_text())
     recorded = meta[FINALISED_KEY]
-    assert sorted(recorded) == sorted(FINALISED)
-    for name in FINALISED:
+    present = sorted(p.name for p in _session(pristine).glob("*.parquet"))  # with a raw gaze stream: gaze.parquet too
+    assert set(FINALISED) <= set(present) and sorted(recorded) == present
+    for name in present:
         path = _session(pristine) / name
         assert recorded[name] == {"sha256": sha256_file(path), "size_bytes": path.stat().st_size}
     load_dataset(pristine, "detection")  # intact: loads
@@ -132,10 +133,10 @@ def test_recover_rebuilds_a_deleted_damaged_file_from_the_log(data: Path, pristi
 
 def test_unrecorded_or_legacy_files_are_refused(data: Path) -> None:
     session = _session(data)
-    shutil.copy(session / "frames.parquet", session / "gaze.parquet")  # a finalised file nobody recorded
-    with pytest.raises(UserError, match="gaze.parquet has no SHA-256"):
+    shutil.copy(session / "frames.parquet", session / "extra.parquet")  # a finalised file nobody recorded
+    with pytest.raises(UserError, match="extra.parquet has no SHA-256"):
         load_dataset(data, "detection")
-    (session / "gaze.parquet").unlink()
+    (session / "extra.parquet").unlink()
     meta = json.loads((session / "session.json").read_text())
     del meta[FINALISED_KEY]  # finalised by a psyop before checksums
     (session / "session.json").write_text(json.dumps(meta))
