@@ -102,8 +102,10 @@ def display_from_metadata(meta: Mapping[str, Any], where: str) -> DisplayProfile
     fields = {k: raw[k] for k in ("name", "width_px", "height_px", "refresh_hz", "tan_left", "tan_right",
                                   "tan_bottom", "tan_top") if k in raw}
     d_m = raw.get("d_m", "inf")
+    left = raw.get("left_tangents")  # the left eye's own frustum (per-eye FOV), else mirrored
     try:
-        return DisplayProfile(**fields, d_m=math.inf if d_m in (None, "inf") else float(d_m))
+        return DisplayProfile(**fields, d_m=math.inf if d_m in (None, "inf") else float(d_m),
+                              left_tangents=None if left is None else tuple(left))
     except (TypeError, ValueError) as exc:
         raise UserError(f"session.json's display profile is not usable: {exc}", where) from exc
 

@@ -170,8 +170,10 @@ def test_export_refuses_a_damaged_session_and_a_non_empty_target(simulated: Path
 
 
 @pytest.mark.parametrize("eye", ["left", "right"])
-@pytest.mark.parametrize("display", [VIVE_PRO, DisplayProfile("asym", 1000, 800, 90.0, -1.39, 1.25, -1.1, 1.3, 2.0)],
-                         ids=["vive_pro", "asymmetric_finite"])
+@pytest.mark.parametrize("display", [
+    VIVE_PRO, DisplayProfile("asym", 1000, 800, 90.0, -1.39, 1.25, -1.1, 1.3, 2.0),
+    DisplayProfile("per_eye", 1000, 800, 90.0, -1.39, 1.25, -1.1, 1.3, left_tangents=(-1.2, 1.35, -1.0, 1.2))],
+    ids=["vive_pro", "asymmetric_finite", "per_eye_fov"])
 def test_gaze_lands_on_the_pixel_whose_ray_the_renderer_camera_casts(display: DisplayProfile, eye: str) -> None:
     """Inverse of psyop.optics.camera's conventional pixel_to_ray: a fixation point on the ray of
     pixel (x, y) from the eye's centre of rotation is placed at (x, y)."""
@@ -218,3 +220,15 @@ def test_an_interrupted_and_resumed_session_exports_one_bids_run_per_psyop_run(
     assert (beh / "sub-P1_ses-1_task-detection_run-2_recording-eye1_physio.tsv.gz").is_file()
     code, issues = _validate(tmp_path / "bids")
     assert code == 0 and not _errors(issues), dict(issues)
+
+
+def test_the_display_profile_is_read_back_as_session_json_records_it() -> None:
+    from psyop.export.gaze import display_from_metadata
+    from psyop.protocol import load_protocol
+    from psyop.session.plan import compile_plan
+
+    plan = compile_plan(load_protocol(REPO / "protocols" / "egocentric.yaml"))
+    recorded = json.loads(json.dumps(plan.metadata(), default=str))  # as session.json holds it
+    assert display_from_metadata(recorded, "session.json") == plan.display
+    with pytest.raises(UserError, match="no display profile"):
+        display_from_metadata({}, "session.json")
