@@ -1,4 +1,4 @@
-"""The statistics the paper reports (/work/shared/paper, main text sec. 5-6), each with the rule that
+"""The statistics the paper reports (Konrad et al. 2020, main text sec. 5-6), each with the rule that
 decides whether psyop's result reaches the same conclusion.
 
 Each :class:`PaperStat` names the study JSON (results/<file>.json) psyop's value comes from.

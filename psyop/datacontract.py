@@ -17,13 +17,13 @@ import pandas as pd
 
 from psyop.protocol.trial import MIN_VALID_GAZE_SHARE
 
-# ---- layout: data/<study>/sub-<ID>/ses-<N>/ (Psych-DS spirit) -------------------------------------
+# ---- layout: data/<study>/sub-<ID>/ses-<N>/ (psyop's own; no standard claimed) ----------------------------------
 DATASET_DESCRIPTION_FILE = "dataset_description.json"
 SESSION_METADATA_FILE = "session.json"
 TRIALS_FILE = "trials.parquet"
 FRAMES_FILE = "frames.parquet"
 LOG_DIR = "log"
-#: Participant IDs are Psych-DS keys: letters and digits only.
+#: Participant IDs are BIDS labels (psyop export --bids): letters and digits only.
 PARTICIPANT_PATTERN = re.compile(r"[A-Za-z0-9]{1,64}")  # use with fullmatch: "ab\n" is refused
 STUDY_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")  # use with fullmatch
 
@@ -101,7 +101,10 @@ SIMULATED_KEY = "simulated"
 
 
 def dataset_description(*, simulated: bool, studies: list[str], n_simulated: int = 0, n_real: int = 0) -> dict[str, Any]:
-    """The content of ``dataset_description.json``; ``simulated`` is what figures and the loader read."""
+    """The content of ``dataset_description.json``; ``simulated`` is what figures and the loader read.
+
+    It names no data standard (no ``schemaVersion``): the layout is psyop's own and no standard's
+    validator accepts it; ``psyop export --bids`` writes the validated form (psyop.export)."""
     return {
         "@context": "https://schema.org/",
         "@type": "Dataset",
@@ -109,9 +112,9 @@ def dataset_description(*, simulated: bool, studies: list[str], n_simulated: int
         "description": (
             "Trial and frame logs of gaze-contingent VR psychophysics sessions recorded by psyop. "
             f"Layout: <study>/sub-<ID>/ses-<N>/{{{TRIALS_FILE.split('.')[0]},{FRAMES_FILE.split('.')[0]}}}.parquet "
-            f"with {SESSION_METADATA_FILE} metadata."
+            f"with {SESSION_METADATA_FILE} metadata (psyop's own layout; it claims no data standard: "
+            "`psyop export --bids DIR` writes a BIDS dataset that the BIDS validator accepts)."
         ),
-        "schemaVersion": "Psych-DS 0.1.0",
         SIMULATED_KEY: bool(simulated),
         "n_sessions_simulated": int(n_simulated),
         "n_sessions_real": int(n_real),

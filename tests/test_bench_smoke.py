@@ -20,3 +20,12 @@ def test_bench_openxr_frame_quick_reports_the_ratio_or_why_not(tmp_path: Path) -
     report = bench_openxr_frame.run(tmp_path, quick=True)
     assert "## OpenXR frame path over headless" in report
     assert "| ratio openxr / headless |" in report or "Skipped: " in report, report
+
+
+def test_bench_export_quick_validates_the_export(tmp_path: Path) -> None:
+    from benchmarks import bench_export
+
+    report = bench_export.run(tmp_path, quick=True)
+    assert "5 simulated sessions" in report and "sessions with at least one: 5 of 5" in report
+    assert "exit 0, 0 errors" in report or "not installed" in report
+    assert "| ratio verify / read |" in report

@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from psyop.finalised import record_finalised
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -16,7 +18,9 @@ def _session(data: Path, study: str, participant: str, *, simulated: bool) -> Pa
     directory = data / study / f"sub-{participant}" / "ses-1"
     directory.mkdir(parents=True)
     (directory / "trials.parquet").write_bytes(b"")
-    (directory / "session.json").write_text(json.dumps({"simulated": simulated, "status": "complete"}))
+    meta = {"simulated": simulated, "status": "complete"}
+    record_finalised(meta, directory, [directory / "trials.parquet"])
+    (directory / "session.json").write_text(json.dumps(meta))
     return directory
 
 
@@ -54,3 +58,13 @@ def test_resimulate_never_deletes_real_sessions(tmp_path: Path) -> None:
     result = _make("resimulate", data)
     assert result.returncode != 0 and "real sessions" in result.stderr and "nothing was deleted" in result.stderr
     assert (real / "session.json").exists() and (data / "detection" / "sub-S01").exists()
+
+
+def test_figures_refuses_a_session_whose_finalised_file_changed(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    _session(data, "detection", "S01", simulated=True)
+    edited = _session(data, "detection", "S02", simulated=True)
+    (edited / "trials.parquet").write_bytes(b"\x00")  # damaged after finalisation
+    refused = _make("figures-data", data)
+    assert refused.returncode != 0
+    assert f"{edited}: session refused: trials.parquet does not match the SHA-256" in refused.stderr

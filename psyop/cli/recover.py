@@ -23,6 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from psyop.adaptive.recorded_stop import rebuilt_stop_record
+    from psyop.finalised import check_finalised
     from psyop.session.log.store import expected_trial_count, finalise_session, find_sessions, read_metadata, salvage
 
     if not args.path.exists():
@@ -35,6 +36,11 @@ def main(args: argparse.Namespace) -> int:
         try:
             meta = read_metadata(paths) or {}
             if meta.get("status") == "complete" and paths.trials_parquet.is_file() and paths.frames_parquet.is_file():
+                problems = check_finalised(meta, paths.directory)
+                if problems:  # a damaged (or edited) file is not silently overwritten: the user decides
+                    raise UserError(f"complete, but {problems[0].describe()}; left untouched: delete the damaged "
+                                    "file to rebuild it from the log, or record a deliberate edit with "
+                                    f"`psyop reseal {paths.directory} --reason TEXT`", str(paths.directory))
                 print(f"{paths.directory}: complete and finalised; left untouched", file=sys.stdout)
                 continue
             trials, _ = finalise_session(paths, status="complete", summary=meta.get("summary"),

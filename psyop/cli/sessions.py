@@ -12,7 +12,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "sessions", help="list the sessions of a data root per study (simulated or real)",
         description="Per study: how many sessions, how many simulated (session.json says \"simulated\": true) "
-        "and real, how many incomplete. Exit 2 when a study mixes simulated and real sessions, unless --allow-mixed.")
+        "and real, how many incomplete. Exit 2 when a study mixes simulated and real sessions, unless --allow-mixed, "
+        "and when a session's finalised files do not match the SHA-256 its session.json recorded (damaged or "
+        "edited: `psyop reseal` records a deliberate edit).")
     parser.add_argument("data", type=Path, nargs="?", default=Path("data"), help="data root (default data/)")
     parser.add_argument("--allow-mixed", action="store_true", help="accept studies that mix simulated and real sessions")
     parser.add_argument("--require-simulated", action="store_true",
@@ -23,7 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     from psyop.session.inventory import check_not_mixed, inventory
 
-    studies = inventory(args.data)
+    # --require-simulated only asks whether anything is real (make resimulate deletes all of it)
+    studies = inventory(args.data, verify=not args.require_simulated)
     if not studies:
         print(f"{args.data}/: no sessions")
         return 0

@@ -2,8 +2,9 @@
 
 ``make figures`` prints this before it draws anything, and refuses a study whose sessions
 mix simulated and real participants (the figures would pool them) unless asked to (MIX=1).
-Reads only each session's session.json (the ``simulated`` and ``status`` fields written by
-psyop.session.runner); stdlib only, so it is quick to import.
+Reads each session's session.json (the ``simulated`` and ``status`` fields written by
+psyop.session.runner) and checks its finalised files against the SHA-256 recorded there
+(psyop.finalised); stdlib only, so it is quick to import.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from psyop.errors import UserError
+from psyop.finalised import verify_session
 
 
 @dataclass(frozen=True)
@@ -33,8 +35,12 @@ class StudySessions:
         return f"{self.study}: {self.n_simulated + self.n_real} sessions ({', '.join(kinds)}{extra})"
 
 
-def inventory(data_root: Path) -> dict[str, StudySessions]:
-    """Every session under ``data_root/<study>/sub-*/ses-*/session.json``, grouped by study."""
+def inventory(data_root: Path, *, verify: bool = True) -> dict[str, StudySessions]:
+    """Every session under ``data_root/<study>/sub-*/ses-*/session.json``, grouped by study.
+
+    With ``verify`` (the default) each session's finalised files must match the SHA-256 its
+    session.json recorded (:func:`psyop.finalised.verify_session`): a damaged or edited session is
+    a :class:`UserError` naming it."""
     studies: dict[str, StudySessions] = {}
     for study_dir in sorted(p for p in Path(data_root).iterdir() if p.is_dir()) if Path(data_root).is_dir() else []:
         simulated = real = incomplete = 0
@@ -44,6 +50,8 @@ def inventory(data_root: Path) -> dict[str, StudySessions]:
                 meta = json.loads(meta_path.read_text())
             except (OSError, ValueError) as exc:
                 raise UserError(f"unreadable session metadata ({exc}); run `psyop recover {data_root}`", str(meta_path)) from exc
+            if verify:
+                verify_session(meta_path.parent)
             if meta.get("simulated") is True:
                 simulated += 1
             else:

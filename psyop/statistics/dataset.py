@@ -11,6 +11,7 @@ import pandas as pd
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
+from psyop.finalised import record_finalised, verify_session
 
 
 class LowGazeWarning(UserWarning):
@@ -64,7 +65,9 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
     """Like :func:`load_trials` but returns a :class:`Dataset` with the simulated flag.
 
     Practice trials (a true ``practice`` column) are left out unless ``include_practice``;
-    how many were left out is in ``trials.attrs["n_practice_dropped"]``. Timed-out trials
+    how many were left out is in ``trials.attrs["n_practice_dropped"]``. Every session's finalised
+    files are checked against the SHA-256 its session.json recorded (:mod:`psyop.finalised`) before
+    any is read: a damaged or edited session is a :class:`UserError` naming it. Timed-out trials
     (response ``timeout``, psyop.datacontract) are left out unless ``include_timeouts``;
     how many in ``trials.attrs["n_timeout_dropped"]``. Low-gaze trials (``gaze_ok`` false:
     less valid gaze than the protocol's ``trial.min_valid_gaze_share``; see
@@ -78,6 +81,8 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
             f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
             str(Path(data_root)),
         )
+    for f in files:  # before anything is read: a damaged or edited session is refused by name
+        verify_session(f.parent)
     frames = [pd.read_parquet(f) for f in files]
     trials = pd.concat(frames, ignore_index=True)
     if "participant" in trials:
@@ -116,8 +121,9 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
     """Write trial tables in the session-log layout (for tests and demos).
 
     Each table is split by ``participant`` and ``session`` into
-    ``<root>/<study>/sub-<ID>/ses-<N>/trials.parquet``; ``dataset_description.json`` records
-    ``simulated``. Returns the written parquet paths.
+    ``<root>/<study>/sub-<ID>/ses-<N>/trials.parquet`` with a session.json that records its
+    SHA-256 (as finalisation does); ``dataset_description.json`` records ``simulated``. Returns
+    the written parquet paths.
     """
     root = Path(data_root)
     root.mkdir(parents=True, exist_ok=True)
@@ -127,6 +133,10 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
             path = dc.session_dir(root, study, participant, session) / dc.TRIALS_FILE
             path.parent.mkdir(parents=True, exist_ok=True)
             part.reset_index(drop=True).to_parquet(path, index=False)
+            meta = {"study": study, "participant": str(participant), "session": int(session),
+                    dc.SIMULATED_KEY: bool(simulated), "status": "complete", "written_by": "write_dataset"}
+            record_finalised(meta, path.parent, [path])
+            (path.parent / dc.SESSION_METADATA_FILE).write_text(json.dumps(meta, indent=2) + "\n")
             written.append(path)
     (root / dc.DATASET_DESCRIPTION_FILE).write_text(
         json.dumps(dc.dataset_description(simulated=simulated, studies=sorted(tables)), indent=2) + "\n")

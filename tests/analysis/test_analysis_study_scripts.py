@@ -133,3 +133,16 @@ def test_study_scripts_take_a_user_study_name_and_refuse_a_missing_one_in_one_li
     assert missing.returncode == 2 and "Traceback" not in missing.stderr
     assert f"no sessions found for study '{study}'" in missing.stderr
     assert _script(script).main([*common, "--study", "mystudy"]) == 0
+
+
+def test_results_name_no_machine_path_and_cite_the_paper_by_reference(built):
+    """results/summary.md named the paper by an absolute path of the machine it was built on."""
+    import re
+
+    md = (built / "results" / "summary.md").read_text()
+    assert "Gaze-Contingent Ocular Parallax Rendering for Virtual Reality" in md and "Konrad" in md
+    for path in sorted((built / "results").glob("*.json")) + [built / "results" / "summary.md"]:
+        text = path.read_text()
+        assert str(built) not in text and "/work/" not in text, path.name
+        absolute = re.findall(r"(?:^|[\s(`'\"\[])(/[A-Za-z0-9_.-]+/[^\s)`'\"]*)", text, flags=re.M)
+        assert not absolute, f"{path.name}: absolute paths {absolute[:3]}"

@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 
 from psyop.datacontract import MIN_VALID_GAZE_SHARE, low_gaze_mask
 from psyop.errors import UserError
+from psyop.finalised import record_finalised
 from psyop.session.lock import SessionLock
 from psyop.session.log.layout import SessionPaths, exclusive_temp, stale_temp_files, write_json_atomic
 from psyop.session.log.schema import FRAME_SCHEMA
@@ -381,6 +382,7 @@ def _finalise_locked(
             stale.unlink()
         _write_parquet_atomic(trials, paths.trials_parquet)
         _write_parquet_atomic(frames, paths.frames_parquet)
+        record_finalised(meta, paths.directory, [paths.trials_parquet, paths.frames_parquet])
         meta["status"] = status
         meta["n_trials_recorded"] = int(len(trials))
         meta["finalised"] = _now()

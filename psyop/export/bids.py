@@ -1,0 +1,438 @@
+"""``psyop export --bids DIR``: a data root's sessions as a BIDS dataset (behaviour + eye tracking).
+
+Layout (one BIDS run per psyop run of a session, task = the study name without ``_``/``-``)::
+
+    DIR/dataset_description.json, README.md, participants.tsv/.json
+    DIR/sub-<ID>/ses-<N>/beh/sub-<ID>_ses-<N>_task-<study>_run-<R>_events.tsv/.json
+    DIR/sub-<ID>/ses-<N>/beh/..._recording-eye<K>_physio.tsv.gz/.json        (BEP020 eye tracking)
+    DIR/sub-<ID>/ses-<N>/beh/..._recording-eye<K>_physioevents.tsv.gz/.json  (trial and phase onsets)
+    DIR/sourcedata/<study>/sub-<ID>/ses-<N>/: session.json, protocol.yaml, the finalised parquet files
+
+Times: every onset, ``StartTime`` and ``timestamp`` is on the session clock of that run (seconds
+since the run's clock started), so the events, physio and physioevents of a run share one timeline.
+Every session is verified first (:func:`psyop.finalised.verify_session`): a damaged or edited session
+is refused, never exported. ``tests/export/test_bids_export.py`` runs the official validator
+(``bids-validator-deno``) on an export of simulated sessions.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import json
+import re
+import shutil
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from psyop import __version__
+from psyop import datacontract as dc
+from psyop.errors import UserError
+from psyop.export.gaze import (FRAME_LOG, RAW_STREAM, display_from_metadata, gaze_on_image_px, image_geometry,
+                               session_gaze)
+from psyop.finalised import FINALISED_KEY, read_session_meta, verify_session
+
+#: The BIDS version the export follows (the schema bundled with bids-validator-deno 3.0.2).
+BIDS_VERSION = "1.11.1"
+#: Trial-table columns written as events columns besides onset/duration/trial_type (when present).
+EVENT_COLUMNS: tuple[str, ...] = ("trial", "block", "response", "correct", "response_time", "practice")
+#: Per-trial columns that are bookkeeping, not events columns (the full table is in sourcedata/).
+_NOT_EVENT_COLUMNS = {"study", "participant", "session", "trial_start_s", "trial_end_s", "condition",
+                      "response_time_s", "run", "trial_seed", "n_frames", "drift_correction_deg"}
+_NOT_EVENT_PREFIXES = ("hand_sample_",)
+
+
+@dataclass(frozen=True)
+class ExportedSession:
+    study: str
+    participant: str
+    session: int
+    runs: int
+    gaze_source: str
+    eyes: tuple[str, ...]
+    n_gaze_samples: int
+
+
+@dataclass(frozen=True)
+class BidsExport:
+    """What :func:`export_bids` wrote."""
+
+    root: Path
+    sessions: tuple[ExportedSession, ...]
+
+
+def task_label(study: str) -> str:
+    """A BIDS label (letters and digits) for a study name.
+
+    Examples
+    --------
+    >>> task_label("detection_quest-plus")
+    'detectionquestplus'
+    """
+    return re.sub(r"[^A-Za-z0-9]", "", study)
+
+
+def export_bids(data_root: Path, out: Path) -> BidsExport:
+    """Write every session under ``data_root`` as a BIDS dataset in ``out`` (new or empty).
+
+    Examples
+    --------
+    >>> export_bids(Path("no-such-data-root"), Path("out"))
+    Traceback (most recent call last):
+    ...
+    psyop.errors.UserError: no-such-data-root: no finalised sessions (<study>/sub-<ID>/ses-<N>/trials.parquet) to export
+    """
+    data_root, out = Path(data_root), Path(out)
+    trials_files = sorted(data_root.glob(f"*/sub-*/ses-*/{dc.TRIALS_FILE}"))
+    if not trials_files:
+        raise UserError(f"no finalised sessions (<study>/sub-<ID>/ses-<N>/{dc.TRIALS_FILE}) to export", str(data_root))
+    for path in trials_files:  # refuse before writing anything
+        verify_session(path.parent)
+    _check_task_labels(sorted({p.parents[2].name for p in trials_files}), data_root)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise UserError("the export directory exists and is not empty; give a new directory", str(out))
+    out.mkdir(parents=True, exist_ok=True)
+    exported = [_export_session(path.parent, out) for path in trials_files]
+    _write_participants(out, exported, data_root)
+    _write_json(out / "dataset_description.json", _description(exported))
+    (out / "README.md").write_text(_readme(exported))
+    return BidsExport(out, tuple(exported))
+
+
+def _check_task_labels(studies: Sequence[str], data_root: Path) -> None:
+    seen: dict[str, str] = {}
+    for study in studies:
+        label = task_label(study)
+        if not label or label in seen:
+            raise UserError(f"studies {seen.get(label)!r} and {study!r} map to one BIDS task label {label!r}; "
+                            "rename one study folder", str(data_root))
+        seen[label] = study
+
+
+def _export_session(directory: Path, out: Path) -> ExportedSession:
+    meta = read_session_meta(directory) or {}
+    study = directory.parents[1].name
+    participant = directory.parent.name.removeprefix("sub-")
+    session = int(directory.name.removeprefix("ses-"))
+    trials = pd.read_parquet(directory / dc.TRIALS_FILE)
+    where = str(directory / dc.SESSION_METADATA_FILE)
+    display = display_from_metadata(meta, where)
+    rig = meta.get("rig")
+    if not isinstance(rig, Mapping) or not rig.get("eyes") or not isinstance(rig.get("ipd_m"), (int, float)):
+        raise UserError("session.json records no eye rig (\"rig\": eyes and ipd_m): cannot place gaze on each "
+                        "eye's image", where)
+    eyes = tuple(e for e in ("left", "right") if e in rig["eyes"])
+    ipd_m = float(rig["ipd_m"])
+    gaze = session_gaze(directory)
+    beh = out / f"sub-{participant}" / f"ses-{session}" / "beh"
+    beh.mkdir(parents=True, exist_ok=True)
+    runs = sorted(int(r) for r in trials["run"].dropna().unique()) if "run" in trials else [0]
+    phases = [p for p in (meta.get("phases") or []) if isinstance(p, Mapping)]
+    for run in runs:
+        run_trials = trials[trials["run"] == run] if "run" in trials else trials
+        run_trials = run_trials.sort_values("trial_start_s", kind="stable")
+        stem = f"sub-{participant}_ses-{session}_task-{task_label(study)}_run-{run + 1}"
+        _write_events(beh / f"{stem}_events", run_trials, display, eyes, meta, study)
+        samples = _run_samples(gaze.samples, run_trials, gaze.source)
+        for index, eye in enumerate(eyes):
+            recording = f"{stem}_recording-eye{index + 1}"
+            _write_physio(beh / f"{recording}_physio", samples, display, eye, ipd_m, gaze.source, gaze.file, meta)
+            _write_physioevents(beh / f"{recording}_physioevents", run_trials, phases, study)
+    _copy_sourcedata(directory, out / "sourcedata" / study / f"sub-{participant}" / f"ses-{session}", meta)
+    return ExportedSession(study, participant, session, len(runs), gaze.source, eyes, len(gaze.samples))
+
+
+def _run_samples(samples: pd.DataFrame, run_trials: pd.DataFrame, source: str) -> pd.DataFrame:
+    """The gaze samples of one run: the frame log's by trial; a raw stream's by the run's time span."""
+    if source == FRAME_LOG:
+        return samples[samples["trial"].isin(run_trials["trial"])].reset_index(drop=True)
+    if "run" in samples and "run" in run_trials:  # a real clock restarts with each run: times alone overlap
+        return samples[samples["run"].isin(run_trials["run"].unique())].reset_index(drop=True)
+    start, end = float(run_trials["trial_start_s"].min()), float(run_trials["trial_end_s"].max())
+    t = samples["gaze_sample_t_s"]
+    return samples[(t >= start) & (t <= end)].reset_index(drop=True)
+
+
+# ---- events ------------------------------------------------------------------------------------------------
+def _stimulus_presentation(display: Any, eye: str) -> dict[str, Any]:
+    geometry = image_geometry(display, eye)
+    return {
+        "ScreenDistance": geometry.distance_m,
+        "ScreenOrigin": ["top", "left"],
+        "ScreenResolution": [geometry.width_px, geometry.height_px],
+        "ScreenSize": [round(geometry.width_m, 9), round(geometry.height_m, 9)],
+        "ScreenRefreshRate": float(display.refresh_hz),
+        "SoftwareName": "psyop",
+        "SoftwareVersion": __version__,
+    }
+
+
+def _screen_note(display: Any) -> str:
+    if np.isfinite(display.d_m):
+        return (f"Each eye sees the head-mounted display {display.name!r}: a virtual image {display.d_m} m in front "
+                "of the eye's centre of rotation; ScreenDistance and ScreenSize are that image's.")
+    return (f"Each eye sees the head-mounted display {display.name!r}, whose virtual image is at optical infinity: "
+            "ScreenDistance and ScreenSize describe the equivalent flat screen 1 m from the eye's centre of rotation "
+            "that subtends the same angles (the same visual angle for every pixel), not a physical screen.")
+
+
+def _write_events(stem: Path, trials: pd.DataFrame, display: Any, eyes: Sequence[str], meta: Mapping[str, Any],
+                  study: str) -> None:
+    events = pd.DataFrame({
+        "onset": trials["trial_start_s"].astype(float).to_numpy(),
+        "duration": (trials["trial_end_s"].astype(float) - trials["trial_start_s"].astype(float)).to_numpy(),
+        "trial_type": trials["condition"].astype(str).to_numpy() if "condition" in trials else "trial",
+    })
+    if "trial" in trials:
+        events["trial"] = trials["trial"].astype(int).to_numpy()
+    if "block" in trials:
+        events["block"] = trials["block"].astype(int).to_numpy()
+    events["response"] = trials[dc.RESPONSE].astype(str).to_numpy() if dc.RESPONSE in trials else "n/a"
+    events["correct"] = [_flag(v) for v in trials[dc.CORRECT]] if dc.CORRECT in trials else "n/a"
+    if "response_time_s" in trials:
+        events["response_time"] = trials["response_time_s"].astype(float).to_numpy()
+    extra = [c for c in trials.columns if c not in _NOT_EVENT_COLUMNS and c not in events and c != dc.CORRECT
+             and not c.startswith(_NOT_EVENT_PREFIXES) and trials[c].notna().any() and not _is_list_column(trials[c])]
+    for column in extra:
+        values = trials[column]
+        flags = values.dtype == bool or values.dropna().map(lambda v: isinstance(v, (bool, np.bool_))).all()
+        events[column] = [_flag(v) for v in values] if flags else values.to_numpy()
+    _write_tsv(stem.with_suffix(".tsv"), events)
+    described = {
+        "onset": {"Description": "trial start on the session clock of this run", "Units": "s"},
+        "duration": {"Description": "trial start to the end of its response phase", "Units": "s"},
+        "trial_type": {"LongName": "condition", "Description": "psyop's condition label of the trial (factor=value|...)"},
+        "trial": {"Description": "psyop trial number (0-based, schedule order)"},
+        "block": {"Description": "block number (0-based)"},
+        "response": {"Description": f"the participant's response; {dc.TIMEOUT_RESPONSE!r}: the response phase timed out"},
+        "correct": {"Description": "correctness of the response (1 correct, 0 wrong, n/a: no correct answer or timed out)",
+                    "Levels": {"1": "correct", "0": "wrong"}},
+        "response_time": {"Description": "response time from the start of the response phase", "Units": "s"},
+    }
+    sidecar: dict[str, Any] = {
+        "TaskName": study,
+        "TaskDescription": str((meta.get("response") or {}).get("question") or study),
+        "StimulusPresentation": _stimulus_presentation(display, eyes[0]),
+        "StimulusPresentationNote": _screen_note(display),
+    }
+    for column in events.columns:
+        sidecar[column] = described.get(column, {"Description": f"schedule column {column!r} of psyop's "
+                                                                "trials.parquet (see sourcedata/)"})
+    _write_json(stem.with_suffix(".json"), sidecar)
+
+
+def _is_list_column(values: pd.Series) -> bool:
+    sample = values.dropna()
+    return bool(len(sample)) and isinstance(sample.iloc[0], (list, tuple, np.ndarray))
+
+
+def _flag(value: Any) -> Any:
+    if value is None or (isinstance(value, float) and np.isnan(value)) or value is pd.NA:
+        return "n/a"
+    return int(bool(value))
+
+
+# ---- physio ----------------------------------------------------------------------------------------------
+def _write_physio(stem: Path, samples: pd.DataFrame, display: Any, eye: str, ipd_m: float, source: str,
+                  source_file: str, meta: Mapping[str, Any]) -> None:
+    fixation = samples[["fixation_x_m", "fixation_y_m", "fixation_z_m"]].to_numpy(dtype=np.float64)
+    valid = samples["gaze_valid"].fillna(False).astype(bool).to_numpy()
+    px = gaze_on_image_px(fixation, display, eye, ipd_m)
+    px[~valid] = np.nan
+    table = pd.DataFrame({"timestamp": samples["gaze_sample_t_s"].astype(float).to_numpy(),
+                          "x_coordinate": px[:, 0], "y_coordinate": px[:, 1]})
+    columns: dict[str, Any] = {
+        "timestamp": {"Description": "time of the tracker sample on the session clock of this run", "Units": "s"},
+        "x_coordinate": {"Description": f"where the {eye} eye's line of sight (from its centre of rotation through "
+                         "the tracked fixation point) meets its display image, from the left edge", "Units": "pixel"},
+        "y_coordinate": {"Description": f"as x_coordinate, from the top edge of the {eye} eye's image",
+                         "Units": "pixel"},
+    }
+    pupil = f"pupil_diameter_{eye}_mm"
+    if pupil in samples:
+        table["pupil_size"] = samples[pupil].astype(float).to_numpy()
+        columns["pupil_size"] = {"Description": f"pupil diameter of the {eye} eye as the tracker reports it",
+                                 "Units": "mm"}
+    table["confidence"] = samples["gaze_confidence"].astype(float).to_numpy()
+    table["valid"] = valid.astype(int)
+    columns["confidence"] = {"Description": "the tracker's confidence in the sample (0..1; n/a: not reported)"}
+    columns["valid"] = {"Description": "1: a usable sample; 0: blink, dropout or low confidence (coordinates n/a)"}
+    _write_tsv_gz(stem.with_suffix(".tsv.gz"), table)
+    if source == FRAME_LOG:
+        sampling = ("Samples are the gaze samples the rendered frames used (psyop's frame log, frames.parquet): at "
+                    "most one per displayed frame, after psyop's per-trial drift correction, so SamplingFrequency is the display refresh rate; frames not "
+                    "rendered or checked (simulated sessions render a few per trial) leave gaps and a sample reused "
+                    "by several frames is written once. The timestamp column gives each sample's time. No pupil "
+                    "size: the frame log does not record it.")
+        rate = float(display.refresh_hz)
+    else:
+        sampling = ("Samples are every sample of the tracker's raw gaze stream (gaze.parquet), as the tracker "
+                    "delivered them: before psyop's per-trial drift correction.")
+        rate = _median_rate_hz(table["timestamp"].to_numpy())
+        sampling += (f" SamplingFrequency ({rate:.6g} Hz) is 1 / the median interval between samples: psyop does not "
+                     "record the tracker's nominal rate.")
+    sidecar = {
+        "TaskName": str(meta.get("study", "")),
+        "PhysioType": "eyetrack",
+        "SamplingFrequency": rate,
+        "StartTime": float(table["timestamp"].iloc[0]) if len(table) else 0.0,
+        "Columns": list(table.columns),
+        "RecordedEye": eye,
+        "SampleCoordinateSystem": "gaze-on-screen",
+        "SampleCoordinateUnits": "pixel",
+        "EnvironmentCoordinates": "top-left",
+        "Manufacturer": _tracker_manufacturer(meta.get("tracker")),
+        "SoftwareVersions": f"psyop {__version__}",
+        "Description": (f"Eye tracking of the {eye} eye from psyop's {source} ({source_file}). "
+                        f"{'Simulated tracker: ' if meta.get(dc.SIMULATED_KEY) else ''}the tracker reports one "
+                        "fixation point in head space for both eyes; this file is that point seen by the "
+                        f"{eye} eye, on its image. {sampling}"),
+        "GazeSource": source,
+        "StimulusPresentation": _stimulus_presentation(display, eye),
+        "StimulusPresentationNote": _screen_note(display),
+        **columns,
+    }
+    _write_json(stem.with_suffix(".json"), sidecar)
+
+
+def _median_rate_hz(timestamps_s: np.ndarray) -> float:
+    """1 / median positive interval between samples (a run with fewer than two samples: 0)."""
+    steps = np.diff(np.sort(timestamps_s[np.isfinite(timestamps_s)]))
+    steps = steps[steps > 0]
+    return float(1.0 / np.median(steps)) if len(steps) else 0.0
+
+
+def _tracker_manufacturer(tracker: Any) -> str:
+    """The tracker kind of psyop's ``--tracker`` (never its host or file argument)."""
+    kind = str(tracker or "").split(":", 1)[0]
+    return {"sim": "none (psyop simulated tracker)", "pupil": "Pupil Labs", "replay": "replayed gaze log",
+            "serial": "serial-line tracker", "lsl": "Lab Streaming Layer stream"}.get(kind, "unknown")
+
+
+def _write_physioevents(stem: Path, trials: pd.DataFrame, phases: Sequence[Mapping[str, Any]], study: str) -> None:
+    rows: list[tuple[float, float, str, str]] = []
+    for trial in trials.itertuples(index=False):
+        start, end = float(trial.trial_start_s), float(trial.trial_end_s)
+        number = int(trial.trial)
+        rows.append((start, end - start, "trial", f"trial {number} {getattr(trial, 'condition', '')}".strip()))
+        onset = start
+        for phase in phases:
+            duration = float(phase.get("duration_s") or 0.0)
+            rows.append((onset, duration, f"phase_{phase.get('name')}", f"trial {number} phase {phase.get('name')}"))
+            onset += duration
+        rows.append((onset, max(0.0, end - onset), "phase_response", f"trial {number} response"))
+    table = pd.DataFrame(rows, columns=["onset", "duration", "trial_type", "message"])
+    _write_tsv_gz(stem.with_suffix(".tsv.gz"), table)
+    _write_json(stem.with_suffix(".json"), {
+        "TaskName": study,
+        "Columns": list(table.columns),
+        "OnsetSource": "timestamp",
+        "Description": ("Trial onsets (trial_type 'trial') and phase onsets (phase_<name>) on the session clock, the "
+                        "timeline of the physio file's timestamp column. A phase starts when the previous one ends: "
+                        "the session loop runs each phase of session.json's \"phases\" for its duration_s, then the "
+                        "response phase until the response."),
+        "onset": {"Description": "event onset on the session clock", "Units": "s"},
+        "duration": {"Description": "event duration", "Units": "s"},
+        "trial_type": {"Description": "'trial' or 'phase_<phase name>'"},
+        "message": {"Description": "trial number, condition or phase"},
+    })
+
+
+# ---- dataset files -----------------------------------------------------------------------------------------
+def _copy_sourcedata(directory: Path, target: Path, meta: Mapping[str, Any]) -> None:
+    target.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(directory / dc.SESSION_METADATA_FILE, target / dc.SESSION_METADATA_FILE)
+    for name in (meta.get(FINALISED_KEY) or {}):
+        shutil.copy2(directory / name, target / name)
+    if meta.get("protocol_text"):
+        (target / "protocol.yaml").write_text(str(meta["protocol_text"]))
+
+
+def _write_participants(out: Path, exported: Sequence[ExportedSession], data_root: Path) -> None:
+    by_participant: dict[str, list[ExportedSession]] = {}
+    for s in exported:
+        by_participant.setdefault(s.participant, []).append(s)
+    simulated = {}
+    for participant, sessions in by_participant.items():
+        flags = {bool((read_session_meta(data_root / s.study / f"sub-{s.participant}" / f"ses-{s.session}") or {})
+                      .get(dc.SIMULATED_KEY)) for s in sessions}
+        simulated[participant] = "mixed" if len(flags) > 1 else ("true" if flags == {True} else "false")
+    table = pd.DataFrame({
+        "participant_id": [f"sub-{p}" for p in sorted(by_participant)],
+        "simulated": [simulated[p] for p in sorted(by_participant)],
+        "studies": [",".join(sorted({s.study for s in by_participant[p]})) for p in sorted(by_participant)],
+    })
+    _write_tsv(out / "participants.tsv", table)
+    _write_json(out / "participants.json", {
+        "participant_id": {"Description": "psyop participant ID"},
+        "simulated": {"Description": "whether the participant's sessions were simulated (session.json "
+                      "\"simulated\"); mixed: some were", "Levels": {"true": "simulated", "false": "real",
+                                                                     "mixed": "both"}},
+        "studies": {"Description": "psyop studies (BIDS tasks) the participant took part in"},
+    })
+
+
+def _description(exported: Sequence[ExportedSession]) -> dict[str, Any]:
+    studies = sorted({s.study for s in exported})
+    return {
+        "Name": f"psyop sessions: {', '.join(studies)}",
+        "BIDSVersion": BIDS_VERSION,
+        "DatasetType": "raw",
+        "GeneratedBy": [{"Name": "psyop", "Version": __version__,
+                         "Description": "psyop export --bids (psyop.export.bids)"}],
+    }
+
+
+def _readme(exported: Sequence[ExportedSession]) -> str:
+    lines = ["# psyop sessions in BIDS", "",
+             "Exported by `psyop export --bids` from psyop's data root. Per session and psyop run (BIDS `run`):",
+             "", "- `beh/*_events.tsv`: one row per trial (onset, duration, trial_type = condition, response, "
+             "correct, and the schedule's factor columns).",
+             "- `beh/*_recording-eye<K>_physio.tsv.gz`: eye tracking (BIDS eye-tracking, `PhysioType` eyetrack), "
+             "gaze on each eye's display image in pixels; the sidecar says which eye, where the samples came from "
+             "(raw gaze stream or frame log) and the image geometry.",
+             "- `beh/*_physioevents.tsv.gz`: trial and phase onsets on the physio timeline.",
+             "- `sourcedata/<study>/sub-<ID>/ses-<N>/`: psyop's session.json (with the SHA-256 of each finalised "
+             "file), the protocol, and the finalised parquet files.", "",
+             "Times are seconds on the session clock of each run.", "", "## Sessions", "",
+             "| study | participant | session | runs | gaze source | eyes | gaze samples |", "|---|---|---|---|---|---|---|"]
+    for s in exported:
+        lines.append(f"| {s.study} | {s.participant} | {s.session} | {s.runs} | {s.gaze_source} | "
+                     f"{', '.join(s.eyes)} | {s.n_gaze_samples} |")
+    return "\n".join(lines) + "\n"
+
+
+def _tsv_text(table: pd.DataFrame, header: bool) -> str:
+    buffer = io.StringIO()
+    table.to_csv(buffer, sep="\t", index=False, header=header, na_rep="n/a", lineterminator="\n",
+                 float_format="%.6f")
+    return buffer.getvalue()
+
+
+def _write_tsv(path: Path, table: pd.DataFrame) -> None:
+    path.write_text(_tsv_text(table, header=True))
+
+
+def _write_tsv_gz(path: Path, table: pd.DataFrame) -> None:
+    """Headerless (BIDS continuous recordings), gzip with no name or time in its header (reproducible)."""
+    with open(path, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as handle:
+        handle.write(_tsv_text(table, header=False).encode())
+
+
+def _write_json(path: Path, content: Mapping[str, Any]) -> None:
+    path.write_text(json.dumps(content, indent=2, default=_json_default) + "\n")
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

@@ -1,0 +1,165 @@
+"""A session's gaze samples for export, and where each eye's line of sight meets its display image.
+
+Source: the raw gaze stream file (:data:`RAW_GAZE_FILE`, every tracker sample, before psyop's
+per-trial drift correction) when the session has one with samples; otherwise the frame log's gaze samples (``frames.parquet``: the sample each rendered
+frame used, after drift correction, so at most one per frame, held repeats dropped). :func:`session_gaze` says which one
+it read; the BIDS sidecar states it.
+
+The tracker reports a fixation point in head space (x right, y up, -z forward, metres, from the
+mid-point between the eyes; psyop.session.gaze.sample). Each eye's display shows a virtual image
+whose extent is given by tangents seen from that eye's centre of rotation C
+(psyop.optics.display). :func:`gaze_on_image_px` intersects the line from C through the fixation
+point with that image: pixel x to the right from the left edge, y down from the top edge
+(docs/architecture.md's pixel convention), the same for any image distance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import pandas as pd
+
+from psyop import datacontract as dc
+from psyop.errors import UserError
+from psyop.optics.display import DisplayProfile
+
+#: The raw gaze stream of a session (every tracker sample), finalised beside trials.parquet.
+RAW_GAZE_FILE = "gaze.parquet"
+#: Columns the raw gaze stream must have (the frame log's gaze column names).
+RAW_GAZE_COLUMNS: tuple[str, ...] = ("gaze_sample_t_s", "fixation_x_m", "fixation_y_m", "fixation_z_m",
+                                     "gaze_valid")
+#: Optional per-eye pupil diameter columns of the raw stream (``{eye}`` is left or right).
+PUPIL_COLUMN = "pupil_diameter_{eye}_mm"
+
+FRAME_LOG = "frame log"
+RAW_STREAM = "raw gaze stream"
+
+
+@dataclass(frozen=True)
+class SessionGaze:
+    """Gaze samples of one session, oldest first, one row per distinct sample time.
+
+    ``samples`` has ``gaze_sample_t_s``, ``fixation_{x,y,z}_m``, ``gaze_valid``,
+    ``gaze_confidence`` (NaN where the source has none), ``trial`` (the frame log's, or -1 for
+    the raw stream) and, from a raw stream only, ``run`` (when it has one: which psyop run
+    recorded the sample) and ``pupil_diameter_{eye}_mm``.
+    """
+
+    source: str  # FRAME_LOG or RAW_STREAM
+    file: str
+    samples: pd.DataFrame
+
+
+def session_gaze(directory: Path) -> SessionGaze:
+    """The session's gaze samples: the raw stream if it holds any, else the frame log's.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> pd.DataFrame({"trial": [0, 0], "frame": [0, 1], "gaze_sample_t_s": [0.5, 0.5], "fixation_x_m": [0.0, 0.0],
+    ...               "fixation_y_m": [0.0, 0.0], "fixation_z_m": [-1.0, -1.0], "gaze_confidence": [0.9, 0.9],
+    ...               "gaze_valid": [True, True]}).to_parquet(d / "frames.parquet")
+    >>> gaze = session_gaze(d)
+    >>> gaze.source, len(gaze.samples)
+    ('frame log', 1)
+    """
+    directory = Path(directory)
+    raw = directory / RAW_GAZE_FILE
+    table = pd.read_parquet(raw) if raw.is_file() else None
+    if table is not None and len(table) >= 2:  # an (almost) empty raw stream: the frame log's samples
+        missing = [c for c in RAW_GAZE_COLUMNS if c not in table]
+        if missing:
+            raise UserError(f"raw gaze stream lacks column(s) {missing}; expected {list(RAW_GAZE_COLUMNS)}", str(raw))
+        table = table.copy()
+        if "gaze_confidence" not in table:
+            table["gaze_confidence"] = np.nan
+        table["trial"] = table["trial"] if "trial" in table else -1
+        source, name = RAW_STREAM, RAW_GAZE_FILE
+    else:
+        path = directory / dc.FRAMES_FILE
+        if not path.is_file():
+            raise UserError("no gaze samples: neither a raw gaze stream nor frames.parquet", str(directory))
+        table = pd.read_parquet(path)
+        source, name = FRAME_LOG, dc.FRAMES_FILE
+    table = table[np.isfinite(pd.to_numeric(table["gaze_sample_t_s"], errors="coerce"))]
+    table = table.sort_values("gaze_sample_t_s", kind="stable")
+    table = table.drop_duplicates(subset="gaze_sample_t_s", keep="first").reset_index(drop=True)
+    keep = [*RAW_GAZE_COLUMNS, "gaze_confidence", "trial", "run",
+            *(c for c in table.columns if c.startswith("pupil_diameter_"))]
+    return SessionGaze(source, name, table[[c for c in keep if c in table]])
+
+
+def display_from_metadata(meta: Mapping[str, Any], where: str) -> DisplayProfile:
+    """The session's display profile as session.json records it (``display``)."""
+    raw = meta.get("display")
+    if not isinstance(raw, Mapping):
+        raise UserError("session.json has no display profile (\"display\"): cannot place gaze on the image", where)
+    fields = {k: raw[k] for k in ("name", "width_px", "height_px", "refresh_hz", "tan_left", "tan_right",
+                                  "tan_bottom", "tan_top") if k in raw}
+    d_m = raw.get("d_m", "inf")
+    left = raw.get("left_tangents")  # the left eye's own frustum (per-eye FOV), else mirrored
+    try:
+        return DisplayProfile(**fields, d_m=math.inf if d_m in (None, "inf") else float(d_m),
+                              left_tangents=None if left is None else tuple(left))
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"session.json's display profile is not usable: {exc}", where) from exc
+
+
+def eye_centre_m(eye: str, ipd_m: float) -> np.ndarray:
+    """The eye's centre of rotation in head space (psyop.optics.rig convention)."""
+    return np.array([(-0.5 if eye == "left" else 0.5) * float(ipd_m), 0.0, 0.0])
+
+
+def gaze_on_image_px(fixation_m: np.ndarray, display: DisplayProfile, eye: str, ipd_m: float) -> np.ndarray:
+    """(n, 2) pixel coordinates where the line from ``eye``'s centre of rotation through each
+    fixation point meets that eye's image; NaN where the point is not in front of the eye.
+
+    Examples
+    --------
+    >>> from psyop.optics.display import VIVE_PRO
+    >>> straight_ahead = np.array([[0.0315, 0.0, -1.0]])
+    >>> gaze_on_image_px(straight_ahead, VIVE_PRO, "right", 0.063)
+    array([[720., 800.]])
+    """
+    points = np.asarray(fixation_m, dtype=np.float64).reshape(-1, 3) - eye_centre_m(eye, ipd_m)
+    left, right, bottom, top = display.frustum_tangents(eye)
+    forward = -points[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tan_x = np.where(forward > 0, points[:, 0] / forward, np.nan)
+        tan_y = np.where(forward > 0, points[:, 1] / forward, np.nan)
+    x_px = (tan_x - left) / (right - left) * display.width_px
+    y_px = (top - tan_y) / (top - bottom) * display.height_px
+    return np.column_stack([x_px, y_px])
+
+
+@dataclass(frozen=True)
+class ImageGeometry:
+    """BIDS ``StimulusPresentation`` of one eye's image: distance and size in metres, resolution.
+
+    An image at optical infinity (``d_m`` inf, the paper's headset) has no physical distance or
+    size; it is described as the flat screen at :data:`EQUIVALENT_DISTANCE_M` that subtends the
+    same angles (``equivalent`` true), which gives the same visual angles for every pixel."""
+
+    distance_m: float
+    width_m: float
+    height_m: float
+    width_px: int
+    height_px: int
+    equivalent: bool
+
+
+EQUIVALENT_DISTANCE_M = 1.0
+
+
+def image_geometry(display: DisplayProfile, eye: str) -> ImageGeometry:
+    """The eye's image as BIDS describes a screen (see :class:`ImageGeometry`)."""
+    left, right, bottom, top = display.frustum_tangents(eye)
+    equivalent = not math.isfinite(display.d_m)
+    d_m = EQUIVALENT_DISTANCE_M if equivalent else float(display.d_m)
+    return ImageGeometry(d_m, d_m * (right - left), d_m * (top - bottom), display.width_px, display.height_px,
+                         equivalent)
