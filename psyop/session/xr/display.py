@@ -26,7 +26,16 @@ from typing import Any
 
 from psyop.optics.camera import ViewGeometry
 from psyop.session.frames import DisplayInterrupted, FrameRequest, RenderTarget
-from psyop.session.xr.runtime import FOCUS_TIMEOUT_S, XrPose, XrRuntime, quaternion_multiply, rotate, tangents_from_fov, xr_error
+from psyop.session.xr.runtime import (
+    FOCUS_TIMEOUT_S,
+    XrPose,
+    XrRuntime,
+    quaternion_multiply,
+    rotate,
+    signals_held,
+    tangents_from_fov,
+    xr_error,
+)
 
 GL_RGBA8 = 0x8058
 #: a target is cleared to this grey before each frame (what a phase that draws nothing shows)
@@ -75,7 +84,8 @@ class OpenXRDisplay:
         self.xr = self.runtime.xr
         self._eyes = plan.rig.eyes
         self._index = 0
-        self._frame: XrFrame | None = None
+        self._frame: XrFrame | None = None  # the frame xrWaitFrame gave and xrEndFrame has not ended
+        self._frame_begun = False
         self._last_display_ns: int | None = None
         self.head_pose: XrPose | None = None  # VIEW space in the reference space at the frame's display time
         self.head_pose_time_s = math.nan
@@ -99,6 +109,7 @@ class OpenXRDisplay:
         return int(round(session_s * 1e9)) + self._clock.epoch_ns + self._offset_ns
 
     # -- set-up ---------------------------------------------------------------------------------------
+    @signals_held
     def _create_swapchains(self) -> dict[str, _EyeSwapchain]:
         xr = self.xr
         formats = list(xr.enumerate_swapchain_formats(self.runtime.session))
@@ -138,13 +149,28 @@ class OpenXRDisplay:
             else:
                 time.sleep(0.005)
 
-    def _empty_frame(self) -> None:
+    @signals_held
+    def _wait_and_begin(self) -> Any:
+        """xrWaitFrame then xrBeginFrame, with the frame marked open from the moment the wait
+        returns: a Ctrl-C (or an error) between the two calls, or before xrEndFrame, leaves a frame
+        that :meth:`close` begins and ends, for a second xrWaitFrame would block for ever."""
         xr = self.xr
         state = xr.wait_frame(self.runtime.session)
+        self._frame = XrFrame(int(state.predicted_display_time), int(state.predicted_display_period), False, ())
+        self._frame_begun = False
         xr.begin_frame(self.runtime.session)
+        self._frame_begun = True
+        return state
+
+    @signals_held
+    def _empty_frame(self) -> None:
+        xr = self.xr
+        state = self._wait_and_begin()
         xr.end_frame(self.runtime.session, xr.FrameEndInfo(display_time=state.predicted_display_time,
                                                            environment_blend_mode=xr.EnvironmentBlendMode.OPAQUE))
+        self._frame = None
 
+    @signals_held
     def begin_frame(self, not_before_s: float) -> FrameRequest:
         xr, rt = self.xr, self.runtime
         rt.poll_events()
@@ -155,11 +181,9 @@ class OpenXRDisplay:
         if self._request_exit_at_frame is not None and self._index == self._request_exit_at_frame:
             xr.request_exit_session(rt.session)
         waited = time.perf_counter()
-        state = xr.wait_frame(rt.session)
+        state = self._wait_and_begin()
         self.wait_frame_s += time.perf_counter() - waited
-        xr.begin_frame(rt.session)
         t_ns, period_ns = int(state.predicted_display_time), int(state.predicted_display_period)
-        self._frame = XrFrame(t_ns, period_ns, False, ())  # begun: close() ends it if this frame never is
         missed = 0
         if self._last_display_ns is not None and period_ns > 0:
             missed = max(0, int(round((t_ns - self._last_display_ns) / period_ns)) - 1)
@@ -195,10 +219,10 @@ class OpenXRDisplay:
         return FrameRequest(self._index - 1, self.to_session_s(t_ns), period_ns * 1e-9, should_render,
                             views=tuple(v for v in views if v.eye in self._eyes), targets=targets, missed_frames=missed)
 
+    @signals_held
     def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float:
         xr, rt = self.xr, self.runtime
-        pending = self._frame
-        self._frame = None
+        pending = self._frame  # cleared only once xrEndFrame returns: close() ends a frame left open
         layers = []
         if pending is not None and pending.should_render:
             self._ctx.finish()  # the images are complete before the runtime reads them
@@ -216,6 +240,7 @@ class OpenXRDisplay:
         display_ns = pending.predicted_display_time_ns if pending is not None else self.to_xr_ns(self._clock.now_s())
         xr.end_frame(rt.session, xr.FrameEndInfo(display_time=display_ns,
                                                  environment_blend_mode=xr.EnvironmentBlendMode.OPAQUE, layers=layers))
+        self._frame = None
         return self._clock.now_s()
 
     def summary(self) -> dict[str, Any]:
@@ -227,6 +252,7 @@ class OpenXRDisplay:
                 "wait_frame_s": self.wait_frame_s,
                 "session_states": list(facts.states)}
 
+    @signals_held
     def close(self) -> None:
         rt = getattr(self, "runtime", None)
         if rt is not None and rt.session is not None:
@@ -237,12 +263,15 @@ class OpenXRDisplay:
                     except Exception:  # noqa: BLE001 - teardown goes on
                         pass
                     chain.acquired = False
-            if self._frame is not None:  # a frame begun and never ended (Ctrl-C, an error mid-frame)
-                self._frame = None
+            if self._frame is not None:  # a frame waited for and never ended (an error mid-frame)
+                open_frame, self._frame = self._frame, None
                 try:
+                    if not self._frame_begun:
+                        self.xr.begin_frame(rt.session)
                     self.xr.end_frame(rt.session, self.xr.FrameEndInfo(
-                        display_time=self._last_display_ns or 0, environment_blend_mode=self.xr.EnvironmentBlendMode.OPAQUE))
-                except Exception:  # noqa: BLE001
+                        display_time=open_frame.predicted_display_time_ns,
+                        environment_blend_mode=self.xr.EnvironmentBlendMode.OPAQUE))
+                except Exception:  # noqa: BLE001 - teardown goes on
                     pass
             rt.request_exit(self._empty_frame)
             for chain in getattr(self, "_swapchains", {}).values():

@@ -20,13 +20,20 @@ when offered). Actions are synced once per frame, only while the session is focu
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
+import functools
 import math
+import signal
+import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from psyop.errors import UserError
+
+T = TypeVar("T")
 
 #: exit code of a headset runtime that is absent or fails (a device problem, not bad input)
 XR_EXIT_CODE = 3
@@ -90,10 +97,72 @@ def _pose(xr: Any, location: Any, valid_bits: int) -> XrPose:
                   (flags & valid_bits) == valid_bits)
 
 
+_HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class _Held:
+    """Per-process nesting depth of :func:`runtime_threads_without_signals` (main thread only)."""
+
+    depth = 0
+
+
+@contextlib.contextmanager
+def runtime_threads_without_signals() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP while this thread is inside the runtime: at the OS level
+    (the mask, which the runtime's own threads inherit) and at Python's (each signal's handler runs
+    after the section, not inside it). The outermost section restores both and then runs the
+    handlers of the signals that arrived, so Ctrl-C still raises, between two runtime calls.
+
+    Two faults it prevents, both found by test_ctrl_c_mid_frame_ends_the_headset_session_cleanly_
+    and_it_resumes under load: a KeyboardInterrupt raised just after ``xrWaitFrame`` returned left
+    a frame that was neither begun nor ended, and the next ``xrWaitFrame`` (in teardown) blocked
+    for ever; a signal delivered to one of an in-process runtime's threads interrupts its waits."""
+    if threading.current_thread() is not threading.main_thread() or _Held.depth:
+        _Held.depth += 1
+        try:
+            yield
+        finally:
+            _Held.depth -= 1
+        return
+    arrived: list[int] = []
+    previous_handlers = {}
+    for signum in _HELD_SIGNALS:
+        handler = signal.getsignal(signum)
+        if callable(handler):
+            previous_handlers[signum] = handler
+            signal.signal(signum, lambda n, frame: arrived.append(n))
+    previous_mask = signal.pthread_sigmask(signal.SIG_BLOCK, set(_HELD_SIGNALS))
+    _Held.depth = 1
+    try:
+        yield
+    finally:
+        _Held.depth = 0
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)  # a held signal is delivered now
+        for signum, handler in previous_handlers.items():
+            signal.signal(signum, handler)
+        for signum in dict.fromkeys(arrived):
+            previous_handlers[signum](signum, None)
+
+
+def signals_held(method: Callable[..., T]) -> Callable[..., T]:
+    """A method that calls into the runtime, run with the signals held (see above)."""
+
+    @functools.wraps(method)
+    def held(*args: Any, **kwargs: Any) -> T:
+        with runtime_threads_without_signals():
+            return method(*args, **kwargs)
+
+    return held
+
+
 class XrRuntime:
     """Instance, system and session of the runtime, bound to ``ctx`` (a moderngl EGL context)."""
 
+    @signals_held
     def __init__(self, ctx: Any, *, reference_space: str = "local", app_name: str = "psyop") -> None:
+        self._open(ctx, reference_space, app_name)
+
+    def _open(self, ctx: Any, reference_space: str, app_name: str) -> None:
         xr = self.xr = import_xr()
         self.ctx = ctx
         self.facts = RuntimeFacts(reference_space=reference_space)
@@ -254,6 +323,7 @@ class XrRuntime:
         self._spaces.append(space)
         return space
 
+    @signals_held
     def tracker_space(self, role: str) -> Any:
         """The grip space of the Vive tracker with this role (XR_HTCX_vive_tracker_interaction)."""
         if self.tracker_action is None:
@@ -264,6 +334,7 @@ class XrRuntime:
         return self._action_space(self.tracker_action, self.tracker_roles[role])
 
     # -- session state ----------------------------------------------------------------------------
+    @signals_held
     def poll_events(self) -> None:
         """Drain the runtime's events; follow the session state (begin the session when READY,
         end it when STOPPING). A change that takes the session out of focus ends the drain, so the
@@ -305,6 +376,7 @@ class XrRuntime:
         return self._lost
 
     # -- time ---------------------------------------------------------------------------------------
+    @signals_held
     def xr_time_now_ns(self) -> int:
         """The runtime's XrTime of CLOCK_MONOTONIC now, and the monotonic reading it came from."""
         xr = self.xr
@@ -319,6 +391,7 @@ class XrRuntime:
         return int(out.value) - mono_ns  # offset: XrTime = CLOCK_MONOTONIC ns + offset
 
     # -- locating -------------------------------------------------------------------------------------
+    @signals_held
     def locate(self, space: Any, base: Any, xr_time_ns: int, next_struct: Any = None) -> XrPose:
         xr = self.xr
         location = xr.SpaceLocation(next=next_struct)
@@ -327,6 +400,7 @@ class XrRuntime:
                    | xr.SpaceLocationFlags.ORIENTATION_TRACKED_BIT)
         return _pose(xr, location, bits)
 
+    @signals_held
     def sync_actions(self) -> None:
         """Sync input once per frame (only delivered while focused)."""
         xr = self.xr
@@ -339,6 +413,7 @@ class XrRuntime:
             return
         self.sync_count += 1
 
+    @signals_held
     def select_presses(self) -> dict[str, int]:
         """Per hand whose select button went down since the last sync: the runtime's time of the
         press (``lastChangeTime``, XrTime ns)."""
@@ -352,6 +427,7 @@ class XrRuntime:
         return out
 
     # -- teardown -------------------------------------------------------------------------------------
+    @signals_held
     def request_exit(self, pump_frame: Any, timeout_s: float = 5.0) -> None:
         """``xrRequestExitSession`` and follow the states to the end (the runtime only moves on while
         frames are submitted: ``pump_frame()`` submits an empty one)."""
@@ -372,6 +448,7 @@ class XrRuntime:
             except xr.exception.XrException:
                 return
 
+    @signals_held
     def close(self) -> None:
         xr = self.xr
         for space in self._spaces:
