@@ -22,8 +22,10 @@ def test_every_category_has_backends_and_every_backend_is_well_formed() -> None:
         assert names, category
         assert len(names) == len(set(names)), f"{category}: duplicate names {names}"
     for backend in BACKENDS:
-        assert backend.usage == backend.name or backend.usage.startswith(backend.name + ":"), backend.usage
-        assert (":" in backend.usage) == bool(backend.takes_arg), backend.usage  # usage and argument rule agree
+        # usage and argument rule agree: NAME (none), NAME:ARG (required), NAME[:ARG] (optional)
+        expected = {False: backend.name, True: backend.name + ":", None: backend.name + "[:"}[backend.takes_arg]
+        assert backend.usage == expected if backend.takes_arg is False else backend.usage.startswith(expected), \
+            backend.usage
         assert backend.summary and "\n" not in backend.summary
 
 
