@@ -22,6 +22,8 @@ DATASET_DESCRIPTION_FILE = "dataset_description.json"
 SESSION_METADATA_FILE = "session.json"
 TRIALS_FILE = "trials.parquet"
 FRAMES_FILE = "frames.parquet"
+#: the raw gaze stream: every sample the tracker delivered (psyop.session.log.schema.GAZE_SCHEMA)
+GAZE_FILE = "gaze.parquet"
 LOG_DIR = "log"
 #: Participant IDs are BIDS labels (psyop export --bids): letters and digits only.
 PARTICIPANT_PATTERN = re.compile(r"[A-Za-z0-9]{1,64}")  # use with fullmatch: "ab\n" is refused
@@ -111,7 +113,8 @@ def dataset_description(*, simulated: bool, studies: list[str], n_simulated: int
         "name": "psyop sessions",
         "description": (
             "Trial and frame logs of gaze-contingent VR psychophysics sessions recorded by psyop. "
-            f"Layout: <study>/sub-<ID>/ses-<N>/{{{TRIALS_FILE.split('.')[0]},{FRAMES_FILE.split('.')[0]}}}.parquet "
+            f"Layout: <study>/sub-<ID>/ses-<N>/{{{TRIALS_FILE.split('.')[0]},{FRAMES_FILE.split('.')[0]},"
+            f"{GAZE_FILE.split('.')[0]}}}.parquet "
             f"with {SESSION_METADATA_FILE} metadata (psyop's own layout; it claims no data standard: "
             "`psyop export --bids DIR` writes a BIDS dataset that the BIDS validator accepts)."
         ),

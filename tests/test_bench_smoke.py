@@ -29,3 +29,13 @@ def test_bench_export_quick_validates_the_export(tmp_path: Path) -> None:
     assert "5 simulated sessions" in report and "sessions with at least one: 5 of 5" in report
     assert "exit 0, 0 errors" in report or "not installed" in report
     assert "| ratio verify / read |" in report
+
+
+def test_bench_lsl_quick_measures_both_paths_and_the_raw_stream(tmp_path: Path) -> None:
+    from benchmarks import bench_lsl
+
+    report = bench_lsl.run(tmp_path, quick=True)
+    for row in ("| Pupil (ZMQ + msgpack, PupilClient) |", "| LSL (Pupil relay outlet, LslGazeSource) |",
+                "LSL / Pupil median age: **", "| raw stream total |", "Raw stream total / Pupil per-message work: **"):
+        assert row in report
+    assert "nan" not in report

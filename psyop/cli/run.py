@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from psyop.errors import UserError
+from psyop.session.backends import help_text
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,22 +20,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--participant", required=True, help="participant ID (letters and digits)")
     parser.add_argument("--session", type=int, default=1, help="session number (default 1)")
     parser.add_argument("--seed", type=int, default=None, help="schedule/observer seed (default: from IDs, or the session's)")
-    parser.add_argument("--tracker", default="sim", help="sim | replay:FILE | pupil:HOST:PORT | serial:DEVICE | openxr "
-                        "(eye gaze through the OpenXR runtime, XR_EXT_eye_gaze_interaction; needs --display openxr)")
-    parser.add_argument("--pose", default="sim",
-                        help="head/hand pose: sim (simulated from the seed) | replay:SESSION_DIR (a logged session with "
-                        "the same schedule: protocol, seed, conditions) | replay-by-condition:SESSION_DIR (each trial "
-                        "replays a logged trial of the same condition) | openxr (head pose from the OpenXR runtime, needs "
-                        "--display openxr) | openxr:HAND (also the hand: left, right or vive_tracker:ROLE)")
-    parser.add_argument("--responses", default="sim",
-                        help="who answers: sim (the protocol's simulated observer) | keyboard (needs --display window) "
-                        "| serial:DEVICE (a response box) | none (nobody: every response phase runs to the protocol's "
-                        "timeout_s and is logged as a timeout; a dry run of the timing, needs timeout_s) | openxr (controller "
-                        "buttons through the OpenXR runtime, needs --display openxr)")
-    parser.add_argument("--display", default="headless", choices=["headless", "window", "openxr"],
-                        help="headless (no screen) | window (a desktop window) | openxr (a VR headset through its "
-                             "OpenXR runtime: pip install 'psyop[xr]'; docs/headset.md)")
+    # the backend options' help is generated from the registry (psyop.session.backends)
+    parser.add_argument("--tracker", default="sim", help=f"the gaze source: {help_text('tracker')}")
+    parser.add_argument("--pose", default="sim", help=f"head/hand pose: {help_text('pose')}")
+    parser.add_argument("--responses", default="sim", help=f"who answers: {help_text('responses')}")
+    parser.add_argument("--display", default="headless", help=f"where frames go: {help_text('display')}")
     parser.add_argument("--clock", default="virtual", choices=["virtual", "real"])
+    parser.add_argument("--lsl-markers", action="store_true",
+                        help="publish trial starts, phase onsets, responses and recorded trial ends (trial index, "
+                             "condition) as the LSL marker stream 'psyop_markers' for LabRecorder (needs --clock real; "
+                             "pip install 'psyop[lsl]'); waits up to --lsl-wait-s for a recorder to connect first")
+    parser.add_argument("--lsl-wait-s", type=float, default=10.0, metavar="S",
+                        help="--lsl-markers: seconds to wait for a recorder (LabRecorder) to connect before the first "
+                             "trial (default 10; the session starts either way and session.json says which)")
     parser.add_argument("--window-scale", type=float, default=0.25, metavar="S",
                         help="--display window: render and show each eye at S x the display's resolution "
                              "(1 = full resolution; both eyes side by side for stereo; default 0.25)")
@@ -65,7 +63,7 @@ def main(args: argparse.Namespace) -> int:
     options = SessionOptions(
         participant=args.participant, session=args.session, seed=args.seed, tracker=args.tracker,
         responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
-        window_scale=args.window_scale,
+        window_scale=args.window_scale, lsl_markers=args.lsl_markers, lsl_wait_s=args.lsl_wait_s,
         progress=not args.no_progress, allow_protocol_change=args.allow_protocol_change, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
         xr_request_exit_at_frame=args.xr_request_exit_at_frame,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,

@@ -30,15 +30,18 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from psyop.adaptive.session import AdaptiveLevels
 from psyop.session.clock import Clock
+from psyop.session.events import EventKind, EventSink, SessionEvent
 from psyop.session.frames import Display, DisplayInterrupted, FrameRecorder, FrameRenderer, FrameRequest, latency_summary
 from psyop.session.log.schema import VIEW_TANGENTS
 from psyop.session.gaze.filter import GazeConditioner
 from psyop.session.gaze.plan import FixationPlan, circling_target
 from psyop.session.gaze.sample import GazeSample, GazeSource, TrackerLost
 from psyop.session.gaze.simulated import seed_for
+from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.log.store import SessionStore
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.reach import horizontal_reach_m
@@ -130,6 +133,7 @@ class TrialLoop:
         response: ResponsePlan | None = None,
         announce: Callable[[str], None] | None = None,
         adaptive: AdaptiveLevels | None = None,
+        events: tuple[EventSink, ...] = (),
     ) -> None:
         self.identity = dict(identity)  # study, participant, session
         self.phases = phases
@@ -137,6 +141,7 @@ class TrialLoop:
         self.response_plan = response
         self.announce = announce  # where a live session shows the response prompt (experimenter console)
         self.adaptive = adaptive  # adaptive levels: chosen before each trial from the logged history
+        self.events = events  # outside recorders told of trial starts, phases, responses, ends (events.py)
         self.clock, self.gaze, self.responses = clock, gaze, responses
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
         self.conditioner = GazeConditioner(config.confidence_threshold)
@@ -151,6 +156,7 @@ class TrialLoop:
         self.state = TrialState.DONE
         #: trials the display interrupted (discarded; re-run when ``rerun``), as session.json records them
         self.display_interruptions: list[dict[str, Any]] = []
+        self.current_trial = -1  # the trial in progress (-1: none); tags the raw gaze samples
 
     # session -------------------------------------------------------------------------
     def run(self, schedule: pd.DataFrame, completed: set[int]) -> SessionOutcome:
@@ -170,12 +176,17 @@ class TrialLoop:
                         bar.update(1)
                         continue
                     row = self.adaptive.fill(row)
+                self.current_trial = int(row["trial"])
                 record, frames = self._run_trial_on_display(row)
                 if self.adaptive is not None:
                     record = self.adaptive.complete(record)
                 self.state = TrialState.RECORD
                 with _sigint_deferred():  # Ctrl-C never tears a record half-written
-                    self.store.append_trial(record, frames.table() if len(frames) else None)
+                    self.store.append_trial(record, frames.table() if len(frames) else None,
+                                            self.raw_gaze(int(record["trial"])))
+                self.current_trial = -1
+                self._emit("trial_end", record, float(record["trial_end_s"]),
+                           duration_s=float(record["trial_end_s"]) - float(record["trial_start_s"]))
                 recorded.add(int(record["trial"]))
                 if self.adaptive is not None:
                     self.adaptive.commit(record)
@@ -238,11 +249,13 @@ class TrialLoop:
         trial = int(row["trial"])
         sampled = (trial in self.config.sampled_trials) or (trial % max(1, self.config.sample_every_n_trials) == 0)
         start_s = self.clock.now_s()
+        self._emit("trial_start", row, start_s)
         drift_deg = math.nan
         valid = total = 0
         for phase in self.phases:
             self.state = TrialState.RECALIBRATE if phase.gaze == "cross" else TrialState.PRESENT
             phase_start = self._phase_start_s = self.clock.now_s()
+            self._emit("phase", row, phase_start, phase.name)
             self._set_plan(phase, row, phase_start)
             if self.config.phase_delay_s > 0:
                 time.sleep(self.config.phase_delay_s)
@@ -260,6 +273,7 @@ class TrialLoop:
         response = self._await_response(row, frames)
         end = self.clock.now_s()
         response, hand_columns = self._track_reach(row, response, end)
+        self._emit("response", row, end, response.response)
         record = dict(row)
         record.update(self.identity)
         record.update(
@@ -295,10 +309,20 @@ class TrialLoop:
                        hand_sample_valid=[h.valid for h in hands], hand_sample_held=[h.held for h in hands])
         return dataclasses.replace(response, response=f"{reach:.6f}", reach_m=reach, extras=tuple(extras.items())), columns
 
+    def _emit(self, kind: EventKind, row: Mapping[str, Any], t_s: float, value: str = "",
+              duration_s: float = 0.0) -> None:
+        if self.events:
+            event = SessionEvent(kind, int(row["trial"]), str(row.get("condition", "")), t_s, value, duration_s)
+            for sink in self.events:
+                sink.emit(event)
+
+    def raw_gaze(self, trial: int) -> pa.Table:
+        """The samples the gaze source delivered since the last call (the raw gaze stream),
+        tagged with this run and ``trial``."""
+        return raw_gaze_table(self.gaze.drain_raw(), run=self.store.run_index, trial=trial)
+
     def _set_plan(self, phase: PhaseSpec, row: Mapping[str, Any], start_s: float) -> None:
-        set_plan = getattr(self.gaze, "set_plan", None)
-        if set_plan is None:
-            return
+        """Tell the gaze source where the observer is asked to look (a real tracker ignores it)."""
         c = self.config
         seed = int(row.get("trial_seed", 0)) & 0xFFFFFFFF
         if phase.gaze == "pursuit":
@@ -311,7 +335,7 @@ class TrialLoop:
             plan = FixationPlan("free", start_s, c.fixation_distance_m, radius_deg=c.free_radius_deg, seed=seed_for(seed, phase.name))
         else:
             plan = FixationPlan("cross", start_s, c.fixation_distance_m)
-        set_plan(plan)
+        self.gaze.set_plan(plan)
 
     def _fresh(self, sample: GazeSample | None) -> GazeSample | None:
         """A sample older than ``stale_after_s`` (tracker dropout) counts as invalid."""
@@ -376,6 +400,7 @@ class TrialLoop:
         if plan is not None and plan.prompt and self.announce is not None:
             self.announce(plan.prompt)
         start_s = self.clock.now_s()
+        self._emit("phase", row, start_s, prompt.name)
         while True:
             response = self.responses.collect(row, self.clock.now_s())
             if response is not None:

@@ -84,8 +84,11 @@ class PoseSource(Protocol):
     ``hand(row, end_s, n, endpoint_m)``: the ``n`` hand samples up to ``end_s`` that
     determine trial ``row``'s reach, oldest first; ``endpoint_m`` is where a simulated
     observer holds its hand (None when the source must know it itself). Empty when the
-    source has no hand data for the trial.
+    source has no hand data for the trial. ``n_reused_hand_trials``: trials whose hand samples
+    repeat another trial's (a replay by condition; 0 for live and simulated sources).
     """
+
+    n_reused_hand_trials: int
 
     def head(self, now_s: float) -> PoseSample | None: ...
 
@@ -140,6 +143,8 @@ class SimulatedPose:
     endpoint tracked at 120 Hz with the tracker's accuracy (one error per reach) and precision
     (per sample), drawn from (seed, trial_seed).
     """
+
+    n_reused_hand_trials = 0
 
     def __init__(self, seed: int, config: SimulatedPoseConfig | None = None) -> None:
         self.seed = int(seed)

@@ -3,9 +3,9 @@
 Called by the runner before anything is written:
 
 - :func:`check_options` refuses combinations that would record wrong numbers: a live
-  response device (serial button box, keyboard) timestamps presses in real time, so on
-  the virtual clock its response times would be meaningless (presses 0.25 s apart logged
-  as 24-28 s response times).
+  device (a backend the registry marks ``real_time``: a serial button box or keyboard
+  timestamps presses in real time, so on the virtual clock its response times would be
+  meaningless, presses 0.25 s apart logged as 24-28 s response times) on the virtual clock.
 - :func:`resolve_seed` decides the seed: an existing session's (session.json, or the
   seed written into the checksummed log when session.json was lost) wins over the
   default; an explicit ``--seed`` that differs from it is refused (exit code 2) rather
@@ -28,28 +28,24 @@ from pathlib import Path
 
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
+from psyop.session.backends import OPTION, Category, is_real_time, lookup
 from psyop.session.lock import SessionLock
 from psyop.session.log.layout import SessionPaths
 from psyop.session.log.store import log_identity, read_metadata
 
-#: response sources whose events carry real (wall-clock) time stamps
-REAL_TIME_RESPONSES = ("serial", "keyboard", "openxr")
-#: trackers that stream in real time
-REAL_TIME_TRACKERS = ("pupil", "serial", "openxr")
+def check_options(*, clock: str, responses: str, tracker: str, pose: str = "sim", display: str = "headless") -> None:
+    """Refuse a live device on the virtual clock (exit code 2, naming the option).
 
-
-def check_options(*, clock: str, responses: str, tracker: str) -> None:
-    """Refuse a live device on the virtual clock (exit code 2, naming the option)."""
-    if clock != "virtual":
-        return
-    response_kind = responses.partition(":")[0]
-    if response_kind in REAL_TIME_RESPONSES:
-        raise UserError(
-            f"--responses {response_kind} is a live device whose presses are timed in real time; "
-            "on --clock virtual its response times would be wrong: use --clock real", "--clock")
-    tracker_kind = tracker.partition(":")[0]
-    if tracker_kind in REAL_TIME_TRACKERS:
-        raise UserError(f"--tracker {tracker_kind} is a live device; use --clock real with it", "--clock")
+    Which backends are live is the registry's ``real_time`` (:mod:`psyop.session.backends`);
+    an unknown backend name is refused here too, before anything is written."""
+    chosen: dict[Category, str] = {"display": display, "tracker": tracker, "pose": pose, "responses": responses}
+    for category, spec in chosen.items():
+        lookup(category, spec)
+        if clock == "virtual" and is_real_time(category, spec):
+            name = spec.partition(":")[0]
+            what = ("a live device whose presses are timed in real time; on --clock virtual its response times "
+                    "would be wrong" if category == "responses" else "a live device")
+            raise UserError(f"{OPTION[category]} {name} is {what}: use --clock real with it", "--clock")
 
 
 def recorded_seed(paths: SessionPaths) -> int | None:

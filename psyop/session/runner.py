@@ -7,6 +7,8 @@ model, display, tracker clock-sync, host.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import functools
 import importlib.metadata
 import platform
@@ -20,17 +22,18 @@ import pandas as pd
 
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
+from psyop.session.backends import BackendContext, build, is_real_time
 from psyop.session.clock import RealClock, VirtualClock
-from psyop.session.frames import CameraRenderer, Display, HeadlessDisplay
-from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, seed_for
+from psyop.session.frames import CameraRenderer, Display
+from psyop.session.gaze.simulated import SimulatedTrackerConfig, seed_for
 from psyop.session.log.layout import session_paths, write_dataset_description
 from psyop.session.log.schema import trial_schema
 from psyop.adaptive.session import AdaptiveLevels, add_log_columns
 from psyop.session.log.store import SessionStore, recover_tables
 from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
+from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.resume import accept_protocol_change, check_options, resolve_seed
-from psyop.session.responses.simulated import make_observer
 
 __all__ = ["DEFAULT_IPD_M", "SessionOptions", "print_outcome", "run_session"]
 _PACKAGES = ("psyop", "numpy", "scipy", "pandas", "pyarrow", "pydantic", "pyzmq", "pyserial", "msgpack", "moderngl", "tqdm")
@@ -61,6 +64,8 @@ class SessionOptions:
     allow_protocol_change: bool = False  # resume with a protocol edited only in comments (resume.py)
     pose: str = "sim"  # sim | replay:SESSION_DIR (head and hand pose; docs/sessions.md)
     xr_request_exit_at_frame: int | None = None  # testing aid: the OpenXR runtime is asked to stop at frame N
+    lsl_markers: bool = False  # publish trial events as an LSL marker stream (psyop.session.lsl_markers)
+    lsl_wait_s: float = 10.0  # --lsl-markers: wait this long for a recorder to connect before the first trial
 
     @property
     def simulated(self) -> bool:
@@ -83,123 +88,6 @@ def _package_versions() -> tuple[tuple[str, str], ...]:
         except importlib.metadata.PackageNotFoundError:
             versions.append((name, "not installed"))
     return tuple(versions)
-
-
-def _make_gaze(spec: str, clock: Any, seed: int, faults: SimulatedTrackerConfig, display: Display) -> Any:
-    kind, _, arg = spec.partition(":")
-    if kind == "sim":
-        return SimulatedTracker(seed_for(seed, "tracker"), faults)
-    if kind == "replay":
-        from psyop.session.gaze.replay import ReplayTracker
-
-        return ReplayTracker.from_path(Path(arg))
-    if clock.virtual:
-        raise UserError(f"--tracker {kind} is a live device; use --clock real with it", "--clock")
-    if kind == "pupil":
-        from psyop.session.gaze.pupil import PupilClient
-
-        host, _, port = arg.rpartition(":")
-        if not host or not port.isdigit():
-            raise UserError(f"expected pupil:HOST:PORT, got {spec!r}", "--tracker")
-        return PupilClient(host, int(port), clock=clock.now_s)
-    if kind == "openxr":
-        from psyop.session.xr.tracking import OpenXRGaze
-
-        return OpenXRGaze.on_display(display)
-    if kind == "serial":
-        from psyop.session.gaze.serial_source import SerialGazeSource
-
-        if not arg:
-            raise UserError("expected serial:DEVICE", "--tracker")
-        return SerialGazeSource(arg, clock=clock.now_s)
-    raise UserError(f"unknown tracker {spec!r}; use sim, replay:FILE, pupil:HOST:PORT, serial:DEVICE or openxr", "--tracker")
-
-
-def _make_pose(spec: str, seed: int, protocol_sha256: str = "", schedule: pd.DataFrame | None = None,
-               display: Display | None = None) -> Any:
-    """The head/hand pose source: simulated (from the seed) or replayed from a logged session
-    (checked against this session's schedule: psyop.session.pose_replay.pair_trials)."""
-    kind, _, arg = spec.partition(":")
-    if kind == "sim" and not arg:
-        from psyop.session.pose import SimulatedPose
-
-        return SimulatedPose(seed_for(seed, "pose"))
-    if kind in ("replay", "replay-by-condition"):
-        from psyop.session.pose_replay import ReplayPose, ReplaySchedule
-
-        if not arg:
-            raise UserError(f"expected {kind}:SESSION_DIR", "--pose")
-        target = None if schedule is None else ReplaySchedule(
-            protocol_sha256, seed, tuple(schedule["condition"].astype(str)) if "condition" in schedule else ())
-        return ReplayPose.from_path(Path(arg), target, by_condition=kind == "replay-by-condition")
-    if kind == "openxr":
-        from psyop.session.xr.tracking import OpenXRPose
-
-        return OpenXRPose.on_display(display, arg)
-    raise UserError(f"unknown pose source {spec!r}; use sim, replay:SESSION_DIR, replay-by-condition:SESSION_DIR, "
-                    "openxr or openxr:HAND_PATH", "--pose")
-
-
-def _make_responses(spec: str, plan: SessionPlan, seed: int, participant: str, clock: Any, window: Any,
-                    display: Display | None = None) -> Any:
-    name, _, arg = spec.partition(":")
-    kind = plan.kind
-    if name == "sim":
-        params = plan.observer_params()
-        if params is None:
-            raise UserError("--responses sim needs an observer: section in the protocol", "protocol")
-        return make_observer(params, seed=seed, participant=participant)
-    if name == "none":
-        if plan.response.timeout_s is None:
-            raise UserError("--responses none: nobody answers, and the protocol's response phase has no timeout_s, "
-                            "so the session would wait forever; add timeout_s to it or use --responses sim",
-                            "--responses")
-        from psyop.session.responses.none import NoResponses
-
-        return NoResponses()
-    if name == "serial":
-        from psyop.session.responses.serial_box import SerialResponseBox
-
-        try:
-            return SerialResponseBox(arg, kind, clock=clock.now_s)
-        except (ValueError, ConnectionError) as exc:
-            raise UserError(str(exc), "--responses") from exc
-    if name == "keyboard":
-        if window is None:
-            raise UserError("--responses keyboard needs --display window", "--responses")
-        from psyop.session.responses.keyboard import KeyboardResponses
-
-        return KeyboardResponses(window, kind)
-    if name == "openxr":
-        from psyop.session.xr.tracking import OpenXRResponses
-
-        return OpenXRResponses.on_display(display, kind)
-    raise UserError(f"unknown response source {spec!r}; use sim, keyboard, serial:DEVICE, openxr or none", "--responses")
-
-
-def _make_display(options: SessionOptions, plan: SessionPlan, clock: Any) -> Display:
-    """Where the session's frames go (psyop.session.frames.Display): headless, a window or an
-    OpenXR headset."""
-    if options.display == "headless":
-        return HeadlessDisplay(clock, float(plan.display.refresh_hz))
-    if options.display == "window":
-        from psyop.session.window import GlfwWindow
-
-        return GlfwWindow(plan.display, clock, scale=options.window_scale, n_eyes=len(plan.rig.eyes))
-    if options.display == "openxr":
-        if clock.virtual:
-            raise UserError("--display openxr shows frames to a person in real time; use --clock real with it",
-                            "--clock")
-        from psyop.session.xr.display import open_openxr_display
-
-        return open_openxr_display(plan, clock, options.xr_request_exit_at_frame)
-    raise UserError(f"unknown display {options.display!r}; use headless, window or openxr", "--display")
-
-
-def _window_type() -> type:
-    from psyop.session.window import GlfwWindow
-
-    return GlfwWindow
 
 
 def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale: float, scale: float,
@@ -251,7 +139,8 @@ def run_session(
     plan = compile_plan(protocol)
     study = plan.study
     paths = session_paths(options.data_root, study, options.participant, options.session)
-    check_options(clock=options.clock, responses=options.responses, tracker=options.tracker)
+    check_options(clock=options.clock, responses=options.responses, tracker=options.tracker, pose=options.pose,
+                  display=options.display)
     seed = resolve_seed(paths, options.seed, seed_for(study, options.participant, options.session))
     protocol_sha256 = accept_protocol_change(paths, protocol) if options.allow_protocol_change \
         else protocol.source_sha256
@@ -280,13 +169,40 @@ def run_session(
     }
     metadata["pose"] = options.pose
     renderer: Any = None
-    display = _make_display(options, plan, clock)
-    pose = _make_pose(options.pose, seed, protocol.source_sha256, schedule, display)
-    gaze = _make_gaze(options.tracker, clock, seed, options.tracker_faults, display)
-    window = display if isinstance(display, _window_type()) else None
-    responses = _make_responses(options.responses, plan, seed, options.participant, clock, window, display)
+    loop: TrialLoop | None = None
+    events: list[Any] = []
+    if options.lsl_markers:
+        if clock.virtual:
+            raise UserError("--lsl-markers stamps events on the LSL clock in real time; on --clock virtual they would "
+                            "carry times that never happened: use --clock real", "--clock")
+        from psyop.session.lsl_markers import LslMarkerOutlet
+
+        markers = LslMarkerOutlet({**metadata, "seed": seed}, clock.now_s)
+        events.append(markers)
+        recorded = markers.wait_for_recorder(options.lsl_wait_s)
+        print(f"psyop run: LSL marker stream 'psyop_markers': "
+              + ("a recorder is connected" if recorded else f"no recorder connected within {options.lsl_wait_s:g} s; "
+                 "markers sent before one connects are recorded by nobody"), file=sys.stderr)
+        metadata["lsl_markers_recorder_at_start"] = recorded
+    metadata["lsl_markers"] = options.lsl_markers
+    # the display first: responses (a window's keys) and headset trackers are built on it
+    context = BackendContext(clock=clock, seed=seed, plan=plan, participant=options.participant,
+                             protocol_sha256=protocol.source_sha256, schedule=schedule,
+                             tracker_faults=options.tracker_faults, window_scale=options.window_scale,
+                             session=options.session, xr_request_exit_at_frame=options.xr_request_exit_at_frame)
+    with contextlib.ExitStack() as built:  # a backend that cannot be built closes those built before it
+        display = build("display", options.display, context)
+        built.callback(display.close)
+        context = dataclasses.replace(context, display=display)
+        gaze = build("tracker", options.tracker, context)
+        built.callback(gaze.close)
+        pose = build("pose", options.pose, context)
+        built.callback(pose.close)
+        responses = build("responses", options.responses, context)
+        built.pop_all()
+    events += context.event_sinks
     announce = None
-    if options.responses not in ("sim", "none"):  # a person answers: the experimenter reads the question and prompts
+    if is_real_time("responses", options.responses):  # a person answers: the experimenter reads the question and prompts
         print(f"psyop run: question for the participant: {plan.response.question}", file=sys.stderr)
 
         def announce(text: str) -> None:
@@ -296,8 +212,9 @@ def run_session(
             gaze.start()
         except (ConnectionError, OSError) as exc:
             raise UserError(f"cannot start tracker {options.tracker}: {exc}", "--tracker") from exc
-        sync = getattr(gaze, "sync", None)
+        sync = gaze.clock_sync()
         metadata["clock_sync"] = sync.as_dict() if sync is not None else None
+        metadata["tracker_at_start"] = gaze.stats()  # e.g. the tracker's own calibration result
         completed = store.open(metadata)
         logged = recover_tables(paths)[0] if completed else None
         if isinstance(clock, VirtualClock) and logged is not None and len(logged):
@@ -325,7 +242,7 @@ def run_session(
             identity={"study": study, "participant": options.participant, "session": options.session},
             phases=plan.phases, clock=clock, gaze=gaze, responses=responses,
             renderer=renderer, display=display, store=store, config=config, pose=pose,
-            response=plan.response, announce=announce, adaptive=adaptive,
+            response=plan.response, announce=announce, adaptive=adaptive, events=tuple(events),
         )
         outcome = loop.run(schedule, completed)
     finally:
@@ -333,11 +250,18 @@ def run_session(
             renderer.close()
         responses.close()
         gaze.close()
+        # raw gaze samples not yet in a trial record (a discarded trial's, or after the last one)
+        store.append_gaze(raw_gaze_table(gaze.drain_raw(), run=store.run_index,
+                                         trial=loop.current_trial if loop is not None else -1),
+                          key=loop.current_trial if loop is not None else -1)
         pose.close()
+        for sink in events:
+            if sink is not gaze:  # a tracker that takes events is closed as the tracker
+                sink.close()
         display.close()
     summary = {"outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
                "tracker": gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held,
-                        "hand_trials_reused": getattr(pose, "n_reused_hand_trials", 0)}}
+                        "hand_trials_reused": pose.n_reused_hand_trials}}
     display_summary = display.summary()
     if "display_flip_period_s" in display_summary:  # from the flip timestamps (least squares)
         summary["display_flip_period_s"] = display_summary["display_flip_period_s"]

@@ -117,6 +117,50 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
     return Dataset(study=study, trials=trials, simulated=simulated, n_sessions=len(files))
 
 
+def load_gaze(data_root: Path, study: str) -> pd.DataFrame:
+    """Every session's raw gaze stream of ``study`` (``gaze.parquet``, every sample the tracker
+    delivered; columns: :data:`psyop.session.log.schema.GAZE_SCHEMA`) in one table, with
+    ``participant`` (str) and ``session`` (int) added. Sessions finalised before the raw stream
+    existed have no gaze.parquet: they are counted in ``attrs["n_sessions_without_gaze"]``, never
+    silently missing. Each session's finalised files are verified first, as for :func:`load_dataset`.
+    Join to the trials on (participant, session, run, trial).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> root = Path(tempfile.mkdtemp())
+    >>> ses = dc.session_dir(root, "demo", "P1", 1)
+    >>> ses.mkdir(parents=True)
+    >>> pd.DataFrame({"trial": [0]}).to_parquet(ses / dc.TRIALS_FILE)
+    >>> pd.DataFrame({"run": [0, 0], "trial": [0, 0], "gaze_sample_t_s": [0.1, 0.2]}).to_parquet(ses / dc.GAZE_FILE)
+    >>> meta = {}
+    >>> _ = record_finalised(meta, ses, [ses / dc.TRIALS_FILE, ses / dc.GAZE_FILE])
+    >>> _ = (ses / dc.SESSION_METADATA_FILE).write_text(json.dumps(meta))
+    >>> gaze = load_gaze(root, "demo")
+    >>> len(gaze), gaze["participant"].tolist(), gaze.attrs["n_sessions_without_gaze"]
+    (2, ['P1', 'P1'], 0)
+    """
+    files = session_files(data_root, study)
+    if not files:
+        raise UserError(f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
+                        str(Path(data_root)))
+    tables, without = [], 0
+    for trials_file in files:
+        verify_session(trials_file.parent)  # the SHA-256 session.json recorded (psyop.finalised)
+        path = trials_file.parent / dc.GAZE_FILE
+        if not path.is_file():
+            without += 1
+            continue
+        table = pd.read_parquet(path)
+        table.insert(0, "session", int(trials_file.parent.name.removeprefix("ses-")))
+        table.insert(0, "participant", trials_file.parent.parent.name.removeprefix("sub-"))
+        tables.append(table)
+    gaze = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame({"participant": [], "session": []})
+    gaze.attrs["n_sessions"] = len(files)
+    gaze.attrs["n_sessions_without_gaze"] = without
+    return gaze
+
+
 def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: bool) -> list[Path]:
     """Write trial tables in the session-log layout (for tests and demos).
 

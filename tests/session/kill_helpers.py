@@ -28,8 +28,8 @@ def _child(argv: list[str], announce_fd: int) -> None:
 
     original = store.SessionStore.append_trial
 
-    def append_and_announce(self, row, frames):  # type: ignore[no-untyped-def]
-        original(self, row, frames)
+    def append_and_announce(self, row, frames, gaze=None):  # type: ignore[no-untyped-def]
+        original(self, row, frames, gaze)
         os.write(announce_fd, f"{int(row['trial'])}\n".encode())
 
     store.SessionStore.append_trial = append_and_announce  # instrumentation only, after the real append

@@ -1,7 +1,19 @@
-"""A small Pupil Capture stand-in speaking the documented Network API over real ZMQ sockets.
+"""A small Pupil Capture stand-in speaking the Network API over real ZMQ sockets.
 
-Pupil Remote (REP): 'SUB_PORT' -> the PUB port, 't' -> Pupil time as a string.
-IPC backbone (PUB): multipart [b'gaze.3d.01.', msgpack map] at ``rate_hz``.
+Pupil Remote (REP), the command set of Capture's ``pupil_remote.py`` with its replies:
+'SUB_PORT' / 'PUB_PORT' -> the IPC backbone's ports; 't' -> Pupil time (repr of a float);
+'T <time>' -> rebase Pupil time ('Timesync successful.'); 'v' -> the version; 'R [name]' / 'r'
+-> recording.should_start / should_stop ('OK'); 'C' / 'c' -> calibration.should_start /
+should_stop ('OK'); a multipart message (``notify.*``, ``annotation*``) is forwarded to the
+backbone ('Message forwarded.'); anything else 'Unknown command.'.
+IPC backbone: a SUB socket bound at PUB_PORT (clients publish there) whose messages are
+re-published on the PUB socket at SUB_PORT, as Capture's backbone proxy does; gaze is published
+there as multipart [b'gaze.3d.01.', msgpack map] at ``rate_hz``. Acting on notifications like
+Capture: ``calibration.should_start`` -> ``calibration.started`` then, after ``calibration_s``,
+``calibration.successful`` (or ``calibration.failed`` with a ``reason`` when
+``calibration_fails``); ``recording.should_start`` -> ``recording.started`` (with
+``session_name``); ``recording.should_stop`` -> ``recording.stopped``. Everything it received is
+kept in ``notifications``, ``annotations`` and ``commands`` for the tests to check.
 Pupil time = monotonic + ``offset_s`` (+ ``drift`` x elapsed), so the client's clock
 sync has something to find. ``skip_every`` drops messages to create gaps.
 
@@ -32,6 +44,14 @@ class FakePupilCapture:
         self.gaze_time_shift_s = 0.0
         self.gaze_timestamp: float | None = None
         self.t_requests = 0
+        self.version = "3.5.1"
+        self.calibration_s = 0.2
+        self.calibration_fails = False
+        self.recording: str | None = None
+        self.commands: list[str] = []
+        self.notifications: list[dict] = []
+        self.annotations: list[dict] = []
+        self._pub_lock = threading.Lock()
         self._ctx = zmq.Context()
         self._rep = self._ctx.socket(zmq.REP)
         self._rep.setsockopt(zmq.LINGER, 0)
@@ -39,10 +59,15 @@ class FakePupilCapture:
         self._pub = self._ctx.socket(zmq.PUB)
         self._pub.setsockopt(zmq.LINGER, 0)
         self.sub_port = self._pub.bind_to_random_port("tcp://127.0.0.1")
+        self._backbone_in = self._ctx.socket(zmq.SUB)
+        self._backbone_in.setsockopt(zmq.LINGER, 0)
+        self._backbone_in.setsockopt(zmq.SUBSCRIBE, b"")
+        self.pub_port = self._backbone_in.bind_to_random_port("tcp://127.0.0.1")
         self._t0 = time.monotonic()
         self._stop = threading.Event()
         self.sent = 0
-        self._threads = [threading.Thread(target=self._serve, daemon=True), threading.Thread(target=self._publish, daemon=True)]
+        self._threads = [threading.Thread(target=self._serve, daemon=True), threading.Thread(target=self._publish, daemon=True),
+                         threading.Thread(target=self._backbone, daemon=True)]
         for t in self._threads:
             t.start()
 
@@ -50,21 +75,100 @@ class FakePupilCapture:
         now = time.monotonic()
         return now + self.offset_s + self.drift * (now - self._t0)
 
+    def _send(self, parts: list[bytes]) -> None:
+        with self._pub_lock:
+            if not self._pub.closed:
+                self._pub.send_multipart(parts)
+
+    def _on_message(self, parts: list[bytes]) -> None:
+        """A message on the backbone: keep it, re-publish it, act on notifications."""
+        topic = parts[0].decode(errors="replace")
+        payload = msgpack.unpackb(parts[1], raw=False) if len(parts) > 1 else {}
+        if topic.startswith("notify."):
+            self.notifications.append(payload)
+        elif topic.startswith("annotation"):
+            self.annotations.append(payload)
+        self._send(parts)
+        if topic.startswith("notify."):
+            self._act(payload)
+
+    def notify(self, subject: str, **fields: object) -> None:
+        payload = {"subject": subject, "topic": f"notify.{subject}", **fields}
+        self._on_message([f"notify.{subject}".encode(), msgpack.packb(payload, use_bin_type=True)])
+
+    def _act(self, notification: dict) -> None:
+        subject = notification.get("subject")
+        if subject == "calibration.should_start":
+            self.notify("calibration.started")
+
+            def finish() -> None:
+                if self._stop.wait(self.calibration_s):
+                    return
+                if self.calibration_fails:
+                    self.notify("calibration.failed", reason="Not enough ref points or pupil data available for calibration.")
+                else:
+                    self.notify("calibration.successful")
+
+            threading.Thread(target=finish, daemon=True).start()
+        elif subject == "recording.should_start":
+            self.recording = str(notification.get("session_name", ""))
+            self.notify("recording.started", session_name=self.recording)
+        elif subject == "recording.should_stop":
+            self.notify("recording.stopped")
+            self.recording = None
+
     def _serve(self) -> None:
         while not self._stop.is_set():
             if not self._rep.poll(20):
                 continue
-            request = self._rep.recv_string()
+            parts = self._rep.recv_multipart()
+            if len(parts) > 1:  # forwarded to the IPC backbone, as Capture does
+                self.commands.append(parts[0].decode(errors="replace"))
+                self._on_message(parts)
+                self._rep.send_string("Message forwarded.")
+                continue
+            request = parts[0].decode(errors="replace")
+            self.commands.append(request)
             if request == "SUB_PORT":
                 self._rep.send_string(str(self.sub_port))
+            elif request == "PUB_PORT":
+                self._rep.send_string(str(self.pub_port))
             elif request == "t":
                 self.t_requests += 1
                 if self.t_delay_s:
                     self._stop.wait(self.t_delay_s)
                 self._rep.send_string(self.t_reply if self.t_reply is not None else repr(self.pupil_time()))
+            elif request.startswith("T"):
+                try:
+                    target = float(request[2:])
+                except ValueError:
+                    self._rep.send_string(f"'{request[2:]}' cannot be converted to float.")
+                    continue
+                self.offset_s = target - time.monotonic()
+                self._rep.send_string("Timesync successful.")
+            elif request == "v":
+                self._rep.send_string(self.version)
+            elif request.startswith("R"):
+                self.notify("recording.should_start", session_name=request[2:])
+                self._rep.send_string("OK")
+            elif request.startswith("r"):
+                self.notify("recording.should_stop")
+                self._rep.send_string("OK")
+            elif request == "C":
+                self.notify("calibration.should_start")
+                self._rep.send_string("OK")
+            elif request == "c":
+                self.notify("calibration.should_stop")
+                self._rep.send_string("OK")
             else:
-                self._rep.send_string("unknown command")
+                self._rep.send_string("Unknown command.")
         self._rep.close(0)
+
+    def _backbone(self) -> None:
+        while not self._stop.is_set():
+            if self._backbone_in.poll(20):
+                self._on_message(self._backbone_in.recv_multipart())
+        self._backbone_in.close(0)
 
     def _publish(self) -> None:
         period = 1.0 / self.rate_hz
@@ -80,9 +184,10 @@ class FakePupilCapture:
             stamp = self.gaze_timestamp if self.gaze_timestamp is not None else self.pupil_time() + self.gaze_time_shift_s
             payload = {"topic": "gaze.3d.01.", "timestamp": stamp, "confidence": confidence,
                        "gaze_point_3d": list(self.point_mm), "norm_pos": [0.5, 0.5]}
-            self._pub.send_multipart([b"gaze.3d.01.", msgpack.packb(payload, use_bin_type=True)])
+            self._send([b"gaze.3d.01.", msgpack.packb(payload, use_bin_type=True)])
             self.sent += 1
-        self._pub.close(0)
+        with self._pub_lock:
+            self._pub.close(0)
 
     def stop(self) -> None:
         """Disconnect: stop answering and publishing, close the sockets."""

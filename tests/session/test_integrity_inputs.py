@@ -245,10 +245,10 @@ def _interrupted_session(protocol: Path, data: Path, monkeypatch: pytest.MonkeyP
 
     original = store.SessionStore.append_trial
 
-    def stop_after_three(self, row, frames):  # type: ignore[no-untyped-def]
+    def stop_after_three(self, row, frames, gaze=None):  # type: ignore[no-untyped-def]
         if int(row["trial"]) >= 3:
             raise KeyboardInterrupt
-        original(self, row, frames)
+        original(self, row, frames, gaze)
 
     monkeypatch.setattr(store.SessionStore, "append_trial", stop_after_three)
     assert cli_main(_run(protocol, data, *options)) == 130

@@ -80,8 +80,8 @@ def test_session_stops_cleanly_when_pupil_disconnects_mid_trial(tmp_path: Path) 
     # the tracker disconnects once 3 trials are durable (an event, not a wall-clock moment)
     real_append = SessionStore.append_trial
 
-    def append_then_disconnect(self: SessionStore, row, frames) -> None:
-        real_append(self, row, frames)
+    def append_then_disconnect(self: SessionStore, row, frames, gaze=None) -> None:
+        real_append(self, row, frames, gaze)
         if int(row["trial"]) == 2:
             server.stop()
 

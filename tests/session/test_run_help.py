@@ -17,7 +17,7 @@ def test_run_help_describes_every_response_tracker_and_pose_source(capsys: pytes
     assert exit_info.value.code == 0
     text = re.sub(r"\s+", " ", capsys.readouterr().out)
     responses = text[text.rindex("--responses"):]
-    for source in ("sim", "keyboard", "serial:DEVICE", "none (nobody"):
+    for source in ("sim", "keyboard", "serial:DEVICE", "none: nobody"):
         assert source in responses, source
     assert "timeout_s" in responses  # --responses none needs the protocol's timeout
     for source in ("replay:FILE", "pupil:HOST:PORT", "serial:DEVICE"):

@@ -16,10 +16,10 @@ the session clock. PUB/SUB drops messages silently, so gaps in the timestamp ser
 from __future__ import annotations
 
 import math
+import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import msgpack
@@ -27,53 +27,63 @@ import numpy as np
 import zmq
 
 from psyop.errors import UserError
-from psyop.session.gaze.sample import GazeSample, TrackerLost, is_usable
+from psyop.session.events import SessionEvent
+from psyop.session.gaze.plan import FixationPlan
+from psyop.session.gaze.sample import EyeSample, GazeSample, RawBuffer, RawGazeSample, TrackerLost, is_usable
+from psyop.session.gaze.sync import ClockSync, fit_clock_sync
 
-
-@dataclass(frozen=True)
-class ClockSync:
-    """Pupil time = offset_s + (1 + drift) * local time; residual and round trips in s."""
-
-    offset_s: float
-    drift: float
-    residual_sd_s: float
-    round_trip_median_s: float
-    n: int
-
-    def to_local(self, pupil_t_s: float) -> float:
-        return (pupil_t_s - self.offset_s) / (1.0 + self.drift)
-
-    def as_dict(self) -> dict[str, float]:
-        return {"offset_s": self.offset_s, "drift": self.drift, "residual_sd_s": self.residual_sd_s,
-                "round_trip_median_s": self.round_trip_median_s, "n": self.n}
-
-
-def fit_clock_sync(local_mid_s: np.ndarray, remote_s: np.ndarray, round_trips_s: np.ndarray, *,
-                   min_span_s: float = 1.0) -> ClockSync:
-    """Least-squares line through (local, remote) time pairs.
-
-    Drift is only estimated once the pairs span ``min_span_s``: over a few milliseconds
-    of round trips the slope is pure noise. Before that the slope is fixed to 1 and the
-    offset is the mean over the faster half of the round trips (least queueing).
-    """
-    local_mid_s = np.asarray(local_mid_s, dtype=np.float64)
-    remote_s = np.asarray(remote_s, dtype=np.float64)
-    trips = np.asarray(round_trips_s, dtype=np.float64)
-    if local_mid_s.size >= 3 and np.ptp(local_mid_s) >= min_span_s:
-        x0 = local_mid_s.mean()
-        slope, intercept = np.polyfit(local_mid_s - x0, remote_s, 1)
-        offset = intercept - slope * x0
-    else:
-        fast = trips <= np.median(trips)
-        slope, offset = 1.0, float(np.mean((remote_s - local_mid_s)[fast]))
-    residual = remote_s - (offset + slope * local_mid_s)
-    return ClockSync(float(offset), float(slope - 1.0), float(np.std(residual)), float(np.median(trips)), int(local_mid_s.size))
+__all__ = ["ClockSync", "PupilClient", "fit_clock_sync", "world_mm_to_head_m"]
 
 
 def world_mm_to_head_m(point_mm: tuple[float, float, float]) -> tuple[float, float, float]:
     """Pupil world camera (x right, y down, z forward, mm) -> head space (y up, -z forward, m)."""
     x, y, z = point_mm
     return (x / 1000.0, -y / 1000.0, -z / 1000.0)
+
+
+def world_to_head_direction(direction: tuple[float, float, float]) -> tuple[float, float, float]:
+    """A direction in Pupil's world-camera frame (x right, y down, z forward) in head space."""
+    x, y, z = direction
+    return (x, -y, -z)
+
+
+def _triple(value: Any) -> tuple[float, float, float] | None:
+    if isinstance(value, (list, tuple)) and len(value) >= 3:
+        return (float(value[0]), float(value[1]), float(value[2]))
+    return None
+
+
+def _per_eye(payload: dict[str, Any], plural: str, singular: str, eye_id: int) -> tuple[float, float, float] | None:
+    """``eye_centers_3d[eye_id]`` (binocular datum) or ``eye_center_3d`` (monocular datum of that eye)."""
+    both = payload.get(plural)
+    if isinstance(both, dict):
+        return _triple(both.get(eye_id, both.get(str(eye_id))))
+    topic = str(payload.get("topic", ""))
+    if topic.endswith(f".{eye_id}.") or topic.endswith(f".{eye_id}"):
+        return _triple(payload.get(singular))
+    return None
+
+
+def pupil_eyes(payload: dict[str, Any]) -> tuple[EyeSample | None, EyeSample | None]:
+    """(left, right) eye parts of a Pupil ``gaze.3d`` datum (Pupil's eye 0 is the right eye,
+    eye 1 the left): eyeball centre and gaze normal (world camera -> head space) and the pupil
+    diameters of its ``base_data`` pupil data (``diameter_3d`` mm, ``diameter`` px)."""
+    diameters: dict[int, tuple[float, float]] = {}
+    for datum in payload.get("base_data") or ():
+        if isinstance(datum, dict) and datum.get("id") in (0, 1):
+            diameters[int(datum["id"])] = (float(datum.get("diameter_3d", math.nan)), float(datum.get("diameter", math.nan)))
+    eyes: list[EyeSample | None] = []
+    for eye_id in (1, 0):  # left, right
+        centre = _per_eye(payload, "eye_centers_3d", "eye_center_3d", eye_id)
+        normal = _per_eye(payload, "gaze_normals_3d", "gaze_normal_3d", eye_id)
+        if centre is None and normal is None and eye_id not in diameters:
+            eyes.append(None)
+            continue
+        nan3 = (math.nan, math.nan, math.nan)
+        mm, px = diameters.get(eye_id, (math.nan, math.nan))
+        eyes.append(EyeSample(world_mm_to_head_m(centre) if centre else nan3,
+                              world_to_head_direction(normal) if normal else nan3, mm, px))
+    return eyes[0], eyes[1]
 
 
 class PupilClient:
@@ -111,8 +121,20 @@ class PupilClient:
         resync_every_s: float = 1.0,
         clock_jump_s: float = 1.0,
         sync_stale_after_s: float | None = None,
+        calibrate: bool = False,
+        calibration_timeout_s: float = 180.0,
+        record_name: str | None = None,
+        annotate: bool = False,
     ) -> None:
         self.host, self.port = host, port
+        self.calibrate = calibrate
+        self.calibration_timeout_s = calibration_timeout_s
+        self.record_name = record_name
+        self.annotate = annotate
+        self.calibration: dict[str, Any] | None = None  # what Capture's calibration said (session.json)
+        self._recording = False
+        self._annotations: queue.Queue[dict[str, Any]] = queue.Queue()
+        self._annotations_sent = self._annotations_confirmed = 0
         self._clock = clock
         self.confidence_threshold = confidence_threshold
         self.n_sync = n_sync
@@ -136,6 +158,7 @@ class PupilClient:
         self._received = self._gaps = self._low_confidence = self._malformed = 0
         self._nonfinite = self._clock_jumps = self._sync_timeouts = self._sync_malformed = self._resyncs = 0
         self._sync_slow = 0
+        self._raw = RawBuffer()
         self._events: list[dict[str, float | str]] = []
         self.sync: ClockSync | None = None
         self._pairs: list[tuple[float, float, float]] = []  # (local mid, remote, round trip)
@@ -181,6 +204,16 @@ class PupilClient:
             raise self._unreachable(f"answered 'SUB_PORT' with {reply[:40]!r}, not a port number")
         sub_port = int(reply)
         self.sync = self.synchronise()
+        if self.annotate:  # Capture records annotations only while its Annotation_Capture plugin runs
+            self._forward({"subject": "start_plugin", "name": "Annotation_Capture", "args": {},
+                           "topic": "notify.start_plugin"})
+        if self.calibrate:
+            self._run_calibration(sub_port)
+        if self.record_name is not None:
+            reply = self._request(f"R {self.record_name}")
+            if reply != "OK":
+                raise self._unreachable(f"answered 'R {self.record_name}' with {str(reply)[:40]!r}, not 'OK'")
+            self._recording = True
         sub = self._ctx.socket(zmq.SUB)
         sub.setsockopt(zmq.LINGER, 0)
         sub.connect(f"tcp://{self.host}:{sub_port}")
@@ -190,6 +223,83 @@ class PupilClient:
                          threading.Thread(target=self._keep_synced, name="pupil-sync", daemon=True)]
         for thread in self._threads:
             thread.start()
+
+    def _forward(self, message: dict[str, Any]) -> bool:
+        """Send a multipart message (a ``notify.*`` notification, an annotation) through Pupil Remote,
+        which forwards it to the IPC backbone; True when it said so ('Message forwarded.')."""
+        assert self._req is not None
+        self._req.send_multipart([str(message["topic"]).encode(), msgpack.packb(message, use_bin_type=True)])
+        deadline = time.monotonic() + self.request_timeout_s
+        while (left_s := deadline - time.monotonic()) > 0:
+            if not self._req.poll(max(1, int(left_s * 1000))):
+                return False
+            try:
+                return self._req.recv(zmq.NOBLOCK).decode("utf-8", errors="replace") == "Message forwarded."
+            except zmq.Again:
+                continue
+        return False
+
+    def _run_calibration(self, sub_port: int) -> None:
+        """Start Capture's own calibration ('C') and wait for ``calibration.successful`` or
+        ``calibration.failed`` (at most ``calibration_timeout_s``); a failure stops the session
+        before its first trial (UserError, exit code 3) and is recorded either way."""
+        sub = self._ctx.socket(zmq.SUB)
+        sub.setsockopt(zmq.LINGER, 0)
+        sub.connect(f"tcp://{self.host}:{sub_port}")
+        sub.setsockopt_string(zmq.SUBSCRIBE, "notify.calibration.")
+        try:
+            started_s = self._clock()
+            reply = self._request("C")
+            if reply != "OK":
+                raise self._unreachable(f"answered 'C' (start calibration) with {str(reply)[:40]!r}, not 'OK'")
+            outcome: dict[str, Any] | None = None
+            while outcome is None and self._clock() - started_s < self.calibration_timeout_s:
+                if not sub.poll(100):
+                    continue
+                parts = sub.recv_multipart()
+                try:
+                    note = msgpack.unpackb(parts[1], raw=False)
+                except (IndexError, ValueError, msgpack.UnpackException):
+                    continue
+                subject = str(note.get("subject", ""))
+                if subject in ("calibration.successful", "calibration.failed"):
+                    outcome = {"result": subject.rsplit(".", 1)[1], "reason": str(note.get("reason", "")),
+                               "duration_s": self._clock() - started_s}
+            if outcome is None:
+                outcome = {"result": "timeout", "reason": f"no calibration result within {self.calibration_timeout_s:g} s",
+                           "duration_s": self._clock() - started_s}
+            self.calibration = outcome
+        finally:
+            sub.close(0)
+        if outcome["result"] != "successful":
+            raise UserError(f"Pupil Capture's calibration did not succeed ({outcome['result']}: {outcome['reason']}); "
+                            "the session did not start: calibrate again and rerun", "--tracker", exit_code=3)
+
+    def annotate_trial(self, trial: int, condition: str, start_s: float, duration_s: float) -> None:
+        """Queue one Pupil annotation for a recorded trial (label ``trial``, Pupil time of its start,
+        its duration, index and condition); the sync thread sends it through Pupil Remote."""
+        sync = self.clock_sync()
+        if sync is None:
+            return
+        self._annotations.put({"topic": "annotation", "label": "trial", "timestamp": sync.to_tracker(start_s),
+                               "duration": duration_s, "trial": trial, "condition": condition,
+                               "source": "psyop"})
+
+    def emit(self, event: SessionEvent) -> None:
+        """:class:`~psyop.session.events.EventSink`: each recorded trial becomes one annotation."""
+        if self.annotate and event.kind == "trial_end":
+            self.annotate_trial(event.trial, event.condition, event.t_s - event.duration_s, event.duration_s)
+
+    def _send_annotations(self) -> None:
+        while True:
+            try:
+                annotation = self._annotations.get_nowait()
+            except queue.Empty:
+                return
+            confirmed = self._forward(annotation)
+            with self._lock:
+                self._annotations_sent += 1
+                self._annotations_confirmed += int(confirmed)
 
     def synchronise(self, *, fresh: bool = False) -> ClockSync:
         """Repeated 't' round trips -> least-squares offset (and drift, once they span >= 1 s).
@@ -256,10 +366,15 @@ class PupilClient:
 
     def _keep_synced(self) -> None:
         """The sync thread: owns the REQ socket after start(); never touches gaze."""
+        next_sync_s = time.monotonic() + self.resync_every_s
         while not self._stop.is_set():
-            requested = self._resync_now.wait(timeout=self.resync_every_s)
+            requested = self._resync_now.wait(timeout=0.05 if self.annotate else self.resync_every_s)
             if self._stop.is_set():
                 break
+            self._send_annotations()
+            if not requested and time.monotonic() < next_sync_s:
+                continue
+            next_sync_s = time.monotonic() + self.resync_every_s
             self._resync_now.clear()
             if requested:  # a gaze timestamp far from now: fresh pairs only
                 self._pairs.clear()
@@ -291,6 +406,9 @@ class PupilClient:
             confidence = float(payload.get("confidence", 0.0))
             point = payload.get("gaze_point_3d") or (math.nan, math.nan, math.nan)
             fixation = world_mm_to_head_m(tuple(float(v) for v in point[:3]))
+            left, right = pupil_eyes(payload)
+            norm = payload.get("norm_pos") or (math.nan, math.nan)
+            norm_pos = (float(norm[0]), float(norm[1]))
         except (IndexError, KeyError, TypeError, ValueError, OverflowError, msgpack.UnpackException):
             with self._lock:
                 self._malformed += 1
@@ -304,6 +422,7 @@ class PupilClient:
             sample = GazeSample.invalid(now)  # no trustworthy time: never a valid sample
         else:
             sample = GazeSample(local_t, fixation, confidence, is_usable(fixation, confidence, self.confidence_threshold))
+        self._raw.add(RawGazeSample(pupil_t, local_t, now, sample.valid, confidence, fixation, norm_pos, left, right))
         with self._lock:
             self._received += 1
             if not math.isfinite(local_t):
@@ -339,20 +458,39 @@ class PupilClient:
                               "be resumed")
         return sample
 
+    def set_plan(self, plan: FixationPlan) -> None:
+        """No-op: a real tracker measures where the eye looks."""
+        return None
+
+    def clock_sync(self) -> ClockSync | None:
+        """The current Pupil-time -> session-clock fit (refitted by the sync thread)."""
+        with self._lock:
+            return self.sync
+
+    def drain_raw(self) -> list[RawGazeSample]:
+        """Every gaze datum received since the last call (malformed messages excepted: counted)."""
+        return self._raw.drain()
+
     def stats(self) -> dict[str, Any]:
         with self._lock:
-            return {"samples_received": self._received, "gaps": self._gaps,
+            return {"samples_received": self._received, "raw_samples_dropped": self._raw.dropped, "gaps": self._gaps,
                     "low_confidence": self._low_confidence, "malformed": self._malformed,
                     "nonfinite_samples": self._nonfinite, "clock_jumps": self._clock_jumps,
                     "sync_timeouts": self._sync_timeouts, "sync_malformed": self._sync_malformed,
                     "sync_slow": self._sync_slow,
-                    "resyncs": self._resyncs, "clock_events": list(self._events)}
+                    "resyncs": self._resyncs, "clock_events": list(self._events),
+                    "calibration": self.calibration, "recording": self.record_name,
+                    "annotations_sent": self._annotations_sent, "annotations_confirmed": self._annotations_confirmed}
 
     def close(self) -> None:
         self._stop.set()
         self._resync_now.set()
         for thread in self._threads:
             thread.join(timeout=2.0 + self.request_timeout_s)
+        if self._req is not None:
+            self._send_annotations()  # those queued after the sync thread's last pass
+            if self._recording:
+                self._recording = self._request("r") != "OK"
         if self._req is not None:
             self._req.close(0)
         self._ctx.term()

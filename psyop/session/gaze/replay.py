@@ -10,7 +10,9 @@ import pandas as pd
 
 from psyop.errors import UserError
 from psyop.input_files import read_logged_table
-from psyop.session.gaze.sample import GazeSample
+from psyop.session.gaze.plan import FixationPlan
+from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample
+from psyop.session.gaze.sync import ClockSync
 
 
 class ReplayTracker:
@@ -32,6 +34,8 @@ class ReplayTracker:
         self._sample_t = [float(t) + time_offset_s for t in table["gaze_sample_t_s"]]
         self._rows = list(table.itertuples(index=False))
         self._delivered = 0
+        self._raw = RawBuffer()
+        self._last_raw = -1
 
     @classmethod
     def from_path(cls, path: Path) -> ReplayTracker:
@@ -52,6 +56,18 @@ class ReplayTracker:
     def stats(self) -> dict[str, float | int]:
         return {"samples_delivered": self._delivered, "samples_available": len(self._t)}
 
+    def set_plan(self, plan: FixationPlan) -> None:
+        """No-op: the logged gaze does not follow this session's fixation plan."""
+        return None
+
+    def clock_sync(self) -> ClockSync | None:
+        """None: the logged samples are on the (logged) session clock."""
+        return None
+
+    def drain_raw(self) -> list[RawGazeSample]:
+        """Each logged sample a :meth:`latest` call delivered, once."""
+        return self._raw.drain()
+
     def latest(self, now_s: float) -> GazeSample | None:
         i = bisect.bisect_right(self._t, now_s) - 1
         if i < 0:
@@ -60,4 +76,8 @@ class ReplayTracker:
         self._delivered += 1
         fixation = (float(row.fixation_x_m), float(row.fixation_y_m), float(row.fixation_z_m))
         valid = bool(row.gaze_valid) and all(math.isfinite(v) for v in fixation)
-        return GazeSample(self._sample_t[i], fixation, float(row.gaze_confidence), valid)
+        sample = GazeSample(self._sample_t[i], fixation, float(row.gaze_confidence), valid)
+        if i > self._last_raw:
+            self._last_raw = i
+            self._raw.add(RawGazeSample.of(sample, received_s=self._t[i]))
+        return sample

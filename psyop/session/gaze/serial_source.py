@@ -12,7 +12,9 @@ import math
 import re
 from collections.abc import Callable
 
-from psyop.session.gaze.sample import GazeSample, TrackerLost, is_usable
+from psyop.session.gaze.plan import FixationPlan
+from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample, TrackerLost, is_usable
+from psyop.session.gaze.sync import ClockSync
 from psyop.session.serial_lines import SerialLineReader
 
 _SPLIT = re.compile(r"[,\s]+")
@@ -43,6 +45,7 @@ class SerialGazeSource:
         self.lost_after_s = lost_after_s
         self._latest: GazeSample | None = None
         self._last_arrival_s = math.nan
+        self._raw = RawBuffer()
         self._reader = SerialLineReader(url, self._on_line, clock, baudrate=baudrate)
 
     def _on_line(self, text: str, arrival_s: float) -> bool:
@@ -55,6 +58,7 @@ class SerialGazeSource:
         with self._reader.lock:
             self._latest = sample
             self._last_arrival_s = arrival_s
+        self._raw.add(RawGazeSample.of(sample, tracker_t_s=math.nan, received_s=arrival_s))
         return True
 
     def start(self) -> None:
@@ -73,6 +77,18 @@ class SerialGazeSource:
     def stats(self) -> dict[str, float | int]:
         with self._reader.lock:
             return {"lines": self._reader.lines, "garbage": self._reader.garbage}
+
+    def set_plan(self, plan: FixationPlan) -> None:
+        """No-op: a real tracker measures where the eye looks."""
+        return None
+
+    def clock_sync(self) -> ClockSync | None:
+        """None: the line protocol carries no timestamp; samples are timed by their arrival."""
+        return None
+
+    def drain_raw(self) -> list[RawGazeSample]:
+        """Every gaze line received since the last call (tracker time NaN: the lines carry none)."""
+        return self._raw.drain()
 
     def close(self) -> None:
         self._reader.close()

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from psyop.session.gaze.plan import FixationPlan
-from psyop.session.gaze.sample import GazeSample, angles_to_direction
+from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample, angles_to_direction
+from psyop.session.gaze.sync import ClockSync
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,8 @@ class SimulatedTracker:
         self._dropouts = _EventTimes(self.seed, 3, c.dropout_rate_hz, c.dropout_s)
         self._blinks = _EventTimes(self.seed, 4, c.blink_rate_hz, c.blink_s)
         self._nan_bursts = _EventTimes(self.seed, 5, c.nan_burst_rate_hz, c.nan_burst_s)
+        self._raw = RawBuffer()
+        self._last_raw_tick = -1
 
     # GazeSource --------------------------------------------------------------------
     def start(self) -> None:
@@ -114,6 +117,15 @@ class SimulatedTracker:
 
     def stats(self) -> dict[str, float | int]:
         return {"samples_delivered": self._delivered, "gaps": 0}
+
+    def clock_sync(self) -> ClockSync | None:
+        """None: simulated samples are stamped on the session clock."""
+        return None
+
+    def drain_raw(self) -> list[RawGazeSample]:
+        """Each tick a :meth:`latest` call delivered, once (the simulation is stateless in time, so
+        it delivers the ticks it is asked for, not a 120 Hz stream behind a jumping virtual clock)."""
+        return self._raw.drain()
 
     def set_plan(self, plan: FixationPlan) -> None:
         """Gaze follows ``plan`` from ``plan.start_s`` on (plans must come in time order)."""
@@ -132,7 +144,11 @@ class SimulatedTracker:
         if k < 0:
             return None
         self._delivered += 1
-        return self.sample_at(k / c.rate_hz, k)
+        sample = self.sample_at(k / c.rate_hz, k)
+        if k > self._last_raw_tick:
+            self._last_raw_tick = k
+            self._raw.add(RawGazeSample.of(sample, received_s=sample.timestamp_s + c.latency_s))
+        return sample
 
     # model -------------------------------------------------------------------------
     def sample_at(self, t_s: float, tick: int) -> GazeSample:

@@ -19,7 +19,7 @@ _STUDY_PATTERN = dc.STUDY_PATTERN
 MAX_SESSION = 9999
 #: new segments are checksummed record logs; ``.arrows`` ones are legacy Arrow IPC streams
 SEGMENT_SUFFIX = ".psylog"
-_SEGMENT_NAME = re.compile(r"(trials|frames)-([0-9]{3})\.(psylog|arrows)")
+_SEGMENT_NAME = re.compile(r"(trials|frames|gaze)-([0-9]{3})\.(psylog|arrows)")
 
 
 @dataclass(frozen=True)
@@ -52,6 +52,10 @@ class SessionPaths:
         return self.directory / dc.FRAMES_FILE
 
     @property
+    def gaze_parquet(self) -> Path:
+        return self.directory / dc.GAZE_FILE
+
+    @property
     def lock_file(self) -> Path:
         return self.directory / ".lock"
 
@@ -61,8 +65,11 @@ class SessionPaths:
     def frame_segment(self, index: int) -> Path:
         return self.log_dir / f"frames-{index:03d}{SEGMENT_SUFFIX}"
 
+    def gaze_segment(self, index: int) -> Path:
+        return self.log_dir / f"gaze-{index:03d}{SEGMENT_SUFFIX}"
+
     def segments(self, kind: str) -> list[Path]:
-        """Existing stream segments of ``kind`` ('trials' or 'frames'), in write order."""
+        """Existing stream segments of ``kind`` ('trials', 'frames' or 'gaze'), in write order."""
         if not self.log_dir.is_dir():
             return []
         found = []
@@ -75,7 +82,7 @@ class SessionPaths:
     def next_run_index(self) -> int:
         """One more than the highest segment index of either kind (0 for a new session)."""
         indices = [int(_SEGMENT_NAME.fullmatch(p.name).group(2))  # type: ignore[union-attr]
-                   for kind in ("trials", "frames") for p in self.segments(kind)]
+                   for kind in ("trials", "frames", "gaze") for p in self.segments(kind)]
         return max(indices, default=-1) + 1
 
 

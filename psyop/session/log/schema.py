@@ -112,3 +112,50 @@ def trial_schema(schedule: pd.DataFrame) -> pa.Schema:
     names = {f.name for f in fields}
     fields += [f for f in TRIAL_LOG_FIELDS if f.name not in names]
     return pa.schema(fields)
+
+
+def eye_fields(eye: str) -> list[pa.Field]:
+    """One eye's columns of the raw gaze stream (NaN where the tracker does not give them)."""
+    return [
+        *(pa.field(f"eye_centre_{eye}_{axis}_m", pa.float64()) for axis in "xyz"),
+        *(pa.field(f"gaze_normal_{eye}_{axis}", pa.float64()) for axis in "xyz"),
+        pa.field(f"pupil_diameter_{eye}_mm", pa.float64()),
+        pa.field(f"pupil_diameter_{eye}_px", pa.float64()),
+    ]
+
+
+#: The raw gaze stream (``gaze.parquet``): one row per sample a gaze source delivered, in the order
+#: it delivered them, whether or not a frame used it (psyop.session.gaze.sample.RawGazeSample).
+#:
+#: - ``run``: the run (first start, each resume) it was recorded in; ``trial``: the trial in progress
+#:   or being prepared when it arrived (-1 after the last trial of a run). Samples of a trial the run
+#:   discarded (interrupted, tracker lost) are kept: (``run``, ``trial``) joins them to trials.parquet.
+#: Columns that mean what the frame log's do carry the frame log's names.
+#:
+#: - ``tracker_t_s``: the tracker's own timestamp (Pupil time; the sender's LSL clock; NaN for a
+#:   source without timestamps); ``gaze_sample_t_s``: when the eye was in this state, on the
+#:   session clock (after clock sync, session.json ``runs[].clock_sync``); ``received_s``: when
+#:   psyop received it, session clock.
+#: - ``gaze_valid``: the source's verdict (finite, plausible time, confidence >= its threshold);
+#:   ``gaze_confidence`` 0..1.
+#: - ``fixation_{x,y,z}_m``: binocular fixation point, head space (x right, y up, -z forward, m).
+#: - ``norm_pos_{x,y}``: 2-D gaze in the tracker's scene camera, normalised 0..1 (x right, y up).
+#: - per eye (``{eye}`` left or right): ``eye_centre_{eye}_{x,y,z}_m`` and
+#:   ``gaze_normal_{eye}_{x,y,z}`` (head space), ``pupil_diameter_{eye}_mm`` (3-D eye model) and
+#:   ``pupil_diameter_{eye}_px`` (eye image).
+GAZE_SCHEMA = pa.schema(
+    [
+        pa.field("run", pa.int64()),
+        pa.field("trial", pa.int64()),
+        pa.field("tracker_t_s", pa.float64()),
+        pa.field("gaze_sample_t_s", pa.float64()),
+        pa.field("received_s", pa.float64()),
+        pa.field("gaze_valid", pa.bool_()),
+        pa.field("gaze_confidence", pa.float64()),
+        *(pa.field(f"fixation_{axis}_m", pa.float64()) for axis in "xyz"),
+        pa.field("norm_pos_x", pa.float64()),
+        pa.field("norm_pos_y", pa.float64()),
+        *eye_fields("left"),
+        *eye_fields("right"),
+    ]
+)

@@ -20,7 +20,7 @@ from psyop.errors import UserError
 from psyop.finalised import record_finalised
 from psyop.session.lock import SessionLock
 from psyop.session.log.layout import SessionPaths, exclusive_temp, stale_temp_files, write_json_atomic
-from psyop.session.log.schema import FRAME_SCHEMA
+from psyop.session.log.schema import FRAME_SCHEMA, GAZE_SCHEMA
 from psyop.session.log.stream import DurableStreamWriter, is_legacy_ipc, read_segment, read_stream_tolerant
 
 #: session.json keys that must match when a session is resumed (also written into the log).
@@ -44,6 +44,7 @@ class SessionStore:
         self._fsync = fsync
         self._trials: DurableStreamWriter | None = None
         self._frames: DurableStreamWriter | None = None
+        self._gaze: DurableStreamWriter | None = None
         self.run_index = 0
         self.metadata: dict[str, Any] = {}
         self.lock = SessionLock(paths.lock_file)
@@ -98,14 +99,16 @@ class SessionStore:
             self._trials = DurableStreamWriter(self.paths.trial_segment(self.run_index),
                                                self.trial_schema.with_metadata(identity), fsync=self._fsync)
             self._frames = DurableStreamWriter(self.paths.frame_segment(self.run_index), FRAME_SCHEMA, fsync=self._fsync)
+            self._gaze = DurableStreamWriter(self.paths.gaze_segment(self.run_index), GAZE_SCHEMA, fsync=self._fsync)
         except OSError as exc:
             raise UserError(f"cannot write the session: {exc.strerror or exc}", str(self.paths.directory)) from exc
         return completed
 
-    def append_trial(self, row: Mapping[str, Any], frames: pa.Table | None) -> None:
-        """Make one finished trial durable: its frames first, then its trial row.
+    def append_trial(self, row: Mapping[str, Any], frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
+        """Make one finished trial durable: its raw gaze samples and frames first, then its trial row.
 
-        A crash between the two leaves frames without a trial; finalisation drops them.
+        A crash between them leaves frames without a trial; finalisation drops them (raw gaze
+        samples are kept: they are the tracker's recording, whether or not a trial used them).
         A write error (disk full) stops the session cleanly: every earlier trial is
         durable, session.json says 'incomplete' where it still can, and the error (exit
         code 2) says how to resume.
@@ -115,11 +118,24 @@ class SessionStore:
         record = {name: [row.get(name)] for name in self.trial_schema.names}
         table = pa.Table.from_pydict(record, schema=self._trials.schema)
         try:
+            if gaze is not None and gaze.num_rows and self._gaze is not None:
+                self._gaze.append(gaze, key=trial)
             if frames is not None and frames.num_rows:
                 self._frames.append(frames, key=trial)
             self._trials.append(table, key=trial)
         except OSError as exc:
             self._stop_after_write_error(trial, exc)
+
+    def append_gaze(self, gaze: pa.Table, key: int = -1) -> None:
+        """Make raw gaze samples durable outside a trial record (those that arrived after the
+        run's last recorded trial: a discarded trial's, or after the last trial). ``key``: the
+        trial they arrived during (-1: none)."""
+        if self._gaze is None or self._gaze.closed or not gaze.num_rows:
+            return
+        try:
+            self._gaze.append(gaze, key=key)
+        except OSError as exc:
+            self._stop_after_write_error(key, exc)
 
     def _stop_after_write_error(self, trial: int, exc: OSError) -> None:
         reason = exc.strerror or str(exc)
@@ -142,7 +158,7 @@ class SessionStore:
 
     def close(self) -> None:
         try:
-            for writer in (self._trials, self._frames):
+            for writer in (self._trials, self._frames, self._gaze):
                 if writer is not None:
                     try:
                         writer.close()
@@ -153,7 +169,7 @@ class SessionStore:
 
     def finalise(self, *, status: str, summary: Mapping[str, Any] | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
         """Close the streams and write parquet + session.json (see :func:`finalise_session`)."""
-        for writer in (self._trials, self._frames):
+        for writer in (self._trials, self._frames, self._gaze):
             if writer is not None:
                 writer.close()
         try:
@@ -236,6 +252,7 @@ class Salvage:
     trials: pd.DataFrame | None
     frames: pd.DataFrame
     report: dict[str, Any]
+    gaze: pd.DataFrame | None = None  # the raw gaze stream, every intact sample (GAZE_SCHEMA)
 
     @property
     def lost_trials(self) -> list[int]:
@@ -253,7 +270,7 @@ def salvage(paths: SessionPaths) -> Salvage:
     """
     damaged: list[dict[str, Any]] = []
     torn: list[str] = []
-    damaged_keys: dict[str, set[int]] = {"trials": set(), "frames": set()}
+    damaged_keys: dict[str, set[int]] = {"trials": set(), "frames": set(), "gaze": set()}
 
     def read_kind(kind: str) -> list[pa.Table]:
         tables: list[pa.Table] = []
@@ -280,6 +297,9 @@ def salvage(paths: SessionPaths) -> Salvage:
 
     trial_tables = read_kind("trials")
     frame_tables = read_kind("frames")
+    gaze_tables = read_kind("gaze")
+    gaze = (pa.concat_tables(gaze_tables, promote_options="permissive").to_pandas()
+            if gaze_tables else GAZE_SCHEMA.empty_table().to_pandas())
     frames = (
         pa.concat_tables(frame_tables, promote_options="permissive").to_pandas()
         if frame_tables else FRAME_SCHEMA.empty_table().to_pandas()
@@ -287,7 +307,7 @@ def salvage(paths: SessionPaths) -> Salvage:
     report: dict[str, Any] = {"damaged_records": damaged, "torn_segments": sorted(set(torn))}
     if not trial_tables:  # no segment even holds a schema yet (killed while opening)
         report.update(lost_trials=sorted(damaged_keys["trials"]), frames_lost_for_trials=[])
-        return Salvage(None, frames.iloc[0:0], report)
+        return Salvage(None, frames.iloc[0:0], report, gaze)
     trials = pa.concat_tables([t.replace_schema_metadata(None) for t in trial_tables],
                               promote_options="permissive").to_pandas()
     trials = trials.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
@@ -298,7 +318,7 @@ def salvage(paths: SessionPaths) -> Salvage:
     report["frames_lost_for_trials"] = sorted(damaged_keys["frames"] & recorded)
     frames = frames[frames["trial"].isin(recorded)]
     frames = frames.sort_values(["trial", "frame"], kind="stable").reset_index(drop=True)
-    return Salvage(trials, frames, report)
+    return Salvage(trials, frames, report, gaze)
 
 
 def recover_tables(paths: SessionPaths) -> tuple[pd.DataFrame | None, pd.DataFrame]:
@@ -336,7 +356,7 @@ def finalise_session(
     lock: SessionLock | None = None,
     adaptive_stop: Mapping[str, Any] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Write trials.parquet / frames.parquet atomically from the streams; update session.json.
+    """Write trials.parquet / frames.parquet / gaze.parquet atomically from the streams; update session.json.
 
     ``status`` is 'complete' only when every scheduled trial is recorded; otherwise the
     session stays resumable ('incomplete'). Takes the session lock unless ``lock`` (held
@@ -382,7 +402,9 @@ def _finalise_locked(
             stale.unlink()
         _write_parquet_atomic(trials, paths.trials_parquet)
         _write_parquet_atomic(frames, paths.frames_parquet)
-        record_finalised(meta, paths.directory, [paths.trials_parquet, paths.frames_parquet])
+        _write_parquet_atomic(found.gaze if found.gaze is not None else GAZE_SCHEMA.empty_table().to_pandas(),
+                              paths.gaze_parquet)
+        record_finalised(meta, paths.directory, [paths.trials_parquet, paths.frames_parquet, paths.gaze_parquet])
         meta["status"] = status
         meta["n_trials_recorded"] = int(len(trials))
         meta["finalised"] = _now()

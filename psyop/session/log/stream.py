@@ -93,6 +93,10 @@ class DurableStreamWriter:
             # fdatasync: the appended bytes and the new file size, without atime/mtime
             getattr(os, "fdatasync", os.fsync)(self._file.fileno())
 
+    @property
+    def closed(self) -> bool:
+        return self._file.closed
+
     def close(self) -> None:
         """Write the end record and close. Safe to call twice."""
         if self._file.closed:

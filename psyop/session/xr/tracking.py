@@ -17,7 +17,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from psyop.errors import UserError
-from psyop.session.gaze.sample import GazeSample
+from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample
+from psyop.session.gaze.sync import ClockSync
 from psyop.session.pose import PoseSample
 from psyop.session.reach import horizontal_reach_m
 from psyop.session.responses.base import ResponseKind
@@ -51,6 +52,8 @@ class OpenXRGaze:
                             "--tracker openxr", XR_EXIT_CODE)
         self.distance_m = float(distance_m)
         self._n = self._invalid = self._untimed = 0
+        self._raw = RawBuffer()
+        self._last_raw_t_s = -math.inf
 
     @classmethod
     def on_display(cls, display: Any) -> "OpenXRGaze":
@@ -61,6 +64,14 @@ class OpenXRGaze:
 
     def set_plan(self, plan: Any) -> None:
         return None  # a person's eyes follow the stimulus, not a plan
+
+    def clock_sync(self) -> ClockSync | None:
+        """None: the runtime's sample times are mapped onto the session clock by the display."""
+        return None
+
+    def drain_raw(self) -> list[RawGazeSample]:
+        """Each distinct gaze sample :meth:`latest` located (the runtime is polled once per frame)."""
+        return self._raw.drain()
 
     def latest(self, now_s: float) -> GazeSample | None:
         t_ns = self.display.frame_time_ns
@@ -77,11 +88,17 @@ class OpenXRGaze:
             self._untimed += 1
         if not pose.valid:
             self._invalid += 1
-            return GazeSample.invalid(t_s)
-        dx, dy, dz = rotate(pose.orientation_wxyz, (0.0, 0.0, -1.0))
-        ox, oy, oz = pose.position_m
-        d = self.distance_m
-        return GazeSample(t_s, (ox + d * dx, oy + d * dy, oz + d * dz), 1.0, True)
+            sample = GazeSample.invalid(t_s)
+        else:
+            dx, dy, dz = rotate(pose.orientation_wxyz, (0.0, 0.0, -1.0))
+            ox, oy, oz = pose.position_m
+            d = self.distance_m
+            sample = GazeSample(t_s, (ox + d * dx, oy + d * dy, oz + d * dz), 1.0, True)
+        if t_s > self._last_raw_t_s:
+            self._last_raw_t_s = t_s
+            self._raw.add(RawGazeSample.of(sample, tracker_t_s=float(sample_time.time) * 1e-9
+                                           if int(sample_time.time) > 0 else math.nan, received_s=now_s))
+        return sample
 
     def stats(self) -> dict[str, Any]:
         return {"source": "openxr eye gaze (XR_EXT_eye_gaze_interaction)", "samples": self._n,
@@ -95,6 +112,8 @@ class OpenXRGaze:
 class OpenXRPose:
     """A PoseSource from the runtime: the head every frame; the hand (a controller's grip pose or
     a Vive tracker's) sampled once per frame and kept for the reach."""
+
+    n_reused_hand_trials = 0  # live: every trial's own hand samples
 
     def __init__(self, display: Any, hand: str = "") -> None:
         self.display = display
