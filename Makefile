@@ -36,14 +36,18 @@ $(STAMP): pyproject.toml
 # Debian packages: EGL/Mesa for headless rendering, Xvfb for the real-window test.
 # Installed only when missing and only when we can (root + apt-get).
 SYS_PACKAGES := libegl1 libgl1-mesa-dri libgles2 xvfb xauth
+# how long apt-get waits for the apt/dpkg lock another process (unattended-upgrades) holds
+APT_LOCK_WAIT_S ?= 300
 sysdeps: $(SYSDEPS_STAMP)
 
 $(SYSDEPS_STAMP): | $(STAMP)
 	@missing=$$(for p in $(SYS_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
-	    echo "[psyop] installing Debian packages: $$missing"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	    echo "[psyop] installing Debian packages: $$missing (waiting up to $(APT_LOCK_WAIT_S) s if another process holds the apt/dpkg lock)"; \
+	    apt-get -o DPkg::Lock::Timeout=$(APT_LOCK_WAIT_S) update -qq && DEBIAN_FRONTEND=noninteractive \
+	      apt-get -o DPkg::Lock::Timeout=$(APT_LOCK_WAIT_S) install -y -qq $$missing >/dev/null \
+	      || { echo "[psyop] error: apt-get failed (the apt/dpkg lock still held after $(APT_LOCK_WAIT_S) s, or no network); rerun make once it is free"; exit 2; }; \
 	  else echo "[psyop] warning: missing Debian packages ($$missing); install them with apt-get"; fi; \
 	fi
 	@touch $@

@@ -71,7 +71,9 @@ def main(args: argparse.Namespace) -> int:
         from psyop.power.figure import plot_power
 
         args.out.mkdir(parents=True, exist_ok=True)
-        table.to_csv(args.out / "power.csv", index=False)
+        from psyop.atomic import write_atomic
+
+        write_atomic(args.out / "power.csv", table.to_csv(index=False))
         save_figure(plot_power(table, f"Power by simulation: {args.protocol.name}"), args.out / "power.png")
         print(f"wrote {args.out / 'power.csv'} and {args.out / 'power.png'}", file=sys.stderr)
     return 0

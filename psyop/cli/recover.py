@@ -57,9 +57,21 @@ def main(args: argparse.Namespace) -> int:
         print(f"{paths.directory}: {len(trials)}/{n_expected} trials{stopped}, {state}", file=sys.stdout)
         for line in describe_integrity(meta.get("integrity") or {}):
             print(f"  {line}", file=sys.stdout)
+    _describe_dataset(args.path)
     if errors:
         raise UserError(f"{len(errors)} of {len(sessions)} sessions could not be recovered (see above)", str(args.path))
     return 0
+
+
+def _describe_dataset(path: Path) -> None:
+    """Rewrite the data root's dataset_description.json (a run whose disk filled after finalising
+    could not): ``path`` is a data root, or a session directory ``ROOT/<study>/sub-*/ses-*``."""
+    from psyop import datacontract as dc
+    from psyop.session.log.layout import write_dataset_description
+
+    root = path.parents[2] if path.name.startswith("ses-") and len(path.parents) > 2 else path
+    if dc.session_metadata_files(root):  # simulated or not is decided from the sessions themselves
+        write_dataset_description(root, simulated=True)
 
 
 def describe_integrity(report: dict) -> list[str]:  # type: ignore[type-arg]

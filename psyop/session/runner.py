@@ -18,6 +18,7 @@ from typing import Any
 
 import pandas as pd
 
+from psyop.atomic import io_error
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
 from psyop.session.clock import RealClock, VirtualClock
@@ -346,7 +347,11 @@ def run_session(
         summary["display_interruptions"] = loop.display_interruptions
     store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
     if options.write_description:
-        write_dataset_description(options.data_root, simulated=options.simulated)
+        try:
+            write_dataset_description(options.data_root, simulated=options.simulated)
+        except OSError as exc:
+            raise io_error(exc, fix=f"the session itself is finalised ({outcome.message}); free space, then run "
+                           f"`psyop recover {options.data_root}` to write the dataset description") from exc
     return outcome
 
 

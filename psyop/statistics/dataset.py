@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 
 from psyop import datacontract as dc
+from psyop.atomic import write_atomic
 from psyop.errors import UserError
 from psyop.finalised import record_finalised, verify_session
 
@@ -131,13 +132,12 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
     for study, table in tables.items():
         for (participant, session), part in table.groupby(["participant", "session"], sort=True):
             path = dc.session_dir(root, study, participant, session) / dc.TRIALS_FILE
-            path.parent.mkdir(parents=True, exist_ok=True)
-            part.reset_index(drop=True).to_parquet(path, index=False)
+            write_atomic(path, lambda handle, part=part: part.reset_index(drop=True).to_parquet(handle, index=False))
             meta = {"study": study, "participant": str(participant), "session": int(session),
                     dc.SIMULATED_KEY: bool(simulated), "status": "complete", "written_by": "write_dataset"}
             record_finalised(meta, path.parent, [path])
-            (path.parent / dc.SESSION_METADATA_FILE).write_text(json.dumps(meta, indent=2) + "\n")
+            write_atomic(path.parent / dc.SESSION_METADATA_FILE, json.dumps(meta, indent=2) + "\n")
             written.append(path)
-    (root / dc.DATASET_DESCRIPTION_FILE).write_text(
-        json.dumps(dc.dataset_description(simulated=simulated, studies=sorted(tables)), indent=2) + "\n")
+    write_atomic(root / dc.DATASET_DESCRIPTION_FILE,
+                 json.dumps(dc.dataset_description(simulated=simulated, studies=sorted(tables)), indent=2) + "\n")
     return written

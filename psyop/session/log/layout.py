@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
 import re
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 from psyop import datacontract as dc
+from psyop.atomic import TEMP_SUFFIX, exclusive_temp, stale_temp_files, write_atomic  # noqa: F401 - re-exported
 from psyop.errors import UserError
 
 _ID_PATTERN = dc.PARTICIPANT_PATTERN
@@ -100,43 +98,8 @@ def _short(text: str, limit: int = 40) -> str:
 
 
 def write_json_atomic(path: Path, content: dict[str, Any]) -> None:
-    """Write JSON to ``path`` via a temporary file + rename, fsynced: never half-written."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(content, indent=2, sort_keys=True, default=str) + "\n"
-    with exclusive_temp(path) as (handle, tmp):
-        handle.write(text.encode())
-        handle.flush()
-        os.fsync(handle.fileno())
-        os.replace(tmp, path)
-
-
-TEMP_SUFFIX = ".tmp"
-
-
-@contextlib.contextmanager
-def exclusive_temp(path: Path) -> Iterator[tuple[BinaryIO, Path]]:
-    """A new temporary file next to ``path`` (O_EXCL | O_NOFOLLOW: never a planted file or
-    symlink), removed again if the body does not rename it into place."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}{TEMP_SUFFIX}")
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
-    try:
-        fd = os.open(tmp, flags, 0o644)
-    except FileExistsError:  # a stale temp file (or a planted link) of a dead process with our pid
-        tmp.unlink()
-        fd = os.open(tmp, flags, 0o644)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            yield handle, tmp
-    finally:
-        if os.path.lexists(tmp):
-            tmp.unlink()
-
-
-def stale_temp_files(directory: Path) -> list[Path]:
-    """Temporary files left by an interrupted finalisation (``.NAME.PID.tmp``)."""
-    if not directory.is_dir():
-        return []
-    return sorted(p for p in directory.iterdir() if p.name.startswith(".") and p.name.endswith(TEMP_SUFFIX))
+    """Write JSON to ``path`` atomically (:func:`psyop.atomic.write_atomic`): never half-written."""
+    write_atomic(path, json.dumps(content, indent=2, sort_keys=True, default=str) + "\n")
 
 
 def write_dataset_description(data_root: Path, *, simulated: bool, studies: list[str] | None = None) -> Path:
