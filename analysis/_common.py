@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -81,12 +82,13 @@ def write_csv(table: pd.DataFrame, path: Path) -> Path:
     return write_text(path, table.to_csv(index=False))
 
 
-def read_fits(path: Path, *, data: Path | None = None, study: str | None = None) -> pd.DataFrame:
+def read_fits(path: Path, *, data: Path | None = None, study: str | None = None,
+              fit_args: tuple[str, ...] = ()) -> pd.DataFrame:
     """Read a psychometric fit cache (results/<study>_fits.csv): ``flags`` '' when none, ``status`` required.
 
     A cache that cannot be read (empty, truncated, not CSV, an older layout) is only a cache: with
-    ``data`` and ``study`` it is rebuilt by analysis/fit_psychometric.py (one line on stderr says so),
-    otherwise it is a UserError naming it."""
+    ``data`` and ``study`` it is rebuilt by analysis/fit_psychometric.py (one line on stderr says so;
+    ``fit_args``: more of its arguments), otherwise it is a UserError naming it."""
     from psyop.errors import UserError
 
     try:
@@ -97,7 +99,7 @@ def read_fits(path: Path, *, data: Path | None = None, study: str | None = None)
         print(f"{Path(sys.argv[0]).name}: {problem}; rebuilding it", file=sys.stderr)
     import fit_psychometric  # noqa: PLC0415 - the fit script, beside this module
 
-    status = fit_psychometric.main(["--study", study, "--data", str(data), "--out", str(path)])
+    status = fit_psychometric.main(["--study", study, "--data", str(data), "--out", str(path), *fit_args])
     if status:
         raise UserError(f"could not rebuild the fit cache (exit {status})", str(path))
     return _parse_fits(path)
@@ -116,5 +118,11 @@ def _parse_fits(path: Path) -> pd.DataFrame:
     if "status" not in fits or "flags" not in fits or "participant" not in fits:
         raise UserError("fit cache lacks the 'participant', 'flags' or 'status' column (half-written, or written "
                         "by an older psyop)", str(path))
+    with open(path, "rb") as handle:  # a CSV written whole ends with a newline; a torn one rarely does
+        handle.seek(max(0, os.path.getsize(path) - 1))
+        torn = handle.read(1) != b"\n"
+    if torn or fits["status"].isna().any() or fits["participant"].isna().any():
+        raise UserError("fit cache is half-written (a row without participant or status, or no final newline)",
+                        str(path))
     fits["flags"] = fits["flags"].fillna("").astype(str)
     return fits
