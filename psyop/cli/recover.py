@@ -70,7 +70,7 @@ def _describe_dataset(path: Path) -> None:
     from psyop.session.log.layout import write_dataset_description
 
     root = path.parents[2] if path.name.startswith("ses-") and len(path.parents) > 2 else path
-    if dc.session_metadata_files(root):  # simulated or not is decided from the sessions themselves
+    if any(p.is_dir() for p in root.glob("*/sub-*/ses-*")):  # simulated or not: decided from the sessions
         write_dataset_description(root, simulated=True)
 
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -67,6 +69,9 @@ class SessionPaths:
         for path in self.log_dir.iterdir():
             match = _SEGMENT_NAME.fullmatch(path.name)
             if match and match.group(1) == kind:
+                if not stat.S_ISREG(os.stat(path).st_mode):  # a FIFO would block, /dev/zero never ends
+                    raise UserError("a log segment is not a regular file (a FIFO, a device or a folder); restore "
+                                    "the segment or move it away", str(path))
                 found.append((int(match.group(2)), path))
         return [p for _, p in sorted(found)]
 
@@ -108,26 +113,27 @@ def write_dataset_description(data_root: Path, *, simulated: bool, studies: list
     ``simulated`` is true only when every session in the dataset is simulated: a real
     session added to a simulated dataset turns the flag false (and is listed).
     """
+    from psyop.session.inventory import session_record
+
     data_root = Path(data_root)
     path = data_root / dc.DATASET_DESCRIPTION_FILE
-    sessions = dc.session_metadata_files(data_root)
+    sessions = sorted(p for p in data_root.glob("*/sub-*/ses-*") if p.is_dir())
     n_sim = n_real = 0
     found_studies: set[str] = set(studies or [])
-    for meta_path in sessions:
-        try:
-            if not meta_path.is_file() or meta_path.stat().st_size > (64 << 20):
-                continue  # a FIFO or device would block or never end
-            meta = json.loads(meta_path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    for directory in sessions:
+        try:  # session.json, else the finalised trials.parquet or the log's header (psyop.session.inventory)
+            record = session_record(directory, data_root)
+        except UserError:  # a hostile or damaged file (`psyop sessions` names it): never called simulated
+            n_real += 1
             continue
-        if not isinstance(meta, dict):
+        if record is None:
             continue
-        found_studies.add(str(meta.get("study", meta_path.parents[2].name)))
-        if meta.get(dc.SIMULATED_KEY):
+        found_studies.add(directory.parents[1].name)
+        if record.simulated is True:
             n_sim += 1
         else:
             n_real += 1
-    if not sessions:
+    if n_sim + n_real == 0:
         all_simulated = simulated
     else:
         all_simulated = n_real == 0
