@@ -24,6 +24,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     from psyop.adaptive.recorded_stop import rebuilt_stop_record
     from psyop.finalised import check_finalised
+    from psyop.session.lock import SessionInUse
     from psyop.session.log.store import expected_trial_count, finalise_session, find_sessions, read_metadata, salvage
 
     if not args.path.exists():
@@ -46,6 +47,9 @@ def main(args: argparse.Namespace) -> int:
             trials, _ = finalise_session(paths, status="complete", summary=meta.get("summary"),
                                          adaptive_stop=rebuilt_stop_record(meta, salvage(paths).trials))
             meta = read_metadata(paths) or {}
+        except SessionInUse as busy:  # another process (a run, or another recover) is finishing it
+            print(f"{paths.directory}: in use by {busy.holder}; left to it (not an error)", file=sys.stdout)
+            continue
         except UserError as error:
             print(f"psyop recover: error: {error}", file=sys.stderr)
             errors.append(error)

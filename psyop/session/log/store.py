@@ -31,6 +31,10 @@ _IDENTITY_KEYS = ("protocol_sha256", "seed", "study", "participant", "session", 
 _RUN_OPTION_KEYS = ("clock", "tracker", "responses", "display_mode", "pose", "render", "protocol_file_sha256")
 
 
+class SessionComplete(UserError):
+    """A run was asked to resume a complete session (`psyop simulate` counts it as done)."""
+
+
 class SessionStore:
     """The durable log of one session.
 
@@ -77,7 +81,7 @@ class SessionStore:
                         str(meta_path),
                     )
             if existing.get("status") == "complete":
-                raise UserError("session is already complete; use another --session", str(meta_path))
+                raise SessionComplete("session is already complete; use another --session", str(meta_path))
             completed = set(completed_trials(self.paths))
             self.metadata = {**metadata, **existing}
             self.metadata["runs"] = list(existing.get("runs", []))
