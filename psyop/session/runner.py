@@ -355,7 +355,8 @@ def run_session(
     return outcome
 
 
-def print_outcome(outcome: SessionOutcome, stream: Any = sys.stderr) -> None:
+def print_outcome(outcome: SessionOutcome, stream: Any = None) -> None:
+    stream = sys.stderr if stream is None else stream  # the stderr of now (not of import time)
     lat = outcome.latency
     print(f"psyop run: {outcome.status}: {outcome.message}", file=stream)
     if lat.get("n_frames"):

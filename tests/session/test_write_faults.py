@@ -148,8 +148,8 @@ def test_session_under_a_file_size_limit_heals_by_rerunning(tmp_path: Path, dete
 
 # -- each write of a session, failing -----------------------------------------------------------
 @pytest.mark.parametrize("code", [errno.ENOSPC, errno.EIO])
-@pytest.mark.parametrize("site", ["rendering metadata", "segment end record", "session.json in finalise",
-                                  "finalised parquet"])
+@pytest.mark.parametrize("site", ["log folder fsync", "rendering metadata", "segment end record",
+                                  "session.json in finalise", "finalised parquet"])
 def test_each_session_write_fails_in_one_line_and_heals(tmp_path: Path, detection_small: Path,
                                                         monkeypatch: pytest.MonkeyPatch,
                                                         capsys: pytest.CaptureFixture[str], site: str, code: int) -> None:
@@ -160,7 +160,11 @@ def test_each_session_write_fails_in_one_line_and_heals(tmp_path: Path, detectio
     expected = pd.read_parquet(SessionPaths(reference, "detection", "W1", 1).trials_parquet)
     capsys.readouterr()
     data = tmp_path / "data"
-    if site == "rendering metadata":  # store.update_metadata(rendering=...) just after open
+    if site == "log folder fsync":  # the new segment's name made durable: its error is an error
+        from psyop.session.log import stream
+
+        _fail_during(monkeypatch, stream, "fsync_dir", code, calls=("fsync",))
+    elif site == "rendering metadata":  # store.update_metadata(rendering=...) just after open
         _fail_during(monkeypatch, store.SessionStore, "update_metadata", code)
     elif site == "segment end record":
         _fail_during(monkeypatch, store.DurableStreamWriter, "close", code)
@@ -173,7 +177,7 @@ def test_each_session_write_fails_in_one_line_and_heals(tmp_path: Path, detectio
     assert ("psyop recover" in line) or ("rerun the same command" in line), line
     monkeypatch.undo()
     paths = SessionPaths(data, "detection", "W1", 1)
-    if site == "rendering metadata":  # nothing ran yet: rerunning the command runs the session
+    if site in ("log folder fsync", "rendering metadata"):  # nothing ran yet: rerunning runs the session
         assert cli_main(_argv(detection_small, data, "W1")) == 0
     else:  # every trial was recorded: recover finishes the session in one step
         assert cli_main(["recover", str(data)]) == 0
