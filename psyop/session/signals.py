@@ -48,11 +48,9 @@ def stop_signals_as_interrupt() -> Iterator[list[int]]:
     def forward(signum: int, frame: FrameType | None) -> None:
         received.append(signum)
         handler = signal.getsignal(signal.SIGINT)
-        if handler is signal.SIG_IGN:
-            return
-        if callable(handler):
+        if callable(handler):  # Python's default (raises KeyboardInterrupt) or a write's deferral
             handler(signal.SIGINT, frame)
-        else:  # SIG_DFL or a handler installed from C
+        else:  # SIG_IGN (a background job ignores Ctrl-C, not a kill), SIG_DFL, or set from C
             raise KeyboardInterrupt
 
     previous = {signum: signal.signal(signum, forward) for signum in STOP_SIGNALS}

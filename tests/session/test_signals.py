@@ -35,8 +35,11 @@ def _recorded(paths: SessionPaths) -> int:
     return segment.stat().st_size if segment.exists() else 0
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
-def test_sigterm_and_sighup_end_a_real_clock_session_like_ctrl_c(tmp_path: Path, signum: int) -> None:
+@pytest.mark.parametrize(("signum", "background"), [(signal.SIGTERM, False), (signal.SIGHUP, False),
+                                                    (signal.SIGTERM, True)])
+def test_sigterm_and_sighup_end_a_real_clock_session_like_ctrl_c(tmp_path: Path, signum: int,
+                                                                 background: bool) -> None:
+    """``background``: started as `psyop run ... &` from a script, with Ctrl-C ignored; a kill still ends it."""
     protocol = fast_protocol(tmp_path, "detection", 1)
     reference = tmp_path / "reference"
     assert cli_main(_real_args(protocol, reference, "S1")) == 0
@@ -44,8 +47,10 @@ def test_sigterm_and_sighup_end_a_real_clock_session_like_ctrl_c(tmp_path: Path,
 
     data = tmp_path / "data"
     paths = SessionPaths(data, "detection", "S1", 1)
+    sigint = signal.SIG_IGN if background else signal.SIG_DFL
     process = subprocess.Popen([sys.executable, "-m", "psyop", *_real_args(protocol, data, "S1")],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, sigint))
     empty = wait_until(lambda: paths.trial_segment(0).exists() and _recorded(paths), what="the segment's schema")
     wait_until(lambda: _recorded(paths) > empty or process.poll() is not None, what="a first durable trial")
     process.send_signal(signum)
