@@ -171,17 +171,24 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
     SHA-256 (as finalisation does); ``dataset_description.json`` records ``simulated``. Returns
     the written parquet paths.
     """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     root = Path(data_root)
     root.mkdir(parents=True, exist_ok=True)
     written = []
     for study, table in tables.items():
         for (participant, session), part in table.groupby(["participant", "session"], sort=True):
             path = dc.session_dir(root, study, participant, session) / dc.TRIALS_FILE
-            write_atomic(path, lambda handle, part=part: part.reset_index(drop=True).to_parquet(handle, index=False))
+            arrow = pa.Table.from_pandas(part.reset_index(drop=True), preserve_index=False)
+            arrow = arrow.replace_schema_metadata({**(arrow.schema.metadata or {}),  # as a finalised session's
+                                                   dc.SIMULATED_METADATA_KEY.encode(): json.dumps(simulated).encode()})
+            write_atomic(path, lambda handle, arrow=arrow: pq.write_table(arrow, handle))
             meta = {"study": study, "participant": str(participant), "session": int(session),
                     dc.SIMULATED_KEY: bool(simulated), "status": "complete", "written_by": "write_dataset"}
             record_finalised(meta, path.parent, [path])
-            write_atomic(path.parent / dc.SESSION_METADATA_FILE, json.dumps(meta, indent=2) + "\n")
+            write_atomic(path.parent / dc.SESSION_METADATA_FILE, json.dumps(meta, indent=2) + "
+")
             written.append(path)
     write_atomic(root / dc.DATASET_DESCRIPTION_FILE,
                  json.dumps(dc.dataset_description(simulated=simulated, studies=sorted(tables)), indent=2) + "\n")
