@@ -125,7 +125,9 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
             f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
             str(Path(data_root)),
         )
-    for f in files:  # before anything is read: a damaged or edited session is refused by name
+    for f in files:  # before anything is read: only regular files within the limit (a FIFO never blocks) ...
+        _TRIALS.check(f)
+    for f in files:  # ... then a damaged or edited session is refused by name
         verify_session(f.parent)
     frames, file_flags = _read_trials(files)
     trials = pd.concat(frames, ignore_index=True)
@@ -187,8 +189,7 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
             meta = {"study": study, "participant": str(participant), "session": int(session),
                     dc.SIMULATED_KEY: bool(simulated), "status": "complete", "written_by": "write_dataset"}
             record_finalised(meta, path.parent, [path])
-            write_atomic(path.parent / dc.SESSION_METADATA_FILE, json.dumps(meta, indent=2) + "
-")
+            write_atomic(path.parent / dc.SESSION_METADATA_FILE, json.dumps(meta, indent=2) + "\n")
             written.append(path)
     write_atomic(root / dc.DATASET_DESCRIPTION_FILE,
                  json.dumps(dc.dataset_description(simulated=simulated, studies=sorted(tables)), indent=2) + "\n")

@@ -120,8 +120,14 @@ def test_deleting_session_json_does_not_turn_a_real_session_simulated(data: Path
     real.metadata.unlink()
     write_dataset_description(data, simulated=True)
     assert json.loads((data / "dataset_description.json").read_text())["simulated"] is False
-    _refused(_sessions(data), "mixed", "2 simulated, 1 real")
-    assert load_dataset(data, "detection").simulated is False
+    # finalised files without session.json are refused by the checksum check (psyop.finalised) ...
+    _refused(_sessions(data), str(real.directory), "without a session.json")
+    with pytest.raises(UserError):
+        load_dataset(data, "detection")
+    # ... and without it, its finalised trials.parquet still says real
+    unverified = subprocess.run([sys.executable, "-m", "psyop", "sessions", str(data), "--require-simulated"],
+                                capture_output=True, text=True, timeout=120)
+    _refused(unverified, "holds real sessions", "1 real")
     for table in (real.trials_parquet, real.frames_parquet):  # only the log is left
         table.unlink()
     _refused(_sessions(data), "mixed", "2 simulated, 1 real")
