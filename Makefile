@@ -36,14 +36,18 @@ $(STAMP): pyproject.toml
 # Debian packages: EGL/Mesa for headless rendering, Xvfb for the real-window test.
 # Installed only when missing and only when we can (root + apt-get).
 SYS_PACKAGES := libegl1 libgl1-mesa-dri libgles2 xvfb xauth
+# how long apt-get waits for the apt/dpkg lock another process (unattended-upgrades) holds
+APT_LOCK_WAIT_S ?= 300
 sysdeps: $(SYSDEPS_STAMP)
 
 $(SYSDEPS_STAMP): | $(STAMP)
 	@missing=$$(for p in $(SYS_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
-	    echo "[psyop] installing Debian packages: $$missing"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	    echo "[psyop] installing Debian packages: $$missing (waiting up to $(APT_LOCK_WAIT_S) s if another process holds the apt/dpkg lock)"; \
+	    apt-get -o DPkg::Lock::Timeout=$(APT_LOCK_WAIT_S) update -qq && DEBIAN_FRONTEND=noninteractive \
+	      apt-get -o DPkg::Lock::Timeout=$(APT_LOCK_WAIT_S) install -y -qq $$missing >/dev/null \
+	      || { echo "[psyop] error: apt-get failed (the apt/dpkg lock still held after $(APT_LOCK_WAIT_S) s, or no network); rerun make once it is free"; exit 2; }; \
 	  else echo "[psyop] warning: missing Debian packages ($$missing); install them with apt-get"; fi; \
 	fi
 	@touch $@
@@ -58,7 +62,8 @@ bench: $(STAMP) $(SYSDEPS_STAMP)
 # Power curves of the five shipped studies (psyop power: whole simulated studies through compile ->
 # session -> analysis). Too slow for `make figures` (docs/adaptive.md says how long), so a target
 # of its own. Sample sizes bracket each paper's (detection/discrimination 6, ordinal/realism 19,
-# egocentric 13); one progress bar per protocol. Writes POWER/NAME/power.{csv,png,txt}.
+# egocentric 13); one progress bar per protocol. Writes POWER/NAME/power.{csv,png,txt}; finished
+# replications are kept in POWER/NAME/replications/, so an interrupted `make power` resumes.
 POWER ?= power
 POWER_REPLICATIONS ?= 40
 POWER_SIZES := detection:4,6,12 discrimination:4,6,12 ordinal:6,12,19 egocentric:6,13,19 realism:6,12,19
@@ -71,11 +76,12 @@ power-run:
 	  i=$$((i + 1)); name=$${spec%%:*}; sizes=$${spec#*:}; mkdir -p $(POWER)/$$name; \
 	  echo "[psyop] power $$i/5: protocols/$$name.yaml, $$sizes participants, $(POWER_REPLICATIONS) replications each"; \
 	  $(PY) -m psyop power protocols/$$name.yaml --participants $$sizes --replications $(POWER_REPLICATIONS) \
-	    --seed 0 --jobs $(JOBS) --out $(POWER)/$$name | tee $(POWER)/$$name/power.txt; \
-	  test $${PIPESTATUS[0]} -eq 0 || exit 1; \
+	    --seed 0 --jobs $(JOBS) --out $(POWER)/$$name | tee $(POWER)/$$name/.power.txt.tmp; \
+	  test $${PIPESTATUS[0]} -eq 0 -a $${PIPESTATUS[1]} -eq 0 || { rm -f $(POWER)/$$name/.power.txt.tmp; exit 1; }; \
+	  mv -f $(POWER)/$$name/.power.txt.tmp $(POWER)/$$name/power.txt; \
 	done; echo "[psyop] power curves in $(POWER)/ (NAME/power.png, power.csv, power.txt)"
 
 include figures.mk
 
 clean:
-	rm -rf figures results bench power demo $(VENV) build *.egg-info .pytest_cache .hypothesis
+	rm -rf figures results bench power demo .psyop-power $(VENV) build *.egg-info .pytest_cache .hypothesis

@@ -6,6 +6,10 @@
 # analysis/ script; make's dependencies rebuild only what changed (new sessions, changed
 # statistics or drawing code). The slow psychometric fits are cached in results/*_fits.csv.
 
+# A recipe that fails (a full disk, a crash) leaves no target behind for the next make to trust:
+# the scripts write atomically (psyop.atomic), and make deletes a target its failed recipe touched.
+.DELETE_ON_ERROR:
+
 DATA ?= data
 RESULTS ?= results
 FIGDIR ?= figures

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -32,13 +33,19 @@ def parser(description: str, default_out: str, study: str | None = None) -> argp
 
 
 def run(main: Callable[[], int]) -> int:
-    """Run a script's ``main``; bad input (a UserError) is one line on stderr and its exit code
-    (2), not a traceback."""
+    """Run a script's ``main``; bad input (a UserError) or an I/O error (disk full) is one line on
+    stderr and exit code 2, not a traceback."""
     from psyop.errors import UserError
 
     try:
         return main()
     except UserError as error:
+        print(f"{Path(sys.argv[0]).name}: error: {error}", file=sys.stderr)
+        return error.exit_code
+    except OSError as exc:  # disk full, I/O error: one line naming the file and the fix
+        from psyop.atomic import io_error
+
+        error = io_error(exc)
         print(f"{Path(sys.argv[0]).name}: error: {error}", file=sys.stderr)
         return error.exit_code
 
@@ -60,19 +67,62 @@ def _clean(value):
 
 def write_json(path: Path, payload: dict) -> Path:
     """Write ``payload`` as JSON (NaN/inf -> null); creates the directory."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(_clean(payload), indent=2) + "\n")
-    return path
+    return write_text(path, json.dumps(_clean(payload), indent=2) + "\n")
 
 
-def read_fits(path: Path) -> pd.DataFrame:
-    """Read a psychometric fit cache (results/<study>_fits.csv): ``flags`` '' when none, ``status`` required."""
-    fits = pd.read_csv(path, dtype={"participant": str, "flags": str, "status": str}, keep_default_na=False,
-                       na_values=[""])
+def write_text(path: Path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (psyop.atomic: whole or absent); creates the directory."""
+    from psyop.atomic import write_atomic
+
+    return write_atomic(path, text)
+
+
+def write_csv(table: pd.DataFrame, path: Path) -> Path:
+    """Write ``table`` as CSV (no index) atomically; creates the directory."""
+    return write_text(path, table.to_csv(index=False))
+
+
+def read_fits(path: Path, *, data: Path | None = None, study: str | None = None,
+              fit_args: tuple[str, ...] = ()) -> pd.DataFrame:
+    """Read a psychometric fit cache (results/<study>_fits.csv): ``flags`` '' when none, ``status`` required.
+
+    A cache that cannot be read (empty, truncated, not CSV, an older layout) is only a cache: with
+    ``data`` and ``study`` it is rebuilt by analysis/fit_psychometric.py (one line on stderr says so;
+    ``fit_args``: more of its arguments), otherwise it is a UserError naming it."""
+    from psyop.errors import UserError
+
+    try:
+        return _parse_fits(path)
+    except UserError as problem:
+        if data is None or study is None:
+            raise
+        print(f"{Path(sys.argv[0]).name}: {problem}; rebuilding it", file=sys.stderr)
+    import fit_psychometric  # noqa: PLC0415 - the fit script, beside this module
+
+    status = fit_psychometric.main(["--study", study, "--data", str(data), "--out", str(path), *fit_args])
+    if status:
+        raise UserError(f"could not rebuild the fit cache (exit {status})", str(path))
+    return _parse_fits(path)
+
+
+def _parse_fits(path: Path) -> pd.DataFrame:
+    from psyop.errors import UserError
+
+    try:
+        fits = pd.read_csv(path, dtype={"participant": str, "flags": str, "status": str}, keep_default_na=False,
+                           na_values=[""])
+    except FileNotFoundError:
+        raise UserError("no fit cache here: run analysis/fit_psychometric.py (or make figures)", str(path)) from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        raise UserError(f"fit cache cannot be read ({type(exc).__name__}: {str(exc)[:120]})", str(path)) from None
+    if "status" not in fits or "flags" not in fits or "participant" not in fits:
+        raise UserError("fit cache lacks the 'participant', 'flags' or 'status' column (half-written, or written "
+                        "by an older psyop)", str(path))
+    with open(path, "rb") as handle:  # a CSV written whole ends with a newline; a torn one rarely does
+        handle.seek(max(0, os.path.getsize(path) - 1))
+        torn = handle.read(1) != b"\n"
+    if torn or fits["status"].isna().any() or fits["participant"].isna().any():
+        raise UserError("fit cache is half-written (a row without participant or status, or no final newline)",
+                        str(path))
     fits["flags"] = fits["flags"].fillna("").astype(str)
-    if "status" not in fits:
-        from psyop.errors import UserError
-
-        raise UserError("fit cache has no 'status' column (written by an older psyop): delete it and rerun "
-                        "analysis/fit_psychometric.py", str(path))
     return fits

@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     p = parser(__doc__, "figures/fig_detection_thresholds.png")
     p.add_argument("--fits", type=Path, default=Path("results/detection_fits.csv"))
     args = p.parse_args(argv)
-    fits = read_fits(args.fits)
+    fits = read_fits(args.fits, data=args.data, study="detection")
     simulated = is_simulated(args.data)
     clean, left_out = usable_for_analysis(fits)
     per_subject = clean.groupby("participant")["threshold_D"].mean()

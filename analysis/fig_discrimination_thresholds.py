@@ -24,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fits", type=Path, default=Path("results/discrimination_fits.csv"))
     p.add_argument("--offset-column", default="offset_D")
     args = p.parse_args(argv)
-    fits = read_fits(args.fits)
+    fits = read_fits(args.fits, data=args.data, study="discrimination")
     simulated = is_simulated(args.data)
     clean, left_out = usable_for_analysis(fits)
     fit = linear_fit(clean, args.offset_column, "threshold_D")

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 
-from _common import parser, run, write_json
+from _common import parser, run, write_csv, write_json
 
 from psyop.errors import UserError
 from psyop.figures.output import save_figure
@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     comparison = condition_interaction(t, "target_fraction", "reach_fraction", "rendering", args.reference)
     mixed = mixed_condition_comparison(t, "target_fraction", "reach_fraction", "rendering", reference=args.reference)
     args.results.mkdir(parents=True, exist_ok=True)
-    fits.to_csv(args.results / "egocentric_fits.csv", index=False)
+    write_csv(fits, args.results / "egocentric_fits.csv")
     summary = {f"reach vs target, {r['rendering']}": f"slope = {r['slope']:.3f}, intercept = {r['intercept']:.3f}, "
                f"R^2 = {r['r2']:.2f}" for _, r in fits.iterrows()}
     summary["reach: condition difference, primary (subject-aware)"] = format_mixed_comparison(mixed)

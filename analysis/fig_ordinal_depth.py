@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import sys
 
-from _common import parser, run, write_json
+from _common import parser, run, write_csv, write_json
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_ordinal
@@ -30,9 +30,9 @@ def main(argv: list[str] | None = None) -> int:
     family_text = ("the 3 mode pairs within each separation (m = 3)" if args.bonferroni_family == "per_level"
                    else f"all {len(posthoc)} mode pairs across separations (m = {len(posthoc)})")
     args.results.mkdir(parents=True, exist_ok=True)
-    cells.to_csv(args.results / "ordinal_cells.csv", index=False)
-    aov.table.to_csv(args.results / "ordinal_anova.csv", index=False)
-    posthoc.to_csv(args.results / "ordinal_posthoc.csv", index=False)
+    write_csv(cells, args.results / "ordinal_cells.csv")
+    write_csv(aov.table, args.results / "ordinal_anova.csv")
+    write_csv(posthoc, args.results / "ordinal_posthoc.csv")
     means = cells.groupby(["mode", "separation_D"])["correct"].mean()
     summary = {f"ordinal rm-ANOVA: {r['effect']}": format_anova(r) for _, r in aov.table.iterrows()}
     for _, r in posthoc.iterrows():

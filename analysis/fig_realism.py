@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import sys
 
-from _common import parser, run, write_json
+from _common import parser, run, write_csv, write_json
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_preferences
@@ -22,7 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     ds = load_dataset(args.data, args.study)
     prefs = pairwise_preferences(ds.trials, PAIRS)
     args.results.mkdir(parents=True, exist_ok=True)
-    prefs.to_csv(args.results / "realism_preferences.csv", index=False)
+    write_csv(prefs, args.results / "realism_preferences.csv")
     write_json(args.results / "realism.json", {
         "study": "realism", "simulated": ds.simulated, "n_subjects": int(ds.trials["participant"].nunique()),
         "preferences": prefs.to_dict("records"),

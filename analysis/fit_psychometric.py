@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from _common import parser, run
+from _common import parser, run, write_csv
 
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric_table
@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     table.insert(0, "study", args.study)
     table["simulated"] = ds.simulated
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    table.to_csv(args.out, index=False)
+    write_csv(table, args.out)
     counts = table["status"].value_counts().to_dict()
     print(f"{args.study}: {len(table)} fits, status {counts} -> {args.out}", file=sys.stderr)
     return 0

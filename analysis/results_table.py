@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 
-from _common import parser, run, write_json
+from _common import parser, run, write_json, write_text
 from paper_values import rows_for
 
 STUDY_FILES = ["detection_thresholds", "discrimination_fit", "ordinal", "egocentric", "realism"]
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
                 lines.append(f"- {key}: " + "; ".join(json.dumps(x, sort_keys=True) for x in payload[key]))
         lines.append("")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
+    write_text(args.out, "\n".join(lines) + "\n")
     write_json(args.out.with_suffix(".json"), {
         "simulated": simulated, "paper_comparison": rows,
         "summary": {n: s.get("summary", {}) for n, s in studies.items()}, "studies": studies,

@@ -24,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fits", type=Path, default=None)
     args = p.parse_args(argv)
     fits_path = args.fits or Path("results") / f"{args.study}_fits.csv"
-    fits = read_fits(fits_path)
+    fits = read_fits(fits_path, data=args.data, study=args.study)
     ds = load_dataset(args.data, args.study)
     cond = CONDITION[args.study]
     answered = ds.trials[ds.trials["correct"].notna()].copy()

@@ -21,6 +21,8 @@ from psyop.protocol.trial import MIN_VALID_GAZE_SHARE
 DATASET_DESCRIPTION_FILE = "dataset_description.json"
 SESSION_METADATA_FILE = "session.json"
 TRIALS_FILE = "trials.parquet"
+#: schema metadata key of a finalised trials.parquet and of the log's trial segments: JSON true/false
+SIMULATED_METADATA_KEY = "psyop.simulated"
 FRAMES_FILE = "frames.parquet"
 #: the raw gaze stream: every sample the tracker delivered (psyop.session.log.schema.GAZE_SCHEMA)
 GAZE_FILE = "gaze.parquet"

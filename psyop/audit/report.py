@@ -79,5 +79,9 @@ def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> Non
         ax.text(4, gap_px + r * (h + gap_px) + h / 2, f"{condition}\n{eye} eye", fontsize=7, va="center")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    from psyop.atomic import write_atomic
+
+    try:
+        write_atomic(path, lambda handle: fig.savefig(handle, format=path.suffix.lstrip(".") or "png", dpi=dpi))
+    finally:
+        plt.close(fig)

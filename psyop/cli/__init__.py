@@ -59,6 +59,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"psyop {args.command}: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:  # disk full, I/O error, permissions: one line naming the file and the fix
+        from psyop.atomic import io_error
+
+        error = io_error(exc)
+        print(f"psyop {args.command}: error: {error}", file=sys.stderr)
+        return error.exit_code
 
 
 if __name__ == "__main__":  # pragma: no cover

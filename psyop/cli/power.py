@@ -43,6 +43,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="run replications on this Dask scheduler instead of local processes")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="local worker processes")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--checkpoint", type=Path, default=None, metavar="DIR",
+                        help="keep each finished replication in DIR; a rerun with the same arguments resumes them "
+                        "(default: OUT/replications with --out, else .psyop-power)")
+    parser.add_argument("--no-checkpoint", action="store_true", help="keep no replications (nothing resumes)")
+    parser.add_argument("--lost-after-s", type=float, default=60.0, metavar="S",
+                        help="--scheduler: a cluster without any worker for S seconds is lost (exit 3; default 60)")
     parser.set_defaults(func=main)
 
 
@@ -57,13 +63,27 @@ def main(args: argparse.Namespace) -> int:
         raise UserError("--replications must be >= 1", "--replications")
     if not 0 < args.alpha < 1:
         raise UserError("--alpha must be in (0, 1)", "--alpha")
+    if not args.lost_after_s > 0:
+        raise UserError("--lost-after-s must be > 0", "--lost-after-s")
+    from psyop.power.checkpoint import DEFAULT_DIR
+
+    checkpoint = None if args.no_checkpoint else (
+        args.checkpoint or (args.out / "replications" if args.out is not None else DEFAULT_DIR))
     run = PowerRun(protocol_path=args.protocol, participants=args.participants, replications=args.replications,
                    seed=args.seed, effects=parse_effects(args.effect), alpha=args.alpha, scheduler=args.scheduler,
-                   jobs=max(1, args.jobs), progress=not args.no_progress and sys.stderr.isatty())
+                   jobs=max(1, args.jobs), progress=not args.no_progress and sys.stderr.isatty(),
+                   checkpoint=checkpoint, lost_after_s=args.lost_after_s)
     start = time.perf_counter()
-    table, results = run_power(run)
+    resumed: list[int] = []
+    try:
+        table, results = run_power(run, resumed)
+    except KeyboardInterrupt:
+        kept = f"; the finished ones are kept in {checkpoint}/: rerun the same command to resume" if checkpoint else ""
+        print(f"psyop power: interrupted{kept}", file=sys.stderr)
+        return 130
     where = args.scheduler or f"{run.jobs} local process(es)"
-    print(f"psyop power: {args.protocol} -- SIMULATED, {len(results)} studies on {where} in "
+    again = f", {resumed[0]} of them resumed from {checkpoint}/" if resumed and resumed[0] else ""
+    print(f"psyop power: {args.protocol} -- SIMULATED, {len(results)} studies{again} on {where} in "
           f"{time.perf_counter() - start:.1f} s (seed {args.seed}, alpha {args.alpha:g})")
     print(format_table(table))
     if args.out is not None:
@@ -71,7 +91,9 @@ def main(args: argparse.Namespace) -> int:
         from psyop.power.figure import plot_power
 
         args.out.mkdir(parents=True, exist_ok=True)
-        table.to_csv(args.out / "power.csv", index=False)
+        from psyop.atomic import write_atomic
+
+        write_atomic(args.out / "power.csv", table.to_csv(index=False))
         save_figure(plot_power(table, f"Power by simulation: {args.protocol.name}"), args.out / "power.png")
         print(f"wrote {args.out / 'power.csv'} and {args.out / 'power.png'}", file=sys.stderr)
     return 0

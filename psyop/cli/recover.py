@@ -24,6 +24,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     from psyop.adaptive.recorded_stop import rebuilt_stop_record
     from psyop.finalised import check_finalised
+    from psyop.session.lock import SessionInUse
     from psyop.session.log.store import expected_trial_count, finalise_session, find_sessions, read_metadata, salvage
 
     if not args.path.exists():
@@ -46,6 +47,9 @@ def main(args: argparse.Namespace) -> int:
             trials, _ = finalise_session(paths, status="complete", summary=meta.get("summary"),
                                          adaptive_stop=rebuilt_stop_record(meta, salvage(paths).trials))
             meta = read_metadata(paths) or {}
+        except SessionInUse as busy:  # another process (a run, or another recover) is finishing it
+            print(f"{paths.directory}: in use by {busy.holder}; left to it (not an error)", file=sys.stdout)
+            continue
         except UserError as error:
             print(f"psyop recover: error: {error}", file=sys.stderr)
             errors.append(error)
@@ -57,9 +61,21 @@ def main(args: argparse.Namespace) -> int:
         print(f"{paths.directory}: {len(trials)}/{n_expected} trials{stopped}, {state}", file=sys.stdout)
         for line in describe_integrity(meta.get("integrity") or {}):
             print(f"  {line}", file=sys.stdout)
+    _describe_dataset(args.path)
     if errors:
         raise UserError(f"{len(errors)} of {len(sessions)} sessions could not be recovered (see above)", str(args.path))
     return 0
+
+
+def _describe_dataset(path: Path) -> None:
+    """Rewrite the data root's dataset_description.json (a run whose disk filled after finalising
+    could not): ``path`` is a data root, or a session directory ``ROOT/<study>/sub-*/ses-*``."""
+    from psyop import datacontract as dc
+    from psyop.session.log.layout import write_dataset_description
+
+    root = path.parents[2] if path.name.startswith("ses-") and len(path.parents) > 2 else path
+    if any(p.is_dir() for p in root.glob("*/sub-*/ses-*")):  # simulated or not: decided from the sessions
+        write_dataset_description(root, simulated=True)
 
 
 def describe_integrity(report: dict) -> list[str]:  # type: ignore[type-arg]

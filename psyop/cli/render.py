@@ -82,7 +82,9 @@ def write_png(path: Path, image_uint8: np.ndarray) -> None:
     """8-bit RGB PNG via matplotlib (already a dependency)."""
     import matplotlib.image as mpimg
 
-    mpimg.imsave(path, image_uint8, format="png")
+    from psyop.atomic import write_atomic
+
+    write_atomic(path, lambda handle: mpimg.imsave(handle, image_uint8, format="png"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -159,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
         "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m},
         "crop_px": args.crop, "antialiasing": args.antialiasing, "primitives": [p.name for p in scene.primitives],
     }
-    Path(str(out) + ".json").write_text(json.dumps(sidecar, indent=2) + "\n")
+    from psyop.atomic import write_atomic
+
+    write_atomic(Path(str(out) + ".json"), json.dumps(sidecar, indent=2) + "\n")
     print(f"wrote {out} ({camera.width_px}x{camera.height_px}, {eye} eye, {mode}) and {out}.json")
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 from pathlib import Path
 
 from psyop.errors import UserError
@@ -56,6 +57,7 @@ def main(args: argparse.Namespace) -> int:
     from psyop.schedule import compile_schedule
     from psyop.session.gaze.simulated import SimulatedTrackerConfig
     from psyop.session.runner import SessionOptions, print_outcome, run_session
+    from psyop.session.signals import stop_signals_as_interrupt
 
     if not args.protocol.exists():
         raise UserError("protocol file not found", str(args.protocol))
@@ -69,10 +71,14 @@ def main(args: argparse.Namespace) -> int:
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),
     )
-    outcome = run_session(protocol, compile_schedule, options)
+    # SIGTERM (kill, shutdown) and SIGHUP (terminal closed) end the session as Ctrl-C does
+    with stop_signals_as_interrupt() as received:
+        outcome = run_session(protocol, compile_schedule, options)
+    if received and outcome.status == "interrupted":
+        outcome.message = f"{signal.Signals(received[0]).name}: {outcome.message}"
     print_outcome(outcome)
     _print_integrity_warnings(args.data, protocol.study.name, args.participant, args.session)
-    return outcome.exit_code
+    return 128 + int(received[0]) if received and outcome.status == "interrupted" else outcome.exit_code
 
 
 def _print_integrity_warnings(data_root: Path, study: str, participant: str, session: int) -> None:

@@ -30,5 +30,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None:
         print(text, end="")
     else:
-        args.out.write_text(text)
+        from psyop.atomic import write_atomic
+
+        write_atomic(args.out, text)
     return 0

@@ -38,10 +38,15 @@ def main(args: argparse.Namespace) -> int:
     # --participants applies to every study, also those without a paper size (e.g. protocols/examples)
     results = simulate_dataset(paths, args.data, jobs=max(1, args.jobs), base_seed=args.seed, participants=sizes,
                                default_participants=args.participants or 6)
-    bad = [r for r in results if r[2] not in ("complete", "already complete")]
+    busy = [r for r in results if r[2].startswith("in use by")]  # another process is simulating it
+    bad = [r for r in results if r[2] not in ("complete", "already complete") and r not in busy]
     n_trials = sum(r[3] for r in results)
     print(f"psyop simulate: {len(results)} sessions, {n_trials} new trials in {time.perf_counter() - start:.1f} s "
           f"-> {args.data}", file=sys.stderr)
+    if busy:
+        print(f"  {len(busy)} sessions were being simulated by another process and were left to it: "
+              + ", ".join(f"{s} sub-{p}" for s, p, _, _ in busy[:10]) + (" ..." if len(busy) > 10 else ""),
+              file=sys.stderr)
     for study, participant, status, _ in bad:
         print(f"  {study} sub-{participant}: {status}", file=sys.stderr)
     return 1 if bad else 0

@@ -32,6 +32,7 @@ import pandas as pd
 
 from psyop import __version__
 from psyop import datacontract as dc
+from psyop.atomic import write_atomic
 from psyop.errors import UserError
 from psyop.export.gaze import (FRAME_LOG, RAW_STREAM, display_from_metadata, gaze_on_image_px, image_geometry,
                                session_gaze)
@@ -100,7 +101,7 @@ def export_bids(data_root: Path, out: Path) -> BidsExport:
     exported = [_export_session(path.parent, out) for path in trials_files]
     _write_participants(out, exported, data_root)
     _write_json(out / "dataset_description.json", _description(exported))
-    (out / "README.md").write_text(_readme(exported))
+    write_atomic(out / "README.md", _readme(exported))
     return BidsExport(out, tuple(exported))
 
 
@@ -350,7 +351,7 @@ def _copy_sourcedata(directory: Path, target: Path, meta: Mapping[str, Any]) -> 
     for name in (meta.get(FINALISED_KEY) or {}):
         shutil.copy2(directory / name, target / name)
     if meta.get("protocol_text"):
-        (target / "protocol.yaml").write_text(str(meta["protocol_text"]))
+        write_atomic(target / "protocol.yaml", str(meta["protocol_text"]))
 
 
 def _write_participants(out: Path, exported: Sequence[ExportedSession], data_root: Path) -> None:
@@ -415,17 +416,20 @@ def _tsv_text(table: pd.DataFrame, header: bool) -> str:
 
 
 def _write_tsv(path: Path, table: pd.DataFrame) -> None:
-    path.write_text(_tsv_text(table, header=True))
+    write_atomic(path, _tsv_text(table, header=True))
 
 
 def _write_tsv_gz(path: Path, table: pd.DataFrame) -> None:
     """Headerless (BIDS continuous recordings), gzip with no name or time in its header (reproducible)."""
-    with open(path, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as handle:
-        handle.write(_tsv_text(table, header=False).encode())
+    def write(raw: Any) -> None:
+        with gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as handle:
+            handle.write(_tsv_text(table, header=False).encode())
+
+    write_atomic(path, write)
 
 
 def _write_json(path: Path, content: Mapping[str, Any]) -> None:
-    path.write_text(json.dumps(content, indent=2, default=_json_default) + "\n")
+    write_atomic(path, json.dumps(content, indent=2, default=_json_default) + "\n")
 
 
 def _json_default(value: Any) -> Any:

@@ -1,16 +1,24 @@
 """Where replications run: local processes (default) or a Dask cluster (``--scheduler``).
 
-Both return results in task order, so the power table does not depend on the executor. psyop
-schedules nothing itself: the local path is ``concurrent.futures.ProcessPoolExecutor`` (spawned
-workers, as ``psyop simulate``), the cluster path ``distributed.Client.submit`` /
-``distributed.as_completed``.
+Both return results in task order, so the power table does not depend on the executor, and
+both hand each result to ``on_result`` as soon as it arrives (psyop.power.checkpoint keeps it
+durably). psyop schedules nothing itself: the local path is
+``concurrent.futures.ProcessPoolExecutor`` (spawned workers, as ``psyop simulate``), the
+cluster path ``distributed.Client.submit`` / ``distributed.wait``.
+
+Faults end promptly: Ctrl-C stops the local workers at once (they are terminated, not waited
+for: a replication takes many seconds); a cluster that has lost every worker for
+``lost_after_s``, or its scheduler, is a :class:`~psyop.errors.UserError` with exit code 3
+(:data:`CLUSTER_LOST_EXIT`), never a hang or a traceback.
 """
 
 from __future__ import annotations
 
 import multiprocessing
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Callable, Sequence, TypeVar
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from typing import TypeVar
 
 from psyop.errors import UserError
 
@@ -18,6 +26,8 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 _SPAWN = multiprocessing.get_context("spawn")
+#: exit code of a power run whose cluster was lost (a device-like failure, as a lost tracker in `psyop run`)
+CLUSTER_LOST_EXIT = 3
 
 
 def _bar(total: int, progress: bool, description: str):
@@ -26,26 +36,59 @@ def _bar(total: int, progress: bool, description: str):
     return tqdm(total=total, desc=description, unit="replication", disable=not progress, leave=False)
 
 
-def run_local(function: Callable[[T], R], tasks: Sequence[T], jobs: int, progress: bool = False) -> list[R]:
+def _ignore(index: int, result: object) -> None:
+    return None
+
+
+def run_local(function: Callable[[T], R], tasks: Sequence[T], jobs: int, progress: bool = False,
+              on_result: Callable[[int, R], None] = _ignore) -> list[R]:
     results: list[R | None] = [None] * len(tasks)
     with _bar(len(tasks), progress, "psyop power (local)") as bar:
         if jobs <= 1:
             for i, task in enumerate(tasks):
                 results[i] = function(task)
+                on_result(i, results[i])  # type: ignore[arg-type]
                 bar.update(1)
-        else:
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=_SPAWN) as pool:
-                futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
-                for future in as_completed(futures):
+            return results  # type: ignore[return-value]
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=_SPAWN)
+        try:
+            futures = {pool.submit(function, task): i for i, task in enumerate(tasks)}
+            pending = set(futures)
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
                     results[futures[future]] = future.result()
+                    on_result(futures[future], results[futures[future]])  # type: ignore[arg-type]
                     bar.update(1)
+        except BaseException:
+            _stop_now(pool)
+            raise
+        pool.shutdown(wait=True)
     return results  # type: ignore[return-value]
 
 
+def _stop_now(pool: ProcessPoolExecutor) -> None:
+    """Cancel what is queued and terminate the workers (shutdown alone waits for running tasks)."""
+    processes = list(getattr(pool, "_processes", {}).values())  # no public handle on the workers
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=10)
+
+
 def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, progress: bool = False,
-             timeout_s: float = 30.0) -> list[R]:
+             timeout_s: float = 30.0, on_result: Callable[[int, R], None] = _ignore,
+             lost_after_s: float = 60.0, poll_s: float = 1.0) -> list[R]:
+    """Run ``tasks`` on the Dask scheduler at ``scheduler``.
+
+    No worker for ``lost_after_s`` (all killed, none started), a scheduler that is gone, or
+    tasks the cluster cancelled end in a UserError with exit code 3 naming the scheduler; every
+    result that arrived before was handed to ``on_result``."""
     try:
-        from distributed import Client, as_completed as dask_as_completed
+        from distributed import Client
+        from distributed import wait as dask_wait
     except ImportError:
         raise UserError("--scheduler needs dask.distributed: pip install 'dask[distributed]'", "--scheduler") from None
     try:
@@ -54,14 +97,76 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
         raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {exc}. Start one with "
                         "`dask scheduler` and workers with `dask worker tcp://HOST:8786` (docs/adaptive.md)",
                         "--scheduler") from None
+
+    def lost(why: str) -> UserError:
+        return UserError(f"lost the Dask cluster at {scheduler}: {why}; the finished replications are kept, "
+                         "restart the cluster and rerun the same command to resume", "--scheduler",
+                         exit_code=CLUSTER_LOST_EXIT)
+
+    import logging
+
+    # a lost scheduler makes the client log reconnect tracebacks: the UserError below says it in one line
+    quiet = logging.getLogger("distributed.client")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)
     try:
         futures = [client.submit(function, task, pure=False) for task in tasks]
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[R | None] = [None] * len(tasks)
+        pending = set(futures)
+        no_workers_since: float | None = None
         with _bar(len(tasks), progress, f"psyop power ({scheduler})") as bar:
-            for future in dask_as_completed(futures):
-                results[index[future.key]] = future.result()
-                bar.update(1)
+            while pending:
+                try:
+                    done, pending = dask_wait(list(pending), timeout=poll_s, return_when="FIRST_COMPLETED")
+                    pending = set(pending)
+                except TimeoutError:
+                    done = set()
+                except Exception as exc:  # noqa: BLE001 - the futures of a dead scheduler are cancelled
+                    if "Cancelled" in type(exc).__name__:
+                        raise lost(f"the scheduler connection was lost ({type(exc).__name__})") from None
+                    raise
+                for future in done:
+                    if future.status in ("cancelled", "lost") or future.cancelled():
+                        raise lost("the scheduler cancelled its tasks (it was stopped or restarted)")
+                    try:
+                        results[index[future.key]] = future.result()
+                    except Exception as exc:  # noqa: BLE001 - a cancelled future of a dead scheduler
+                        if type(exc).__name__ in ("CancelledError", "FutureCancelledError"):
+                            raise lost(f"the scheduler cancelled its tasks ({type(exc).__name__})") from None
+                        raise
+                    on_result(index[future.key], results[index[future.key]])  # type: ignore[arg-type]
+                    bar.update(1)
+                if done:
+                    continue
+                if client.status not in ("running", "connecting", "newly-created"):
+                    raise lost(f"the client is {client.status}")
+                n_workers = _n_workers(client, timeout_s)
+                if n_workers is None:
+                    raise lost("the scheduler does not answer")
+                now = time.monotonic()
+                if n_workers:
+                    no_workers_since = None
+                elif no_workers_since is None:
+                    no_workers_since = now
+                elif now - no_workers_since > lost_after_s:
+                    raise lost(f"no worker for {lost_after_s:g} s")
         return results  # type: ignore[return-value]
+    except KeyboardInterrupt:
+        client.cancel(list(pending), force=True) if client.status == "running" else None
+        raise
     finally:
-        client.close()
+        try:
+            client.close(timeout=5)
+        except Exception:  # noqa: BLE001 - a dead scheduler: nothing left to close
+            pass
+        finally:
+            quiet.setLevel(level)
+
+
+def _n_workers(client: object, timeout_s: float) -> int | None:
+    """Workers the scheduler has now; None when the scheduler does not answer within ``timeout_s``."""
+    try:
+        return len(client.nthreads())  # type: ignore[attr-defined]
+    except Exception:  # noqa: BLE001 - OSError, CommClosedError, TimeoutError: the scheduler is gone
+        return None

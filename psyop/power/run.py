@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from psyop.power.checkpoint import Checkpoint
 from psyop.power.executors import run_dask, run_local
 from psyop.power.replicate import ReplicationResult, ReplicationTask, run_replication
 from psyop.power.summary import power_table
@@ -23,6 +24,10 @@ class PowerRun:
     scheduler: str | None = None
     jobs: int = 1
     progress: bool = False
+    #: where finished replications are kept (psyop.power.checkpoint); None: nowhere
+    checkpoint: Path | None = None
+    #: a cluster without any worker for this long is lost (exit 3)
+    lost_after_s: float = 60.0
 
 
 def plan_tasks(run: PowerRun) -> list[ReplicationTask]:
@@ -36,10 +41,32 @@ def plan_tasks(run: PowerRun) -> list[ReplicationTask]:
             for n in run.participants for r in range(run.replications)]
 
 
-def run_power(run: PowerRun) -> tuple[pd.DataFrame, list[ReplicationResult]]:
+def run_power(run: PowerRun, resumed: list[int] | None = None) -> tuple[pd.DataFrame, list[ReplicationResult]]:
+    """The power table and every replication's result, in task order.
+
+    With ``run.checkpoint``, each finished replication is kept there as it arrives and the kept
+    ones are not run again (their count is appended to ``resumed``); an interrupted or failed
+    run loses only the replications that were running."""
     tasks = plan_tasks(run)
-    if run.scheduler:
-        results = run_dask(run_replication, tasks, run.scheduler, run.progress)
+    store = Checkpoint(run.checkpoint) if run.checkpoint is not None else None
+    kept = [store.load(task) if store is not None else None for task in tasks]
+    todo = [i for i, result in enumerate(kept) if result is None]
+    if resumed is not None:
+        resumed.append(len(tasks) - len(todo))
+
+    def keep(j: int, result: ReplicationResult) -> None:
+        if store is not None:
+            store.save(tasks[todo[j]], result)
+
+    remaining = [tasks[i] for i in todo]
+    if not remaining:
+        fresh: list[ReplicationResult] = []
+    elif run.scheduler:
+        fresh = run_dask(run_replication, remaining, run.scheduler, run.progress, on_result=keep,
+                         lost_after_s=run.lost_after_s)
     else:
-        results = run_local(run_replication, tasks, run.jobs, run.progress)
+        fresh = run_local(run_replication, remaining, run.jobs, run.progress, on_result=keep)
+    for i, result in zip(todo, fresh):
+        kept[i] = result
+    results = [r for r in kept if r is not None]
     return power_table(results, run.alpha), results

@@ -18,7 +18,9 @@ from psyop.protocol.trial import TrialSpec
 class StudyInfo(StrictModel):
     """Who and what: ``name`` is the study's folder under data/."""
 
-    name: str = Field(pattern=r"^[a-z][a-z0-9_]*$", description="lower_snake_case; data/<name>/ holds its sessions")
+    # a folder name: bounded like every name psyop makes a folder of (psyop.datacontract.STUDY_PATTERN)
+    name: str = Field(pattern=r"^[a-z][a-z0-9_]*$", max_length=64,
+                      description="lower_snake_case, at most 64 characters; data/<name>/ holds its sessions")
     title: str = Field(min_length=1)
     citation: str | None = None
     description: str | None = None

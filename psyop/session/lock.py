@@ -13,9 +13,18 @@ import fcntl
 import json
 import os
 import platform
+from dataclasses import dataclass
 from pathlib import Path
 
 from psyop.errors import UserError
+
+
+@dataclass
+class SessionInUse(UserError):
+    """Another process holds the session's lock (``holder`` says who): a maintenance command
+    (`psyop recover`, `psyop simulate`) leaves the session to it instead of failing."""
+
+    holder: str = "another process"
 
 
 class SessionLock:
@@ -43,9 +52,9 @@ class SessionLock:
         except BlockingIOError:
             holder = _read_holder(fd)
             os.close(fd)
-            raise UserError(
+            raise SessionInUse(
                 f"session is in use by {holder}; only one psyop process may write a session "
-                "(wait for it to end, or use another --session)", str(self.path.parent)) from None
+                "(wait for it to end, or use another --session)", str(self.path.parent), holder=holder) from None
         except OSError as exc:
             os.close(fd)
             raise UserError(f"cannot lock the session: {exc.strerror or exc}", str(self.path)) from exc
@@ -70,9 +79,9 @@ class SessionLock:
             fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = _read_holder(fd)
-            raise UserError(
+            raise SessionInUse(
                 f"session is in use by {holder}; only one psyop process may write a session "
-                "(wait for it to end, or use another --session)", str(self.path.parent)) from None
+                "(wait for it to end, or use another --session)", str(self.path.parent), holder=holder) from None
         except OSError:
             pass
         finally:

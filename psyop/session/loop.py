@@ -168,6 +168,7 @@ class TrialLoop:
                                enabled=self.config.progress)
         status, message = "complete", f"all {n_total} trials recorded"
         n_stopped = self._record_stops(schedule, recorded, -1)
+        record: dict[str, Any] = {"trial": -1}
         try:
             for row in rows:
                 bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
@@ -184,23 +185,26 @@ class TrialLoop:
                 with _sigint_deferred():  # Ctrl-C never tears a record half-written
                     self.store.append_trial(record, frames.table() if len(frames) else None,
                                             self.raw_gaze(int(record["trial"])))
+                    recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
+                    n_done += 1
                 self.current_trial = -1
                 self._emit("trial_end", record, float(record["trial_end_s"]),
                            duration_s=float(record["trial_end_s"]) - float(record["trial_start_s"]))
-                recorded.add(int(record["trial"]))
                 if self.adaptive is not None:
                     self.adaptive.commit(record)
                     if self.adaptive.state(str(record["condition"])).finished:
                         n_stopped = self._record_stops(schedule, recorded, n_stopped)
                 self.state = TrialState.DONE
-                n_done += 1
                 bar.update(1)
             if n_done < n_total:
                 message = (f"{n_done} of {n_total} trials recorded; the other {n_total - n_done} were not run: "
                            "their conditions met the adaptive stop rule (session.json adaptive_stop)")
         except KeyboardInterrupt:
             status = "interrupted"
-            message = f"interrupted during trial (state {self.state.value}); that trial was discarded, {n_done}/{n_total} recorded"
+            message = (f"interrupted just after trial {record['trial']} was recorded, {n_done}/{n_total} recorded"
+                       if self.state is TrialState.RECORD and int(record["trial"]) in recorded else
+                       f"interrupted during trial (state {self.state.value}); that trial was discarded, "
+                       f"{n_done}/{n_total} recorded")
         except TrackerLost as exc:
             status = "tracker_lost"
             message = f"{exc}; the trial in progress was discarded, {n_done}/{n_total} recorded"

@@ -20,6 +20,7 @@ from typing import Any
 
 import pandas as pd
 
+from psyop.atomic import io_error
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
 from psyop.session.backends import BackendContext, build, is_real_time
@@ -270,11 +271,16 @@ def run_session(
         summary["display_interruptions"] = loop.display_interruptions
     store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
     if options.write_description:
-        write_dataset_description(options.data_root, simulated=options.simulated)
+        try:
+            write_dataset_description(options.data_root, simulated=options.simulated)
+        except OSError as exc:
+            raise io_error(exc, fix=f"the session itself is finalised ({outcome.message}); free space, then run "
+                           f"`psyop recover {options.data_root}` to write the dataset description") from exc
     return outcome
 
 
-def print_outcome(outcome: SessionOutcome, stream: Any = sys.stderr) -> None:
+def print_outcome(outcome: SessionOutcome, stream: Any = None) -> None:
+    stream = sys.stderr if stream is None else stream  # the stderr of now (not of import time)
     lat = outcome.latency
     print(f"psyop run: {outcome.status}: {outcome.message}", file=stream)
     if lat.get("n_frames"):

@@ -62,10 +62,18 @@ def run_job(job: SimulatedJob, data_root: Path) -> tuple[str, str, str, int]:
         return job.study, job.participant, "already complete", 0
     # images are rendered and checked in the first participant's session of each study only:
     # the check is of the pipeline, and an OpenGL context per session would double the run time
+    from psyop.session.lock import SessionInUse
+    from psyop.session.log.store import SessionComplete
+
     options = SessionOptions(participant=job.participant, seed=job.seed, data_root=data_root,
                              progress=False, write_description=False,
                              render="auto" if job.participant == "S01" else "cameras")
-    outcome = run_session(load_protocol(job.protocol), compile_schedule, options)
+    try:
+        outcome = run_session(load_protocol(job.protocol), compile_schedule, options)
+    except SessionInUse as busy:  # another `psyop simulate` (or run) has it: skip it, do the rest
+        return job.study, job.participant, f"in use by {busy.holder}, skipped", 0
+    except SessionComplete:  # another process completed it since the check above
+        return job.study, job.participant, "already complete", 0
     return job.study, job.participant, outcome.status, outcome.n_recorded
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,8 +11,10 @@ from pathlib import Path
 import pandas as pd
 
 from psyop import datacontract as dc
+from psyop.atomic import write_atomic
 from psyop.errors import UserError
 from psyop.finalised import record_finalised, verify_session
+from psyop.input_files import MAX_LOG_TABLE_BYTES, InputFile
 
 
 class LowGazeWarning(UserWarning):
@@ -36,13 +39,54 @@ def is_simulated(data_root: Path) -> bool:
     show "simulated" in figures only when this returns True.
     """
     path = Path(data_root) / dc.DATASET_DESCRIPTION_FILE
-    if not path.exists():
+    if not os.path.lexists(path):
         return False
+    raw = _DESCRIPTION.read_bytes(path)  # a regular file within its limit (never a FIFO or /dev/zero)
     try:
-        description = json.loads(path.read_text())
+        description = json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise UserError(f"not UTF-8 text ({exc.reason})", str(path)) from exc
     except json.JSONDecodeError as exc:
         raise UserError(f"not valid JSON: {exc.msg}", f"{path}:{exc.lineno}:{exc.colno}") from exc
+    if not isinstance(description, dict):
+        raise UserError("not a JSON object", str(path))
     return bool(description.get(dc.SIMULATED_KEY, False))
+
+
+_DESCRIPTION = InputFile(what="dataset_description.json", give="it must be a regular JSON file",
+                         max_bytes=1 << 20, typical="a dataset description is a few hundred bytes",
+                         not_found="no file {path}")
+_TRIALS = InputFile(what="trials.parquet", give="a session's trials.parquet must be a regular file",
+                    max_bytes=MAX_LOG_TABLE_BYTES, typical="a session's trials.parquet is a few MB",
+                    not_found="no file {path}")
+
+
+def _read_trials(files: list[Path]) -> tuple[list[pd.DataFrame], list[bool | None]]:
+    """Each session's trials (regular files within the size limit, each read once: a file or
+    session folder reached twice through a link is a UserError naming both) and what its own
+    ``psyop.simulated`` schema metadata says (None: not recorded)."""
+    import pyarrow.parquet as pq
+
+    seen: dict[tuple[int, int], Path] = {}
+    tables, flags = [], []
+    for path in files:
+        _TRIALS.check(path)
+        for item in (path, path.parent):
+            info = os.stat(item)
+            key = (info.st_dev, info.st_ino)
+            if key in seen:
+                raise UserError(f"{item} is the same as {seen[key]} (one is a link to the other): its trials would "
+                                "be loaded twice; remove the link", str(item))
+            seen[key] = item
+        try:
+            table = pq.read_table(path)
+        except Exception as exc:  # noqa: BLE001 - any unreadable table is the user's data
+            raise UserError(f"trials.parquet cannot be read ({type(exc).__name__}: {str(exc)[:120]}); run "
+                            f"`psyop recover {path.parent}` to rebuild it from the session's log", str(path)) from None
+        value = (table.schema.metadata or {}).get(dc.SIMULATED_METADATA_KEY.encode())
+        flags.append(None if value is None else json.loads(value) is True)
+        tables.append(table.to_pandas())
+    return tables, flags
 
 
 def session_files(data_root: Path, study: str) -> list[Path]:
@@ -81,9 +125,11 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
             f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
             str(Path(data_root)),
         )
-    for f in files:  # before anything is read: a damaged or edited session is refused by name
+    for f in files:  # before anything is read: only regular files within the limit (a FIFO never blocks) ...
+        _TRIALS.check(f)
+    for f in files:  # ... then a damaged or edited session is refused by name
         verify_session(f.parent)
-    frames = [pd.read_parquet(f) for f in files]
+    frames, file_flags = _read_trials(files)
     trials = pd.concat(frames, ignore_index=True)
     if "participant" in trials:
         trials["participant"] = trials["participant"].astype(str)
@@ -107,7 +153,9 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
             f"trial.min_valid_gaze_share (gaze_ok false); {what}"), stacklevel=2)
     if drop_low_gaze:
         trials = trials[~low].reset_index(drop=True)
-    simulated = is_simulated(data_root)
+    # simulated only when the description says so and no session's own trials.parquet says real
+    # (a real session whose session.json was deleted still carries its flag in its finalised table)
+    simulated = is_simulated(data_root) and False not in file_flags
     trials.attrs["n_low_gaze"] = n_low
     trials.attrs["n_low_gaze_dropped"] = n_low if drop_low_gaze else 0
     trials.attrs["n_timeout_dropped"] = n_timeout
@@ -169,19 +217,24 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
     SHA-256 (as finalisation does); ``dataset_description.json`` records ``simulated``. Returns
     the written parquet paths.
     """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     root = Path(data_root)
     root.mkdir(parents=True, exist_ok=True)
     written = []
     for study, table in tables.items():
         for (participant, session), part in table.groupby(["participant", "session"], sort=True):
             path = dc.session_dir(root, study, participant, session) / dc.TRIALS_FILE
-            path.parent.mkdir(parents=True, exist_ok=True)
-            part.reset_index(drop=True).to_parquet(path, index=False)
+            arrow = pa.Table.from_pandas(part.reset_index(drop=True), preserve_index=False)
+            arrow = arrow.replace_schema_metadata({**(arrow.schema.metadata or {}),  # as a finalised session's
+                                                   dc.SIMULATED_METADATA_KEY.encode(): json.dumps(simulated).encode()})
+            write_atomic(path, lambda handle, arrow=arrow: pq.write_table(arrow, handle))
             meta = {"study": study, "participant": str(participant), "session": int(session),
                     dc.SIMULATED_KEY: bool(simulated), "status": "complete", "written_by": "write_dataset"}
             record_finalised(meta, path.parent, [path])
-            (path.parent / dc.SESSION_METADATA_FILE).write_text(json.dumps(meta, indent=2) + "\n")
+            write_atomic(path.parent / dc.SESSION_METADATA_FILE, json.dumps(meta, indent=2) + "\n")
             written.append(path)
-    (root / dc.DATASET_DESCRIPTION_FILE).write_text(
-        json.dumps(dc.dataset_description(simulated=simulated, studies=sorted(tables)), indent=2) + "\n")
+    write_atomic(root / dc.DATASET_DESCRIPTION_FILE,
+                 json.dumps(dc.dataset_description(simulated=simulated, studies=sorted(tables)), indent=2) + "\n")
     return written

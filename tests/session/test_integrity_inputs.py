@@ -119,8 +119,9 @@ def test_participant_ids_are_matched_whole(protocol: Path, tmp_path: Path, capsy
 
 def test_long_study_name_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = _protocol_with(tmp_path, r"^  name: detection", "  name: " + "s" * 5000)
-    err = _fails_cleanly(capsys, _run(path, tmp_path / "d"), "study name", "5000 characters")
-    assert len(err) < 600
+    # refused by protocol validation, located (issue 22: `psyop validate` accepted it), before any session
+    err = _fails_cleanly(capsys, _run(path, tmp_path / "d"), "p.yaml:5:9", "study.name", "at most 64 characters")
+    assert len(err) < 600 and not (tmp_path / "d").exists()
 
 
 def test_huge_session_number_leaves_no_directory(protocol: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -2,16 +2,16 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import re
-from collections.abc import Iterator
+import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 from psyop import datacontract as dc
+from psyop.atomic import TEMP_SUFFIX, exclusive_temp, stale_temp_files, write_atomic  # noqa: F401 - re-exported
 from psyop.errors import UserError
 
 _ID_PATTERN = dc.PARTICIPANT_PATTERN
@@ -76,6 +76,9 @@ class SessionPaths:
         for path in self.log_dir.iterdir():
             match = _SEGMENT_NAME.fullmatch(path.name)
             if match and match.group(1) == kind:
+                if not stat.S_ISREG(os.stat(path).st_mode):  # a FIFO would block, /dev/zero never ends
+                    raise UserError("a log segment is not a regular file (a FIFO, a device or a folder); restore "
+                                    "the segment or move it away", str(path))
                 found.append((int(match.group(2)), path))
         return [p for _, p in sorted(found)]
 
@@ -107,43 +110,8 @@ def _short(text: str, limit: int = 40) -> str:
 
 
 def write_json_atomic(path: Path, content: dict[str, Any]) -> None:
-    """Write JSON to ``path`` via a temporary file + rename, fsynced: never half-written."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(content, indent=2, sort_keys=True, default=str) + "\n"
-    with exclusive_temp(path) as (handle, tmp):
-        handle.write(text.encode())
-        handle.flush()
-        os.fsync(handle.fileno())
-        os.replace(tmp, path)
-
-
-TEMP_SUFFIX = ".tmp"
-
-
-@contextlib.contextmanager
-def exclusive_temp(path: Path) -> Iterator[tuple[BinaryIO, Path]]:
-    """A new temporary file next to ``path`` (O_EXCL | O_NOFOLLOW: never a planted file or
-    symlink), removed again if the body does not rename it into place."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}{TEMP_SUFFIX}")
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
-    try:
-        fd = os.open(tmp, flags, 0o644)
-    except FileExistsError:  # a stale temp file (or a planted link) of a dead process with our pid
-        tmp.unlink()
-        fd = os.open(tmp, flags, 0o644)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            yield handle, tmp
-    finally:
-        if os.path.lexists(tmp):
-            tmp.unlink()
-
-
-def stale_temp_files(directory: Path) -> list[Path]:
-    """Temporary files left by an interrupted finalisation (``.NAME.PID.tmp``)."""
-    if not directory.is_dir():
-        return []
-    return sorted(p for p in directory.iterdir() if p.name.startswith(".") and p.name.endswith(TEMP_SUFFIX))
+    """Write JSON to ``path`` atomically (:func:`psyop.atomic.write_atomic`): never half-written."""
+    write_atomic(path, json.dumps(content, indent=2, sort_keys=True, default=str) + "\n")
 
 
 def write_dataset_description(data_root: Path, *, simulated: bool, studies: list[str] | None = None) -> Path:
@@ -152,26 +120,27 @@ def write_dataset_description(data_root: Path, *, simulated: bool, studies: list
     ``simulated`` is true only when every session in the dataset is simulated: a real
     session added to a simulated dataset turns the flag false (and is listed).
     """
+    from psyop.session.inventory import session_record
+
     data_root = Path(data_root)
     path = data_root / dc.DATASET_DESCRIPTION_FILE
-    sessions = dc.session_metadata_files(data_root)
+    sessions = sorted(p for p in data_root.glob("*/sub-*/ses-*") if p.is_dir())
     n_sim = n_real = 0
     found_studies: set[str] = set(studies or [])
-    for meta_path in sessions:
-        try:
-            if not meta_path.is_file() or meta_path.stat().st_size > (64 << 20):
-                continue  # a FIFO or device would block or never end
-            meta = json.loads(meta_path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    for directory in sessions:
+        try:  # session.json, else the finalised trials.parquet or the log's header (psyop.session.inventory)
+            record = session_record(directory, data_root)
+        except UserError:  # a hostile or damaged file (`psyop sessions` names it): never called simulated
+            n_real += 1
             continue
-        if not isinstance(meta, dict):
+        if record is None:
             continue
-        found_studies.add(str(meta.get("study", meta_path.parents[2].name)))
-        if meta.get(dc.SIMULATED_KEY):
+        found_studies.add(directory.parents[1].name)
+        if record.simulated is True:
             n_sim += 1
         else:
             n_real += 1
-    if not sessions:
+    if n_sim + n_real == 0:
         all_simulated = simulated
     else:
         all_simulated = n_real == 0

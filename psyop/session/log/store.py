@@ -19,14 +19,20 @@ from psyop.datacontract import MIN_VALID_GAZE_SHARE, low_gaze_mask
 from psyop.errors import UserError
 from psyop.finalised import record_finalised
 from psyop.session.lock import SessionLock
-from psyop.session.log.layout import SessionPaths, exclusive_temp, stale_temp_files, write_json_atomic
+from psyop.atomic import io_error, write_atomic
+from psyop.session.log.layout import SessionPaths, stale_temp_files, write_json_atomic
 from psyop.session.log.schema import FRAME_SCHEMA, GAZE_SCHEMA
+from psyop.session.signals import interrupts_deferred
 from psyop.session.log.stream import DurableStreamWriter, is_legacy_ipc, read_segment, read_stream_tolerant
 
 #: session.json keys that must match when a session is resumed (also written into the log).
 _IDENTITY_KEYS = ("protocol_sha256", "seed", "study", "participant", "session", "simulated", "clock")
 #: options recorded per run (a resume may change them, e.g. another tracker host).
 _RUN_OPTION_KEYS = ("clock", "tracker", "responses", "display_mode", "pose", "render", "protocol_file_sha256")
+
+
+class SessionComplete(UserError):
+    """A run was asked to resume a complete session (`psyop simulate` counts it as done)."""
 
 
 class SessionStore:
@@ -76,7 +82,7 @@ class SessionStore:
                         str(meta_path),
                     )
             if existing.get("status") == "complete":
-                raise UserError("session is already complete; use another --session", str(meta_path))
+                raise SessionComplete("session is already complete; use another --session", str(meta_path))
             completed = set(completed_trials(self.paths))
             self.metadata = {**metadata, **existing}
             self.metadata["runs"] = list(existing.get("runs", []))
@@ -101,7 +107,9 @@ class SessionStore:
             self._frames = DurableStreamWriter(self.paths.frame_segment(self.run_index), FRAME_SCHEMA, fsync=self._fsync)
             self._gaze = DurableStreamWriter(self.paths.gaze_segment(self.run_index), GAZE_SCHEMA, fsync=self._fsync)
         except OSError as exc:
-            raise UserError(f"cannot write the session: {exc.strerror or exc}", str(self.paths.directory)) from exc
+            raise io_error(exc, exc.filename or self.paths.directory,
+                           "cannot start the session; nothing recorded is lost: free space (or fix the disk), then "
+                           "rerun the same command") from exc
         return completed
 
     def append_trial(self, row: Mapping[str, Any], frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
@@ -153,8 +161,16 @@ class SessionStore:
         ) from exc
 
     def update_metadata(self, **fields: Any) -> None:
+        """Add ``fields`` to session.json. A write error (disk full) closes the store and is a
+        UserError: every recorded trial is in the log, and rerunning the command resumes."""
         self.metadata.update(fields)
-        write_json_atomic(self.paths.metadata, self.metadata)
+        try:
+            write_json_atomic(self.paths.metadata, self.metadata)
+        except OSError as exc:
+            self.close()
+            raise io_error(exc, self.paths.metadata,
+                           "every recorded trial is safely in the log; free space (or fix the disk), then rerun "
+                           "the same command to resume the session") from exc
 
     def close(self) -> None:
         try:
@@ -168,15 +184,26 @@ class SessionStore:
             self.lock.release()
 
     def finalise(self, *, status: str, summary: Mapping[str, Any] | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
-        """Close the streams and write parquet + session.json (see :func:`finalise_session`)."""
-        for writer in (self._trials, self._frames, self._gaze):
-            if writer is not None:
-                writer.close()
+        """Close the streams and write parquet + session.json (see :func:`finalise_session`).
+
+        A write error (the end record of a segment, session.json) is a UserError: the log
+        holds every recorded trial, and `psyop recover` (or rerunning) finishes the session."""
+        fix = ("every recorded trial is safely in the log; free space (or fix the disk), then run "
+               f"`psyop recover {self.paths.directory}` (or rerun the same command to resume)")
         try:
+            for writer in (self._trials, self._frames, self._gaze):
+                if writer is not None:
+                    try:
+                        writer.close()
+                    except OSError as exc:
+                        raise io_error(exc, writer.path, fix) from exc
             if self.metadata.get("runs"):
                 self.metadata["runs"][-1]["ended"] = _now()
                 self.metadata["runs"][-1]["status"] = status
-            write_json_atomic(self.paths.metadata, self.metadata)
+            try:
+                write_json_atomic(self.paths.metadata, self.metadata)
+            except OSError as exc:
+                raise io_error(exc, self.paths.metadata, fix) from exc
             return finalise_session(self.paths, status=status, summary=summary,
                                     expected_trials=expected_trial_count(self.metadata), lock=self.lock)
         finally:
@@ -369,8 +396,9 @@ def finalise_session(
     held = SessionLock(paths.lock_file) if lock is None else lock
     held.acquire("finalise")
     try:
-        return _finalise_locked(paths, status=status, summary=summary, expected_trials=expected_trials,
-                                adaptive_stop=adaptive_stop)
+        with interrupts_deferred():  # a Ctrl-C (or SIGTERM) here waits: the files are written together
+            return _finalise_locked(paths, status=status, summary=summary, expected_trials=expected_trials,
+                                    adaptive_stop=adaptive_stop)
     finally:
         if own_lock:
             held.release()
@@ -400,10 +428,10 @@ def _finalise_locked(
     try:
         for stale in stale_temp_files(paths.directory):
             stale.unlink()
-        _write_parquet_atomic(trials, paths.trials_parquet)
-        _write_parquet_atomic(frames, paths.frames_parquet)
+        _write_parquet_atomic(frames, paths.frames_parquet)  # frames and gaze first: trials.parquet never stands alone
         _write_parquet_atomic(found.gaze if found.gaze is not None else GAZE_SCHEMA.empty_table().to_pandas(),
                               paths.gaze_parquet)
+        _write_parquet_atomic(trials, paths.trials_parquet, {"simulated": meta.get("simulated")})
         record_finalised(meta, paths.directory, [paths.trials_parquet, paths.frames_parquet, paths.gaze_parquet])
         meta["status"] = status
         meta["n_trials_recorded"] = int(len(trials))
@@ -418,9 +446,9 @@ def _finalise_locked(
             meta["summary"] = dict(summary)
         write_json_atomic(paths.metadata, meta)
     except OSError as exc:
-        raise UserError(
-            f"cannot finalise the session ({exc.strerror or exc}); the log is intact: fix the disk, "
-            "then run `psyop recover` on this directory", str(paths.directory)) from exc
+        raise io_error(exc, exc.filename or paths.directory,
+                       f"cannot finalise the session; the log is intact: free space (or fix the disk), then run "
+                       f"`psyop recover {paths.directory}`") from exc
     return trials, frames
 
 
@@ -442,13 +470,14 @@ def find_sessions(root: Path) -> Sequence[SessionPaths]:
     return list(found.values())
 
 
-def _write_parquet_atomic(frame: pd.DataFrame, path: Path) -> None:
+def _write_parquet_atomic(frame: pd.DataFrame, path: Path, identity: Mapping[str, Any] | None = None) -> None:
+    """``frame`` as parquet at ``path`` (psyop.atomic.write_atomic); ``identity`` (e.g. ``simulated``)
+    goes into the file's schema metadata as ``psyop.KEY`` (JSON), readable without session.json."""
     table = pa.Table.from_pandas(frame, preserve_index=False)
-    with exclusive_temp(path) as (handle, tmp):
-        pq.write_table(table, handle)
-        handle.flush()
-        os.fsync(handle.fileno())
-        os.replace(tmp, path)
+    if identity:
+        extra = {f"psyop.{key}".encode(): json.dumps(value).encode() for key, value in identity.items()}
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}), **extra})
+    write_atomic(path, lambda handle: pq.write_table(table, handle))
 
 
 def _now() -> str:

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import pyarrow as pa
 
+from psyop.atomic import fsync_dir
+
 MAGIC = b"PSYR"
 VERSION = 1
 KIND_SCHEMA, KIND_BATCH, KIND_END = 1, 2, 3
@@ -61,9 +63,13 @@ class DurableStreamWriter:
         self._schema_crc = zlib.crc32(schema_bytes)
         self._n_batches = 0
         record = _header(KIND_SCHEMA, 0, schema_bytes, self._schema_crc) + schema_bytes
-        self._write_all(record + record)  # two copies: one damaged copy loses nothing
-        self._sync()
-        _fsync_dir(self.path.parent)
+        try:
+            self._write_all(record + record)  # two copies: one damaged copy loses nothing
+            self._sync()
+            fsync_dir(self.path.parent)  # the new segment's name is durable (an error is an error)
+        except OSError as exc:
+            self._file.close()
+            raise OSError(exc.errno, exc.strerror, exc.filename or str(self.path)) from exc
 
     def append(self, table: pa.Table | pa.RecordBatch, key: int = NO_KEY) -> None:
         """Write ``table`` (cast to the segment schema) as one record; durable on return.
@@ -315,17 +321,3 @@ def _read_legacy_ipc(path: Path, timeout_s: float = 120.0) -> tuple[pa.Table | N
     if schema is None:
         return None, True
     return pa.Table.from_batches(batches, schema=schema), not clean
-
-
-def _fsync_dir(directory: Path) -> None:
-    """Make a newly created directory entry durable (POSIX); ignore where unsupported."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
