@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from psyop.cli import main
+from psyop.optics.angles import polar_direction
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.stimulus import build_scene, interval_mode
@@ -36,11 +37,12 @@ def test_detection_scene_follows_the_trial_row():
     for disc in (back, front):  # 2 deg seen from the eye's centre of rotation
         rel = np.array(disc.centre_m) - CENTRE
         assert 2 * math.degrees(math.atan(disc.half_u_m[0] / np.linalg.norm(rel))) == pytest.approx(2.0)
-    # the fixation target circles at 16 deg, 90 deg/s, from the row's start and direction
+    # the fixation target circles at a constant 16 deg, 90 deg/s of polar angle, from the row's start and direction
     target = np.array(by_name["fixation_outer"].centre_m) - CENTRE
-    phi = math.radians(row["fixation_start_deg"] + row["fixation_direction"] * 90.0 * 0.25)
-    expected = np.array([math.tan(math.radians(16 * math.cos(phi))), math.tan(math.radians(16 * math.sin(phi))), -1])
+    phi_deg = row["fixation_start_deg"] + row["fixation_direction"] * 90.0 * 0.25
+    expected = polar_direction(16.0, phi_deg)
     assert _angle_deg(target, expected) < 1e-9
+    assert _angle_deg(target, [0.0, 0.0, -1.0]) == pytest.approx(16.0, abs=1e-9)
     assert interval_mode(protocol, row, 1) in ("conventional", "ocular")
     assert {interval_mode(protocol, row, 1), interval_mode(protocol, row, 2)} == {"conventional", "ocular"}
 
