@@ -29,3 +29,12 @@ def test_bench_export_quick_validates_the_export(tmp_path: Path) -> None:
     assert "5 simulated sessions" in report and "sessions with at least one: 5 of 5" in report
     assert "exit 0, 0 errors" in report or "not installed" in report
     assert "| ratio verify / read |" in report
+
+
+def test_bench_adaptive_calibration_quick_writes_its_coverage_table(tmp_path: Path) -> None:
+    from benchmarks import bench_adaptive_calibration
+
+    report = bench_adaptive_calibration.run(tmp_path, quick=True)
+    assert "| procedure and estimate | trials | observers | coverage | bias (D) | SD / error |" in report
+    for name in ("QUEST+ (posterior)", "reversal mean +- SE (before)", "posterior (now logged)"):
+        assert name in report

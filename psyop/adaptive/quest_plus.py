@@ -198,12 +198,20 @@ class QuestPlus:
         with self._blas.limit(limits=1, user_api="blas"):
             return self._state(history)
 
-    def _state(self, history: Sequence[Observation]) -> ProcedureState:
-        post = self.posterior(history)
+    def threshold_estimate(self, history: Sequence[Observation]) -> tuple[float, float]:
+        """Posterior mean and SD of the threshold after ``history`` (no next-level search)."""
+        with self._blas.limit(limits=1, user_api="blas"):
+            return self._threshold_moments(self.posterior(history))
+
+    def _threshold_moments(self, post: np.ndarray) -> tuple[float, float]:
         marginal = post.sum(axis=(1, 2))
         thresholds = np.asarray(self.spec.threshold)
         mean = float(marginal @ thresholds)
-        sd = float(math.sqrt(max(float(marginal @ (thresholds - mean) ** 2), 0.0)))
+        return mean, float(math.sqrt(max(float(marginal @ (thresholds - mean) ** 2), 0.0)))
+
+    def _state(self, history: Sequence[Observation]) -> ProcedureState:
+        post = self.posterior(history)
+        mean, sd = self._threshold_moments(post)
         if not history and self.spec.first_level is not None:
             next_level = float(self.spec.first_level)
         else:

@@ -42,7 +42,9 @@ def _simulate(spec, runs: int, trials: int, seed: int) -> list[float]:
         threshold, width, lapse = rng.uniform(0.2, 1.0), rng.uniform(0.1, 0.4), rng.uniform(0.0, 0.05)
         history: list[Observation] = []
         for _ in range(trials):
-            level = procedure.state(history).next_level
+            # a staircase's level is its walk (Staircase.next_level, what state() reports) without the estimate
+            level = procedure.next_level(history) if hasattr(procedure, "next_level") else \
+                procedure.state(history).next_level
             levels.append(level)
             history.append(Observation(level, _observer(rng, level, threshold, width, lapse)))
     return levels
