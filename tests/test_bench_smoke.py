@@ -38,3 +38,11 @@ def test_bench_adaptive_calibration_quick_writes_its_coverage_table(tmp_path: Pa
     assert "| procedure and estimate | trials | observers | coverage | bias (D) | SD / error |" in report
     for name in ("QUEST+ (posterior)", "reversal mean +- SE (before)", "posterior (now logged)"):
         assert name in report
+
+
+def test_bench_statistics_lapse_coverage_quick_writes_its_table(tmp_path: Path) -> None:
+    from benchmarks import bench_statistics_lapse_coverage
+
+    report = bench_statistics_lapse_coverage.run(tmp_path, quick=True)
+    assert "| trials per level | coverage, all | lapse < 0.01 | lapse >= 0.03 | usable fits | wall s |" in report
+    assert "| 15 |" in report and "| 1000 |" in report
