@@ -44,5 +44,5 @@ def test_bench_statistics_lapse_coverage_quick_writes_its_table(tmp_path: Path) 
     from benchmarks import bench_statistics_lapse_coverage
 
     report = bench_statistics_lapse_coverage.run(tmp_path, quick=True)
-    assert "| trials per level | coverage, all | lapse < 0.01 | lapse >= 0.03 | usable fits | wall s |" in report
+    assert "| trials per level | coverage, all | lapse < 0.01 | lapse >= 0.03 | sd < 0.2 D | sd >= 0.3 D |" in report
     assert "| 15 |" in report and "| 1000 |" in report
