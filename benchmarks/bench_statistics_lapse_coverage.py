@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import binomtest
+from scipy.stats import binom, binomtest
 
 from psyop.statistics.psychometric import FitOptions, fit_many
 from psyop.statistics.simulate import pc_2afc, true_t75
@@ -27,6 +27,11 @@ def _rate(hits: np.ndarray) -> str:
     k, n = int(hits.sum()), hits.size
     ci = binomtest(k, n).proportion_ci()
     return f"{k / n:.3f} [{ci.low:.3f}, {ci.high:.3f}]"
+
+
+def _loglik(data: np.ndarray, threshold_D: float, sigma_D: float, lapse: float) -> float:
+    """Binomial log-likelihood of a 2AFC dataset (level, correct, total) under the cumulative normal."""
+    return float(binom.logpmf(data[:, 1], data[:, 2], pc_2afc(data[:, 0], threshold_D, sigma_D, lapse)).sum())
 
 
 def run(out_dir: Path, quick: bool = False) -> str:
@@ -39,6 +44,7 @@ def run(out_dir: Path, quick: bool = False) -> str:
              "| trials per level | coverage, all | lapse < 0.01 | lapse >= 0.03 | sd < 0.2 D | sd >= 0.3 D | usable fits "
              "| wall s |",
              "|---|---|---|---|---|---|---|---|"]
+    notes: list[str] = []
     for n_per in counts:
         thr = rng.uniform(0.2, 1.0, n_obs)
         sd = rng.uniform(0.1, 0.4, n_obs)
@@ -57,6 +63,16 @@ def run(out_dir: Path, quick: bool = False) -> str:
         steep, shallow = sd < 0.2, sd >= 0.3
         lines.append(f"| {n_per} | {_rate(cover)} | {_rate(cover[low])} | {_rate(cover[high])} | {_rate(cover[steep])} | "
                      f"{_rate(cover[shallow])} | {sum(f.usable for f in fits)} | {wall:.1f} |")
+        misses = [i for i in range(n_obs) if not cover[i] and np.isfinite(fits[i].sigma_D)]
+        if misses:
+            ratio = np.array([fits[i].sigma_D / sd[i] for i in misses])
+            lapse_ratio = np.array([fits[i].lapse / lapse[i] for i in misses])
+            gain = np.array([_loglik(data[i], thr[i], sd[i], lapse[i])
+                             - _loglik(data[i], fits[i].location_D, fits[i].sigma_D, fits[i].lapse) for i in misses])
+            notes.append(f"- {n_per} trials per level, {len(misses)} misses: fitted / true sd median {np.median(ratio):.2f}, "
+                         f"fitted / true lapse median {np.median(lapse_ratio):.2f}; the true parameters' log-likelihood "
+                         f"exceeds the fit's in {int((gain > 0).sum())} of them (median by {np.median(gain):.1f} nats)")
+    lines += ["", "Misses (fit location_D, sigma_D and lapse against the generator's):", *notes]
     report = "\n".join(lines) + "\n"
     (out_dir / "bench_statistics_lapse_coverage.md").write_text(report)
     return report
