@@ -164,3 +164,15 @@ def test_polar_centre_in_a_protocol_is_the_same_direction_as_its_fick_angles():
     assert float(angle_between_deg(normal, direction)) == pytest.approx(0.0, abs=1e-7) or \
         float(angle_between_deg(normal, -direction)) == pytest.approx(0.0, abs=1e-7)
     assert dataclasses.is_dataclass(back)
+
+
+def test_the_former_tangent_space_path_left_the_nominal_eccentricity():
+    """docs/optics.md: the former path, direction (tan(e cos p), tan(e sin p), -1), put a nominal 40 deg at
+    37.27 deg 45 deg around the circle (and 16 deg at 15.80 deg): the rendered-frame test above would fail on it."""
+    def old(e_deg: float, p_deg: float) -> float:
+        p = math.radians(p_deg)
+        d = np.array([math.tan(math.radians(e_deg * math.cos(p))), math.tan(math.radians(e_deg * math.sin(p))), -1.0])
+        return float(angle_between_deg(d, AHEAD))
+
+    assert old(40.0, 45.0) == pytest.approx(37.27, abs=0.005)
+    assert old(16.0, 45.0) == pytest.approx(15.80, abs=0.005)
