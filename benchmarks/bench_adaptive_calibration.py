@@ -11,6 +11,9 @@ Procedures: QUEST+ over 0-2 D (default grids, 0.02 D), and a 1-up-3-down stairca
 0.2/0.1/0.05 D, range 0-2 D, whose estimate is (a) before this benchmark: the mean of its reversal
 levels after the first two +- their standard error; (b) now (psyop.adaptive.staircase, "estimate"):
 the posterior mean and SD of the threshold given its trials, on QUEST+'s default grid over [min, max].
+
+Second table: a ``target_sd`` stop on the logged SD against fixed-length runs of the same procedure at
+equal RMS error (the trials a calibrated stop saves).
 """
 
 from __future__ import annotations
@@ -100,6 +103,25 @@ def coverage(means: np.ndarray, sds: np.ndarray, truth: np.ndarray) -> tuple[flo
     return float(inside.mean()) if defined.any() else math.nan, int(defined.sum()), float(np.mean(sds[defined])) / rms
 
 
+TARGET_SD_D = 0.1
+
+
+def stop_against_fixed(means: np.ndarray, sds: np.ndarray, truth: np.ndarray, checkpoints: np.ndarray) -> str:
+    """A ``target_sd`` stop (each observer stops at the first checkpoint whose logged SD <= TARGET_SD_D, else at
+    the last) against fixed-length runs: the fewest fixed trials whose RMS error is at most the stop's."""
+    reached = sds <= TARGET_SD_D
+    first = np.where(reached.any(axis=1), reached.argmax(axis=1), checkpoints.size - 1)
+    trials = checkpoints[first]
+    errors = means[np.arange(means.shape[0]), first] - truth
+    rms_stop = float(np.sqrt(np.mean(errors ** 2)))
+    rms_fixed = np.sqrt(np.mean((means - truth[:, None]) ** 2, axis=0))
+    equal = np.flatnonzero(rms_fixed <= rms_stop)
+    fixed = f"{int(checkpoints[equal[0]])}" if equal.size else f"not reached by {int(checkpoints[-1])}"
+    saved = f"{int(checkpoints[equal[0]]) - trials.mean():+.1f}" if equal.size else "n/a"
+    censored = int((~reached.any(axis=1)).sum())
+    return (f"| {trials.mean():.1f} | {censored} | {rms_stop:.3f} | {fixed} | {saved} |")
+
+
 def run(out_dir: Path, quick: bool = False) -> str:
     n_obs = 60 if quick else 500
     seed = 1919
@@ -136,6 +158,19 @@ def run(out_dir: Path, quick: bool = False) -> str:
             cov, defined, ratio = coverage(m[:, j], s[:, j], truth[:, j])
             bias = float(np.nanmean(m[:, j][np.isfinite(s[:, j])] - truth[:, j][np.isfinite(s[:, j])]))
             rows.append(f"| {name} | {n} | {defined} | {cov:.3f} | {bias:+.3f} | {ratio:.2f} |")
+    # the target_sd stop on the logged (calibrated) SD against fixed-length runs at equal RMS error
+    stops = np.arange(10, max_trials + 1, 10 if quick else 5)
+    stop_rows = []
+    qp_m2, qp_s2 = posterior_stats(q, qp_levels, qp_correct, stops)
+    st_m2 = np.empty((n_obs, stops.size))
+    st_s2 = np.empty_like(st_m2)
+    for i in range(n_obs):
+        history = [Observation(float(x), bool(c)) for x, c in zip(st_levels[i], st_correct[i])]
+        for j, n in enumerate(stops):
+            state = stair.state(history[:n])
+            st_m2[i, j], st_s2[i, j] = state.estimate_mean, state.estimate_sd
+    for name, m, s_ in (("QUEST+", qp_m2, qp_s2), ("1-up-3-down (posterior SD)", st_m2, st_s2)):
+        stop_rows.append(f"| {name} " + stop_against_fixed(m, s_, obs["threshold"], stops))
     elapsed = time.perf_counter() - start
     lines = [
         "## Adaptive estimates: coverage of the true threshold by estimate +- 1.96 SD (bench_adaptive_calibration)",
@@ -148,6 +183,15 @@ def run(out_dir: Path, quick: bool = False) -> str:
         "| procedure and estimate | trials | observers | coverage | bias (D) | SD / error |",
         "|---|---|---|---|---|---|",
         *rows,
+        "",
+        f"Stopping at target_sd {TARGET_SD_D:g} D on the logged SD (checked every {int(stops[1] - stops[0])} trials, "
+        f"at most {max_trials}) against fixed-length runs of the same procedure: the fewest fixed trials whose RMS",
+        "error across observers is at most the stop's (equal error), and the trials saved per observer.",
+        "",
+        "| procedure | mean trials with the stop | never reached the SD | RMS error (D) | fixed trials at equal error | "
+        "saved per observer |",
+        "|---|---|---|---|---|---|",
+        *stop_rows,
         "",
         f"_{elapsed:.1f} s_",
     ]

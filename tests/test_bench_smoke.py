@@ -38,6 +38,7 @@ def test_bench_adaptive_calibration_quick_writes_its_coverage_table(tmp_path: Pa
     assert "| procedure and estimate | trials | observers | coverage | bias (D) | SD / error |" in report
     for name in ("QUEST+ (posterior)", "reversal mean +- SE (before)", "posterior (now logged)"):
         assert name in report
+    assert "| procedure | mean trials with the stop | never reached the SD | RMS error (D) |" in report
 
 
 def test_bench_statistics_lapse_coverage_quick_writes_its_table(tmp_path: Path) -> None:
