@@ -98,6 +98,27 @@ def test_a_disc_behind_an_opaque_plane_fails_with_a_clear_line(tmp_path, capsys)
     assert img.ndim == 3 and img.shape[0] > 2 * 100  # two conditions, rows of 100 px frames
 
 
+def test_contact_sheet_columns_are_labelled_and_a_progress_line_counts_frames(ctx, tmp_path, capsys):
+    from psyop.audit import AuditSettings, run_audit
+    from psyop.audit.report import column_labels
+    from psyop.protocol import load_protocol
+
+    path = tmp_path / "hidden.yaml"
+    path.write_text(HIDDEN_DISC)
+    calls = []
+    report = run_audit(load_protocol(path), AuditSettings(scale=0.0625, gazes=2, samples_per_axis=8), ctx=ctx,
+                       progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(i, len(report.records)) for i in range(1, len(report.records) + 1)]
+    columns = column_labels(report)
+    assert columns == [(phase, gaze) for phase in dict.fromkeys(r.frame.phase for r in sorted(
+        report.records, key=lambda r: r.frame.phase_index)) for gaze in (0, 1)]
+    rc = main(["audit", str(path), "--scale", "0.0625", "--gazes", "2", "--samples", "8",
+               "--sheet", str(tmp_path / "s.png")])
+    assert rc == 1
+    err = capsys.readouterr().err
+    assert f"psyop audit: frame {len(report.records)}/{len(report.records)} (100 %)" in err
+
+
 IDENTICAL = (HIDDEN_DISC.replace("width_deg: 30", "width_deg: 2").replace("height_deg: 30", "height_deg: 2")
              .replace("depth: {D: 3}", "centre_deg: [6, 0]\n    depth: {D: 3}")
              .replace("reference: {mode: conventional}", "reference: {mode: ocular, set: {level_D: 0}}"))

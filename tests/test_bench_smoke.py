@@ -39,3 +39,21 @@ def test_bench_lsl_quick_measures_both_paths_and_the_raw_stream(tmp_path: Path) 
                 "LSL / Pupil median age: **", "| raw stream total |", "Raw stream total / Pupil per-message work: **"):
         assert row in report
     assert "nan" not in report
+
+
+def test_bench_adaptive_calibration_quick_writes_its_coverage_table(tmp_path: Path) -> None:
+    from benchmarks import bench_adaptive_calibration
+
+    report = bench_adaptive_calibration.run(tmp_path, quick=True)
+    assert "| procedure and estimate | trials | observers | coverage | bias (D) | SD / error |" in report
+    for name in ("QUEST+ (posterior)", "reversal mean +- SE (before)", "posterior (now logged)"):
+        assert name in report
+    assert "| procedure | mean trials with the stop | never reached the SD | RMS error (D) |" in report
+
+
+def test_bench_statistics_lapse_coverage_quick_writes_its_table(tmp_path: Path) -> None:
+    from benchmarks import bench_statistics_lapse_coverage
+
+    report = bench_statistics_lapse_coverage.run(tmp_path, quick=True)
+    assert "| trials per level | coverage, all | lapse < 0.01 | lapse >= 0.03 | sd < 0.2 D | sd >= 0.3 D |" in report
+    assert "| 15 |" in report and "| 1000 |" in report

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from fractions import Fraction
 from typing import Sequence
 
 import numpy as np
@@ -48,6 +49,21 @@ def _grid(values: Sequence[float], name: str, positive: bool = False) -> tuple[f
     return tuple(float(v) for v in array)
 
 
+def exact_linspace(low: float, high: float, count: int) -> tuple[float, ...]:
+    """``count`` levels from ``low`` to ``high`` in equal steps, each the float nearest the exact decimal
+    value ``low + k (high - low) / (count - 1)`` (0.3, not ``np.linspace``'s 0.30000000000000004).
+
+    Examples
+    --------
+    >>> exact_linspace(0.0, 1.5, 76)[15]
+    0.3
+    """
+    if count < 2:
+        raise ValueError(f"need at least two grid points, got {count}")
+    a, b = Fraction(repr(float(low))), Fraction(repr(float(high)))
+    return tuple(float(a + (b - a) * k / (count - 1)) for k in range(count))
+
+
 @dataclass(frozen=True)
 class QuestPlusSpec:
     """Grids of a QUEST+ run (uniform prior over the parameter grid).
@@ -71,6 +87,12 @@ class QuestPlusSpec:
             raise ValueError(f"guess rate must be in [0, 1), got {self.guess}")
         if not all(0 <= l < 1 - self.guess for l in self.lapse):
             raise ValueError(f"lapse grid values must be in [0, {1 - self.guess})")
+        if self.first_level is not None:
+            # the protocol's start, a declared level too: the grid point it stands for, else its exact decimal
+            nearest = min(self.stimulus, key=lambda v: abs(v - float(self.first_level)))
+            first = nearest if abs(nearest - float(self.first_level)) <= _ON_GRID_TOL else \
+                float(Fraction(repr(float(self.first_level))))
+            object.__setattr__(self, "first_level", first)
 
     @classmethod
     def default(cls, min_level: float, max_level: float, stop: StopRule | None = None,
@@ -83,9 +105,14 @@ class QuestPlusSpec:
             raise ValueError(f"need max > min, got min {min_level}, max {max_level}")
         span = max_level - min_level
         widths = np.geomspace(0.025 * span, 0.4 * span, 13) if width is None else width
-        return cls(stimulus=tuple(np.linspace(min_level, max_level, stimulus_count)),
-                   threshold=tuple(np.linspace(min_level, max_level, threshold_count)),
+        return cls(stimulus=exact_linspace(min_level, max_level, stimulus_count),
+                   threshold=exact_linspace(min_level, max_level, threshold_count),
                    width=tuple(widths), stop=stop or StopRule(max_trials=64), first_level=first_level)
+
+    def on_grid(self, level: float) -> bool:
+        """True when ``level`` is (as a float, exactly) one of the declared levels: the stimulus grid, or the
+        first level (the protocol's ``start``, which need not be a grid point)."""
+        return float(level) in set(self.stimulus) or (self.first_level is not None and float(level) == self.first_level)
 
 
 class QuestPlus:
@@ -171,12 +198,20 @@ class QuestPlus:
         with self._blas.limit(limits=1, user_api="blas"):
             return self._state(history)
 
-    def _state(self, history: Sequence[Observation]) -> ProcedureState:
-        post = self.posterior(history)
+    def threshold_estimate(self, history: Sequence[Observation]) -> tuple[float, float]:
+        """Posterior mean and SD of the threshold after ``history`` (no next-level search)."""
+        with self._blas.limit(limits=1, user_api="blas"):
+            return self._threshold_moments(self.posterior(history))
+
+    def _threshold_moments(self, post: np.ndarray) -> tuple[float, float]:
         marginal = post.sum(axis=(1, 2))
         thresholds = np.asarray(self.spec.threshold)
         mean = float(marginal @ thresholds)
-        sd = float(math.sqrt(max(float(marginal @ (thresholds - mean) ** 2), 0.0)))
+        return mean, float(math.sqrt(max(float(marginal @ (thresholds - mean) ** 2), 0.0)))
+
+    def _state(self, history: Sequence[Observation]) -> ProcedureState:
+        post = self.posterior(history)
+        mean, sd = self._threshold_moments(post)
         if not history and self.spec.first_level is not None:
             next_level = float(self.spec.first_level)
         else:

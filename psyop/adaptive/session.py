@@ -40,7 +40,7 @@ import pandas as pd
 from psyop.adaptive.history import Observation
 from psyop.adaptive.procedure import Procedure, make_procedure
 from psyop.adaptive.quest_plus import QuestPlusSpec
-from psyop.adaptive.staircase import StaircaseSpec
+from psyop.adaptive.staircase import StaircaseSpec, exact_decimal
 from psyop.adaptive.state import ProcedureState
 from psyop.adaptive.stopping import StopRule
 
@@ -86,8 +86,10 @@ def adaptive_plan(protocol: "Protocol") -> AdaptivePlan | None:
                 float(a.min), float(a.max), stop=stop, stimulus_count=points, threshold_count=points,
                 first_level=float(a.start))
         elif a.procedure == "staircase":
-            span = float(a.max) - float(a.min)
-            steps = tuple(float(s) for s in a.step_sizes) if a.step_sizes else (span / 10, span / 20, span / 40)
+            # the default steps from the exact decimal range (0.1 to 1.3 is 1.2, not 1.2000000000000002)
+            span = exact_decimal(float(a.max)) - exact_decimal(float(a.min))
+            steps = (tuple(float(s) for s in a.step_sizes) if a.step_sizes
+                     else tuple(float(span / n) for n in (10, 20, 40)))
             rule = a.rule or "1u3d"
             up, down = _RULES.get(rule, (1, 1))
             spec = StaircaseSpec(start=float(a.start), min=float(a.min), max=float(a.max),

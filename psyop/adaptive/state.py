@@ -13,9 +13,10 @@ class ProcedureState:
     ``next_level`` is where the next trial goes (even when ``finished``; a caller that keeps
     going gets a sensible level). ``estimate_mean``/``estimate_sd`` are the running threshold
     estimate: for QUEST+ the posterior mean and SD of the threshold; for a staircase the mean of
-    the counted reversal levels and its standard error (``inf`` until two reversals exist,
-    ``estimate_defined`` False). ``step`` and ``reversals`` are the staircase's step size and
-    reversal count (``nan`` and 0 for QUEST+)."""
+    the posterior mean and SD of the threshold given its trials (psyop.adaptive.staircase, calibrated
+    by benchmarks/bench_adaptive_calibration.py). ``estimate_defined`` is False for an infinite SD.
+    ``step``, ``reversals`` and ``reversal_mean`` are the staircase's step size, reversal count and the
+    mean of its counted reversal levels (``nan``, 0 and ``nan`` for QUEST+; ``nan`` before a reversal)."""
 
     procedure: str
     trials: int
@@ -26,6 +27,7 @@ class ProcedureState:
     estimate_sd: float
     step: float = math.nan
     reversals: int = 0
+    reversal_mean: float = math.nan
 
     @property
     def estimate_defined(self) -> bool:

@@ -10,7 +10,6 @@ grid (straight ahead, then a ring at :data:`GRID_ECCENTRICITY_DEG`).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -18,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from psyop.rendering.builders import direction_from_angles
+from psyop.stimulus.placement import polar_centre_deg
 
 GRID_ECCENTRICITY_DEG = 10.0
 GRID_FIXATION_DISTANCE_M = 1.0
@@ -62,11 +62,12 @@ def representative_rows(schedule: Any) -> list[dict[str, Any]]:
 
 
 def grid_gaze_deg(index: int, count: int) -> tuple[float, float]:
-    """Gaze ``index`` of ``count`` on the grid: straight ahead, then evenly round a ring."""
+    """Gaze ``index`` of ``count`` on the grid as Fick angles: straight ahead, then evenly round a ring of
+    constant eccentricity ``GRID_ECCENTRICITY_DEG`` (docs/optics.md, "Angles")."""
     if index == 0:
         return (0.0, 0.0)
-    phi = 2.0 * math.pi * (index - 1) / max(1, count - 1)
-    return (GRID_ECCENTRICITY_DEG * math.cos(phi), GRID_ECCENTRICITY_DEG * math.sin(phi))
+    meridian_deg = 360.0 * (index - 1) / max(1, count - 1)
+    return polar_centre_deg(GRID_ECCENTRICITY_DEG, meridian_deg)
 
 
 def fixation_point(scene: Any, fixation_prefix: str | None, origin_m: np.ndarray, gaze_index: int,

@@ -10,6 +10,7 @@ a few px^2 in ocular frames at non-zero levels.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -49,9 +50,20 @@ def format_table(report: AuditReport) -> str:
     return "\n".join(lines)
 
 
+def _column_of(rec: Any) -> tuple[str, int]:
+    return (rec.frame.phase, rec.frame.gaze_index)
+
+
+def column_labels(report: AuditReport) -> list[tuple[str, int]]:
+    """The contact sheet's columns in order: (phase name, gaze index), by the phase's place in the trial."""
+    order = sorted({(rec.frame.phase_index, rec.frame.phase, rec.frame.gaze_index) for rec in report.records})
+    return [(phase, gaze) for _, phase, gaze in order]
+
+
 def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> None:
-    """A PNG of every audited frame: one row per (condition, eye), columns phase x gaze,
-    with the row's condition and eye written at its left."""
+    """A PNG of every audited frame: one row per (condition, eye), one column per (phase, gaze),
+    with the row's condition and eye written at its left and each column's phase and gaze above it
+    (:func:`column_labels`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -63,12 +75,15 @@ def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> Non
     if not rows:
         raise ValueError("no frames to put on a contact sheet")
     h, w = report.records[0].image.shape[:2]
-    n_cols = max(len(r) for r in rows.values())
-    label_px = 260
-    sheet = np.ones((len(rows) * (h + gap_px) + gap_px, label_px + n_cols * (w + gap_px) + gap_px, 3), np.float32)
+    columns = column_labels(report)
+    n_cols = max(len(columns), max(len(r) for r in rows.values()))
+    label_px, header_px = 260, 36
+    sheet = np.ones((header_px + len(rows) * (h + gap_px) + gap_px, label_px + n_cols * (w + gap_px) + gap_px, 3),
+                    np.float32)
     for r, recs in enumerate(rows.values()):
-        for c, rec in enumerate(sorted(recs, key=lambda x: (x.frame.phase_index, x.frame.gaze_index))):
-            y, x = gap_px + r * (h + gap_px), label_px + gap_px + c * (w + gap_px)
+        for rec in recs:
+            c = columns.index(_column_of(rec))
+            y, x = header_px + gap_px + r * (h + gap_px), label_px + gap_px + c * (w + gap_px)
             sheet[y:y + h, x:x + w] = np.clip(rec.image, 0.0, 1.0)
     dpi = 100
     fig = plt.figure(figsize=(sheet.shape[1] / dpi, sheet.shape[0] / dpi), dpi=dpi)
@@ -76,7 +91,10 @@ def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> Non
     ax.imshow(sheet, interpolation="nearest")
     ax.set_axis_off()
     for r, (condition, eye) in enumerate(rows):
-        ax.text(4, gap_px + r * (h + gap_px) + h / 2, f"{condition}\n{eye} eye", fontsize=7, va="center")
+        ax.text(4, header_px + gap_px + r * (h + gap_px) + h / 2, f"{condition}\n{eye} eye", fontsize=7, va="center")
+    for c, (phase, gaze) in enumerate(columns):
+        ax.text(label_px + gap_px + c * (w + gap_px) + w / 2, header_px / 2, f"{phase}\ngaze {gaze}", fontsize=7,
+                ha="center", va="center")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     from psyop.atomic import write_atomic

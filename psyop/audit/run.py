@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -121,8 +121,11 @@ def iter_frames(plan: Any, settings: AuditSettings) -> Iterator[tuple[AuditFrame
                                      float(phase.duration_s) * k / settings.gazes), phase
 
 
-def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir: Path | None = None) -> AuditReport:
-    """Render and check every audited frame of ``protocol`` (see the module docstring)."""
+def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir: Path | None = None,
+              progress: Callable[[int, int], None] | None = None) -> AuditReport:
+    """Render and check every audited frame of ``protocol`` (see the module docstring).
+
+    ``progress(done, total)``: called after each rendered frame (``psyop audit`` prints a progress line)."""
     from psyop.rendering import RenderSettings
     from psyop.rendering.renderer import create_headless_context
     from psyop.session.plan import compile_plan
@@ -139,7 +142,8 @@ def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir:
     measurer = FrameMeasurer(ctx, RenderSettings(samples_per_axis=settings.samples_per_axis, reuse_tolerance_px=None))
     records: list[FrameRecord] = []
     try:
-        for frame, phase in iter_frames(plan, settings):
+        frames = list(iter_frames(plan, settings))
+        for done, (frame, phase) in enumerate(frames, 1):
             centre = plan.rig.centre_m(frame.eye)
             scene = build_scene(protocol, frame.row, frame.time_s, centre, interval=frame.interval, base_dir=base_dir,
                                 show=phase.primitives)
@@ -158,6 +162,8 @@ def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir:
                                        hidden_by(scene.primitives, camera.centre_of_projection_m), image,
                                        tuple(float(c) for c in camera.centre_of_projection_m),
                                        _px_per_m_shift(scene, camera, display)))
+            if progress is not None:
+                progress(done, len(frames))
     finally:
         measurer.release()
         if owns_ctx:

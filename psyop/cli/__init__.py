@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import re
 import sys
 from collections.abc import Sequence
 
@@ -43,8 +44,29 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+#: A value list that starts with a minus sign (``-12,0``): argparse would take it for an option.
+_NEGATIVE_LIST = re.compile(r"^-\d[\d.]*(,[-+]?[\d.]+)+$")
+
+
+def attach_negative_lists(argv: Sequence[str]) -> list[str]:
+    """``--gaze-deg -12,0`` -> ``--gaze-deg=-12,0``, so a comma list of numbers may start with a minus.
+
+    Examples
+    --------
+    >>> attach_negative_lists(["render", "p.yaml", "--gaze-deg", "-12,0", "--out", "x.png"])
+    ['render', 'p.yaml', '--gaze-deg=-12,0', '--out', 'x.png']
+    """
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and _NEGATIVE_LIST.match(arg):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = attach_negative_lists(sys.argv[1:] if argv is None else argv)
     first = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(first if first in command_names() else None)
     args = parser.parse_args(argv)

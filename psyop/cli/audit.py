@@ -4,9 +4,22 @@ gazes) at a reduced scale and check what the participant sees; exit 1 when a che
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
+from psyop.cli.render import DEFAULT_IPD_MM
 from psyop.errors import UserError
+
+
+def progress_line(done: int, total: int) -> str:
+    """The progress line ``psyop audit`` rewrites on stderr.
+
+    Examples
+    --------
+    >>> progress_line(3, 12)
+    'psyop audit: frame 3/12 (25 %)'
+    """
+    return f"psyop audit: frame {done}/{total} ({100 * done // max(1, total)} %)"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,8 +37,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--samples", type=int, default=16,
                         help="rays per axis in edge pixels (S x S; the session uses 32; default 16)")
     parser.add_argument("--seed", type=int, default=0, help="schedule seed that picks each condition's trial")
-    parser.add_argument("--ipd-mm", type=float, default=64.0,
-                        help="interpupillary distance when the protocol takes it from the tracker")
+    parser.add_argument("--ipd-mm", type=float, default=DEFAULT_IPD_MM,
+                        help=f"interpupillary distance when the protocol takes it from the tracker "
+                             f"(default {DEFAULT_IPD_MM:g}, the sessions' default)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
     parser.add_argument("--sheet", default=None, metavar="PATH.png", help="write a contact sheet of the checked frames")
     parser.set_defaults(func=run)
 
@@ -39,7 +54,10 @@ def run(args: argparse.Namespace) -> int:
     settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=args.ipd_mm / 1000.0, seed=args.seed)
     path = Path(args.protocol)
     protocol = load_protocol(path)
-    report = run_audit(protocol, settings, base_dir=path.parent)
+    def show(done: int, total: int) -> None:
+        print("\r" + progress_line(done, total), end="\n" if done == total else "", file=sys.stderr, flush=True)
+
+    report = run_audit(protocol, settings, base_dir=path.parent, progress=None if args.no_progress else show)
     print(format_table(report))
     if args.sheet is not None:
         write_contact_sheet(report, Path(args.sheet))

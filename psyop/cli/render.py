@@ -17,6 +17,10 @@ from psyop.errors import UserError
 if TYPE_CHECKING:
     import numpy as np
 
+#: The sessions' default interpupillary distance (psyop.session.plan.DEFAULT_IPD_M, checked by
+#: tests/test_cli.py; not imported here so that ``psyop --help`` stays light).
+DEFAULT_IPD_MM = 63.0
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -29,18 +33,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--phase", choices=("interval", "response"), default="interval",
                         help="interval: the stimulus of --interval; response: what the participant sees while "
                              "answering (the prompt, else the question, on a head-fixed panel; conventional mode)")
-    parser.add_argument("--gaze-deg", default="0,0", metavar="AZ,EL",
-                        help="gaze direction from the rendered eye's centre of rotation, degrees "
-                             "(azimuth right-positive, elevation up-positive)")
-    parser.add_argument("--fixation-m", type=float, default=1.0, help="distance of the fixated point (m)")
+    gaze = parser.add_mutually_exclusive_group()
+    gaze.add_argument("--gaze-deg", default=None, metavar="AZ,EL",
+                      help="gaze direction from the rendered eye's centre of rotation as Fick angles, degrees "
+                           "(azimuth right-positive about the vertical axis, then elevation up-positive; "
+                           "docs/optics.md, 'Angles'); |AZ|, |EL| < 89; default 0,0")
+    gaze.add_argument("--gaze-polar-deg", default=None, metavar="ECC,MERIDIAN",
+                      help="the gaze direction in the polar form instead: eccentricity from straight ahead (< 89) "
+                           "and meridian (0 right, 90 up)")
+    parser.add_argument("--fixation-m", type=float, default=1.0,
+                        help="distance of the fixated point (m, more than 0.02)")
     parser.add_argument("--eye", choices=("right", "left"), default=None,
                         help="eye to render (default: the protocol's eye; right for stereo)")
     parser.add_argument("--mode", choices=("conventional", "ocular", "reversed"), default=None,
                         help="rendering mode (default: the interval's mode from the schedule)")
     parser.add_argument("--time-s", type=float, default=0.0, help="time into the interval (moving targets)")
     parser.add_argument("--seed", type=int, default=0, help="schedule seed")
-    parser.add_argument("--ipd-mm", type=float, default=64.0, help="interpupillary distance when the protocol "
-                                                                   "takes it from the tracker")
+    parser.add_argument("--ipd-mm", type=float, default=DEFAULT_IPD_MM,
+                        help=f"interpupillary distance when the protocol takes it from the tracker "
+                             f"(default {DEFAULT_IPD_MM:g}, the sessions' default)")
     parser.add_argument("--antialiasing", choices=("adaptive", "none", "msaa", "supersample"), default="adaptive")
     parser.add_argument("--crop", default=None, metavar="X0,Y0,W,H",
                         help="render only this pixel window of the full frame (same rays as the full frame)")
@@ -48,13 +59,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _parse_gaze(text: str) -> tuple[float, float]:
+def _parse_pair(option: str, text: str, names: str) -> tuple[float, float]:
     try:
-        az, el = (float(x) for x in text.split(","))
+        a, b = (float(x) for x in text.split(","))
     except ValueError:
-        raise UserError(f"--gaze-deg must be AZ,EL in degrees, got {text!r}") from None
-    if not (math.isfinite(az) and math.isfinite(el) and abs(az) < 89 and abs(el) < 89):
-        raise UserError(f"--gaze-deg must be finite and within +-89 deg, got {text!r}")
+        raise UserError(f"{option} must be {names} in degrees, got {text!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise UserError(f"{option} must be finite, got {text!r}")
+    return a, b
+
+
+def parse_gaze(gaze_deg: str | None, gaze_polar_deg: str | None) -> tuple[float, float]:
+    """Fick (azimuth, elevation) of ``--gaze-deg AZ,EL`` or ``--gaze-polar-deg ECC,MERIDIAN``."""
+    from psyop.stimulus.placement import polar_centre_deg
+
+    if gaze_polar_deg is not None:
+        ecc, meridian = _parse_pair("--gaze-polar-deg", gaze_polar_deg, "ECC,MERIDIAN")
+        if not 0.0 <= ecc < 89.0:
+            raise UserError(f"--gaze-polar-deg eccentricity must be in [0, 89) deg, got {gaze_polar_deg!r}")
+        return polar_centre_deg(ecc, meridian)
+    text = "0,0" if gaze_deg is None else gaze_deg
+    az, el = _parse_pair("--gaze-deg", text, "AZ,EL")
+    if not (abs(az) < 89 and abs(el) < 89):
+        raise UserError(f"--gaze-deg must be within +-89 deg, got {text!r}")
     return az, el
 
 
@@ -107,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--interval must be in 1..{n_intervals}, got {args.interval}")
     if not (math.isfinite(args.fixation_m) and args.fixation_m > 0.02):
         raise UserError(f"--fixation-m must be more than 0.02 m, got {args.fixation_m}")
-    az, el = _parse_gaze(args.gaze_deg)
+    az, el = parse_gaze(args.gaze_deg, args.gaze_polar_deg)
     row = schedule.iloc[args.trial].to_dict()
     eye = args.eye or (protocol.eyes if protocol.eyes in ("right", "left") else "right")
     response_text = None

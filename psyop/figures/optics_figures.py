@@ -22,6 +22,7 @@ from psyop.optics.parallax import (
     minimum_angle_of_resolution_deg,
     ocular_parallax_exact_rad,
 )
+from psyop.optics.pixels import pixel_angles
 
 ARCMIN_PER_RAD = 180.0 / np.pi * 60.0
 
@@ -46,7 +47,12 @@ def plot_parallax_vs_eccentricity(
                 parallax = ocular_parallax_exact_rad(ecc, rel, 0.0, nc_m) * ARCMIN_PER_RAD
                 ax.plot(ecc, parallax, color=colour, label=f"{rel:g} D separation")
             ax.plot(ecc, minimum_angle_of_resolution_deg(ecc) * 60.0, "r--", label="MAR (Guenter et al.)")
-            ax.axhline(display.arcmin_per_px, color="b", ls="--", label=f"{display_label(display.name)} pixel ({display.arcmin_per_px:.2f}')")
+            # the paper's pixel size is the row average; the pixel on the display's axis is larger
+            # (psyop.optics.pixels; docs/optics.md, "Pixel angles")
+            ax.axhline(display.arcmin_per_px, color="b", ls="--",
+                       label=f"{display_label(display.name)} pixel, row average ({display.arcmin_per_px:.2f}')")
+            centre_px = pixel_angles(display).centre.width_arcmin
+            ax.axhline(centre_px, color="b", ls=":", label=f"{display_label(display.name)} centre pixel ({centre_px:.2f}')")
             ax.set_xlim(0.0, e_max)
             ax.set_xlabel("eccentricity (deg)")
             ax.set_ylabel("ocular parallax (arcmin)")

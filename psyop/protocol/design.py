@@ -74,9 +74,10 @@ class AdaptiveLevel(StrictModel):
             raise ValueError("target is the weighted staircase's p(correct); give rule: weighted or drop target")
         if self.min_trials is not None and self.target_sd is None:
             raise ValueError("min_trials delays the target_sd stop; give target_sd or drop min_trials")
-        prior_sd = (float(self.max) - float(self.min)) / 12 ** 0.5  # QUEST+'s uniform prior on [min, max]
-        if self.procedure == "quest_plus" and self.target_sd is not None and self.target_sd >= prior_sd:
-            raise ValueError(f"target_sd {self.target_sd:g} is not below the SD of QUEST+'s uniform prior over "
+        # the uniform prior on [min, max] of both procedures' estimate (a staircase's is QUEST+'s posterior)
+        prior_sd = (float(self.max) - float(self.min)) / 12 ** 0.5
+        if self.target_sd is not None and self.target_sd >= prior_sd:
+            raise ValueError(f"target_sd {self.target_sd:g} is not below the SD of the estimate's uniform prior over "
                              f"[min, max] ({prior_sd:.3g}): it would stop before learning anything; give a smaller one")
         return self
 

@@ -1,13 +1,15 @@
 """Scene primitives of a protocol: what is drawn, in degrees of visual angle and explicit depths.
 
 Every primitive has an ``id`` (phases refer to it in ``show:``) and a ``kind`` (the
-discriminator). Sizes are visual angles seen from the eye's centre of rotation, so a disc of
-``size_deg: 2`` subtends 2 deg at any depth. Depths carry their unit: ``{D: 2}`` (dioptres,
+discriminator). Positions and sizes are visual angles seen from the scene origin (the eye's
+centre of rotation, or the head origin in stereo): centres as Fick angles or eccentricity and
+meridian, sizes as docs/optics.md ("Angles", "Sizes") defines them, at any depth. Depths carry their unit: ``{D: 2}`` (dioptres,
 0 = optical infinity), ``{m: 0.5}``, or a reference to factor columns of the trial schedule.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Annotated, Literal, Union
 
@@ -112,7 +114,32 @@ Surface = Annotated[Union[SolidSurface, WhiteNoiseSurface, PinkNoiseSurface, Ima
 
 # ---- primitives -----------------------------------------------------------------------------
 
-Point2Deg = tuple[Number, Number]
+#: A direction as Fick angles [azimuth_deg, elevation_deg] seen from the scene origin (docs/optics.md, "Angles"):
+#: azimuth right-positive about the vertical axis, then elevation up-positive.
+Point2Deg = tuple[Annotated[Number, Field(gt=-90, lt=90)], Annotated[Number, Field(gt=-90, lt=90)]]
+
+
+class PolarPoint(StrictModel):
+    """A direction in the polar form (docs/optics.md, "Angles"): ``eccentricity_deg`` from straight
+    ahead, ``meridian_deg`` counter-clockwise from the right (0 right, 90 up, as the viewer sees it)."""
+
+    eccentricity_deg: Number = Field(ge=0, lt=90)
+    meridian_deg: Number = Field(ge=-360, le=360)
+
+
+#: Where a primitive's centre lies: Fick angles ``[az, el]`` or ``{eccentricity_deg, meridian_deg}``.
+Centre = Union[Point2Deg, PolarPoint]
+def centre_eccentricity_deg(centre: "Centre") -> float:
+    """Angle of a centre from straight ahead: ``acos(cos az cos el)`` for Fick angles (docs/optics.md)."""
+    if isinstance(centre, PolarPoint):
+        return float(centre.eccentricity_deg)
+    az, el = (math.radians(float(c)) for c in centre)
+    return math.degrees(math.acos(max(-1.0, min(1.0, math.cos(az) * math.cos(el)))))
+
+
+#: How a primitive is oriented (docs/optics.md, "Sizes"): in a frontoparallel plane (the paper's stimuli),
+#: or facing the scene origin, so that it subtends its size in every direction.
+Facing = Literal["frontoparallel", "eye"]
 
 
 class _Primitive(StrictModel):
@@ -120,24 +147,30 @@ class _Primitive(StrictModel):
 
 
 class Disc(_Primitive):
-    """A frontoparallel disc subtending ``size_deg`` (diameter) at its depth."""
+    """A disc of ``size_deg`` (diameter) at its depth (docs/optics.md, "Sizes"): frontoparallel, its
+    diameter across the meridian through its centre subtends ``size_deg``; ``facing: eye``, it
+    subtends ``size_deg`` in every direction."""
 
     kind: Literal["disc"]
     size_deg: Number = Field(gt=0, lt=180)
     depth: Depth
     surface: Surface
-    centre_deg: Point2Deg = (0.0, 0.0)
+    centre_deg: Centre = (0.0, 0.0)
+    facing: Facing = "frontoparallel"
 
 
 class Quad(_Primitive):
-    """A frontoparallel rectangle ``width_deg`` x ``height_deg`` at its depth."""
+    """A rectangle ``width_deg`` x ``height_deg`` at its depth, sized like a disc (docs/optics.md,
+    "Sizes"): frontoparallel (axes along x and y) or ``facing: eye`` (axes along the centre's local
+    right and up)."""
 
     kind: Literal["quad"]
     width_deg: Number = Field(gt=0, lt=180)
     height_deg: Number = Field(gt=0, lt=180)
     depth: Depth
     surface: Surface
-    centre_deg: Point2Deg = (0.0, 0.0)
+    centre_deg: Centre = (0.0, 0.0)
+    facing: Facing = "frontoparallel"
 
 
 class SinusoidalBorder(_Primitive):
@@ -203,7 +236,9 @@ class TargetField(_Primitive):
 
 
 class CirclePath(StrictModel):
-    """Circle around the view centre at ``eccentricity_deg`` with angular speed ``speed_deg_s``.
+    """A circle of constant ``eccentricity_deg`` around the target's ``centre_deg``, whose polar angle
+    turns at the constant ``speed_deg_s`` (docs/optics.md, "Angles"; the target's own angular speed
+    is ``speed_deg_s * sin(eccentricity_deg)``: 24.81 deg/s for 16 deg and 90 deg/s).
     ``start: random`` / ``direction: random`` are drawn per trial and written to the schedule."""
 
     kind: Literal["circle"]
@@ -214,14 +249,16 @@ class CirclePath(StrictModel):
 
 
 class FixationTarget(_Primitive):
-    """A small two-colour fixation target; static at ``centre_deg`` or moving along ``path``."""
+    """A small two-colour fixation target (a disc, sized as :class:`Disc`); static at ``centre_deg``
+    or moving along ``path`` around it."""
 
     kind: Literal["fixation_target"]
     size_deg: Number = Field(gt=0, le=10)
     depth: Depth
     rgb: Rgb = (1.0, 0.0, 0.0)
     centre_rgb: Rgb = (1.0, 1.0, 1.0)
-    centre_deg: Point2Deg = (0.0, 0.0)
+    centre_deg: Centre = (0.0, 0.0)
+    facing: Facing = "frontoparallel"
     path: CirclePath | None = None
 
 

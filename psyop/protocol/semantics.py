@@ -20,7 +20,7 @@ from psyop.protocol.model import Protocol
 from psyop.protocol.primitive_count import primitive_count
 from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, PinkNoiseSurface,
-                                  ReachTarget, Room, SinusoidalBorder, TargetField)
+                                  ReachTarget, Room, SinusoidalBorder, TargetField, centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
 
 #: Random sequential placement of equal discs jams at about 54.7 % area coverage. Measured for
@@ -175,8 +175,11 @@ class _Checker:
             if isinstance(item, ReachTarget) and isinstance(item.distance_fraction, FactorRef):
                 self.factor_exists(item.distance_fraction.factor, path + ("distance_fraction", "factor"), numeric=True)
             if isinstance(item, FixationTarget) and item.path is not None:
-                if item.path.eccentricity_deg + item.size_deg / 2 >= 90:
-                    self.add(path + ("path", "eccentricity_deg"), "the fixation path leaves the visual field")
+                centre_ecc = centre_eccentricity_deg(item.centre_deg)
+                if centre_ecc + item.path.eccentricity_deg + item.size_deg / 2 >= 90:
+                    self.add(path + ("path", "eccentricity_deg"),
+                             f"the fixation path reaches {centre_ecc + item.path.eccentricity_deg:g} deg from straight "
+                             "ahead and leaves the forward field; make centre_deg plus eccentricity_deg less than 90")
         for index, phase in enumerate(self.p.trial.phases):
             if isinstance(phase, (Interval, Blank)) and isinstance(phase.show, list):
                 for j, name in enumerate(phase.show):

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from psyop.optics.angles import angle_between_deg, fick_direction, local_axes, polar_to_fick_deg
 from psyop.rendering.scene import (
     Colour,
     GridMaterial,
@@ -32,13 +33,109 @@ ROOM_EDGE_SAMPLES_PER_AXIS = 4
 
 
 def direction_from_angles(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
-    """Unit direction in head space; azimuth right-positive, elevation up-positive, 0/0 = -z.
+    """Unit direction in head space of Fick angles (:func:`psyop.optics.angles.fick_direction`):
+    azimuth right-positive about the vertical axis, then elevation up-positive; 0/0 = -z.
 
-    Defined through tangents (x = tan az, y = tan el, z = -1) so that a grid of angles maps to
-    a grid on a frontoparallel plane, as in the paper's stimulus layout.
+    Examples
+    --------
+    >>> direction_from_angles(0.0, 0.0).tolist()
+    [0.0, 0.0, -1.0]
     """
-    d = np.array([math.tan(math.radians(azimuth_deg)), math.tan(math.radians(elevation_deg)), -1.0])
-    return d / np.linalg.norm(d)
+    return fick_direction(float(azimuth_deg), float(elevation_deg))
+
+
+#: How a primitive is oriented (docs/optics.md, "Sizes"): ``frontoparallel`` (in a plane of
+#: constant z, the paper's stimuli) or ``eye`` (perpendicular to the line from the scene origin
+#: to its centre: it subtends its size in every direction).
+FACINGS = ("frontoparallel", "eye")
+
+
+def place_centre_m(direction: Sequence[float], distance_m: float, origin_m: Sequence[float] = ORIGIN,
+                   facing: str = "frontoparallel") -> np.ndarray:
+    """Where a primitive's centre lies: along ``direction`` from ``origin_m``, on the plane
+    ``distance_m`` ahead of the origin (frontoparallel: its depth is the plane's) or at
+    ``distance_m`` from the origin (eye-facing: its depth is its centre's distance).
+
+    Examples
+    --------
+    >>> place_centre_m(direction_from_angles(45.0, 0.0), 1.0).round(12).tolist()
+    [1.0, 0.0, -1.0]
+    >>> place_centre_m(direction_from_angles(45.0, 0.0), 1.0, facing="eye").round(6).tolist()
+    [0.707107, 0.0, -0.707107]
+    """
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    o = np.asarray(origin_m, dtype=np.float64)
+    if facing == "eye":
+        return o + d * distance_m
+    if facing != "frontoparallel":
+        raise ValueError(f"facing must be one of {FACINGS}, got {facing!r}")
+    if not d[2] < 0.0:
+        raise ValueError(f"a frontoparallel primitive must lie ahead of the origin (direction {d.tolist()})")
+    return o + d * (distance_m / -d[2])
+
+
+def placed_primitive(
+    shape: Shape,
+    distance_m: float,
+    width_deg: float,
+    height_deg: float,
+    material: Material,
+    azimuth_deg: float = 0.0,
+    elevation_deg: float = 0.0,
+    origin_m: Sequence[float] = ORIGIN,
+    facing: str = "frontoparallel",
+    border: SineBorder | None = None,
+    name: str = "",
+) -> Primitive:
+    """A disc or rectangle centred on the direction of Fick angles (``azimuth_deg``,
+    ``elevation_deg``) seen from ``origin_m``, sized in degrees (docs/optics.md, "Sizes").
+
+    Both orientations have the linear size that subtends the angles face-on at the centre's
+    distance R from the origin: half-extents ``R tan(width_deg / 2)`` and ``R tan(height_deg / 2)``.
+
+    * ``facing="eye"``: the primitive is perpendicular to the line of sight to its centre, its
+      axes along the centre's local right and up (:func:`psyop.optics.angles.local_axes`); a disc
+      subtends ``width_deg`` in every direction. ``distance_m`` is R.
+    * ``facing="frontoparallel"``: in the plane ``distance_m`` ahead, axes along x and y. A disc's
+      diameter perpendicular to the meridian through its centre subtends ``width_deg`` exactly;
+      its diameter along that meridian is foreshortened (:func:`frontoparallel_radial_subtense_deg`).
+
+    ``distance_m`` = inf (0 D): the primitive at optical infinity (``at_infinity``, the same
+    angles from every origin).
+    """
+    if math.isinf(distance_m) and distance_m > 0:
+        unit = placed_primitive(shape, 1.0, width_deg, height_deg, material, azimuth_deg, elevation_deg, ORIGIN,
+                                facing, border, name)
+        return dataclasses.replace(unit, at_infinity=True)
+    forward, right, up = local_axes(azimuth_deg, elevation_deg)
+    centre = place_centre_m(forward, distance_m, origin_m, facing)
+    reach_m = float(np.linalg.norm(centre - np.asarray(origin_m, dtype=np.float64)))
+    hw = reach_m * math.tan(math.radians(width_deg) / 2.0)
+    hh = reach_m * math.tan(math.radians(height_deg) / 2.0)
+    if facing == "eye":
+        u, v = right * hw, up * hh
+    else:
+        u, v = np.array([hw, 0.0, 0.0]), np.array([0.0, hh, 0.0])
+    return Primitive(shape, centre, tuple(u), tuple(v), material, border=border, name=name)
+
+
+def frontoparallel_radial_subtense_deg(size_deg: float, eccentricity_deg: float) -> float:
+    """The angle a frontoparallel disc of ``size_deg`` (:func:`placed_primitive`) subtends along
+    the meridian through its centre at ``eccentricity_deg`` from straight ahead:
+    ``atan(tan e + k) - atan(tan e - k)``, ``k = tan(size / 2) / cos e``; about ``size * cos e``
+    for small discs (3.9 % less than ``size_deg`` at 16 deg, 13 % at 30 deg).
+
+    Examples
+    --------
+    >>> round(frontoparallel_radial_subtense_deg(2.0, 0.0), 12)
+    2.0
+    >>> round(frontoparallel_radial_subtense_deg(2.0, 16.0), 4)
+    1.9226
+    """
+    e = math.radians(eccentricity_deg)
+    k = math.tan(math.radians(size_deg) / 2.0) / math.cos(e)
+    return math.degrees(math.atan(math.tan(e) + k) - math.atan(math.tan(e) - k))
 
 
 def frontoparallel_disc(
@@ -50,19 +147,26 @@ def frontoparallel_disc(
     origin_m: Sequence[float] = ORIGIN,
     name: str = "",
 ) -> Primitive:
-    """A disc facing the viewer whose centre lies ``distance_m`` along the given direction
-    (measured along -z from ``origin_m``) and that subtends ``diameter_deg`` from ``origin_m``.
+    """A frontoparallel disc on the plane ``distance_m`` ahead of ``origin_m``, centred on the
+    direction of Fick (``azimuth_deg``, ``elevation_deg``): its tangential diameter subtends
+    ``diameter_deg`` (:func:`placed_primitive`). ``distance_m`` = inf: at optical infinity."""
+    return placed_primitive(Shape.DISC, distance_m, diameter_deg, diameter_deg, material, azimuth_deg,
+                            elevation_deg, origin_m, "frontoparallel", name=name)
 
-    ``distance_m`` = inf (0 D): a disc at optical infinity (``at_infinity``), the same angles
-    from every origin."""
-    if math.isinf(distance_m) and distance_m > 0:
-        unit = frontoparallel_disc(1.0, diameter_deg, material, azimuth_deg, elevation_deg, ORIGIN, name)
-        return dataclasses.replace(unit, at_infinity=True)
-    o = np.asarray(origin_m, dtype=np.float64)
-    d = direction_from_angles(azimuth_deg, elevation_deg)
-    centre = o + d * (distance_m / -d[2])
-    radius = np.linalg.norm(centre - o) * math.tan(math.radians(diameter_deg) / 2.0)
-    return Primitive(Shape.DISC, centre, (radius, 0, 0), (0, radius, 0), material, name=name)
+
+def eye_facing_disc(
+    distance_m: float,
+    diameter_deg: float,
+    material: Material,
+    azimuth_deg: float = 0.0,
+    elevation_deg: float = 0.0,
+    origin_m: Sequence[float] = ORIGIN,
+    name: str = "",
+) -> Primitive:
+    """A disc facing ``origin_m``, its centre ``distance_m`` away in the direction of Fick
+    (``azimuth_deg``, ``elevation_deg``): it subtends ``diameter_deg`` in every direction."""
+    return placed_primitive(Shape.DISC, distance_m, diameter_deg, diameter_deg, material, azimuth_deg,
+                            elevation_deg, origin_m, "eye", name=name)
 
 
 def frontoparallel_rect(
@@ -76,19 +180,12 @@ def frontoparallel_rect(
     border: SineBorder | None = None,
     name: str = "",
 ) -> Primitive:
-    """A frontoparallel rectangle at plane depth ``distance_m`` spanning the given angles
-    (tangent extents measured from ``origin_m``), optionally clipped by a sinusoidal border.
-    ``distance_m`` = inf (0 D): a rectangle at optical infinity (``at_infinity``)."""
-    if math.isinf(distance_m) and distance_m > 0:
-        unit = frontoparallel_rect(1.0, width_deg, height_deg, material, azimuth_deg, elevation_deg, ORIGIN, border,
-                                   name)
-        return dataclasses.replace(unit, at_infinity=True)
-    o = np.asarray(origin_m, dtype=np.float64)
-    d = direction_from_angles(azimuth_deg, elevation_deg)
-    centre = o + d * (distance_m / -d[2])
-    hw = distance_m * math.tan(math.radians(width_deg) / 2.0)
-    hh = distance_m * math.tan(math.radians(height_deg) / 2.0)
-    return Primitive(Shape.RECT, centre, (hw, 0, 0), (0, hh, 0), material, border=border, name=name)
+    """A frontoparallel rectangle on the plane ``distance_m`` ahead of ``origin_m``, centred on
+    the direction of Fick (``azimuth_deg``, ``elevation_deg``), sized as :func:`placed_primitive`
+    says (straight ahead it spans exactly ``width_deg`` x ``height_deg``), optionally clipped by a
+    sinusoidal border. ``distance_m`` = inf (0 D): at optical infinity (``at_infinity``)."""
+    return placed_primitive(Shape.RECT, distance_m, width_deg, height_deg, material, azimuth_deg, elevation_deg,
+                            origin_m, "frontoparallel", border, name)
 
 
 def detection_stimulus(
@@ -191,7 +288,7 @@ def target_field(
     ``min_gap_deg``) inside a ``field_deg`` circle. Deterministic for a given seed. Without a
     ``material`` each target gets a random solid shade."""
     rng = np.random.default_rng(seed)
-    placed: list[tuple[float, float]] = []
+    placed: list[np.ndarray] = []
     out: list[Primitive] = []
     radius = field_deg / 2.0 - diameter_deg / 2.0
     tries = 0
@@ -199,10 +296,12 @@ def target_field(
         tries += 1
         r = radius * math.sqrt(rng.uniform())
         phi = rng.uniform(0, 2 * math.pi)
-        az, el = r * math.cos(phi), r * math.sin(phi)
-        if any(math.hypot(az - a, el - e) < diameter_deg * 1.05 + min_gap_deg for a, e in placed):
+        # polar placement (eccentricity r, meridian phi) and angular gaps between centres (docs/optics.md)
+        az, el = (float(x) for x in polar_to_fick_deg(r, math.degrees(phi)))
+        here = fick_direction(az, el)
+        if any(float(angle_between_deg(here, other)) < diameter_deg * 1.05 + min_gap_deg for other in placed):
             continue
-        placed.append((az, el))
+        placed.append(here)
         depth_D = rng.uniform(far_D, near_D)
         shade = float(rng.uniform(0.3, 0.9))
         mat = material if material is not None else Solid((shade, shade * 0.9, 0.4))

@@ -71,6 +71,8 @@ class LoopConfig:
     confidence_threshold: float = 0.6
     pursuit_eccentricity_deg: float = 16.0
     pursuit_speed_deg_s: float = 90.0
+    pursuit_centre_deg: tuple[float, float] = (0.0, 0.0)  # Fick angles the target circles (plan.fixation)
+    pursuit_id: str = "fixation"  # the fixation target's id: schedule columns <id>_start_deg, <id>_direction
     free_radius_deg: float = 10.0
     fixation_distance_m: float = 1.0
     phase_delay_s: float = 0.0  # real sleep per phase; only for crash-safety tests
@@ -331,10 +333,11 @@ class TrialLoop:
         seed = int(row.get("trial_seed", 0)) & 0xFFFFFFFF
         if phase.gaze == "pursuit":
             # the schedule fixes where the target starts and which way it turns
-            phase_deg = float(row.get("fixation_start_deg", seed_for("pursuit", seed) % 360))
-            direction = -1.0 if float(row.get("fixation_direction", 1)) < 0 else 1.0
-            plan = FixationPlan("pursuit", start_s, c.fixation_distance_m,
-                                target=circling_target(c.pursuit_eccentricity_deg, direction * c.pursuit_speed_deg_s, phase_deg))
+            phase_deg = float(row.get(f"{c.pursuit_id}_start_deg", seed_for("pursuit", seed) % 360))
+            direction = -1.0 if float(row.get(f"{c.pursuit_id}_direction", 1)) < 0 else 1.0
+            plan = FixationPlan("pursuit", start_s, c.fixation_distance_m, centre_deg=c.pursuit_centre_deg,
+                                target=circling_target(c.pursuit_eccentricity_deg, direction * c.pursuit_speed_deg_s,
+                                                       phase_deg, c.pursuit_centre_deg))
         elif phase.gaze == "free":
             plan = FixationPlan("free", start_s, c.fixation_distance_m, radius_deg=c.free_radius_deg, seed=seed_for(seed, phase.name))
         else:

@@ -34,6 +34,7 @@ from psyop.protocol.trial import Blank, DriftRecalibration, Interval, ResponsePh
 from psyop.schedule.rows import mode_column
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.session.responses.base import ResponseKind
+from psyop.stimulus.placement import centre_angles_deg
 
 #: ipd used when the protocol says ``ipd: tracker`` and the tracker reports none (recorded as such).
 DEFAULT_IPD_M = 0.063
@@ -58,6 +59,10 @@ class FixationPath:
     eccentricity_deg: float = 16.0
     speed_deg_s: float = 90.0
     distance_m: float = 1.0
+    #: Fick (azimuth, elevation) the target circles around (docs/optics.md, "Angles")
+    centre_deg: tuple[float, float] = (0.0, 0.0)
+    #: the scene item's id: the schedule's ``<id>_start_deg`` / ``<id>_direction`` columns
+    id: str = "fixation"
 
 
 @dataclass(frozen=True)
@@ -171,7 +176,8 @@ def fixation_path(protocol: Protocol) -> FixationPath | None:
     """The circling fixation target, if the scene has one."""
     for item in protocol.scene:
         if isinstance(item, FixationTarget) and item.path is not None:
-            return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s))
+            return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s),
+                                centre_deg=centre_angles_deg(item.centre_deg), id=item.id)
     return None
 
 

@@ -234,6 +234,8 @@ def run_session(
             every_frame=every_frame,
             pursuit_eccentricity_deg=path.eccentricity_deg if path else 16.0,
             pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
+            pursuit_centre_deg=path.centre_deg if path else (0.0, 0.0),
+            pursuit_id=path.id if path else "fixation",
             phase_delay_s=options.phase_delay_s,
             progress=options.progress,
             hand_last_n=plan.response.average_last_samples,

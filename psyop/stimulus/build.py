@@ -10,6 +10,10 @@ Conventions (docs/rendering.md):
   eyes see the same world-fixed objects, with their disparity).
 * A depth of 0 D is optical infinity: the primitive is built ``at_infinity`` (a direction
   cone, drawn behind everything, without parallax), never at a large finite distance.
+* Angles (docs/optics.md, "Angles" and "Sizes"): centres are Fick angles (or eccentricity and
+  meridian, :mod:`psyop.stimulus.placement`); a frontoparallel disc's diameter across the
+  meridian through its centre subtends ``size_deg``, an eye-facing one (``facing: eye``)
+  subtends it in every direction; the circling fixation target keeps a constant eccentricity.
 * Coplanar primitives: the later-listed one wins (``psyop.rendering.scene``), so a protocol's
   scene order is its layer order at equal depth.
 """
@@ -43,6 +47,7 @@ from psyop.rendering.scene import (
     Solid,
 )
 from psyop.schedule import interval_values
+from psyop.stimulus.placement import centre_angles_deg, circle_position_deg
 
 INFINITY_M = math.inf  # the distance of 0 D: optical infinity, rendered as directions
 DEFAULT_ARM_REACH_M = 0.70
@@ -133,19 +138,20 @@ def _grid_planes(item: ps.GridPlanes) -> list[Primitive]:
 
 
 def _fixation(item: ps.FixationTarget, values: Mapping[str, Any], time_s: float, origin: np.ndarray) -> list[Primitive]:
-    az, el = (float(c) for c in item.centre_deg)
+    az, el = centre_angles_deg(item.centre_deg)
     if item.path is not None:
         start = float(values.get(f"{item.id}_start_deg", 0.0 if item.path.start == "random" else item.path.start))
         direction = int(values.get(f"{item.id}_direction", 1))
-        phi = math.radians(start + direction * float(item.path.speed_deg_s) * time_s)
-        ecc = float(item.path.eccentricity_deg)
-        az, el = az + ecc * math.cos(phi), el + ecc * math.sin(phi)
+        az, el = circle_position_deg(az, el, float(item.path.eccentricity_deg), start,
+                                     direction * float(item.path.speed_deg_s), time_s)
     dist = _distance_m(item.depth, values)
     size = float(item.size_deg)
-    outer = builders.frontoparallel_disc(dist, size, Solid(tuple(item.rgb)), az, el, origin, f"{item.id}_outer")
+    facing = str(item.facing)
+    outer = builders.placed_primitive(Shape.DISC, dist, size, size, Solid(tuple(item.rgb)), az, el, origin, facing,
+                                      name=f"{item.id}_outer")
     # coplanar with the outer disc and listed after it, so it is drawn on top (the coplanar rule)
-    inner = builders.frontoparallel_disc(dist, size * 0.4, Solid(tuple(item.centre_rgb)), az, el, origin,
-                                         f"{item.id}_inner")
+    inner = builders.placed_primitive(Shape.DISC, dist, size * 0.4, size * 0.4, Solid(tuple(item.centre_rgb)), az, el,
+                                      origin, facing, name=f"{item.id}_inner")
     return [outer, inner]
 
 
@@ -241,16 +247,17 @@ def build_scene(
             continue
         if isinstance(item, ps.Disc):
             mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
-            prims.append(builders.frontoparallel_disc(_distance_m(item.depth, values), float(item.size_deg), mat,
-                                                      float(item.centre_deg[0]), float(item.centre_deg[1]), origin,
-                                                      item.id))
+            az, el = centre_angles_deg(item.centre_deg)
+            prims.append(builders.placed_primitive(Shape.DISC, _distance_m(item.depth, values), float(item.size_deg),
+                                                   float(item.size_deg), mat, az, el, origin, str(item.facing),
+                                                   name=item.id))
         elif isinstance(item, ps.Quad):
             size = max(float(item.width_deg), float(item.height_deg))
-            prims.append(builders.frontoparallel_rect(_distance_m(item.depth, values), float(item.width_deg),
-                                                      float(item.height_deg),
-                                                      _material(item.surface, values, size, base_dir, images),
-                                                      float(item.centre_deg[0]), float(item.centre_deg[1]), origin,
-                                                      name=item.id))
+            az, el = centre_angles_deg(item.centre_deg)
+            prims.append(builders.placed_primitive(Shape.RECT, _distance_m(item.depth, values), float(item.width_deg),
+                                                   float(item.height_deg),
+                                                   _material(item.surface, values, size, base_dir, images),
+                                                   az, el, origin, str(item.facing), name=item.id))
         elif isinstance(item, ps.SinusoidalBorder):
             prims += _sinusoidal_border(item, values, origin, base_dir, images)
         elif isinstance(item, ps.Aperture):

@@ -106,7 +106,7 @@ def test_min_trials_delays_the_stop(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("adaptive,message", [
-    ("{procedure: quest_plus, start: 0.5, min: 0, max: 1.5, target_sd: 0.5}", "not below the SD of QUEST+'s uniform prior"),
+    ("{procedure: quest_plus, start: 0.5, min: 0, max: 1.5, target_sd: 0.5}", "not below the SD of the estimate's uniform prior"),
     ("{procedure: quest_plus, start: 0.5, min: 0, max: 1.5, min_trials: 5}", "give target_sd or drop min_trials"),
     ("{procedure: staircase, start: 0.5, min: 0, max: 1.5, target_sd: 0}", "greater than 0"),
     ("{procedure: staircase, start: 0.5, min: 0, max: 1.5, target_sd: 0.1, min_trials: 0}", "must be at least 1"),

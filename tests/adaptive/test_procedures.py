@@ -39,8 +39,14 @@ def test_one_up_three_down_by_hand() -> None:
     assert final.next_level == pytest.approx(0.8)
     assert final.reversals == 3
     assert final.step == pytest.approx(0.1)
-    assert final.estimate_mean == pytest.approx((0.6 + 0.8 + 0.7) / 3)
-    assert final.estimate_sd == pytest.approx(np.std([0.6, 0.8, 0.7], ddof=1) / math.sqrt(3))
+    assert final.reversal_mean == pytest.approx((0.6 + 0.8 + 0.7) / 3)
+    # the logged estimate is the posterior of the threshold given the trials (QUEST+'s model and prior over
+    # [min, max]), computed here with a QuestPlus of its own on the staircase's levels
+    own = QuestPlus(QuestPlusSpec(stimulus=tuple(round(0.1 * k, 10) for k in range(21)),
+                                  threshold=QuestPlusSpec.default(0.0, 2.0).threshold,
+                                  width=QuestPlusSpec.default(0.0, 2.0).width))
+    mean, sd = own.threshold_estimate(history)
+    assert final.estimate_mean == pytest.approx(mean, rel=1e-12) and final.estimate_sd == pytest.approx(sd, rel=1e-12)
     assert final.procedure == "staircase_1u3d"
 
 
@@ -56,7 +62,9 @@ def test_weighted_steps_and_clamping() -> None:
     assert stair.state(history).next_level == pytest.approx(0.5)
     history.append(Observation(0.5, False))
     assert stair.state(history).next_level == pytest.approx(0.5)
-    assert stair.state([]).estimate_sd == math.inf and not stair.state([]).estimate_defined
+    # before any trial: the prior's SD (uniform thresholds over [0, 0.5]), finite
+    assert stair.state([]).estimate_sd == pytest.approx(0.5 / math.sqrt(12), rel=0.02)
+    assert stair.state([]).estimate_defined
 
 
 def test_stop_on_reversals_and_on_count() -> None:

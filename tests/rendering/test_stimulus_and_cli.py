@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from psyop.cli import main
+from psyop.optics.angles import polar_direction
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.stimulus import build_scene, interval_mode
@@ -36,11 +37,12 @@ def test_detection_scene_follows_the_trial_row():
     for disc in (back, front):  # 2 deg seen from the eye's centre of rotation
         rel = np.array(disc.centre_m) - CENTRE
         assert 2 * math.degrees(math.atan(disc.half_u_m[0] / np.linalg.norm(rel))) == pytest.approx(2.0)
-    # the fixation target circles at 16 deg, 90 deg/s, from the row's start and direction
+    # the fixation target circles at a constant 16 deg, 90 deg/s of polar angle, from the row's start and direction
     target = np.array(by_name["fixation_outer"].centre_m) - CENTRE
-    phi = math.radians(row["fixation_start_deg"] + row["fixation_direction"] * 90.0 * 0.25)
-    expected = np.array([math.tan(math.radians(16 * math.cos(phi))), math.tan(math.radians(16 * math.sin(phi))), -1])
+    phi_deg = row["fixation_start_deg"] + row["fixation_direction"] * 90.0 * 0.25
+    expected = polar_direction(16.0, phi_deg)
     assert _angle_deg(target, expected) < 1e-9
+    assert _angle_deg(target, [0.0, 0.0, -1.0]) == pytest.approx(16.0, abs=1e-9)
     assert interval_mode(protocol, row, 1) in ("conventional", "ocular")
     assert {interval_mode(protocol, row, 1), interval_mode(protocol, row, 2)} == {"conventional", "ocular"}
 
@@ -95,3 +97,30 @@ def test_render_command_rejects_bad_input(tmp_path, capsys):
     assert "--trial" in capsys.readouterr().err
     rc = main(["render", str(PROTOCOLS / "detection.yaml"), "--gaze-deg", "nan,0", "--out", str(tmp_path / "x.png")])
     assert rc == 2
+
+
+def test_render_gaze_takes_a_negative_azimuth_the_polar_form_and_the_sessions_ipd(tmp_path):
+    """``--gaze-deg -12,0`` used to fail ("expected one argument"); the default ipd was 64 mm where sessions use 63."""
+    from psyop.cli.render import DEFAULT_IPD_MM
+    from psyop.optics.angles import fick_direction
+    from psyop.session.plan import DEFAULT_IPD_M
+
+    assert DEFAULT_IPD_MM == pytest.approx(DEFAULT_IPD_M * 1000.0)
+    sides = []
+    for option, value in (("--gaze-deg", "-12,0"), ("--gaze-polar-deg", "12,180")):
+        out = tmp_path / f"{option.strip('-')}.png"
+        rc = main(["render", str(PROTOCOLS / "detection.yaml"), option, value, "--mode", "ocular",
+                   "--crop", "0,0,8,8", "--out", str(out)])
+        assert rc == 0
+        sides.append(json.loads(Path(str(out) + ".json").read_text()))
+    assert sides[0]["gaze_deg"] == [-12.0, 0.0]
+    assert sides[1]["gaze_deg"] == pytest.approx([-12.0, 0.0], abs=1e-12)
+    assert sides[0]["ipd_m"] == pytest.approx(0.063)
+    fixation = np.array(sides[0]["fixation_m"]) - np.array(sides[0]["eye_centre_m"])
+    assert _angle_deg(fixation, fick_direction(-12.0, 0.0)) < 1e-9
+
+
+def test_render_refuses_a_gaze_beyond_89_deg(tmp_path, capsys):
+    rc = main(["render", str(PROTOCOLS / "detection.yaml"), "--gaze-deg", "-89.5,0", "--out", str(tmp_path / "x.png")])
+    assert rc == 2
+    assert "within +-89 deg" in capsys.readouterr().err

@@ -8,12 +8,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from psyop.session.gaze.sample import angles_to_direction
+from psyop.stimulus.placement import circle_position_deg
 
 
 @dataclass(frozen=True)
 class FixationPlan:
     """Where gaze should go from ``start_s`` (session clock) on.
 
+    Angles are Fick (azimuth, elevation) in degrees (docs/optics.md, "Angles").
     kind: 'cross' (fixate ``centre_deg``), 'pursuit' (follow ``target(t_rel_s) ->
     (az_deg, el_deg)``), 'free' (saccades between random points within ``radius_deg`` of
     ``centre_deg``), 'none' (display off: look ahead).
@@ -34,14 +36,23 @@ class FixationPlan:
         return angles_to_direction(*self.centre_deg)
 
 
-def circling_target(eccentricity_deg: float = 16.0, speed_deg_s: float = 90.0, phase_deg: float = 0.0) -> Callable[[float], tuple[float, float]]:
-    """A target circling the centre at ``eccentricity_deg`` (the threshold studies' fixation target).
+def circling_target(eccentricity_deg: float = 16.0, speed_deg_s: float = 90.0, phase_deg: float = 0.0,
+                    centre_deg: tuple[float, float] = (0.0, 0.0)) -> Callable[[float], tuple[float, float]]:
+    """A target circling ``centre_deg`` (Fick angles) at constant ``eccentricity_deg`` (the threshold
+    studies' fixation target), the one path the stimulus draws (:func:`psyop.stimulus.placement.circle_position_deg`).
 
-    ``speed_deg_s`` is the angular speed of the target around the circle.
+    ``speed_deg_s`` is the rate of the polar angle around the circle (negative: clockwise); the
+    target's own angular speed is ``|speed_deg_s| * sin(eccentricity_deg)``. Returns Fick (az, el).
+
+    Examples
+    --------
+    >>> az, el = circling_target(16.0, 90.0)(1.0)
+    >>> round(az, 9), round(el, 9)
+    (0.0, 16.0)
     """
+    centre_az, centre_el = (float(c) for c in centre_deg)
 
     def position(t_rel_s: float) -> tuple[float, float]:
-        angle = np.radians(phase_deg + speed_deg_s * t_rel_s)
-        return float(eccentricity_deg * np.cos(angle)), float(eccentricity_deg * np.sin(angle))
+        return circle_position_deg(centre_az, centre_el, eccentricity_deg, phase_deg, speed_deg_s, t_rel_s)
 
     return position

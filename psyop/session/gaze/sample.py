@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from psyop.optics.angles import fick_angles_deg, fick_direction
+
 if TYPE_CHECKING:
     from psyop.session.gaze.plan import FixationPlan
     from psyop.session.gaze.sync import ClockSync
@@ -156,17 +158,14 @@ class RawBuffer:
 
 
 def direction_to_angles_deg(direction: np.ndarray) -> tuple[float, float]:
-    """(azimuth, elevation) in degrees of a head-space direction (-z forward)."""
-    d = np.asarray(direction, dtype=np.float64)
-    azimuth = math.degrees(math.atan2(d[0], -d[2]))
-    elevation = math.degrees(math.atan2(d[1], math.hypot(d[0], d[2])))
-    return azimuth, elevation
+    """Fick (azimuth, elevation) in degrees of a head-space direction (-z forward; docs/optics.md, "Angles")."""
+    azimuth, elevation = fick_angles_deg(direction)
+    return float(azimuth), float(elevation)
 
 
 def angles_to_direction(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
-    """Unit head-space direction for (azimuth, elevation) in degrees."""
-    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
-    return np.array([math.cos(el) * math.sin(az), math.sin(el), -math.cos(el) * math.cos(az)])
+    """Unit head-space direction of Fick (azimuth, elevation) in degrees (:func:`psyop.optics.angles.fick_direction`)."""
+    return fick_direction(float(azimuth_deg), float(elevation_deg))
 
 
 #: a fixation farther than this is not a measurement (``G 1e308 ...`` overflowed to NaN downstream)

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from psyop.session.gaze.plan import FixationPlan
+from psyop.optics.angles import fick_angles_deg, offset_direction
 from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample, angles_to_direction
 from psyop.session.gaze.sync import ClockSync
 
@@ -208,7 +209,9 @@ class SimulatedTracker:
             while t <= max(t_rel_s, 10.0):
                 r = plan.radius_deg * math.sqrt(rng.uniform())
                 a = rng.uniform(0, 2 * math.pi)
-                fixations.append((t, plan.centre_deg[0] + r * math.cos(a), plan.centre_deg[1] + r * math.sin(a)))
+                # r deg from the centre at polar angle a (docs/optics.md, "Angles"), as Fick angles
+                az, el = fick_angles_deg(offset_direction(*plan.centre_deg, r, math.degrees(a)))
+                fixations.append((t, float(az), float(el)))
                 t += rng.gamma(4.0, c.fixation_mean_s / 4.0)
             self._fixations = (key, fixations)
         fixations = self._fixations[1]
