@@ -19,6 +19,14 @@ from psyop.statistics.dataset import write_dataset
 ANALYSIS = Path(__file__).resolve().parents[2] / "analysis"
 
 
+def paper_protocol_hashes() -> dict[str, str]:
+    """study name -> the hash of the shipped paper protocol (what a simulated paper session records)."""
+    from psyop.protocol import load_protocol
+
+    return {name: load_protocol(ANALYSIS.parent / "protocols" / f"{name}.yaml").source_sha256
+            for name in ("detection", "discrimination", "ordinal", "egocentric", "realism")}
+
+
 def _script(name: str):
     if str(ANALYSIS) not in sys.path:
         sys.path.insert(0, str(ANALYSIS))
@@ -38,7 +46,7 @@ def built(tmp_path_factory):
     tables["ordinal"] = ordinal[~((ordinal["participant"] == "02") & (ordinal["mode"] == "reversed")
                                   & (ordinal["separation_D"] == 2.0))]
     data, res, fig = root / "data", root / "results", root / "figures"
-    write_dataset(data, tables, simulated=True)
+    write_dataset(data, tables, simulated=True, protocol_sha256=paper_protocol_hashes())
     common = ["--data", str(data), "--results", str(res)]
     for study in ("detection", "discrimination"):
         assert _script("fit_psychometric").main(
