@@ -48,7 +48,7 @@ def out_path(args: argparse.Namespace) -> Path:
     """``--out``, else the script's default named after ``--study``."""
     if args.out is not None:
         return args.out
-    return Path(args.default_out.format(study=getattr(args, "study", "")))
+    return Path(args.default_out.format(study=getattr(args, "study", ""), results=args.results))
 
 
 def results_file(results: Path, study: str, what: str = "", ext: str = "json") -> Path:

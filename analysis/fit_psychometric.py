@@ -20,7 +20,7 @@ from psyop.statistics.studies import study_facts
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser(__doc__, "results/{study}_fits.csv", study="detection")
+    p = parser(__doc__, "{results}/{study}_fits.csv", study="detection")
     p.add_argument("--condition-column", default=None, help="the condition column (default: the protocol's factor "
                    "other than the level factor)")
     p.add_argument("--level-column", default=None, help="the level column (default: the response's level_factor)")

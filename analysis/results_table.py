@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--protocols", type=Path, default=Path("protocols"), help="the paper's protocol files "
                    "(protocols/<name>.yaml); their hashes pick the paper's results")
     args = p.parse_args(argv)
-    out = args.out or Path("results/summary.md")
+    out = args.out or args.results / "summary.md"
     found = study_results(args.results)
     if not found:
         raise UserError("no study results here; run the analysis scripts first (make figures)", str(args.results))

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path as FsPath
 from typing import Any
 
+from pydantic import BaseModel
+
 from psyop.limits import MAX_PRIMITIVES
 from psyop.optics.ranges import DEPTH_D
 from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
@@ -302,6 +304,69 @@ class _Checker:
                                                     "(or conventional/reversed) under modes")
             self.factor_exists(response.target_factor, path + ("target_factor",), numeric=True)
 
+    def check_level_factor_levels(self) -> None:
+        """A threshold needs its level to vary: a fixed two_interval level factor needs at least two levels
+        in every level set (else every fit is ``no_fit`` after a full session)."""
+        response = self.p.response
+        if response.kind != "two_interval" or response.level_factor not in self.factors:
+            return
+        factor = self.factors[response.level_factor]
+        for values in factor.level_sets():
+            if len(values) < 2:
+                key = "levels_by" if factor.levels_by is not None else "levels"
+                self.add(("design", "factors", response.level_factor, key),
+                         f"the level factor '{response.level_factor}' has one level ({values[0]!r}) here: a threshold "
+                         "needs the level to vary; give at least two levels (five or more for a psychometric fit, "
+                         "e.g. {start: 0, step: 0.25, count: 5}) or make it adaptive")
+                return
+
+    def check_pair_orders(self) -> None:
+        """``a|b`` and ``b|a`` are one comparison (``order`` already counterbalances which is shown first)."""
+        response = self.p.response
+        if response.kind != "pairwise_preference" or response.pair_factor not in self.factors:
+            return
+        seen: dict[frozenset[str], str] = {}
+        factor = self.factors[response.pair_factor]
+        for index, level in enumerate(factor.all_levels()):
+            parts = frozenset(str(level).split("|"))
+            if parts in seen:
+                path = ("design", "factors", response.pair_factor, "levels")
+                if isinstance(factor.levels, list):
+                    path += (index,)
+                self.add(path, f"pair '{level}' is '{seen[parts]}' written in the other order: both are one "
+                               f"comparison (response.order: {response.order} already sets which is shown first); "
+                               f"remove '{level}'")
+            seen.setdefault(parts, str(level))
+
+    def used_factors(self) -> set[str]:
+        """Every factor some part of the protocol reads: the scene (any ``{factor: ...}``), the response's
+        fields, another factor's ``depends_on``, or the blocking ``by:``."""
+        used: set[str] = set()
+        for item in self.p.scene:
+            used |= _factor_refs(item)
+        response = self.p.response
+        for key in ("level_factor", "separation_factor", "pair_factor", "rendering_factor", "target_factor"):
+            value = getattr(response, key, None)
+            if isinstance(value, str):
+                used.add(value)
+        for role in ("test", "reference", "mode"):
+            spec = getattr(response, role, None)
+            mode = getattr(spec, "mode", spec)
+            if isinstance(mode, ModeFromFactor):
+                used.add(mode.factor)
+            used |= set(getattr(spec, "set", {}) or {})
+        used |= {f.depends_on for f in self.factors.values() if f.depends_on}
+        return used
+
+    def check_unused_factors(self) -> None:
+        used = self.used_factors()
+        for name in self.factors:
+            if name not in used:
+                self.add(("design", "factors", name),
+                         f"factor '{name}' is used by nothing: no scene item, response field or other factor refers "
+                         "to it, so its conditions would look the same on screen. Refer to it (e.g. depth: "
+                         f"{{factor: {name}}}, or a size/contrast field {{factor: {name}}}) or remove it")
+
     def mode_factor(self, name: str, path: tuple[Any, ...]) -> None:
         if self.factor_exists(name, path, numeric=False):
             for level in self.factors[name].all_levels():
@@ -323,7 +388,11 @@ class _Checker:
                                        f"kind: {next(k for k, v in fits.items() if v == response_kind)}")
             return
         if observer.kind == "psychometric_2afc":
-            self.factor_exists(observer.level_column, path + ("level_column",), numeric=True)
+            level = self.p.response.level_factor
+            if self.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
+                    observer.level_column != level:
+                self.add(path + ("level_column",), f"the observer reads '{observer.level_column}' as its level, but "
+                                                   f"the response's level factor is '{level}'; set level_column: {level}")
             if observer.threshold_offset_column is not None:
                 self.factor_exists(observer.threshold_offset_column, path + ("threshold_offset_column",), numeric=True)
         elif observer.kind == "ordinal_accuracy":
@@ -366,6 +435,21 @@ class _Checker:
                                                          f"{separation} in mode '{mode}'; add '{separation}: p'")
 
 
+def _factor_refs(value: Any) -> set[str]:
+    """Every factor name a scene item refers to (``FactorRef``, ``Depth.factor``), at any depth."""
+    if isinstance(value, FactorRef):
+        return {value.factor}
+    if isinstance(value, Depth):
+        return set(value.factor_names)
+    if isinstance(value, (list, tuple)):
+        return set().union(*(_factor_refs(v) for v in value)) if value else set()
+    if isinstance(value, dict):
+        return set().union(*(_factor_refs(v) for v in value.values())) if value else set()
+    if isinstance(value, BaseModel):
+        return set().union(set(), *(_factor_refs(getattr(value, n)) for n in type(value).model_fields))
+    return set()
+
+
 def _same(a: Any, b: Any) -> bool:
     if isinstance(a, str) or isinstance(b, str):
         return str(a) == str(b)
@@ -385,5 +469,8 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None) -> list[Issue]:
     checker.check_scene(conditions)
     checker.check_primitive_limit()
     checker.check_response()
+    checker.check_level_factor_levels()
+    checker.check_pair_orders()
+    checker.check_unused_factors()
     checker.check_observer()
     return checker.issues
