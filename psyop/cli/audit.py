@@ -26,6 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="schedule seed that picks each condition's trial")
     parser.add_argument("--ipd-mm", type=float, default=64.0,
                         help="interpupillary distance when the protocol takes it from the tracker")
+    parser.add_argument("--level", type=float, action="append", default=None, metavar="VALUE",
+                        help="audit the adaptive factor at this level (repeatable; default: its range's min, "
+                             "start and max)")
     parser.add_argument("--sheet", default=None, metavar="PATH.png", help="write a contact sheet of the checked frames")
     parser.set_defaults(func=run)
 
@@ -36,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.sheet is not None and not str(args.sheet).lower().endswith(".png"):
         raise UserError(f"--sheet must name a .png file, got {args.sheet!r}")
-    settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=args.ipd_mm / 1000.0, seed=args.seed)
+    settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=args.ipd_mm / 1000.0, seed=args.seed,
+                             levels=tuple(args.level or ()))
     path = Path(args.protocol)
     protocol = load_protocol(path)
     report = run_audit(protocol, settings, base_dir=path.parent)

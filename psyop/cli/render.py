@@ -39,6 +39,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="rendering mode (default: the interval's mode from the schedule)")
     parser.add_argument("--time-s", type=float, default=0.0, help="time into the interval (moving targets)")
     parser.add_argument("--seed", type=int, default=0, help="schedule seed")
+    parser.add_argument("--level", type=float, default=None, metavar="VALUE",
+                        help="the adaptive factor's level for this trial (an adaptive protocol's level is chosen "
+                             "while the session runs; default: the procedure's start level)")
     parser.add_argument("--ipd-mm", type=float, default=64.0, help="interpupillary distance when the protocol "
                                                                    "takes it from the tracker")
     parser.add_argument("--antialiasing", choices=("adaptive", "none", "msaa", "supersample"), default="adaptive")
@@ -66,6 +69,17 @@ def _parse_crop(text: str, width_px: int, height_px: int) -> tuple[int, int, int
     if not (0 <= x0 and 0 <= y0 and w > 0 and h > 0 and x0 + w <= width_px and y0 + h <= height_px):
         raise UserError(f"--crop {text} does not fit the {width_px}x{height_px} frame")
     return x0, y0, w, h
+
+
+def _adaptive_level(protocol, given: float | None) -> float | None:
+    """The level an adaptive protocol's trial is rendered at: ``--level`` (checked against the
+    procedure's range), else the start level; None for fixed levels (``--level`` is then an error)."""
+    from psyop.adaptive.session import preview_levels
+
+    if given is not None:
+        return preview_levels(protocol, (given,))[0]
+    factors = [f for f in protocol.design.factors.values() if f.adaptive is not None]
+    return float(factors[0].adaptive.start) if factors else None
 
 
 def frustum_tangents(pixel_to_ray: np.ndarray) -> dict[str, float]:
@@ -107,6 +121,13 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--fixation-m must be more than 0.02 m, got {args.fixation_m}")
     az, el = _parse_gaze(args.gaze_deg)
     row = schedule.iloc[args.trial].to_dict()
+    level = _adaptive_level(protocol, args.level)
+    if level is not None:
+        from psyop.adaptive.session import adaptive_plan, row_at_level
+
+        plan = adaptive_plan(protocol)
+        assert plan is not None
+        row = row_at_level(plan, row, level)
     eye = args.eye or (protocol.eyes if protocol.eyes in ("right", "left") else "right")
     response_text = None
     if args.phase == "response":
@@ -148,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
     sidecar = {
         "protocol": str(protocol_path), "protocol_sha256": protocol.source_sha256, "seed": args.seed,
         "trial": args.trial, "phase": args.phase, "interval": args.interval, "time_s": args.time_s,
+        "adaptive_level": level,
         "response_text": response_text,
         "eye": eye, "mode": mode, "gaze_deg": [az, el], "fixation_m": fixation.tolist(),
         "camera_valid": bool(camera.valid),
