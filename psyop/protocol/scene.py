@@ -71,6 +71,17 @@ Rgb = tuple[Annotated[Number, Field(ge=0, le=1)], Annotated[Number, Field(ge=0, 
             Annotated[Number, Field(ge=0, le=1)]]
 
 
+class FactorRef(StrictModel):
+    """A value read from the trial schedule's factor column: ``{factor: NAME}`` (the factor's levels
+    must fit the field's range; validation checks each level, psyop.protocol.factor_fields)."""
+
+    factor: str
+
+
+#: A number, or ``{factor: NAME}``: the trial's level of a numeric factor (a size, a contrast).
+Factorable = Union[Number, FactorRef]
+
+
 class SolidSurface(StrictModel):
     """A uniform colour, linear RGB in [0, 1]."""
 
@@ -83,8 +94,9 @@ class WhiteNoiseSurface(StrictModel):
 
     kind: Literal["white_noise"]
     grain_deg: Number = Field(default=0.05, gt=0, le=10)
-    mean: Number = Field(default=0.5, ge=0, le=1)
-    contrast: Number = Field(default=1.0, ge=0, le=1, description="RMS-free peak contrast around the mean")
+    mean: Annotated[Number, Field(ge=0, le=1)] | FactorRef = 0.5
+    contrast: Annotated[Number, Field(ge=0, le=1)] | FactorRef = Field(
+        default=1.0, description="RMS-free peak contrast around the mean; a number or {factor: NAME}")
     seed: Integer = Field(default=0, ge=0, description="added to the trial seed, so two surfaces differ")
 
 
@@ -93,8 +105,9 @@ class PinkNoiseSurface(StrictModel):
 
     kind: Literal["one_over_f"]
     exponent: Number = Field(default=1.0, ge=0, le=4)
-    mean: Number = Field(default=0.5, ge=0, le=1)
-    contrast: Number = Field(default=1.0, ge=0, le=1)
+    mean: Annotated[Number, Field(ge=0, le=1)] | FactorRef = 0.5
+    contrast: Annotated[Number, Field(ge=0, le=1)] | FactorRef = Field(
+        default=1.0, description="peak contrast around the mean; a number or {factor: NAME}")
     seed: Integer = Field(default=0, ge=0)
 
 
@@ -120,21 +133,22 @@ class _Primitive(StrictModel):
 
 
 class Disc(_Primitive):
-    """A frontoparallel disc subtending ``size_deg`` (diameter) at its depth."""
+    """A frontoparallel disc subtending ``size_deg`` (diameter) at its depth; ``size_deg`` may be
+    ``{factor: NAME}`` (a factor in deg)."""
 
     kind: Literal["disc"]
-    size_deg: Number = Field(gt=0, lt=180)
+    size_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef
     depth: Depth
     surface: Surface
     centre_deg: Point2Deg = (0.0, 0.0)
 
 
 class Quad(_Primitive):
-    """A frontoparallel rectangle ``width_deg`` x ``height_deg`` at its depth."""
+    """A frontoparallel rectangle ``width_deg`` x ``height_deg`` at its depth (each may be ``{factor: NAME}``)."""
 
     kind: Literal["quad"]
-    width_deg: Number = Field(gt=0, lt=180)
-    height_deg: Number = Field(gt=0, lt=180)
+    width_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef
+    height_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef
     depth: Depth
     surface: Surface
     centre_deg: Point2Deg = (0.0, 0.0)
@@ -246,12 +260,6 @@ class ReachTarget(_Primitive):
     size_m: Number = Field(gt=0, le=1, description="longest dimension of the object")
     distance_fraction: Annotated[Number, Field(gt=0, le=1.5)] | "FactorRef"
     height_m: Number = Field(default=-0.15, ge=-2, le=2, description="relative to eye height, up positive")
-
-
-class FactorRef(StrictModel):
-    """A value read from the trial schedule's factor column."""
-
-    factor: str
 
 
 ReachTarget.model_rebuild()

@@ -10,6 +10,7 @@ import difflib
 import math
 from dataclasses import dataclass
 from pathlib import Path as FsPath
+from collections.abc import Iterator
 from typing import Any
 
 from pydantic import BaseModel
@@ -174,6 +175,7 @@ class _Checker:
                 if item.near_side == "schedule" and self.p.response.kind != "left_right_nearer":
                     self.add(path + ("near_side",), "near_side: schedule needs a left_right_nearer response; "
                                                     "set near_side to left or right")
+            self.check_factor_fields(item, path, conditions)
             if isinstance(item, ReachTarget) and isinstance(item.distance_fraction, FactorRef):
                 self.factor_exists(item.distance_fraction.factor, path + ("distance_fraction", "factor"), numeric=True)
             if isinstance(item, FixationTarget) and item.path is not None:
@@ -185,6 +187,45 @@ class _Checker:
                     if name not in ids:
                         self.add(("trial", "phases", index, "show", j),
                                  f"no scene primitive has id '{name}'.{_suggest(name, list(ids))} Ids: {', '.join(ids)}")
+
+    def _value_sets(self, conditions: list[dict[str, Any]]) -> Iterator[dict[str, Any]]:
+        """Every set of factor values a scene is built from: each condition, each interval's ``set:``
+        overrides of it, and an adaptive factor at both ends of its range."""
+        adaptive = {n: f.adaptive for n, f in self.factors.items() if f.adaptive is not None}
+        overrides = [{}]
+        response = self.p.response
+        for role in ("test", "reference"):
+            spec = getattr(response, role, None)
+            if spec is not None and getattr(spec, "set", None):
+                overrides.append(dict(spec.set))
+        for condition in conditions:
+            ends = [{}] + [{n: float(a.min)} for n, a in adaptive.items()] + [{n: float(a.max)} for n, a in adaptive.items()]
+            for end in ends:
+                for override in overrides:
+                    yield {**condition, **end, **override}
+
+    def check_factor_fields(self, item: Any, path: tuple[Any, ...], conditions: list[dict[str, Any]]) -> None:
+        """Each ``{factor: NAME}`` of a size or contrast names a numeric factor, and every level it can take
+        fits the field's range (the item is re-validated with each trial's values)."""
+        from pydantic import ValidationError
+
+        from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
+
+        refs = [(sub, ref) for sub, ref in factor_fields(item) if sub != ("distance_fraction",)]
+        if not refs or not all(self.factor_exists(ref.factor, path + sub + ("factor",), numeric=True)
+                               for sub, ref in refs):
+            return
+        for values in self._value_sets(conditions):
+            try:
+                type(item).model_validate(resolve_factor_fields(item, values).model_dump())
+            except ValidationError as error:
+                first = error.errors()[0]
+                sub, ref = next(((sub, r) for sub, r in refs if _in_order(sub, tuple(first["loc"]))), refs[0])
+                self.add(path + sub, f"{ref.factor} = {values.get(ref.factor)!r} does not fit this field: "
+                                     f"{first['msg'].lower()}; give {ref.factor} levels (or an adaptive range) that do")
+                return
+            except ValueError:
+                return
 
     def check_primitive_limit(self) -> None:
         """Each phase's scene (its ``show:`` items) must fit the renderer's MAX_PRIMITIVES; the
@@ -433,6 +474,12 @@ class _Checker:
                 if not any(_same(separation, key) for key in given):
                     self.add(path + ("p_correct", mode), f"no p_correct for {response.separation_factor} = "
                                                          f"{separation} in mode '{mode}'; add '{separation}: p'")
+
+
+def _in_order(sub: tuple[Any, ...], loc: tuple[Any, ...]) -> bool:
+    """``sub``'s keys appear in ``loc`` in order (pydantic's loc adds union tags such as 'white_noise')."""
+    it = iter(loc)
+    return all(any(key == x for x in it) for key in sub)
 
 
 def _factor_refs(value: Any) -> set[str]:

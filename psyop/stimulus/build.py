@@ -42,6 +42,7 @@ from psyop.rendering.scene import (
     SineBorder,
     Solid,
 )
+from psyop.protocol.factor_fields import resolve_factor_fields
 from psyop.schedule import interval_values
 
 INFINITY_M = math.inf  # the distance of 0 D: optical infinity, rendered as directions
@@ -239,6 +240,10 @@ def build_scene(
     for item in protocol.scene:
         if show != "all" and item.id not in show:
             continue
+        try:  # sizes and contrasts given as {factor: NAME} take this trial's (interval's) level
+            item = resolve_factor_fields(item, values)
+        except ValueError as error:
+            raise UserError(f"scene item '{item.id}': {error}") from None
         if isinstance(item, ps.Disc):
             mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
             prims.append(builders.frontoparallel_disc(_distance_m(item.depth, values), float(item.size_deg), mat,
