@@ -110,7 +110,7 @@ def iter_frames(plan: Any, settings: AuditSettings) -> Iterator[tuple[AuditFrame
     """Every audited frame and its plan phase, in order: condition, phase, eye, gaze."""
     from psyop.schedule import compile_schedule
 
-    schedule = compile_schedule(plan.protocol, settings.seed)
+    schedule = compile_schedule(plan.protocol, settings.seed, participant_index=0)  # block order: irrelevant here
     phases = [(i, phase) for i, phase in enumerate(plan.phases)
               if phase.show == "stimulus" or (phase.show == "blank" and phase.primitives)]
     rows = representative_rows(schedule)

@@ -39,6 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="rendering mode (default: the interval's mode from the schedule)")
     parser.add_argument("--time-s", type=float, default=0.0, help="time into the interval (moving targets)")
     parser.add_argument("--seed", type=int, default=0, help="schedule seed")
+    parser.add_argument("--participant-index", type=int, default=0, metavar="N",
+                        help="participant index for block_order: latin_square (default 0; trial numbers follow its order)")
     parser.add_argument("--level", type=float, default=None, metavar="VALUE",
                         help="the adaptive factor's level for this trial (an adaptive protocol's level is chosen "
                              "while the session runs; default: the procedure's start level)")
@@ -111,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
 
     protocol_path = Path(args.protocol)
     protocol = load_protocol(protocol_path)
-    schedule = compile_schedule(protocol, args.seed)
+    schedule = compile_schedule(protocol, args.seed, participant_index=args.participant_index)
     if not 0 <= args.trial < len(schedule):
         raise UserError(f"--trial must be in 0..{len(schedule) - 1}, got {args.trial}")
     n_intervals = len(interval_phases(protocol))

@@ -81,7 +81,7 @@ def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.
     elif randomisation.block_order == "latin_square":
         if participant_index is None:
             raise UserError("block_order: latin_square orders blocks by participant: give the participant index "
-                            "(psyop run --participant-index N, or a participant ID ending in its number, e.g. S07)",
+                            "(--participant-index N; psyop run also takes it from a participant ID ending in its number, e.g. S07)",
                             "design.randomisation.block_order")
         rank = np.argsort(latin_square_order(len(keys), participant_index))
     else:
