@@ -157,7 +157,7 @@ def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir:
                                 show=phase.primitives)
             origin = scene_origin_m(protocol, centre)
             fixation = fixation_point(scene, fixation_prefix, origin, frame.gaze_index, settings.gazes)
-            camera = plan.rig.camera(display, frame.eye, fixation, frame.mode)
+            camera = plan.rig.camera(display, frame.eye, fixation, frame.mode, row=frame.row)
             try:
                 image = measurer.colour(scene, camera)
                 areas = measurer.visible_areas_px(scene, camera) / px_scale

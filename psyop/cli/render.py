@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     from psyop.protocol import load_protocol, resolve_display_profile, resolve_eye_model
     from psyop.rendering import Renderer, RenderSettings
     from psyop.rendering.builders import direction_from_angles
-    from psyop.schedule import compile_schedule
+    from psyop.schedule import compile_schedule, interval_values
     from psyop.stimulus import build_scene, interval_mode, interval_phases
 
     protocol_path = Path(args.protocol)
@@ -146,7 +146,11 @@ def run(args: argparse.Namespace) -> int:
     ipd_m = float(ipd_spec.mm) / 1000.0 if hasattr(ipd_spec, "mm") else args.ipd_mm / 1000.0
     centre = np.array([ipd_m / 2.0 if eye == "right" else -ipd_m / 2.0, 0.0, 0.0])
     fixation = centre + direction_from_angles(az, el) * args.fixation_m
-    camera = make_eye_camera(display, eye, fixation, ipd_m, eye_model.nc_m, mode)
+    from psyop.protocol.display import rendering_nc_rule
+
+    nc_rule = rendering_nc_rule(protocol.display)
+    nc_m = eye_model.nc_m if nc_rule is None else nc_rule.nc_m_for(eye_model.nc_m, interval_values(row, args.interval))
+    camera = make_eye_camera(display, eye, fixation, ipd_m, nc_m, mode)
     if args.crop:
         from psyop.rendering.camera_math import crop_camera
 
@@ -180,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
         "frustum_tangents": frustum_tangents(camera.pixel_to_ray),
         "resolution_px": [camera.width_px, camera.height_px],
         "display_profile": display.name, "image_distance_m": None if math.isinf(display.d_m) else display.d_m,
-        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m},
+        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m}, "rendered_nc_m": nc_m,
         "crop_px": args.crop, "antialiasing": args.antialiasing, "primitives": [p.name for p in scene.primitives],
     }
     Path(str(out) + ".json").write_text(json.dumps(sidecar, indent=2) + "\n")

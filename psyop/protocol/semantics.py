@@ -397,7 +397,61 @@ class _Checker:
                 used.add(mode.factor)
             used |= set(getattr(spec, "set", {}) or {})
         used |= {f.depends_on for f in self.factors.values() if f.depends_on}
+        nc = self.p.display.rendering_nc
+        for value in (nc.mm, nc.scale) if nc is not None else ():
+            if isinstance(value, FactorRef):
+                used.add(value.factor)
         return used
+
+    def check_rendering_nc(self, conditions: list[dict[str, Any]]) -> None:
+        """``display.rendering_nc``: a numeric factor (``mm`` ones named ``..._mm``), not a ``set:`` override,
+        and every value giving an NC in psyop.optics.ranges.NC_M."""
+        from psyop.optics.ranges import NC_M
+        from psyop.protocol.display import rendering_nc_rule, resolve_eye_model
+
+        nc = self.p.display.rendering_nc
+        if nc is None:
+            return
+        key = "mm" if nc.mm is not None else "scale"
+        value = nc.mm if nc.mm is not None else nc.scale
+        path = ("display", "rendering_nc", key)
+        rule = rendering_nc_rule(self.p.display)
+        eye_nc_m = resolve_eye_model(self.p.display).nc_m
+        if isinstance(value, FactorRef):
+            if not self.factor_exists(value.factor, path + ("factor",), numeric=True):
+                return
+            if key == "mm" and not value.factor.endswith("_mm"):
+                self.add(path + ("factor",), f"rendering_nc.mm reads millimetres: name the factor '{value.factor}' with "
+                                             "_mm (e.g. nc_mm), or use rendering_nc: {scale: {factor: ...}}")
+                return
+            response = self.p.response
+            for role in ("test", "reference"):
+                spec = getattr(response, role, None)
+                if spec is not None and value.factor in (getattr(spec, "set", None) or {}):
+                    self.add(("response", role, "set", value.factor),
+                             f"the rendered NC is the trial's level of '{value.factor}'; an interval cannot override "
+                             "it. Remove it from set:")
+            values = [condition[value.factor] for condition in conditions]
+        else:
+            values = [value]
+        for level in values:
+            try:
+                level_f = float(level)
+            except (TypeError, ValueError):
+                continue
+            if math.isnan(level_f):  # adaptive: known at run time; its range is checked below
+                a = self.factors[value.factor].adaptive
+                candidates = [float(a.min), float(a.max)] if a is not None else []
+            else:
+                candidates = [level_f]
+            for candidate in candidates:
+                nc_m = candidate / 1000.0 if key == "mm" else candidate * eye_nc_m
+                if not NC_M.contains(nc_m):
+                    self.add(path, f"{key} {candidate:g} gives a rendered NC of {nc_m * 1000:g} mm, outside "
+                                   f"{NC_M.describe(1000, 'mm')}; for NC 0 render conventionally (mode: conventional), "
+                                   "for a reversed NC use mode: reversed")
+                    return
+        assert rule is not None
 
     def check_unused_factors(self) -> None:
         used = self.used_factors()
@@ -518,6 +572,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None) -> list[Issue]:
     checker.check_response()
     checker.check_level_factor_levels()
     checker.check_pair_orders()
+    checker.check_rendering_nc(conditions)
     checker.check_unused_factors()
     checker.check_observer()
     return checker.issues
