@@ -126,6 +126,9 @@ Surface = Annotated[Union[SolidSurface, WhiteNoiseSurface, PinkNoiseSurface, Ima
 # ---- primitives -----------------------------------------------------------------------------
 
 Point2Deg = tuple[Number, Number]
+#: A primitive's centre [azimuth_deg, elevation_deg] whose angles may each be ``{factor: NAME}`` (a factor in deg).
+FactorPoint2Deg = tuple[Annotated[Number, Field(gt=-90, lt=90)] | FactorRef,
+                        Annotated[Number, Field(gt=-90, lt=90)] | FactorRef]
 
 
 class _Primitive(StrictModel):
@@ -140,7 +143,7 @@ class Disc(_Primitive):
     size_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef
     depth: Depth
     surface: Surface
-    centre_deg: Point2Deg = (0.0, 0.0)
+    centre_deg: FactorPoint2Deg = (0.0, 0.0)
 
 
 class Quad(_Primitive):
@@ -151,7 +154,7 @@ class Quad(_Primitive):
     height_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef
     depth: Depth
     surface: Surface
-    centre_deg: Point2Deg = (0.0, 0.0)
+    centre_deg: FactorPoint2Deg = (0.0, 0.0)
 
 
 class SinusoidalBorder(_Primitive):

@@ -98,3 +98,39 @@ def test_a_level_outside_a_fields_range_is_refused_at_its_line() -> None:
     assert "contrast: {factor: contrast_fraction}" in text.splitlines()[line - 1]
     with pytest.raises(UserError, match="'sise_deg' is not a factor"):
         parse_protocol(PROTOCOL.replace("{factor: size_deg}", "{factor: sise_deg}"), "p.yaml")
+
+
+PLACED = PROTOCOL.replace("    size_deg: {factor: size_deg}\n", "    size_deg: 2\n    centre_deg: [{factor: azimuth_deg}, {factor: elevation_deg}]\n") \
+    .replace("    size_deg: {levels: [2, 6]}\n", "    azimuth_deg: {levels: [-12, 20]}\n    elevation_deg: {levels: [0, 8]}\n")
+
+
+def test_a_disc_centre_as_factor_levels_lands_where_its_angles_say(tmp_path: Path) -> None:
+    """The disc's centre from azimuth/elevation factors: the rendered disc's centroid is where the
+    direction (az, el) from the eye's centre projects (conventional, gaze ahead), within 0.5 px."""
+    from psyop.optics.camera import make_eye_camera
+    from psyop.protocol.display import resolve_display_profile
+    from psyop.rendering.builders import direction_from_angles
+    from psyop.rendering.camera_math import project_points_px
+
+    path = tmp_path / "placed.yaml"
+    path.write_text(PLACED)
+    protocol = parse_protocol(PLACED, str(path))
+    schedule = compile_schedule(protocol, 0)
+    display = resolve_display_profile(protocol.display)
+    centre = np.array([0.032, 0.0, 0.0])
+    camera = make_eye_camera(display, "right", centre + np.array([0.0, 0.0, -1.0]), 0.064, 0.0076916, "conventional")
+    seen = set()
+    for _, row in schedule.iterrows():
+        key = (row["azimuth_deg"], row["elevation_deg"])
+        if key in seen:
+            continue
+        seen.add(key)
+        out = tmp_path / f"p{len(seen)}.png"
+        assert main(["render", str(path), "--trial", str(int(row["trial"])), "--interval", str(int(row["correct_interval"])),
+                     "--antialiasing", "none", "--out", str(out)]) == 0
+        image = (mpimg.imread(out)[..., :3] * 255).round()
+        ys, xs = np.nonzero(np.any(np.abs(image - 127.5) > 1, axis=-1))
+        expected = project_points_px(camera, [centre + direction_from_angles(*key) * 1.0])[0]
+        # a frontoparallel disc projects onto the (parallel) image plane as a circle about its centre's image
+        assert abs(xs.mean() + 0.5 - expected[0]) < 0.5 and abs(ys.mean() + 0.5 - expected[1]) < 0.5, key
+    assert len(seen) == 4
