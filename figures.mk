@@ -4,7 +4,8 @@
 # headless when it holds none), then runs a second make over the figure graph, so that
 # the session files it lists exist when make reads them. Every figure or table is one
 # analysis/ script; make's dependencies rebuild only what changed (new sessions, changed
-# statistics or drawing code). The slow psychometric fits are cached in results/*_fits.csv.
+# statistics or drawing code). The slow psychometric fits are cached in results/<study>_fits.csv.
+# Every study in data/ is analysed by its response kind and its outputs carry its name.
 
 # A recipe that fails (a full disk, a crash) leaves no target behind for the next make to trust:
 # the scripts write atomically (psyop.atomic), and make deletes a target its failed recipe touched.
@@ -15,17 +16,21 @@ RESULTS ?= results
 FIGDIR ?= figures
 
 OPTICS_SRC := $(wildcard psyop/optics/*.py) psyop/figures/optics_figures.py psyop/figures/labels.py
-STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py
+STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py analysis/_twoafc.py
 DRAW_SRC := $(STATS_SRC) psyop/figures/study_figures.py psyop/figures/labels.py
 trials_of = $(wildcard $(DATA)/$(1)/sub-*/ses-*/trials.parquet)
 
 MODEL_FIGURES := $(FIGDIR)/fig03_parallax_vs_eccentricity.png $(FIGDIR)/supp_linearity.png
-STUDY_FIGURES := $(FIGDIR)/detection_thresholds.png $(FIGDIR)/discrimination_thresholds.png \
-	$(FIGDIR)/supp_psychometric_detection.png $(FIGDIR)/supp_psychometric_discrimination.png \
-	$(FIGDIR)/ordinal_depth.png $(FIGDIR)/egocentric_reach.png $(FIGDIR)/realism_preferences.png
 TABLES := $(RESULTS)/summary.md
+# Every study found in $(DATA)/ gets its figures by its response kind (`psyop studies`, which
+# writes these rules and says what each study builds); outputs are named after the study.
+STUDY_FIGURES :=
+STUDIES_MK ?=
+ifneq ($(STUDIES_MK),)
+include $(STUDIES_MK)
+endif
 
-.PHONY: figures figures-data figures-build resimulate
+.PHONY: figures figures-data figures-build figures-all resimulate
 
 figures: $(STAMP) $(SYSDEPS_STAMP)
 	@$(MAKE) --no-print-directory figures-data
@@ -54,7 +59,13 @@ resimulate: $(STAMP)
 	@rm -rf $(RESULTS) $(FIGDIR)
 	@$(MAKE) --no-print-directory figures
 
-figures-build: $(MODEL_FIGURES) $(STUDY_FIGURES) $(TABLES)
+# The study rules depend on what data/ holds, so they are written first (psyop studies), then a
+# second make reads them. `+` runs both under `make -n` too, so a dry run shows the real graph.
+figures-build:
+	+@$(PY) -m psyop studies $(DATA) --protocols protocols --make-rules $(RESULTS)/.studies.mk
+	+@$(MAKE) --no-print-directory figures-all STUDIES_MK=$(RESULTS)/.studies.mk
+
+figures-all: $(MODEL_FIGURES) $(STUDY_FIGURES) $(TABLES)
 
 $(FIGDIR)/fig03_parallax_vs_eccentricity.png: analysis/fig03_parallax_vs_eccentricity.py $(OPTICS_SRC)
 	@mkdir -p $(FIGDIR)
@@ -66,46 +77,8 @@ $(FIGDIR)/supp_linearity.png: analysis/supp_linearity.py $(OPTICS_SRC)
 	@echo "[psyop] $@"
 	@$(PY) $< --out $@
 
-# Psychometric fit caches (the slow step), one per threshold study.
-$(RESULTS)/%_fits.csv: analysis/fit_psychometric.py $(STATS_SRC)
-	@mkdir -p $(RESULTS)
-	@echo "[psyop] fitting psychometric functions: $*"
-	@$(PY) $< --study $* --data $(DATA) --out $@ --n-jobs $(JOBS)
-
-$(RESULTS)/detection_fits.csv: $(call trials_of,detection)
-$(RESULTS)/discrimination_fits.csv: $(call trials_of,discrimination)
-
-$(FIGDIR)/detection_thresholds.png: analysis/fig_detection_thresholds.py $(RESULTS)/detection_fits.csv $(DRAW_SRC)
-	@mkdir -p $(FIGDIR)
+# The results table collects the JSON each figure script writes beside its figure: the paper's rows
+# from the paper's protocols (by hash), every other study in results/<study>_summary.md.
+$(RESULTS)/summary.md: analysis/results_table.py analysis/paper_values.py $(STUDY_FIGURES) $(STATS_SRC) $(wildcard protocols/*.yaml)
 	@echo "[psyop] $@"
-	@$(PY) $< --data $(DATA) --fits $(RESULTS)/detection_fits.csv --results $(RESULTS) --out $@
-
-$(FIGDIR)/discrimination_thresholds.png: analysis/fig_discrimination_thresholds.py $(RESULTS)/discrimination_fits.csv $(DRAW_SRC)
-	@mkdir -p $(FIGDIR)
-	@echo "[psyop] $@"
-	@$(PY) $< --data $(DATA) --fits $(RESULTS)/discrimination_fits.csv --results $(RESULTS) --out $@
-
-$(FIGDIR)/supp_psychometric_%.png: analysis/supp_psychometric_functions.py $(RESULTS)/%_fits.csv $(DRAW_SRC)
-	@mkdir -p $(FIGDIR)
-	@echo "[psyop] $@"
-	@$(PY) $< --study $* --data $(DATA) --fits $(RESULTS)/$*_fits.csv --results $(RESULTS) --out $@
-
-$(FIGDIR)/ordinal_depth.png: analysis/fig_ordinal_depth.py $(call trials_of,ordinal) $(DRAW_SRC)
-	@mkdir -p $(FIGDIR)
-	@echo "[psyop] $@"
-	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
-
-$(FIGDIR)/egocentric_reach.png: analysis/fig_egocentric_reach.py $(call trials_of,egocentric) $(DRAW_SRC)
-	@mkdir -p $(FIGDIR)
-	@echo "[psyop] $@"
-	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
-
-$(FIGDIR)/realism_preferences.png: analysis/fig_realism.py $(call trials_of,realism) $(DRAW_SRC)
-	@mkdir -p $(FIGDIR)
-	@echo "[psyop] $@"
-	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
-
-# The results table collects the JSON each figure script writes beside its figure.
-$(RESULTS)/summary.md: analysis/results_table.py analysis/paper_values.py $(STUDY_FIGURES) $(STATS_SRC)
-	@echo "[psyop] $@"
-	@$(PY) $< --data $(DATA) --results $(RESULTS) --out $@
+	@$(PY) $< --data $(DATA) --results $(RESULTS) --protocols protocols --out $@

@@ -1,9 +1,12 @@
 """Shared plumbing of the study analysis scripts: arguments, results files, JSON.
 
-Every script: ``--data DIR`` (the data root), ``--out PATH`` (a PNG, PDF beside it, or
-the CSV for the fit cache), ``--results DIR`` (machine-readable statistics; default
-``results``). Scripts are run as ``python analysis/<name>.py``, so this module is found
-on ``sys.path[0]``.
+Every script: ``--data DIR`` (the data root), ``--study NAME`` (the data/<NAME> folder, i.e. the
+protocol's ``study.name``), ``--out PATH`` (a PNG, PDF beside it, or the CSV for the fit cache),
+``--results DIR`` (machine-readable statistics; default ``results``). Every output is named after
+the study (``results/<study>_<what>.json``, ``figures/<study>_<what>.png``) and every results JSON
+records the study, its response kind and the protocol hashes its sessions ran, so that
+analysis/results_table.py puts only the paper's protocols in the paper's rows. Scripts are run as
+``python analysis/<name>.py``, so this module is found on ``sys.path[0]``.
 """
 
 from __future__ import annotations
@@ -20,16 +23,71 @@ import numpy as np
 import pandas as pd
 
 
-def parser(description: str, default_out: str, study: str | None = None) -> argparse.ArgumentParser:
+class _Parser(argparse.ArgumentParser):
+    """argparse whose usage errors are one line and exit 2 (no usage block)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def parser(description: str, default_out: str | None, study: str | None = None) -> argparse.ArgumentParser:
     """The common arguments; with ``study``, also ``--study`` (the data/<study> folder, i.e. the
-    protocol's ``study.name``; default ``study``), so a user's own protocol of that kind can be analysed."""
-    p = argparse.ArgumentParser(description=description)
+    protocol's ``study.name``; default ``study``), so a user's own protocol of that kind can be analysed.
+    ``default_out`` may hold ``{study}``; None: ``--out`` defaults to nothing (the script names it)."""
+    p = _Parser(description=description)
     p.add_argument("--data", type=Path, default=Path("data"), help="data root (data/<study>/sub-*/ses-*/trials.parquet)")
-    p.add_argument("--out", type=Path, default=Path(default_out), help="output file")
+    p.add_argument("--out", type=Path, default=None,
+                   help=f"output file (default {default_out})" if default_out else "output file")
+    p.set_defaults(default_out=default_out)
     p.add_argument("--results", type=Path, default=Path("results"), help="directory for CSV/JSON statistics")
     if study is not None:
         p.add_argument("--study", default=study, help=f"study name (the protocol's study.name; default {study})")
     return p
+
+
+def out_path(args: argparse.Namespace) -> Path:
+    """``--out``, else the script's default named after ``--study``."""
+    if args.out is not None:
+        return args.out
+    return Path(args.default_out.format(study=getattr(args, "study", ""), results=args.results))
+
+
+def results_file(results: Path, study: str, what: str = "", ext: str = "json") -> Path:
+    """``results/<study>_<what>.<ext>`` (``results/<study>.<ext>`` without ``what``): every results
+    file is named after its study.
+
+    Examples
+    --------
+    >>> results_file(Path("results"), "mystudy", "thresholds").as_posix()
+    'results/mystudy_thresholds.json'
+    """
+    return results / (f"{study}_{what}.{ext}" if what else f"{study}.{ext}")
+
+
+def provenance(facts, analysis: str) -> dict:
+    """The keys every results JSON starts with: which study, its response kind, which analysis
+    wrote it and the protocol hashes its sessions ran (psyop.statistics.studies.StudyFacts)."""
+    return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind,
+            "protocol_sha256": list(facts.protocol_sha256)}
+
+
+def require_kind(facts, kind: str, script: str) -> None:
+    """A UserError when the study's responses are of another kind than this script analyses."""
+    if facts.kind != kind:
+        from psyop.errors import UserError
+
+        raise UserError(f"study {facts.name!r} has {facts.kind} responses; {script} analyses {kind} studies "
+                        "(`python -m psyop studies DATA` lists each study's kind and its scripts)", facts.name)
+
+
+def require_columns(trials: pd.DataFrame, columns: list[str], where: str, fix: str) -> None:
+    """A UserError naming the missing columns and ``fix``."""
+    missing = [c for c in columns if c not in trials]
+    if missing:
+        from psyop.errors import UserError
+
+        raise UserError(f"no column {', '.join(map(repr, missing))} (columns: {', '.join(map(str, trials.columns))}); "
+                        f"{fix}", where)
 
 
 def run(main: Callable[[], int]) -> int:
@@ -112,7 +170,7 @@ def _parse_fits(path: Path) -> pd.DataFrame:
         fits = pd.read_csv(path, dtype={"participant": str, "flags": str, "status": str}, keep_default_na=False,
                            na_values=[""])
     except FileNotFoundError:
-        raise UserError("no fit cache here: run analysis/fit_psychometric.py (or make figures)", str(path)) from None
+        raise UserError("no fit cache here; run analysis/fit_psychometric.py --study <study> first (or give --fits, or make figures)", str(path)) from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
         raise UserError(f"fit cache cannot be read ({type(exc).__name__}: {str(exc)[:120]})", str(path)) from None
     if "status" not in fits or "flags" not in fits or "participant" not in fits:

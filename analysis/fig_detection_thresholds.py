@@ -1,10 +1,12 @@
-"""Detection thresholds by back-surface distance (subject thresholds with 95 % CIs, mean ± SE).
+"""Thresholds by condition (subject thresholds with 95 % CIs, mean ± SE): the paper's detection
+figure, and the thresholds figure of any two-interval study.
 
-Reads the fit cache (results/detection_fits.csv); writes results/detection_thresholds.json
-with the grand mean threshold (and its 95 % t-interval over participants) and a one-way
-rm-ANOVA of thresholds over back distance. Fits whose status is not usable (censored,
-lapse at bound, bimodal, grid edge, no fit) are left out by the documented rule
-(psyop.statistics.psychometric.usable_for_analysis) and counted by status.
+Reads the fit cache (results/<study>_fits.csv); writes results/<study>_thresholds.json with the
+grand mean threshold (and its 95 % t-interval over participants) and a one-way rm-ANOVA of
+thresholds over the condition. Fits whose status is not usable (censored, lapse at bound, bimodal,
+grid edge, no fit) are left out by the documented rule
+(psyop.statistics.psychometric.usable_for_analysis) and counted by status. Axis labels come from
+the protocol's factor names, descriptions and units.
 """
 
 from __future__ import annotations
@@ -12,7 +14,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from _common import parser, read_fits, run, write_json
+from _common import out_path, parser, provenance, read_fits, require_columns, results_file, run, write_json
+from _twoafc import check_two_interval, condition_column, level_column
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_thresholds
@@ -20,42 +23,62 @@ from psyop.statistics.anova import rm_anova
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_anova
 from psyop.statistics.psychometric import usable_for_analysis
+from psyop.statistics.studies import study_facts
 from scipy import stats
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser(__doc__, "figures/fig_detection_thresholds.png")
-    p.add_argument("--fits", type=Path, default=Path("results/detection_fits.csv"))
+    p = parser(__doc__, "figures/{study}_thresholds.png", study="detection")
+    p.add_argument("--fits", type=Path, default=None, help="fit cache (default results/<study>_fits.csv)")
+    p.add_argument("--condition-column", default=None, help="default: the fit cache's (the protocol's condition factor)")
+    p.add_argument("--level-column", default=None, help="default: the response's level_factor")
     args = p.parse_args(argv)
-    fits = read_fits(args.fits, data=args.data, study="detection")
+    facts = study_facts(args.data, args.study)
+    check_two_interval(facts, "fig_detection_thresholds.py")
+    fits_path = args.fits or results_file(args.results, args.study, "fits", "csv")
+    fits = read_fits(fits_path, data=args.data, study=args.study)
+    cached = fits["condition_column"].iloc[0] if "condition_column" in fits and len(fits) else None
+    cond = condition_column(facts, args.condition_column or cached)
+    require_columns(fits, [cond, "threshold_D", "participant"], str(fits_path),
+                    "give --condition-column naming the column the fits were made over, or refit with "
+                    "analysis/fit_psychometric.py")
+    level = facts.factor(level_column(facts, args.level_column))
+    unit = level.unit or ""
     simulated = is_simulated(args.data)
     clean, left_out = usable_for_analysis(fits)
     per_subject = clean.groupby("participant")["threshold_D"].mean()
-    per_back = clean.groupby("back_D")["threshold_D"].agg(["mean", "std", "count"]).reset_index()
+    per_cond = clean.groupby(cond)["threshold_D"].agg(["mean", "std", "count"]).reset_index()
     n = len(per_subject)
     half = float(stats.t.ppf(0.975, n - 1) * per_subject.std(ddof=1) / n ** 0.5) if n > 1 else float("nan")
-    mean = float(per_subject.mean())
+    mean = float(per_subject.mean()) if n else float("nan")
+    cond_label = facts.factor(cond).label
+    key_mean = ("detection threshold (mean over subjects and back distances)" if cond == "back_D"
+                else f"{args.study} threshold (mean over subjects and {cond_label})")
     payload = {
-        "study": "detection", "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
+        **provenance(facts, "thresholds"), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
+        "condition_column": cond, "level_column": level.name, "level_unit": level.unit,
         "n_fits": len(fits), "n_left_out": int(sum(left_out.values())), "left_out_by_status": left_out,
-        "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", "back_D", "status"]].to_dict("records"),
+        "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", cond, "status"]].to_dict("records"),
         "mean_threshold_D": mean, "mean_threshold_ci_D": [mean - half, mean + half],
-        "per_back": per_back.to_dict("records"),
-        "summary": {"detection threshold (mean over subjects and back distances)":
-                    f"{mean:.2f} D [95 % CI {mean - half:.2f}, {mean + half:.2f}; {n} participants; "
+        "per_condition": per_cond.to_dict("records"),
+        "summary": {key_mean:
+                    f"{mean:.2f} {unit} [95 % CI {mean - half:.2f}, {mean + half:.2f}; {n} participants; "
                     f"{sum(left_out.values())} of {len(fits)} fits left out: {left_out or 'none'}]"},
     }
+    effect_key = ("effect of back distance on threshold (rm-ANOVA)" if cond == "back_D"
+                  else f"effect of {cond_label} on threshold (rm-ANOVA)")
     try:
-        aov = rm_anova(clean, "threshold_D", "back_D")
-    except ValueError as exc:  # too few complete subjects: say so instead of a number
-        payload["summary"]["effect of back distance on threshold (rm-ANOVA)"] = f"not computed: {exc}"
+        aov = rm_anova(clean, "threshold_D", cond)
+    except ValueError as exc:  # too few complete subjects or one condition: say so instead of a number
+        payload["summary"][effect_key] = f"not computed: {exc}"
     else:
-        payload["anova_back_D"] = aov.table.to_dict("records")
+        payload[f"anova_{cond}"] = aov.table.to_dict("records")
         payload["anova_dropped"] = aov.dropped.to_dict("records")
-        payload["summary"]["effect of back distance on threshold (rm-ANOVA)"] = format_anova(aov.table.iloc[0])
-    write_json(args.results / "detection_thresholds.json", payload)
-    fig = plot_thresholds(fits, "back_D", "back surface distance (D)", "Detection thresholds", simulated=simulated)
-    save_figure(fig, args.out)
+        payload["summary"][effect_key] = format_anova(aov.table.iloc[0])
+    write_json(results_file(args.results, args.study, "thresholds"), payload)
+    title = "Detection thresholds" if args.study == "detection" else f"Thresholds: {args.study}"
+    fig = plot_thresholds(fits, cond, cond_label, title, simulated=simulated, level_unit=unit or "level units")
+    save_figure(fig, out_path(args))
     return 0
 
 

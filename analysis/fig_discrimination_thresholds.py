@@ -1,7 +1,9 @@
-"""Discrimination thresholds against relative offset, with the linear fit (paper: 0.11 x + 0.38 D).
+"""Thresholds against a numeric condition, with the linear fit (the paper's discrimination figure:
+0.11 x + 0.38 D); any two-interval study with a numeric condition factor.
 
-Reads results/discrimination_fits.csv; writes results/discrimination_fit.json. Fits whose
-status is not usable are left out (psyop.statistics.psychometric.usable_for_analysis) and counted.
+Reads results/<study>_fits.csv; writes results/<study>_fit.json. Fits whose status is not usable
+are left out (psyop.statistics.psychometric.usable_for_analysis) and counted. Axis labels come from
+the protocol's factor names, descriptions and units.
 """
 
 from __future__ import annotations
@@ -9,36 +11,59 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from _common import parser, read_fits, run, write_json
+import pandas as pd
+from _common import out_path, parser, provenance, read_fits, require_columns, results_file, run, write_json
+from _twoafc import check_two_interval, condition_column, level_column
 
+from psyop.errors import UserError
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_thresholds
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_linear_fit
 from psyop.statistics.psychometric import usable_for_analysis
 from psyop.statistics.regression import linear_fit
+from psyop.statistics.studies import study_facts
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser(__doc__, "figures/fig_discrimination_thresholds.png")
-    p.add_argument("--fits", type=Path, default=Path("results/discrimination_fits.csv"))
-    p.add_argument("--offset-column", default="offset_D")
+    p = parser(__doc__, "figures/{study}_thresholds.png", study="discrimination")
+    p.add_argument("--fits", type=Path, default=None, help="fit cache (default results/<study>_fits.csv)")
+    p.add_argument("--offset-column", "--condition-column", dest="condition_column", default=None,
+                   help="the numeric condition column (default: the fit cache's)")
+    p.add_argument("--level-column", default=None, help="default: the response's level_factor")
     args = p.parse_args(argv)
-    fits = read_fits(args.fits, data=args.data, study="discrimination")
+    facts = study_facts(args.data, args.study)
+    check_two_interval(facts, "fig_discrimination_thresholds.py")
+    fits_path = args.fits or results_file(args.results, args.study, "fits", "csv")
+    fits = read_fits(fits_path, data=args.data, study=args.study)
+    cached = fits["condition_column"].iloc[0] if "condition_column" in fits and len(fits) else None
+    cond = condition_column(facts, args.condition_column or cached)
+    require_columns(fits, [cond, "threshold_D", "participant"], str(fits_path),
+                    "give --condition-column naming the column the fits were made over")
+    if not pd.api.types.is_numeric_dtype(fits[cond]):
+        raise UserError(f"condition {cond!r} is not numeric: a linear fit needs numbers; use "
+                        "analysis/fig_detection_thresholds.py for thresholds by condition", str(fits_path))
+    level = facts.factor(level_column(facts, args.level_column))
+    unit = level.unit or "level units"
     simulated = is_simulated(args.data)
     clean, left_out = usable_for_analysis(fits)
-    fit = linear_fit(clean, args.offset_column, "threshold_D")
-    write_json(args.results / "discrimination_fit.json", {
-        "study": "discrimination", "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
+    fit = linear_fit(clean, cond, "threshold_D")
+    label = facts.factor(cond).label
+    key = ("discrimination threshold vs offset (linear fit)" if cond == "offset_D"
+           else f"{args.study} threshold vs {label} (linear fit)")
+    write_json(results_file(args.results, args.study, "fit"), {
+        **provenance(facts, "linear_fit"), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
+        "condition_column": cond, "level_column": level.name, "level_unit": level.unit,
         "n_fits": len(fits), "n_left_out": int(sum(left_out.values())), "left_out_by_status": left_out,
-        "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", args.offset_column, "status"]].to_dict("records"),
+        "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", cond, "status"]].to_dict("records"),
         "linear_fit": fit.__dict__,
-        "summary": {"discrimination threshold vs offset (linear fit)": format_linear_fit(fit, "D")
+        "summary": {key: format_linear_fit(fit, unit)
                     + f"; {sum(left_out.values())} of {len(fits)} fits left out: {left_out or 'none'}"},
     })
-    fig = plot_thresholds(fits, args.offset_column, "relative offset (D)", "Discrimination thresholds",
-                          line=(fit.slope, fit.intercept), simulated=simulated)
-    save_figure(fig, args.out)
+    title = "Discrimination thresholds" if args.study == "discrimination" else f"Thresholds: {args.study}"
+    fig = plot_thresholds(fits, cond, label, title, line=(fit.slope, fit.intercept), simulated=simulated,
+                          level_unit=unit)
+    save_figure(fig, out_path(args))
     return 0
 
 

@@ -1,52 +1,65 @@
-"""Ordinal depth: proportion correct by rendering mode and separation, 3 x 2 rm-ANOVA (GG),
-Bonferroni post-hoc paired t-tests per separation with significance stars.
+"""Ordinal depth (left/right nearer): proportion correct by rendering mode and separation, mode x
+separation rm-ANOVA (GG), Bonferroni post-hoc paired t-tests per separation with significance stars.
 
-Writes results/ordinal_cells.csv, ordinal_anova.csv, ordinal_posthoc.csv, ordinal.json.
+Writes results/<study>_cells.csv, <study>_anova.csv, <study>_posthoc.csv and <study>.json. The
+separation column is the response's ``separation_factor`` (or --separation-column).
 """
 
 from __future__ import annotations
 
 import sys
 
-from _common import parser, run, write_csv, write_json
+from _common import out_path, parser, provenance, require_columns, require_kind, results_file, run, write_csv, write_json
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_ordinal
 from psyop.statistics.anova import cell_means, posthoc_paired, rm_anova
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.formatting import format_anova, format_ttest
+from psyop.statistics.studies import NEAR_SIDE, study_facts
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser(__doc__, "figures/fig_ordinal_depth.png", study="ordinal")
+    p = parser(__doc__, "figures/{study}_depth.png", study="ordinal")
     p.add_argument("--bonferroni-family", choices=["per_level", "all"], default="per_level",
                    help="per_level: correct over the 3 mode pairs within each separation (the paper's "
                         "'pairwise t-tests between rendering modes at each separation distance'); all: over all 6")
+    p.add_argument("--separation-column", default=None, help="default: the response's separation_factor")
     args = p.parse_args(argv)
+    facts = study_facts(args.data, args.study)
+    require_kind(facts, NEAR_SIDE, "fig_ordinal_depth.py")
+    sep = args.separation_column or facts.response_column("separation_factor", "separation_D")
     ds = load_dataset(args.data, args.study)
-    cells = cell_means(ds.trials, "correct", ["mode", "separation_D"])
-    aov = rm_anova(cells, "correct", ["mode", "separation_D"])
-    posthoc = posthoc_paired(cells, "correct", "mode", by="separation_D", family=args.bonferroni_family)
+    require_columns(ds.trials, ["mode", sep, "correct"], str(args.data / args.study),
+                    "give --separation-column naming the study's separation factor")
+    cells = cell_means(ds.trials, "correct", ["mode", sep])
+    aov = rm_anova(cells, "correct", ["mode", sep])
+    posthoc = posthoc_paired(cells, "correct", "mode", by=sep, family=args.bonferroni_family)
     family_text = ("the 3 mode pairs within each separation (m = 3)" if args.bonferroni_family == "per_level"
                    else f"all {len(posthoc)} mode pairs across separations (m = {len(posthoc)})")
     args.results.mkdir(parents=True, exist_ok=True)
-    write_csv(cells, args.results / "ordinal_cells.csv")
-    write_csv(aov.table, args.results / "ordinal_anova.csv")
-    write_csv(posthoc, args.results / "ordinal_posthoc.csv")
-    means = cells.groupby(["mode", "separation_D"])["correct"].mean()
-    summary = {f"ordinal rm-ANOVA: {r['effect']}": format_anova(r) for _, r in aov.table.iterrows()}
+    write_csv(cells, results_file(args.results, args.study, "cells", "csv"))
+    write_csv(aov.table, results_file(args.results, args.study, "anova", "csv"))
+    write_csv(posthoc, results_file(args.results, args.study, "posthoc", "csv"))
+    means = cells.groupby(["mode", sep])["correct"].mean()
+    unit = facts.factor(sep).unit or ""
+    # the paper's labels ("ordinal rm-ANOVA: mode") for the paper's study; each study's own name otherwise
+    summary = {f"{args.study} rm-ANOVA: {r['effect']}": format_anova(r) for _, r in aov.table.iterrows()}
     for _, r in posthoc.iterrows():
-        summary[f"ordinal post-hoc at {r['separation_D']:g} D: {r['A']} vs {r['B']}"] = format_ttest(r)
-    for (mode, sep), m in means.items():
-        summary[f"ordinal proportion correct: {mode}, {sep:g} D"] = f"{100 * m:.1f}%"
-    write_json(args.results / "ordinal.json", {
-        "study": "ordinal", "simulated": ds.simulated, "n_subjects": aov.n_subjects,
+        summary[f"{args.study} post-hoc at {r[sep]:g} {unit}: {r['A']} vs {r['B']}".replace("  ", " ")] = format_ttest(r)
+    for (mode, s), m in means.items():
+        summary[f"{args.study} proportion correct: {mode}, {s:g} {unit}".rstrip()] = f"{100 * m:.1f}%"
+    write_json(results_file(args.results, args.study), {
+        **provenance(facts, "ordinal"), "simulated": ds.simulated, "n_subjects": aov.n_subjects,
+        "separation_column": sep,
         "dropped": aov.dropped.to_dict("records"), "anova": aov.table.to_dict("records"),
         "posthoc": posthoc.to_dict("records"), "bonferroni_family": args.bonferroni_family,
         "bonferroni_family_text": family_text, "summary": summary,
     })
+    title = "Ordinal depth" if args.study == "ordinal" else f"Ordinal depth: {args.study}"
     save_figure(plot_ordinal(cells[~cells["participant"].isin(aov.dropped["subject"])], posthoc,
-                             simulated=ds.simulated), args.out)
+                             simulated=ds.simulated, separation_column=sep, separation_label=facts.factor(sep).text,
+                             separation_unit=unit, title=title), out_path(args))
     return 0
 
 

@@ -9,7 +9,9 @@ correction), or ``value``: the paper's number lies in psyop's 95 % interval.
 from __future__ import annotations
 
 from collections.abc import Callable
+import hashlib
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 ALPHA = 0.05
@@ -147,6 +149,33 @@ PAPER: list[PaperStat] = [
     PaperStat("realism", "ocular parallax over reversed", "49.1 %, not significant", "not significant",
               _binomial("ocular", "reversed", False)),
 ]
+
+
+#: The paper's studies: results key -> (the shipped protocol file in protocols/, the analysis whose
+#: results JSON gives its rows). A results JSON counts for the paper only when its sessions ran exactly
+#: this file (its ``protocol_sha256`` list is this file's hash alone).
+PAPER_PROTOCOLS: dict[str, tuple[str, str]] = {
+    "detection_thresholds": ("detection.yaml", "thresholds"),
+    "discrimination_fit": ("discrimination.yaml", "linear_fit"),
+    "ordinal": ("ordinal.yaml", "ordinal"),
+    "egocentric": ("egocentric.yaml", "reach"),
+    "realism": ("realism.yaml", "preferences"),
+}
+
+
+def paper_hashes(protocols_dir: Path) -> dict[str, str]:
+    """results key -> the sha256 of the paper's protocol file (as psyop.protocol records it: the file's
+    UTF-8 text); a UserError naming a missing file."""
+    from psyop.errors import UserError
+
+    out = {}
+    for key, (name, _) in PAPER_PROTOCOLS.items():
+        path = Path(protocols_dir) / name
+        if not path.is_file():
+            raise UserError(f"the paper's protocol {name} is missing; give --protocols DIR holding the paper's "
+                            "protocols", str(path))
+        out[key] = hashlib.sha256(path.read_bytes().decode("utf-8").encode("utf-8")).hexdigest()
+    return out
 
 
 def rows_for(studies: dict[str, Any]) -> list[dict[str, Any]]:

@@ -1,8 +1,11 @@
 """results/summary.md in the paper's form, beside the paper: every statistic the paper reports with
 the paper's value, psyop's value and whether the conclusion agrees (analysis/paper_values.py);
-then each study's full statistics. Also results/summary.json.
+then each paper study's full statistics. Also results/summary.json.
 
-Reads results/{detection_thresholds,discrimination_fit,ordinal,egocentric,realism}.json.
+The paper's rows come only from results whose sessions ran the paper's protocols, identified by the
+protocol hash each results JSON records (analysis/_common.provenance) against the shipped files
+protocols/<name>.yaml (analysis/paper_values.PAPER_PROTOCOLS), never by study name. Every other
+study's results go to results/<study>_summary.md: a user's study never changes a paper row.
     python analysis/results_table.py --results results --out results/summary.md
 """
 
@@ -10,14 +13,79 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 from _common import parser, run, write_json, write_text
-from paper_values import rows_for
+from paper_values import PAPER_PROTOCOLS, paper_hashes, rows_for
 
-STUDY_FILES = ["detection_thresholds", "discrimination_fit", "ordinal", "egocentric", "realism"]
+from psyop.errors import UserError
+
 #: The paper, cited by its reference (never by a path on the machine that built the summary).
 PAPER_REFERENCE = ("Konrad, Angelopoulos and Wetzstein, \"Gaze-Contingent Ocular Parallax Rendering for Virtual "
                    "Reality\", ACM Transactions on Graphics, 2020 (sec. 5-6 and supplement)")
+
+
+def study_results(results: Path) -> list[tuple[Path, dict]]:
+    """Every results JSON an analysis script wrote (it has an ``analysis`` key), by file name."""
+    found = []
+    for path in sorted(results.glob("*.json")):
+        if path.name.startswith("summary") or path.name.endswith("_summary.json"):
+            continue
+        try:
+            payload = json.loads(path.read_text())
+        except ValueError as exc:
+            raise UserError(f"not valid JSON ({exc}); rerun the analysis script that wrote it", str(path)) from exc
+        if isinstance(payload, dict) and "analysis" in payload and "study" in payload:
+            found.append((path, payload))
+    return found
+
+
+def split_paper(found: list[tuple[Path, dict]], hashes: dict[str, str]) -> tuple[dict[str, dict], list[tuple[Path, dict]]]:
+    """(paper key -> payload of the paper's protocol, every other results payload)."""
+    paper: dict[str, dict] = {}
+    others = []
+    for path, payload in found:
+        key = next((k for k, (_, analysis) in PAPER_PROTOCOLS.items()
+                    if payload["analysis"] == analysis and payload.get("protocol_sha256") == [hashes[k]]), None)
+        if key is None:
+            others.append((path, payload))
+        elif key in paper:
+            raise UserError(f"two results of the paper's {PAPER_PROTOCOLS[key][0]} ({paper[key]['study']!r} and "
+                            f"{payload['study']!r}); remove one", str(path))
+        else:
+            paper[key] = payload
+    return paper, others
+
+
+def _statistics(payload: dict, name: str) -> list[str]:
+    lines = [f"### {payload.get('study', name)} (n = {payload.get('n_subjects', '?')})", ""]
+    lines += [f"- {k}: {v}" for k, v in payload.get("summary", {}).items()]
+    for key in ("left_out", "dropped"):
+        if payload.get(key):
+            lines.append(f"- {key}: " + "; ".join(json.dumps(x, sort_keys=True) for x in payload[key]))
+    lines.append("")
+    return lines
+
+
+def write_study_summaries(others: list[tuple[Path, dict]], results: Path) -> list[Path]:
+    """results/<study>_summary.md for each study that is not one of the paper's protocols."""
+    by_study: dict[str, list[dict]] = {}
+    for _, payload in others:
+        by_study.setdefault(payload["study"], []).append(payload)
+    written = []
+    for study, payloads in sorted(by_study.items()):
+        hashes = sorted({h for p in payloads for h in p.get("protocol_sha256", [])})
+        lines = [f"# Statistics of study {study}", "",
+                 f"Protocol hash(es): {', '.join(h[:12] for h in hashes) or 'not recorded'} (not one of the paper's "
+                 "protocols: these numbers are not compared with the paper).", ""]
+        if any(p.get("simulated") for p in payloads):
+            lines += ["**Simulated data**.", ""]
+        for payload in payloads:
+            lines += [f"## {payload['analysis']}", ""] + _statistics(payload, study)[2:]
+        path = results / f"{study}_summary.md"
+        write_text(path, "\n".join(lines) + "\n")
+        written.append(path)
+    return written
 
 
 def _methods(studies: dict) -> list[str]:
@@ -48,16 +116,18 @@ def _methods(studies: dict) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parser(__doc__, "results/summary.md").parse_args(argv)
-    studies, simulated = {}, False
-    for name in STUDY_FILES:
-        path = args.results / f"{name}.json"
-        if path.exists():
-            studies[name] = json.loads(path.read_text())
-            simulated |= bool(studies[name].get("simulated"))
-    if not studies:
-        print(f"no study results in {args.results}", file=sys.stderr)
-        return 1
+    p = parser(__doc__, "results/summary.md")
+    p.add_argument("--protocols", type=Path, default=Path("protocols"), help="the paper's protocol files "
+                   "(protocols/<name>.yaml); their hashes pick the paper's results")
+    args = p.parse_args(argv)
+    out = args.out or args.results / "summary.md"
+    found = study_results(args.results)
+    if not found:
+        raise UserError("no study results here; run the analysis scripts first (make figures)", str(args.results))
+    studies, others = split_paper(found, paper_hashes(args.protocols))
+    for path in write_study_summaries(others, args.results):
+        print(f"[psyop] {path} (not a paper protocol: not in the paper's rows)", file=sys.stderr)
+    simulated = any(bool(s.get("simulated")) for s in studies.values())
     rows = rows_for(studies)
     lines = ["# Statistics summary, beside the paper", ""]
     if simulated:
@@ -66,23 +136,19 @@ def main(argv: list[str] | None = None) -> int:
     agree = sum(r["agrees"] == "yes" for r in rows)
     judged = sum(r["agrees"] != "n/a" for r in rows)
     lines += [f"Paper: {PAPER_REFERENCE}. Conclusions agree for {agree} of {judged} statistics judged "
-              "(alpha 0.05 after the same correction; a value agrees when it lies in psyop's 95 % CI).", "",
+              "(alpha 0.05 after the same correction; a value agrees when it lies in psyop's 95 % CI). "
+              "Rows come only from sessions of the paper's protocols (protocols/*.yaml, by hash).", "",
               "| study | statistic | paper | psyop | conclusion agrees |", "|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['study'].split('_')[0]} | {r['statistic']} | {r['paper']} | {r['psyop']} | {r['agrees']} |")
     lines.append("")
     lines += _methods(studies)
     lines += ["## Every statistic psyop computed", ""]
-    for name, payload in studies.items():
-        lines += [f"### {payload.get('study', name)} (n = {payload.get('n_subjects', '?')})", ""]
-        lines += [f"- {k}: {v}" for k, v in payload.get("summary", {}).items()]
-        for key in ("left_out", "dropped"):
-            if payload.get(key):
-                lines.append(f"- {key}: " + "; ".join(json.dumps(x, sort_keys=True) for x in payload[key]))
-        lines.append("")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_text(args.out, "\n".join(lines) + "\n")
-    write_json(args.out.with_suffix(".json"), {
+    for name in PAPER_PROTOCOLS:
+        if name in studies:
+            lines += _statistics(studies[name], name)
+    write_text(out, "\n".join(lines) + "\n")
+    write_json(out.with_suffix(".json"), {
         "simulated": simulated, "paper_comparison": rows,
         "summary": {n: s.get("summary", {}) for n, s in studies.items()}, "studies": studies,
     })

@@ -246,3 +246,30 @@ def test_modes_with_the_same_centre_of_projection_are_a_note_not_a_failure(ctx):
                        AuditSettings(scale=0.05, gazes=1, samples_per_axis=4), ctx=ctx)
     assert not report.failures, report.failures
     assert any("ocular|reversed" in note and "render identically" in note for note in report.notes)
+
+
+def test_the_shipped_adaptive_example_passes_the_audit_at_points_of_its_level_range(ctx):
+    """Issue 18: an adaptive protocol stopped the audit with 'depth resolves to nan D'. Each condition
+    is now audited at the range's min, start and max (or the --level values), in rendered frames."""
+    protocol = load_protocol(PROTOCOLS / "examples" / "detection_quest_plus.yaml")
+    report = run_audit(protocol, FAST, ctx=ctx, base_dir=PROTOCOLS)
+    assert report.passed, "\n".join(report.failures)
+    conditions = {r.frame.condition for r in report.records}
+    assert {c.rsplit("=", 1)[1] for c in conditions} == {"0", "0.5", "1.5"} and len(conditions) == 9
+    # the front surface's ocular shift grows with its level: the rendered test interval differs by level
+    fronts = {}
+    for r in report.records:
+        if r.frame.mode == "ocular" and r.frame.gaze_index == 1 and r.frame.condition.startswith("back_D=1|"):
+            fronts[r.frame.condition.rsplit("=", 1)[1]] = r.image
+    assert not np.array_equal(fronts["0"], fronts["1.5"])
+    chosen = run_audit(protocol, AuditSettings(scale=0.0625, gazes=1, samples_per_axis=8, levels=(0.3,)), ctx=ctx,
+                       base_dir=PROTOCOLS)
+    assert chosen.passed and {r.frame.condition.rsplit("=", 1)[1] for r in chosen.records} == {"0.3"}
+
+
+def test_audit_and_render_level_errors_are_one_line(tmp_path, capsys):
+    adaptive = str(PROTOCOLS / "examples" / "detection_quest_plus.yaml")
+    assert main(["audit", adaptive, "--level", "7"]) == 2
+    assert "outside level_D's adaptive range [0, 1.5]" in capsys.readouterr().err
+    assert main(["render", str(PROTOCOLS / "detection.yaml"), "--level", "0.5", "--out", str(tmp_path / "x.png")]) == 2
+    assert "this protocol has none" in capsys.readouterr().err

@@ -3,14 +3,19 @@ fits, its figures and the summary (checked with make's dry run on a scratch tree
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import subprocess
 from pathlib import Path
 
+import sys
+
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-STUDIES = ["detection", "discrimination", "ordinal", "egocentric", "realism"]
+STUDIES = {"detection": "2afc_interval", "discrimination": "2afc_interval", "ordinal": "near_side",
+           "egocentric": "reach", "realism": "preference"}
 OUTPUTS = [  # in build order: each is written after the ones before it
     "results/detection_fits.csv", "results/discrimination_fits.csv",
     "figures/fig03_parallax_vs_eccentricity.png", "figures/supp_linearity.png",
@@ -19,6 +24,12 @@ OUTPUTS = [  # in build order: each is written after the ones before it
     "figures/ordinal_depth.png", "figures/egocentric_reach.png", "figures/realism_preferences.png",
     "results/summary.md",
 ]
+# the study rules are written before anything is built (psyop studies --make-rules)
+STUDIES_MK = "results/.studies.mk"
+
+
+def _sha(study: str) -> str:
+    return hashlib.sha256((REPO / "protocols" / f"{study}.yaml").read_bytes()).hexdigest()
 
 
 def dry_run(tmp: Path) -> str:
@@ -31,11 +42,15 @@ def dry_run(tmp: Path) -> str:
 def built_tree(tmp_path: Path) -> Path:
     newest_source = max(p.stat().st_mtime for p in [*REPO.glob("psyop/**/*.py"), *REPO.glob("analysis/*.py")])
     t = newest_source + 10
-    for study in STUDIES:
+    for study, kind in STUDIES.items():
         f = tmp_path / "data" / study / "sub-S01" / "ses-1" / "trials.parquet"
         f.parent.mkdir(parents=True)
         f.write_bytes(b"")
+        (f.parent / "session.json").write_text(json.dumps({"response_kind": kind, "protocol_sha256": _sha(study)}))
         os.utime(f, (t, t))
+    subprocess.run([sys.executable, "-m", "psyop", "studies", str(tmp_path / "data"), "--protocols",
+                    str(REPO / "protocols"), "--make-rules", str(tmp_path / STUDIES_MK)], check=True, cwd=REPO,
+                   capture_output=True)
     for i, rel in enumerate(OUTPUTS, start=1):
         f = tmp_path / rel
         f.parent.mkdir(parents=True, exist_ok=True)
@@ -64,3 +79,22 @@ def test_new_detection_session_rebuilds_only_detection_and_summary(built_tree: P
                   "fig03_parallax", "supp_linearity"]:
         assert other not in scripts, f"{other} rebuilt for a detection session"
     assert len(commands) == 4
+    assert "fig_detection_thresholds.py --study detection" in scripts  # by kind, outputs named after the study
+
+
+def test_a_user_study_gets_its_own_rules_and_never_a_paper_figure(built_tree: Path) -> None:
+    """A study found in data/ is built by its response kind, under its own name; the paper's figures
+    are not rebuilt for it (the summary is: it lists which results are the paper's)."""
+    f = built_tree / "data" / "stereo_blocks" / "sub-P1" / "ses-1" / "trials.parquet"
+    f.parent.mkdir(parents=True)
+    f.write_bytes(b"")
+    (f.parent / "session.json").write_text(json.dumps({"response_kind": "near_side", "protocol_sha256": "ab" * 32}))
+    later = (built_tree / "results" / "summary.md").stat().st_mtime + 10
+    os.utime(f, (later, later))
+    out = dry_run(built_tree)
+    commands = " ".join(line for line in out.splitlines() if "analysis/" in line)
+    assert "fig_ordinal_depth.py --study stereo_blocks" in commands
+    assert "stereo_blocks_depth.png" in commands
+    assert "[psyop] study stereo_blocks (left/right nearer): stereo_blocks_depth.png" in out
+    for paper in ("--study ordinal ", "--study detection", "fig_realism", "fig_egocentric"):
+        assert paper not in commands

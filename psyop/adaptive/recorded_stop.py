@@ -34,7 +34,8 @@ def rebuilt_stop_record(meta: Mapping[str, Any], trials: pd.DataFrame | None) ->
     plan = adaptive_plan(protocol)
     if plan is None:
         return None
-    schedule = compile_schedule(protocol, int(seed))
+    index = meta.get("participant_index")
+    schedule = compile_schedule(protocol, int(seed), participant_index=index if isinstance(index, int) else None)
     logged = trials if trials is not None and len(trials) and "trial" in trials else None
     levels = AdaptiveLevels.from_log(plan, logged)
     recorded = set() if logged is None else {int(t) for t in logged["trial"]}

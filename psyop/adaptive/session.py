@@ -105,6 +105,49 @@ def adaptive_plan(protocol: "Protocol") -> AdaptivePlan | None:
     return None
 
 
+def row_at_level(plan: AdaptivePlan, row: Mapping[str, Any], level: float) -> dict[str, Any]:
+    """``row`` with the adaptive factor at ``level``: its column and each interval's copy of it (an
+    interval whose ``set:`` fixes the factor keeps that value). The session fills each trial this
+    way; ``psyop render --level`` and ``psyop audit`` preview levels with it."""
+    out = dict(row)
+    out[plan.factor] = float(level)
+    for k in (1, 2):
+        column = f"{plan.factor}_interval{k}"
+        if column in out:
+            is_test = int(out.get("correct_interval", 1)) == k
+            fixed = plan.test_level if is_test else plan.reference_level
+            out[column] = float(level) if fixed is None else fixed
+    return out
+
+
+def preview_levels(protocol: "Protocol", given: tuple[float, ...] = ()) -> tuple[float, ...]:
+    """The adaptive factor's levels to preview: ``given`` (each checked against [min, max]), else the
+    range's min, start and max. Empty when the protocol has no adaptive factor (``given`` is then an error).
+
+    Examples
+    --------
+    >>> from psyop.protocol import load_protocol
+    >>> preview_levels(load_protocol("protocols/examples/detection_quest_plus.yaml"))
+    (0.0, 0.5, 1.5)
+    """
+    from psyop.errors import UserError
+
+    adaptive = [(name, f.adaptive) for name, f in protocol.design.factors.items() if f.adaptive is not None]
+    if not adaptive:
+        if given:
+            raise UserError("--level previews an adaptive factor, and this protocol has none; its levels are fixed "
+                            "(pick a trial with --trial)", "--level")
+        return ()
+    name, a = adaptive[0]
+    for level in given:
+        if not (math.isfinite(level) and float(a.min) <= level <= float(a.max)):
+            raise UserError(f"--level {level:g} is outside {name}'s adaptive range [{float(a.min):g}, {float(a.max):g}]",
+                            "--level")
+    if given:
+        return tuple(float(v) for v in given)
+    return tuple(sorted({float(a.min), float(a.start), float(a.max)}))
+
+
 def _maybe_float(value: Any) -> float | None:
     return None if value is None else float(value)
 
@@ -152,16 +195,8 @@ class AdaptiveLevels:
 
     def fill(self, row: Mapping[str, Any]) -> dict[str, Any]:
         """``row`` with the level the condition's procedure chooses now."""
-        plan, out = self.plan, dict(row)
         state = self.state(str(row["condition"]))
-        level = float(state.next_level)
-        out[plan.factor] = level
-        for k in (1, 2):
-            column = f"{plan.factor}_interval{k}"
-            if column in out:
-                is_test = int(out.get("correct_interval", 1)) == k
-                fixed = plan.test_level if is_test else plan.reference_level
-                out[column] = level if fixed is None else fixed
+        out = row_at_level(self.plan, row, float(state.next_level))
         out.update(adaptive_procedure=state.procedure, adaptive_trials=np.int64(state.trials))
         return out
 

@@ -47,6 +47,8 @@ class AuditSettings:
     samples_per_axis: int = 16
     ipd_m: float = 0.064
     seed: int = 0
+    #: an adaptive factor's levels to audit (each condition at each); empty: the range's min, start and max
+    levels: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale) and 0.01 <= self.scale <= 1.0):
@@ -108,10 +110,20 @@ def iter_frames(plan: Any, settings: AuditSettings) -> Iterator[tuple[AuditFrame
     """Every audited frame and its plan phase, in order: condition, phase, eye, gaze."""
     from psyop.schedule import compile_schedule
 
-    schedule = compile_schedule(plan.protocol, settings.seed)
+    schedule = compile_schedule(plan.protocol, settings.seed, participant_index=0)  # block order: irrelevant here
     phases = [(i, phase) for i, phase in enumerate(plan.phases)
               if phase.show == "stimulus" or (phase.show == "blank" and phase.primitives)]
-    for row in representative_rows(schedule):
+    rows = representative_rows(schedule)
+    if plan.adaptive is not None:  # the level is chosen at run time: audit each condition at a few levels
+        from psyop.adaptive.session import preview_levels, row_at_level
+
+        levels = preview_levels(plan.protocol, settings.levels)
+        rows = [dict(row_at_level(plan.adaptive, row, level),
+                     condition=f"{row['condition']}|{plan.adaptive.factor}={level:g}")
+                for row in rows for level in levels]
+    elif settings.levels:
+        preview_levels(plan.protocol, settings.levels)  # the error: no adaptive factor to set
+    for row in rows:
         for index, phase in phases:
             mode = plan.mode_for(phase, row)
             for eye in plan.eyes:
@@ -149,7 +161,7 @@ def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir:
                                 show=phase.primitives)
             origin = scene_origin_m(protocol, centre)
             fixation = fixation_point(scene, fixation_prefix, origin, frame.gaze_index, settings.gazes)
-            camera = plan.rig.camera(display, frame.eye, fixation, frame.mode)
+            camera = plan.rig.camera(display, frame.eye, fixation, frame.mode, row=frame.row)
             try:
                 image = measurer.colour(scene, camera)
                 areas = measurer.visible_areas_px(scene, camera) / px_scale

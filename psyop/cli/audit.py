@@ -41,6 +41,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help=f"interpupillary distance when the protocol takes it from the tracker "
                              f"(default {DEFAULT_IPD_MM:g}, the sessions' default)")
     parser.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
+    parser.add_argument("--level", type=float, action="append", default=None, metavar="VALUE",
+                        help="audit the adaptive factor at this level (repeatable; default: its range's min, "
+                             "start and max)")
     parser.add_argument("--sheet", default=None, metavar="PATH.png", help="write a contact sheet of the checked frames")
     parser.set_defaults(func=run)
 
@@ -51,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.sheet is not None and not str(args.sheet).lower().endswith(".png"):
         raise UserError(f"--sheet must name a .png file, got {args.sheet!r}")
-    settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=args.ipd_mm / 1000.0, seed=args.seed)
+    settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=args.ipd_mm / 1000.0, seed=args.seed,
+                             levels=tuple(args.level or ()))
     path = Path(args.protocol)
     protocol = load_protocol(path)
     def show(done: int, total: int) -> None:

@@ -15,6 +15,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("protocol", help="protocol YAML file")
     parser.add_argument("--seed", type=int, required=True, help="non-negative integer seed")
     parser.add_argument("--out", type=Path, required=True, help="output .parquet file")
+    parser.add_argument("--participant-index", type=int, default=None, metavar="N",
+                        help="participant index for block_order: latin_square (required there; ignored otherwise)")
     parser.set_defaults(func=run)
 
 
@@ -23,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     from psyop.schedule import compile_schedule, write_schedule
 
     protocol = load_protocol(args.protocol)
-    schedule = compile_schedule(protocol, args.seed)
+    schedule = compile_schedule(protocol, args.seed, participant_index=args.participant_index)
     if not args.out.parent.exists():
         raise UserError(f"output folder {args.out.parent} does not exist; create it first")
     try:

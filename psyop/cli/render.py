@@ -49,6 +49,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="rendering mode (default: the interval's mode from the schedule)")
     parser.add_argument("--time-s", type=float, default=0.0, help="time into the interval (moving targets)")
     parser.add_argument("--seed", type=int, default=0, help="schedule seed")
+    parser.add_argument("--participant-index", type=int, default=0, metavar="N",
+                        help="participant index for block_order: latin_square (default 0; trial numbers follow its order)")
+    parser.add_argument("--level", type=float, default=None, metavar="VALUE",
+                        help="the adaptive factor's level for this trial (an adaptive protocol's level is chosen "
+                             "while the session runs; default: the procedure's start level)")
     parser.add_argument("--ipd-mm", type=float, default=DEFAULT_IPD_MM,
                         help=f"interpupillary distance when the protocol takes it from the tracker "
                              f"(default {DEFAULT_IPD_MM:g}, the sessions' default)")
@@ -95,6 +100,17 @@ def _parse_crop(text: str, width_px: int, height_px: int) -> tuple[int, int, int
     return x0, y0, w, h
 
 
+def _adaptive_level(protocol, given: float | None) -> float | None:
+    """The level an adaptive protocol's trial is rendered at: ``--level`` (checked against the
+    procedure's range), else the start level; None for fixed levels (``--level`` is then an error)."""
+    from psyop.adaptive.session import preview_levels
+
+    if given is not None:
+        return preview_levels(protocol, (given,))[0]
+    factors = [f for f in protocol.design.factors.values() if f.adaptive is not None]
+    return float(factors[0].adaptive.start) if factors else None
+
+
 def frustum_tangents(pixel_to_ray: np.ndarray) -> dict[str, float]:
     """Left/right/bottom/top tangents of the image seen from the centre of projection."""
     import numpy as np
@@ -121,12 +137,12 @@ def run(args: argparse.Namespace) -> int:
     from psyop.protocol import load_protocol, resolve_display_profile, resolve_eye_model
     from psyop.rendering import Renderer, RenderSettings
     from psyop.rendering.builders import direction_from_angles
-    from psyop.schedule import compile_schedule
+    from psyop.schedule import compile_schedule, interval_values
     from psyop.stimulus import build_scene, interval_mode, interval_phases
 
     protocol_path = Path(args.protocol)
     protocol = load_protocol(protocol_path)
-    schedule = compile_schedule(protocol, args.seed)
+    schedule = compile_schedule(protocol, args.seed, participant_index=args.participant_index)
     if not 0 <= args.trial < len(schedule):
         raise UserError(f"--trial must be in 0..{len(schedule) - 1}, got {args.trial}")
     n_intervals = len(interval_phases(protocol))
@@ -136,6 +152,13 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--fixation-m must be more than 0.02 m, got {args.fixation_m}")
     az, el = parse_gaze(args.gaze_deg, args.gaze_polar_deg)
     row = schedule.iloc[args.trial].to_dict()
+    level = _adaptive_level(protocol, args.level)
+    if level is not None:
+        from psyop.adaptive.session import adaptive_plan, row_at_level
+
+        plan = adaptive_plan(protocol)
+        assert plan is not None
+        row = row_at_level(plan, row, level)
     eye = args.eye or (protocol.eyes if protocol.eyes in ("right", "left") else "right")
     response_text = None
     if args.phase == "response":
@@ -152,7 +175,11 @@ def run(args: argparse.Namespace) -> int:
     ipd_m = float(ipd_spec.mm) / 1000.0 if hasattr(ipd_spec, "mm") else args.ipd_mm / 1000.0
     centre = np.array([ipd_m / 2.0 if eye == "right" else -ipd_m / 2.0, 0.0, 0.0])
     fixation = centre + direction_from_angles(az, el) * args.fixation_m
-    camera = make_eye_camera(display, eye, fixation, ipd_m, eye_model.nc_m, mode)
+    from psyop.protocol.display import rendering_nc_rule
+
+    nc_rule = rendering_nc_rule(protocol.display)
+    nc_m = eye_model.nc_m if nc_rule is None else nc_rule.nc_m_for(eye_model.nc_m, interval_values(row, args.interval))
+    camera = make_eye_camera(display, eye, fixation, ipd_m, nc_m, mode)
     if args.crop:
         from psyop.rendering.camera_math import crop_camera
 
@@ -177,6 +204,7 @@ def run(args: argparse.Namespace) -> int:
     sidecar = {
         "protocol": str(protocol_path), "protocol_sha256": protocol.source_sha256, "seed": args.seed,
         "trial": args.trial, "phase": args.phase, "interval": args.interval, "time_s": args.time_s,
+        "adaptive_level": level,
         "response_text": response_text,
         "eye": eye, "mode": mode, "gaze_deg": [az, el], "fixation_m": fixation.tolist(),
         "camera_valid": bool(camera.valid),
@@ -185,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
         "frustum_tangents": frustum_tangents(camera.pixel_to_ray),
         "resolution_px": [camera.width_px, camera.height_px],
         "display_profile": display.name, "image_distance_m": None if math.isinf(display.d_m) else display.d_m,
-        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m},
+        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m}, "rendered_nc_m": nc_m,
         "crop_px": args.crop, "antialiasing": args.antialiasing, "primitives": [p.name for p in scene.primitives],
     }
     from psyop.atomic import write_atomic

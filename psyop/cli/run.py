@@ -20,6 +20,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("protocol", type=Path, help="protocol YAML file")
     parser.add_argument("--participant", required=True, help="participant ID (letters and digits)")
     parser.add_argument("--session", type=int, default=1, help="session number (default 1)")
+    parser.add_argument("--participant-index", type=int, default=None, metavar="N",
+                        help="the participant's index for block_order: latin_square (row N mod the square's rows; "
+                        "default: the number the participant ID ends in, e.g. S07 -> 7)")
     parser.add_argument("--seed", type=int, default=None, help="schedule/observer seed (default: from IDs, or the session's)")
     # the backend options' help is generated from the registry (psyop.session.backends)
     parser.add_argument("--tracker", default="sim", help=f"the gaze source: {help_text('tracker')}")
@@ -64,6 +67,7 @@ def main(args: argparse.Namespace) -> int:
     protocol = load_protocol(args.protocol)
     options = SessionOptions(
         participant=args.participant, session=args.session, seed=args.seed, tracker=args.tracker,
+        participant_index=args.participant_index,
         responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
         window_scale=args.window_scale, lsl_markers=args.lsl_markers, lsl_wait_s=args.lsl_wait_s,
         progress=not args.no_progress, allow_protocol_change=args.allow_protocol_change, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,

@@ -51,13 +51,15 @@ def _usable(fits: pd.DataFrame) -> pd.Series:
 
 
 def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, title: str,
-                    line: tuple[float, float] | None = None, simulated: bool = False) -> plt.Figure:
+                    line: tuple[float, float] | None = None, simulated: bool = False,
+                    level_unit: str = "D") -> plt.Figure:
     """Per-participant thresholds with 95 % CIs (grey, jittered) and the mean ± SE across participants.
 
     CIs are clipped at 0 D (a down-triangle marks a clipped lower bound) and an infinite upper
     bound is drawn as an up-arrow. Censored fits are drawn at their bound as open triangles
     (below the lowest / above the highest level) and, like other unusable fits, left out of the
-    mean. ``line`` = (slope, intercept) draws the linear fit (discrimination).
+    mean. ``line`` = (slope, intercept) draws the linear fit (discrimination). ``level_unit``: the
+    level factor's unit (thresholds are in it; the fit cache's ``_D`` columns hold that unit).
     """
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(5.0, 4.0))
@@ -99,7 +101,7 @@ def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, titl
             Line2D([], [], color="k", marker="s", ms=6, lw=1.5, label="mean ± SE across participants"),
         ]
         if n_clipped:
-            handles.append(Line2D([], [], color=SUBJECT_GREY, marker="v", ls="", ms=5, label="CI clipped at 0 D"))
+            handles.append(Line2D([], [], color=SUBJECT_GREY, marker="v", ls="", ms=5, label=f"CI clipped at 0 {level_unit}"))
         if n_open:
             handles.append(Line2D([], [], color=SUBJECT_GREY, marker="$\\uparrow$", ls="", ms=7, label="CI without upper bound"))
         if n_censored:
@@ -108,10 +110,10 @@ def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, titl
         if line is not None:
             xs = np.linspace(min(conds) - 0.2, max(conds) + 0.2, 50)
             ax.plot(xs, line[1] + line[0] * xs, "--", color="#1f77b4", lw=1.2, zorder=2)
-            handles.append(Line2D([], [], color="#1f77b4", ls="--", label=f"linear fit: {line[0]:.2f} x + {line[1]:.2f} D"))
+            handles.append(Line2D([], [], color="#1f77b4", ls="--", label=f"linear fit: {line[0]:.2f} x + {line[1]:.2f} {level_unit}"))
         ax.set_xticks(conds, [f"{c:g}" for c in conds])
         ax.set_xlabel(xlabel)
-        ax.set_ylabel("threshold (D)")
+        ax.set_ylabel(f"threshold ({level_unit})")
         ax.set_ylim(0.0, ymax)
         ax.legend(handles=handles, loc="upper left", frameon=False)
         ax.set_title(title)
@@ -120,11 +122,12 @@ def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, titl
 
 
 def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_column: str,
-                           title: str, simulated: bool = False) -> plt.Figure:
+                           title: str, simulated: bool = False, level_column: str = "level_D",
+                           level_label: str = "level (D)") -> plt.Figure:
     """Every participant (rows) x condition (columns): proportion correct, fitted curve, threshold and 95 % CI.
 
-    ``blocks`` has participant, condition, ``level_D``, ``n_correct``, ``n_total``. A fit whose
-    status is not 'ok' names its status in the panel.
+    ``blocks`` has participant, condition, ``level_column``, ``n_correct``, ``n_total``. A fit whose
+    status is not 'ok' names its status in the panel; ``level_label`` labels the level axis.
     """
     subjects = sorted(fits["participant"].unique())
     conds = sorted(fits[condition_column].unique())
@@ -136,7 +139,7 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
                 ax = axes[i, j]
                 b = blocks[(blocks["participant"] == s) & (blocks[condition_column] == c)]
                 f = fits[(fits["participant"] == s) & (fits[condition_column] == c)]
-                ax.plot(b["level_D"], b["n_correct"] / b["n_total"], "o", ms=4, color="k")
+                ax.plot(b[level_column], b["n_correct"] / b["n_total"], "o", ms=4, color="k")
                 if not f.empty:
                     r = f.iloc[0]
                     if np.isfinite(r["location_D"]):
@@ -156,7 +159,7 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
                 if j == 0:
                     ax.set_ylabel(f"{participant_label(s)}\nP(correct)")
                 if i == len(subjects) - 1:
-                    ax.set_xlabel("level (D)")
+                    ax.set_xlabel(level_label)
         handles = [Line2D([], [], color="k", marker="o", ls="", label="proportion correct"),
                    Line2D([], [], color="#1f77b4", label="fitted function (MAP)"),
                    Line2D([], [], color="#d62728", label="75 % threshold and 95 % CI")]
@@ -168,14 +171,17 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
 
 
 def plot_ordinal(cells: pd.DataFrame, posthoc: pd.DataFrame, dv: str = "correct",
-                 simulated: bool = False) -> plt.Figure:
-    """Proportion correct by mode at each separation: mean ± SE across participants; Bonferroni stars."""
+                 simulated: bool = False, separation_column: str = "separation_D",
+                 separation_label: str = "separation of the two surfaces", separation_unit: str = "D",
+                 title: str = "Ordinal depth") -> plt.Figure:
+    """Proportion correct by mode at each separation: mean ± SE across participants; Bonferroni stars.
+    ``separation_column``/``separation_label``/``separation_unit``: the protocol's separation factor."""
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(5.2, 4.0))
-        seps = sorted(cells["separation_D"].unique())
+        seps = sorted(cells[separation_column].unique())
         modes = [m for m in ("conventional", "ocular", "reversed") if m in set(cells["mode"])]
         width = 0.8 / len(modes)
-        summary = cells.groupby(["separation_D", "mode"])[dv].agg(["mean", _sem])
+        summary = cells.groupby([separation_column, "mode"])[dv].agg(["mean", _sem])
         top = 0.0
         xpos = {}
         for k, mode in enumerate(modes):
@@ -189,22 +195,22 @@ def plot_ordinal(cells: pd.DataFrame, posthoc: pd.DataFrame, dv: str = "correct"
         level = top + 0.03
         m_family = int(posthoc["m"].iloc[0]) if len(posthoc) else 0
         for s in seps:
-            rows = posthoc[(posthoc["separation_D"] == s) & (posthoc["stars"] != "")]
+            rows = posthoc[(posthoc[separation_column] == s) & (posthoc["stars"] != "")]
             for n, (_, r) in enumerate(rows.iterrows()):
                 x0, x1 = xpos[(s, r["A"])], xpos[(s, r["B"])]
                 y = level + 0.06 * n
                 ax.plot([x0, x0, x1, x1], [y - 0.01, y, y, y - 0.01], color="k", lw=0.8)
                 ax.text((x0 + x1) / 2, y, r["stars"], ha="center", va="bottom", fontsize=10)
         ax.axhline(0.5, color="k", ls=":", lw=0.8)
-        ax.set_xticks(range(len(seps)), [f"{s:g} D" for s in seps])
-        ax.set_xlabel("separation of the two surfaces")
+        ax.set_xticks(range(len(seps)), [f"{s:g} {separation_unit}".strip() for s in seps])
+        ax.set_xlabel(separation_label)
         ax.set_ylabel("proportion correct")
         ax.set_ylim(0.0, max(1.0, level + 0.25))
         handles, labels = ax.get_legend_handles_labels()
         handles.append(Line2D([], [], color="k", ls=":", lw=0.8))
         labels.append("chance")
         ax.legend(handles, labels, frameon=False, loc="upper left", ncol=2)
-        ax.set_title("Ordinal depth")
+        ax.set_title(title)
         caption(fig, f"Bars: mean ± SE across participants. Stars: paired t-tests, Bonferroni over m = {m_family}\n"
                      "(* p ≤ 0.05, ** p ≤ 0.01, *** p ≤ 0.001).")
         mark_simulated(fig, simulated)
@@ -212,7 +218,8 @@ def plot_ordinal(cells: pd.DataFrame, posthoc: pd.DataFrame, dv: str = "correct"
 
 
 def plot_reach(reaches: pd.DataFrame, lines: pd.DataFrame, x: str = "target_fraction", y: str = "reach_fraction",
-               condition: str = "rendering", simulated: bool = False) -> plt.Figure:
+               condition: str = "rendering", simulated: bool = False,
+               title: str = "Egocentric blind reaching") -> plt.Figure:
     """Reach against target (fractions of arm reach): one panel per condition with each participant's
     mean reach per target (dots) and the condition's fitted line; the other condition's line dashed."""
     conds = sorted(reaches[condition].astype(str).unique())
@@ -245,7 +252,7 @@ def plot_reach(reaches: pd.DataFrame, lines: pd.DataFrame, x: str = "target_frac
             ax.set_xlabel("target distance (fraction of arm reach)")
             ax.grid(True, alpha=0.3)
         axes[0, 0].set_ylabel("reach (fraction of arm reach)")
-        fig.suptitle("Egocentric blind reaching")
+        fig.suptitle(title)
         fig.tight_layout(rect=(0, 0.2, 1, 1))
         fig.legend(list(handles.values()), list(handles.keys()), loc="lower center", ncol=2, frameon=False,
                    bbox_to_anchor=(0.5, 0.04))

@@ -9,7 +9,9 @@ one; the renderers take their eye centres and cameras from it.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -23,6 +25,41 @@ EYE_NAMES: tuple[str, ...] = ("left", "right")
 
 
 @dataclass(frozen=True)
+class NcRule:
+    """The NC the renderer uses instead of the eye model's (a protocol's ``display.rendering_nc``):
+    ``nc_m`` fixed, ``scale`` times the eye model's, or the trial row's ``column`` (in mm when
+    ``column_unit`` is ``mm``, a multiple of the eye model's NC when it is ``scale``).
+
+    Examples
+    --------
+    >>> NcRule(column="nc_mm", column_unit="mm").nc_m_for(0.0077, {"nc_mm": 10.0})
+    0.01
+    >>> NcRule(scale=2.0).nc_m_for(0.005, None)
+    0.01
+    """
+
+    nc_m: float | None = None
+    scale: float | None = None
+    column: str | None = None
+    column_unit: str = "mm"
+
+    def nc_m_for(self, eye_model_nc_m: float, row: Mapping[str, Any] | None) -> float:
+        if self.nc_m is not None:
+            value = self.nc_m
+        elif self.scale is not None:
+            value = self.scale * eye_model_nc_m
+        else:
+            if row is None or self.column not in row:
+                raise ValueError(f"the rendered NC is the trial's {self.column!r}; this frame has no trial row")
+            level = float(row[self.column])
+            value = level / 1000.0 if self.column_unit == "mm" else level * eye_model_nc_m
+        return NC_M.check(value, "the rendered NC")
+
+    def as_dict(self) -> dict[str, object]:
+        return {"nc_m": self.nc_m, "scale": self.scale, "column": self.column, "column_unit": self.column_unit}
+
+
+@dataclass(frozen=True)
 class EyeRig:
     """``eyes``: the eyes that see the stimulus (``("right",)``, ``("left",)`` or both, stereo).
     ``ipd_source``: where ``ipd_m`` came from (``protocol``, ``tracker`` or ``default``)."""
@@ -31,6 +68,7 @@ class EyeRig:
     ipd_m: float
     eyes: tuple[str, ...] = ("right",)
     ipd_source: str = "protocol"
+    rendering_nc: NcRule | None = None  # None: render with the eye model's NC
 
     def __post_init__(self) -> None:
         IPD_M.check(self.ipd_m)
@@ -39,9 +77,16 @@ class EyeRig:
             raise ValueError(f"eyes must be left and/or right, got {self.eyes!r}")
 
     @classmethod
-    def for_protocol_eyes(cls, eyes: str, eye_model: EyeModel, ipd_m: float, ipd_source: str) -> "EyeRig":
+    def for_protocol_eyes(cls, eyes: str, eye_model: EyeModel, ipd_m: float, ipd_source: str,
+                          rendering_nc: NcRule | None = None) -> "EyeRig":
         """``eyes``: the protocol's ``eyes:`` value (``right``, ``left`` or ``stereo``)."""
-        return cls(eye_model, float(ipd_m), EYE_NAMES if eyes == "stereo" else (eyes,), ipd_source)
+        return cls(eye_model, float(ipd_m), EYE_NAMES if eyes == "stereo" else (eyes,), ipd_source, rendering_nc)
+
+    def rendered_nc_m(self, row: Mapping[str, Any] | None = None) -> float:
+        """The NC this trial is rendered with: the eye model's, or the protocol's ``rendering_nc``."""
+        if self.rendering_nc is None:
+            return self.nc_m
+        return self.rendering_nc.nc_m_for(self.nc_m, row)
 
     @property
     def nc_m(self) -> float:
@@ -58,15 +103,17 @@ class EyeRig:
         return np.array([(-0.5 if eye == "left" else 0.5) * self.ipd_m, 0.0, 0.0])
 
     def camera(self, display: DisplayProfile, eye: str, fixation_m: ArrayLike, mode: str,
-               **kwargs: float) -> EyeCamera:
-        """The camera of ``eye`` for this frame (``psyop.optics.camera.make_eye_camera``)."""
-        return make_eye_camera(display, eye, fixation_m, self.ipd_m, self.nc_m, mode, **kwargs)
+               row: Mapping[str, Any] | None = None, **kwargs: float) -> EyeCamera:
+        """The camera of ``eye`` for this frame (``psyop.optics.camera.make_eye_camera``); ``row``: the
+        trial's row, for a rendered NC that is a factor (:class:`NcRule`)."""
+        return make_eye_camera(display, eye, fixation_m, self.ipd_m, self.rendered_nc_m(row), mode, **kwargs)
 
     def view_camera(self, view: ViewGeometry, width_px: int, height_px: int, fixation_m: ArrayLike,
-                    mode: str, **kwargs: float) -> EyeCamera:
+                    mode: str, row: Mapping[str, Any] | None = None, **kwargs: float) -> EyeCamera:
         """The camera of a view a headset runtime reported (``psyop.optics.camera.make_view_camera``),
-        with this rig's NC. Place the views with :meth:`place_views` first."""
-        return make_view_camera(view, width_px, height_px, fixation_m, self.nc_m, mode, **kwargs)
+        with this rig's rendered NC (``row``: the trial's row, as :meth:`camera`). Place the views with
+        :meth:`place_views` first."""
+        return make_view_camera(view, width_px, height_px, fixation_m, self.rendered_nc_m(row), mode, **kwargs)
 
     def place_views(self, views: tuple[ViewGeometry, ...]) -> tuple[ViewGeometry, ...]:
         """The runtime's views with each eye's centre of rotation C where this rig says it is.
@@ -94,4 +141,5 @@ class EyeRig:
     def as_dict(self) -> dict[str, object]:
         """What session.json records."""
         return {"eyes": list(self.eyes), "ipd_m": self.ipd_m, "ipd_source": self.ipd_source,
-                "eye_model": self.eye_model.name, "nc_m": self.nc_m}
+                "eye_model": self.eye_model.name, "nc_m": self.nc_m,
+                "rendering_nc": None if self.rendering_nc is None else self.rendering_nc.as_dict()}

@@ -40,7 +40,7 @@ def direct_trials(task: ReplicationTask) -> pd.DataFrame:
     for j in range(task.participants):
         participant = f"S{j + 1:02d}"
         seed = session_seed(task.seed, task.participants, task.replication, j)
-        schedule = compile_schedule(protocol, seed)
+        schedule = compile_schedule(protocol, seed, participant_index=j + 1)  # as the ID S{j+1} gives a session
         observer = make_observer(plan.observer_params(), seed=seed, participant=participant)
         main = schedule[~schedule["practice"].astype(bool)] if "practice" in schedule else schedule
         answers = [observer.collect(row, 0.0) for row in main.to_dict("records")]

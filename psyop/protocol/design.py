@@ -153,12 +153,14 @@ def _same_level(a: Level | None, b: Level | None) -> bool:
 
 class Randomisation(StrictModel):
     """Trial order. ``full``: all trials shuffled. ``blocked``: one block per combination of the
-    ``by`` factors, trials shuffled within blocks, blocks in ``block_order``. ``sequential``:
+    ``by`` factors, trials shuffled within blocks, blocks in ``block_order``: ``random`` (drawn from
+    the session's seed), ``fixed`` (as written) or ``latin_square`` (a Williams design keyed to the
+    participant index, balanced for first-order carry-over; psyop.schedule.counterbalance). ``sequential``:
     conditions in protocol order, repetitions last (pilots and debugging only)."""
 
     kind: Literal["full", "blocked", "sequential"] = "full"
     by: list[str] = Field(default_factory=list)
-    block_order: Literal["random", "fixed"] = "random"
+    block_order: Literal["random", "fixed", "latin_square"] = "random"
 
     @model_validator(mode="after")
     def _by(self) -> "Randomisation":
@@ -166,6 +168,8 @@ class Randomisation(StrictModel):
             raise ValueError("blocked randomisation needs by: [factor, ...]")
         if self.kind != "blocked" and self.by:
             raise ValueError("by: only applies to kind: blocked")
+        if self.kind != "blocked" and self.block_order != "random":
+            raise ValueError(f"block_order: {self.block_order} only applies to kind: blocked (with by: [factor, ...])")
         return self
 
 

@@ -14,6 +14,7 @@ from pydantic import Field, field_validator, model_validator
 
 from psyop.optics.ranges import IPD_M, NC_M
 from psyop.protocol.base import Integer, Number, StrictModel
+from psyop.protocol.scene import FactorRef
 
 #: Built-in display profiles (``psyop.optics.display.DISPLAY_PROFILES``).
 DISPLAY_PROFILE_NAMES: tuple[str, ...] = ("vive_pro",)
@@ -110,12 +111,28 @@ class FixedIpd(StrictModel):
         return self.mm / 1000.0
 
 
+class RenderingNc(StrictModel):
+    """The NC the renderer uses in ocular and reversed modes, instead of the eye model's: ``mm`` (a
+    number or ``{factor: NAME}``, NAME ending in ``_mm``) or ``scale`` (a multiple of the eye model's
+    NC; a number or ``{factor: NAME}``). Give one. Every value must give an NC in psyop.optics.ranges.NC_M."""
+
+    mm: Number | FactorRef | None = None
+    scale: Number | FactorRef | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> "RenderingNc":
+        if (self.mm is None) == (self.scale is None):
+            raise ValueError("give one of mm (the rendered NC in mm) or scale (a multiple of the eye model's NC)")
+        return self
+
+
 class DisplaySpec(StrictModel):
     """Which headset, which schematic eye and where the ipd comes from."""
 
     profile: Annotated[str, Field(description="built-in profile name")] | InlineDisplayProfile = "vive_pro"
     eye_model: str | InlineEyeModel = "gullstrand_emsley_relaxed"
     ipd: Literal["tracker"] | FixedIpd = "tracker"
+    rendering_nc: RenderingNc | None = None
 
     @field_validator("profile", mode="after")
     @classmethod
@@ -137,6 +154,22 @@ def resolve_display_profile(spec: DisplaySpec):
     data = spec.profile.model_dump(exclude_none=True)
     data["d_m"] = spec.profile.image_distance_m
     return display_profile_from_mapping(data)
+
+
+def rendering_nc_rule(spec: DisplaySpec):
+    """The ``psyop.optics.rig.NcRule`` of ``display.rendering_nc``, or None (render with the eye model's NC)."""
+    from psyop.optics.rig import NcRule
+
+    nc = spec.rendering_nc
+    if nc is None:
+        return None
+    if isinstance(nc.mm, FactorRef):
+        return NcRule(column=nc.mm.factor, column_unit="mm")
+    if isinstance(nc.scale, FactorRef):
+        return NcRule(column=nc.scale.factor, column_unit="scale")
+    if nc.mm is not None:
+        return NcRule(nc_m=float(nc.mm) / 1000.0)
+    return NcRule(scale=float(nc.scale))
 
 
 def resolve_eye_model(spec: DisplaySpec):

@@ -73,6 +73,17 @@ Rgb = tuple[Annotated[Number, Field(ge=0, le=1)], Annotated[Number, Field(ge=0, 
             Annotated[Number, Field(ge=0, le=1)]]
 
 
+class FactorRef(StrictModel):
+    """A value read from the trial schedule's factor column: ``{factor: NAME}`` (the factor's levels
+    must fit the field's range; validation checks each level, psyop.protocol.factor_fields)."""
+
+    factor: str
+
+
+#: A number, or ``{factor: NAME}``: the trial's level of a numeric factor (a size, a contrast).
+Factorable = Union[Number, FactorRef]
+
+
 class SolidSurface(StrictModel):
     """A uniform colour, linear RGB in [0, 1]."""
 
@@ -85,8 +96,9 @@ class WhiteNoiseSurface(StrictModel):
 
     kind: Literal["white_noise"]
     grain_deg: Number = Field(default=0.05, gt=0, le=10)
-    mean: Number = Field(default=0.5, ge=0, le=1)
-    contrast: Number = Field(default=1.0, ge=0, le=1, description="RMS-free peak contrast around the mean")
+    mean: Annotated[Number, Field(ge=0, le=1)] | FactorRef = 0.5
+    contrast: Annotated[Number, Field(ge=0, le=1)] | FactorRef = Field(
+        default=1.0, description="RMS-free peak contrast around the mean; a number or {factor: NAME}")
     seed: Integer = Field(default=0, ge=0, description="added to the trial seed, so two surfaces differ")
 
 
@@ -95,8 +107,9 @@ class PinkNoiseSurface(StrictModel):
 
     kind: Literal["one_over_f"]
     exponent: Number = Field(default=1.0, ge=0, le=4)
-    mean: Number = Field(default=0.5, ge=0, le=1)
-    contrast: Number = Field(default=1.0, ge=0, le=1)
+    mean: Annotated[Number, Field(ge=0, le=1)] | FactorRef = 0.5
+    contrast: Annotated[Number, Field(ge=0, le=1)] | FactorRef = Field(
+        default=1.0, description="peak contrast around the mean; a number or {factor: NAME}")
     seed: Integer = Field(default=0, ge=0)
 
 
@@ -127,12 +140,22 @@ class PolarPoint(StrictModel):
     meridian_deg: Number = Field(ge=-360, le=360)
 
 
-#: Where a primitive's centre lies: Fick angles ``[az, el]`` or ``{eccentricity_deg, meridian_deg}``.
-Centre = Union[Point2Deg, PolarPoint]
+#: A primitive's centre [azimuth_deg, elevation_deg] whose angles may each be ``{factor: NAME}`` (a factor in deg).
+FactorPoint2Deg = tuple[Annotated[Number, Field(gt=-90, lt=90)] | FactorRef,
+                        Annotated[Number, Field(gt=-90, lt=90)] | FactorRef]
+
+#: Where a primitive's centre lies: Fick angles ``[az, el]`` (each a number or a factor) or
+#: ``{eccentricity_deg, meridian_deg}``.
+Centre = Union[FactorPoint2Deg, PolarPoint]
+
+
 def centre_eccentricity_deg(centre: "Centre") -> float:
-    """Angle of a centre from straight ahead: ``acos(cos az cos el)`` for Fick angles (docs/optics.md)."""
+    """Angle of a centre from straight ahead: ``acos(cos az cos el)`` for Fick angles (docs/optics.md);
+    NaN while an angle is a factor (known per trial, once the factor's level is filled in)."""
     if isinstance(centre, PolarPoint):
         return float(centre.eccentricity_deg)
+    if any(isinstance(c, FactorRef) for c in centre):
+        return math.nan
     az, el = (math.radians(float(c)) for c in centre)
     return math.degrees(math.acos(max(-1.0, min(1.0, math.cos(az) * math.cos(el)))))
 
@@ -149,10 +172,10 @@ class _Primitive(StrictModel):
 class Disc(_Primitive):
     """A disc of ``size_deg`` (diameter) at its depth (docs/optics.md, "Sizes"): frontoparallel, its
     diameter across the meridian through its centre subtends ``size_deg``; ``facing: eye``, it
-    subtends ``size_deg`` in every direction."""
+    subtends ``size_deg`` in every direction. ``size_deg`` may be ``{factor: NAME}`` (a factor in deg)."""
 
     kind: Literal["disc"]
-    size_deg: Number = Field(gt=0, lt=180)
+    size_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef
     depth: Depth
     surface: Surface
     centre_deg: Centre = (0.0, 0.0)
@@ -160,13 +183,13 @@ class Disc(_Primitive):
 
 
 class Quad(_Primitive):
-    """A rectangle ``width_deg`` x ``height_deg`` at its depth, sized like a disc (docs/optics.md,
-    "Sizes"): frontoparallel (axes along x and y) or ``facing: eye`` (axes along the centre's local
-    right and up)."""
+    """A rectangle ``width_deg`` x ``height_deg`` at its depth (each may be ``{factor: NAME}``), sized
+    like a disc (docs/optics.md, "Sizes"): frontoparallel (axes along x and y) or ``facing: eye`` (axes
+    along the centre's local right and up)."""
 
     kind: Literal["quad"]
-    width_deg: Number = Field(gt=0, lt=180)
-    height_deg: Number = Field(gt=0, lt=180)
+    width_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef
+    height_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef
     depth: Depth
     surface: Surface
     centre_deg: Centre = (0.0, 0.0)
@@ -283,12 +306,6 @@ class ReachTarget(_Primitive):
     size_m: Number = Field(gt=0, le=1, description="longest dimension of the object")
     distance_fraction: Annotated[Number, Field(gt=0, le=1.5)] | "FactorRef"
     height_m: Number = Field(default=-0.15, ge=-2, le=2, description="relative to eye height, up positive")
-
-
-class FactorRef(StrictModel):
-    """A value read from the trial schedule's factor column."""
-
-    factor: str
 
 
 ReachTarget.model_rebuild()

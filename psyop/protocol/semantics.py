@@ -10,7 +10,10 @@ import difflib
 import math
 from dataclasses import dataclass
 from pathlib import Path as FsPath
+from collections.abc import Iterator
 from typing import Any
+
+from pydantic import BaseModel
 
 from psyop.limits import MAX_PRIMITIVES
 from psyop.optics.ranges import DEPTH_D
@@ -172,6 +175,7 @@ class _Checker:
                 if item.near_side == "schedule" and self.p.response.kind != "left_right_nearer":
                     self.add(path + ("near_side",), "near_side: schedule needs a left_right_nearer response; "
                                                     "set near_side to left or right")
+            self.check_factor_fields(item, path, conditions)
             if isinstance(item, ReachTarget) and isinstance(item.distance_fraction, FactorRef):
                 self.factor_exists(item.distance_fraction.factor, path + ("distance_fraction", "factor"), numeric=True)
             if isinstance(item, FixationTarget) and item.path is not None:
@@ -186,6 +190,45 @@ class _Checker:
                     if name not in ids:
                         self.add(("trial", "phases", index, "show", j),
                                  f"no scene primitive has id '{name}'.{_suggest(name, list(ids))} Ids: {', '.join(ids)}")
+
+    def _value_sets(self, conditions: list[dict[str, Any]]) -> Iterator[dict[str, Any]]:
+        """Every set of factor values a scene is built from: each condition, each interval's ``set:``
+        overrides of it, and an adaptive factor at both ends of its range."""
+        adaptive = {n: f.adaptive for n, f in self.factors.items() if f.adaptive is not None}
+        overrides = [{}]
+        response = self.p.response
+        for role in ("test", "reference"):
+            spec = getattr(response, role, None)
+            if spec is not None and getattr(spec, "set", None):
+                overrides.append(dict(spec.set))
+        for condition in conditions:
+            ends = [{}] + [{n: float(a.min)} for n, a in adaptive.items()] + [{n: float(a.max)} for n, a in adaptive.items()]
+            for end in ends:
+                for override in overrides:
+                    yield {**condition, **end, **override}
+
+    def check_factor_fields(self, item: Any, path: tuple[Any, ...], conditions: list[dict[str, Any]]) -> None:
+        """Each ``{factor: NAME}`` of a size or contrast names a numeric factor, and every level it can take
+        fits the field's range (the item is re-validated with each trial's values)."""
+        from pydantic import ValidationError
+
+        from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
+
+        refs = [(sub, ref) for sub, ref in factor_fields(item) if sub != ("distance_fraction",)]
+        if not refs or not all(self.factor_exists(ref.factor, path + sub + ("factor",), numeric=True)
+                               for sub, ref in refs):
+            return
+        for values in self._value_sets(conditions):
+            try:
+                type(item).model_validate(resolve_factor_fields(item, values).model_dump())
+            except ValidationError as error:
+                first = error.errors()[0]
+                sub, ref = next(((sub, r) for sub, r in refs if _in_order(sub, tuple(first["loc"]))), refs[0])
+                self.add(path + sub, f"{ref.factor} = {values.get(ref.factor)!r} does not fit this field: "
+                                     f"{first['msg'].lower()}; give {ref.factor} levels (or an adaptive range) that do")
+                return
+            except ValueError:
+                return
 
     def check_primitive_limit(self) -> None:
         """Each phase's scene (its ``show:`` items) must fit the renderer's MAX_PRIMITIVES; the
@@ -305,6 +348,123 @@ class _Checker:
                                                     "(or conventional/reversed) under modes")
             self.factor_exists(response.target_factor, path + ("target_factor",), numeric=True)
 
+    def check_level_factor_levels(self) -> None:
+        """A threshold needs its level to vary: a fixed two_interval level factor needs at least two levels
+        in every level set (else every fit is ``no_fit`` after a full session)."""
+        response = self.p.response
+        if response.kind != "two_interval" or response.level_factor not in self.factors:
+            return
+        factor = self.factors[response.level_factor]
+        for values in factor.level_sets():
+            if len(values) < 2:
+                key = "levels_by" if factor.levels_by is not None else "levels"
+                self.add(("design", "factors", response.level_factor, key),
+                         f"the level factor '{response.level_factor}' has one level ({values[0]!r}) here: a threshold "
+                         "needs the level to vary; give at least two levels (five or more for a psychometric fit, "
+                         "e.g. {start: 0, step: 0.25, count: 5}) or make it adaptive")
+                return
+
+    def check_pair_orders(self) -> None:
+        """``a|b`` and ``b|a`` are one comparison (``order`` already counterbalances which is shown first)."""
+        response = self.p.response
+        if response.kind != "pairwise_preference" or response.pair_factor not in self.factors:
+            return
+        seen: dict[frozenset[str], str] = {}
+        factor = self.factors[response.pair_factor]
+        for index, level in enumerate(factor.all_levels()):
+            parts = frozenset(str(level).split("|"))
+            if parts in seen:
+                path = ("design", "factors", response.pair_factor, "levels")
+                if isinstance(factor.levels, list):
+                    path += (index,)
+                self.add(path, f"pair '{level}' is '{seen[parts]}' written in the other order: both are one "
+                               f"comparison (response.order: {response.order} already sets which is shown first); "
+                               f"remove '{level}'")
+            seen.setdefault(parts, str(level))
+
+    def used_factors(self) -> set[str]:
+        """Every factor some part of the protocol reads: the scene (any ``{factor: ...}``), the response's
+        fields, another factor's ``depends_on``, or the blocking ``by:``."""
+        used: set[str] = set()
+        for item in self.p.scene:
+            used |= _factor_refs(item)
+        response = self.p.response
+        for key in ("level_factor", "separation_factor", "pair_factor", "rendering_factor", "target_factor"):
+            value = getattr(response, key, None)
+            if isinstance(value, str):
+                used.add(value)
+        for role in ("test", "reference", "mode"):
+            spec = getattr(response, role, None)
+            mode = getattr(spec, "mode", spec)
+            if isinstance(mode, ModeFromFactor):
+                used.add(mode.factor)
+            used |= set(getattr(spec, "set", {}) or {})
+        used |= {f.depends_on for f in self.factors.values() if f.depends_on}
+        nc = self.p.display.rendering_nc
+        for value in (nc.mm, nc.scale) if nc is not None else ():
+            if isinstance(value, FactorRef):
+                used.add(value.factor)
+        return used
+
+    def check_rendering_nc(self, conditions: list[dict[str, Any]]) -> None:
+        """``display.rendering_nc``: a numeric factor (``mm`` ones named ``..._mm``), not a ``set:`` override,
+        and every value giving an NC in psyop.optics.ranges.NC_M."""
+        from psyop.optics.ranges import NC_M
+        from psyop.protocol.display import rendering_nc_rule, resolve_eye_model
+
+        nc = self.p.display.rendering_nc
+        if nc is None:
+            return
+        key = "mm" if nc.mm is not None else "scale"
+        value = nc.mm if nc.mm is not None else nc.scale
+        path = ("display", "rendering_nc", key)
+        rule = rendering_nc_rule(self.p.display)
+        eye_nc_m = resolve_eye_model(self.p.display).nc_m
+        if isinstance(value, FactorRef):
+            if not self.factor_exists(value.factor, path + ("factor",), numeric=True):
+                return
+            if key == "mm" and not value.factor.endswith("_mm"):
+                self.add(path + ("factor",), f"rendering_nc.mm reads millimetres: name the factor '{value.factor}' with "
+                                             "_mm (e.g. nc_mm), or use rendering_nc: {scale: {factor: ...}}")
+                return
+            response = self.p.response
+            for role in ("test", "reference"):
+                spec = getattr(response, role, None)
+                if spec is not None and value.factor in (getattr(spec, "set", None) or {}):
+                    self.add(("response", role, "set", value.factor),
+                             f"the rendered NC is the trial's level of '{value.factor}'; an interval cannot override "
+                             "it. Remove it from set:")
+            values = [condition[value.factor] for condition in conditions]
+        else:
+            values = [value]
+        for level in values:
+            try:
+                level_f = float(level)
+            except (TypeError, ValueError):
+                continue
+            if math.isnan(level_f):  # adaptive: known at run time; its range is checked below
+                a = self.factors[value.factor].adaptive
+                candidates = [float(a.min), float(a.max)] if a is not None else []
+            else:
+                candidates = [level_f]
+            for candidate in candidates:
+                nc_m = candidate / 1000.0 if key == "mm" else candidate * eye_nc_m
+                if not NC_M.contains(nc_m):
+                    self.add(path, f"{key} {candidate:g} gives a rendered NC of {nc_m * 1000:g} mm, outside "
+                                   f"{NC_M.describe(1000, 'mm')}; for NC 0 render conventionally (mode: conventional), "
+                                   "for a reversed NC use mode: reversed")
+                    return
+        assert rule is not None
+
+    def check_unused_factors(self) -> None:
+        used = self.used_factors()
+        for name in self.factors:
+            if name not in used:
+                self.add(("design", "factors", name),
+                         f"factor '{name}' is used by nothing: no scene item, response field or other factor refers "
+                         "to it, so its conditions would look the same on screen. Refer to it (e.g. depth: "
+                         f"{{factor: {name}}}, or a size/contrast field {{factor: {name}}}) or remove it")
+
     def mode_factor(self, name: str, path: tuple[Any, ...]) -> None:
         if self.factor_exists(name, path, numeric=False):
             for level in self.factors[name].all_levels():
@@ -326,7 +486,11 @@ class _Checker:
                                        f"kind: {next(k for k, v in fits.items() if v == response_kind)}")
             return
         if observer.kind == "psychometric_2afc":
-            self.factor_exists(observer.level_column, path + ("level_column",), numeric=True)
+            level = self.p.response.level_factor
+            if self.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
+                    observer.level_column != level:
+                self.add(path + ("level_column",), f"the observer reads '{observer.level_column}' as its level, but "
+                                                   f"the response's level factor is '{level}'; set level_column: {level}")
             if observer.threshold_offset_column is not None:
                 self.factor_exists(observer.threshold_offset_column, path + ("threshold_offset_column",), numeric=True)
         elif observer.kind == "ordinal_accuracy":
@@ -369,6 +533,27 @@ class _Checker:
                                                          f"{separation} in mode '{mode}'; add '{separation}: p'")
 
 
+def _in_order(sub: tuple[Any, ...], loc: tuple[Any, ...]) -> bool:
+    """``sub``'s keys appear in ``loc`` in order (pydantic's loc adds union tags such as 'white_noise')."""
+    it = iter(loc)
+    return all(any(key == x for x in it) for key in sub)
+
+
+def _factor_refs(value: Any) -> set[str]:
+    """Every factor name a scene item refers to (``FactorRef``, ``Depth.factor``), at any depth."""
+    if isinstance(value, FactorRef):
+        return {value.factor}
+    if isinstance(value, Depth):
+        return set(value.factor_names)
+    if isinstance(value, (list, tuple)):
+        return set().union(*(_factor_refs(v) for v in value)) if value else set()
+    if isinstance(value, dict):
+        return set().union(*(_factor_refs(v) for v in value.values())) if value else set()
+    if isinstance(value, BaseModel):
+        return set().union(set(), *(_factor_refs(getattr(value, n)) for n in type(value).model_fields))
+    return set()
+
+
 def _same(a: Any, b: Any) -> bool:
     if isinstance(a, str) or isinstance(b, str):
         return str(a) == str(b)
@@ -388,5 +573,9 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None) -> list[Issue]:
     checker.check_scene(conditions)
     checker.check_primitive_limit()
     checker.check_response()
+    checker.check_level_factor_levels()
+    checker.check_pair_orders()
+    checker.check_rendering_nc(conditions)
+    checker.check_unused_factors()
     checker.check_observer()
     return checker.issues

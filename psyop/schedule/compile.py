@@ -20,6 +20,7 @@ from psyop.protocol.model import Protocol
 from psyop.protocol.response import (LeftRightNearerResponse, ModeFromFactor, PairwisePreferenceResponse,
                                      ReachResponse, TwoIntervalResponse)
 from psyop.protocol.scene import FixationTarget, SinusoidalBorder
+from psyop.schedule.counterbalance import latin_square_order
 from psyop.schedule.counts import expected_duration_s, trial_count  # noqa: F401 - re-exported
 
 #: Independent random streams derived from the user's seed (adding a stream never changes others).
@@ -61,7 +62,7 @@ def _counterbalance(protocol: Protocol) -> str:
 
 
 def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.ndarray, rep_index: np.ndarray,
-           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+           rng: np.random.Generator, participant_index: int | None) -> tuple[np.ndarray, np.ndarray]:
     """(permutation of the main trials, block number of each trial in the new order)."""
     randomisation = protocol.design.randomisation
     n = cond_index.size
@@ -75,7 +76,16 @@ def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.
     for index, condition in enumerate(conditions):
         key = tuple(condition[name] for name in randomisation.by)
         block_of_condition[index] = keys.setdefault(key, len(keys))
-    rank = np.arange(len(keys)) if randomisation.block_order == "fixed" else rng.permutation(len(keys))
+    if randomisation.block_order == "fixed":
+        rank = np.arange(len(keys))
+    elif randomisation.block_order == "latin_square":
+        if participant_index is None:
+            raise UserError("block_order: latin_square orders blocks by participant: give the participant index "
+                            "(--participant-index N; psyop run also takes it from a participant ID ending in its number, e.g. S07)",
+                            "design.randomisation.block_order")
+        rank = np.argsort(latin_square_order(len(keys), participant_index))
+    else:
+        rank = rng.permutation(len(keys))
     block = rank[block_of_condition[cond_index]]
     order = np.lexsort((rng.random(n), block))
     return order, block[order]
@@ -93,8 +103,11 @@ def _mode_values(mode: Any, columns: dict[str, np.ndarray], n: int) -> np.ndarra
     return np.full(n, mode, dtype=object)
 
 
-def compile_schedule(protocol: Protocol, seed: int) -> pd.DataFrame:
-    """The trial table for one participant session of ``protocol``, drawn with ``seed``."""
+def compile_schedule(protocol: Protocol, seed: int, participant_index: int | None = None) -> pd.DataFrame:
+    """The trial table for one participant session of ``protocol``, drawn with ``seed``.
+
+    ``participant_index`` keys the block order of ``block_order: latin_square`` (a Williams design,
+    psyop.schedule.counterbalance); other designs ignore it. Blocks are numbered in run order."""
     seed = check_seed(seed)
     design = protocol.design
     conditions = expand_conditions(design)
@@ -102,7 +115,8 @@ def compile_schedule(protocol: Protocol, seed: int) -> pd.DataFrame:
     cond_main = np.repeat(np.arange(n_conditions), repetitions)
     rep_main = np.tile(np.arange(repetitions), n_conditions)
 
-    order, block_main = _order(protocol, conditions, cond_main, rep_main, _rng(seed, _STREAM_ORDER))
+    order, block_main = _order(protocol, conditions, cond_main, rep_main, _rng(seed, _STREAM_ORDER),
+                               participant_index)
     counterbalance_rng = _rng(seed, _STREAM_COUNTERBALANCE)
     if _counterbalance(protocol) == "balanced":
         binary_main = _balanced_binary(cond_main, rep_main, n_conditions, repetitions, counterbalance_rng)

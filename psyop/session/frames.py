@@ -150,8 +150,9 @@ class CameraRenderer:
         ok = True  # cameras are in head space: the head pose changes no camera
         for eye in self.rig.eyes:
             view = frame.view(eye) if frame is not None else None
-            camera = (self.rig.camera(self.display, eye, fixation_m, mode) if view is None
-                      else self.rig.view_camera(view, self.display.width_px, self.display.height_px, fixation_m, mode))
+            camera = (self.rig.camera(self.display, eye, fixation_m, mode, row=row) if view is None
+                      else self.rig.view_camera(view, self.display.width_px, self.display.height_px, fixation_m, mode,
+                                                row=row))
             ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
         return FrameCheck(False, ok)  # no image was made
 

@@ -209,7 +209,7 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
     """The plan of a session of ``protocol``. ``tracker_ipd_m``: the ipd the tracker measured
     (used when the protocol says ``ipd: tracker``; None: :data:`DEFAULT_IPD_M`, recorded as
     the default)."""
-    from psyop.protocol.display import FixedIpd, resolve_display_profile, resolve_eye_model
+    from psyop.protocol.display import FixedIpd, rendering_nc_rule, resolve_display_profile, resolve_eye_model
 
     spec = protocol.display
     if isinstance(spec.ipd, FixedIpd):
@@ -221,7 +221,7 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
         ipd_m, source = float(tracker_ipd_m), "tracker"
     else:
         ipd_m, source = DEFAULT_IPD_M, "default (ipd: tracker, none reported)"
-    rig = EyeRig.for_protocol_eyes(protocol.eyes, resolve_eye_model(spec), ipd_m, source)
+    rig = EyeRig.for_protocol_eyes(protocol.eyes, resolve_eye_model(spec), ipd_m, source, rendering_nc_rule(spec))
     path = fixation_path(protocol)
     phases, response_phase = compile_phases(protocol, "pursuit" if path is not None else "free")
     r = protocol.response

@@ -67,6 +67,7 @@ class SessionOptions:
     xr_request_exit_at_frame: int | None = None  # testing aid: the OpenXR runtime is asked to stop at frame N
     lsl_markers: bool = False  # publish trial events as an LSL marker stream (psyop.session.lsl_markers)
     lsl_wait_s: float = 10.0  # --lsl-markers: wait this long for a recorder to connect before the first trial
+    participant_index: int | None = None  # keys block_order: latin_square (None: the number the ID ends in)
 
     @property
     def simulated(self) -> bool:
@@ -145,7 +146,13 @@ def run_session(
     seed = resolve_seed(paths, options.seed, seed_for(study, options.participant, options.session))
     protocol_sha256 = accept_protocol_change(paths, protocol) if options.allow_protocol_change \
         else protocol.source_sha256
-    schedule = compile_schedule(protocol, seed)
+    from psyop.schedule.counterbalance import block_sequence, resolve_participant_index
+    from psyop.session.log.store import read_metadata
+
+    recorded = (read_metadata(paths) or {}).get("participant_index")
+    participant_index = resolve_participant_index(options.participant_index, options.participant,
+                                                  recorded if isinstance(recorded, int) else None)
+    schedule = compile_schedule(protocol, seed, participant_index=participant_index)
     if plan.adaptive is not None:  # the adaptive level and the procedure's state are logged per trial
         schedule = add_log_columns(schedule, plan.adaptive)
     display_profile = plan.display
@@ -164,6 +171,10 @@ def run_session(
         "protocol_file_sha256": protocol.source_sha256,
         "protocol_text": protocol.source_text, "protocol_file": protocol.source_name,
         "n_trials_scheduled": int(len(schedule)), **plan.metadata(), "packages": package_versions(),
+        "participant_index": participant_index,
+        "block_order": {"kind": protocol.design.randomisation.block_order,
+                        "blocks": block_sequence(schedule, protocol.design.randomisation.by)}
+        if protocol.design.randomisation.kind == "blocked" else None,
         "python": platform.python_version(), "host": platform.node(),
         "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,

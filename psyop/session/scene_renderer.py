@@ -102,19 +102,21 @@ class SceneRenderer:
                             base_dir=self._base_dir, show=phase.primitives, images=self._images)
         return scene_in_head(scene, *head_pose) if head_pose is not None else scene
 
-    def _camera(self, eye: str, fixation_m: tuple[float, float, float], mode: str, frame: FrameRequest | None) -> Any:
+    def _camera(self, eye: str, fixation_m: tuple[float, float, float], mode: str, frame: FrameRequest | None,
+                row: Mapping[str, Any] | None = None) -> Any:
         """This eye's camera: from the display's view and at its target's size where the display
-        gives them (a headset runtime), else from the protocol's display profile and the rig."""
+        gives them (a headset runtime), else from the protocol's display profile and the rig; ``row``
+        (the trial) sets a rendered NC that is a factor (display.rendering_nc)."""
         view = frame.view(eye) if frame is not None else None
         target = frame.targets.get(eye) if frame is not None else None
         if view is None:
             if target is not None and (target.width_px, target.height_px) != (self.display.width_px, self.display.height_px):
                 display = dataclasses.replace(self.display, width_px=target.width_px, height_px=target.height_px)
-                return self.rig.camera(display, eye, fixation_m, mode)
-            return self.rig.camera(self.display, eye, fixation_m, mode)
+                return self.rig.camera(display, eye, fixation_m, mode, row=row)
+            return self.rig.camera(self.display, eye, fixation_m, mode, row=row)
         width, height = (target.width_px, target.height_px) if target is not None else (self.display.width_px,
                                                                                          self.display.height_px)
-        return self.rig.view_camera(view, width, height, fixation_m, mode)
+        return self.rig.view_camera(view, width, height, fixation_m, mode, row=row)
 
     def render(self, row: Mapping[str, Any], phase: PhaseSpec, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
@@ -129,7 +131,7 @@ class SceneRenderer:
         ok = True
         images = checked = 0
         for eye in self.eyes:
-            camera = self._camera(eye, fixation_m, mode, frame)
+            camera = self._camera(eye, fixation_m, mode, frame, row)
             cameras_ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
             if phase.show == "stimulus" and self.max_images is not None and self.images_rendered >= self.max_images:
                 return FrameCheck(False, cameras_ok)

@@ -209,13 +209,16 @@ def load_gaze(data_root: Path, study: str) -> pd.DataFrame:
     return gaze
 
 
-def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: bool) -> list[Path]:
+def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: bool,
+                  protocol_sha256: dict[str, str] | None = None) -> list[Path]:
     """Write trial tables in the session-log layout (for tests and demos).
 
     Each table is split by ``participant`` and ``session`` into
     ``<root>/<study>/sub-<ID>/ses-<N>/trials.parquet`` with a session.json that records its
-    SHA-256 (as finalisation does); ``dataset_description.json`` records ``simulated``. Returns
-    the written parquet paths.
+    SHA-256 (as finalisation does); ``dataset_description.json`` records ``simulated``. With
+    ``protocol_sha256`` (study -> hash), the session.json of that study's sessions also names the
+    protocol it ran (what psyop.statistics.studies reads to tell the paper's protocols from a
+    user's). Returns the written parquet paths.
     """
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -232,6 +235,8 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
             write_atomic(path, lambda handle, arrow=arrow: pq.write_table(arrow, handle))
             meta = {"study": study, "participant": str(participant), "session": int(session),
                     dc.SIMULATED_KEY: bool(simulated), "status": "complete", "written_by": "write_dataset"}
+            if protocol_sha256 and study in protocol_sha256:
+                meta["protocol_sha256"] = protocol_sha256[study]
             record_finalised(meta, path.parent, [path])
             write_atomic(path.parent / dc.SESSION_METADATA_FILE, json.dumps(meta, indent=2) + "\n")
             written.append(path)

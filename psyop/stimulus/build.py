@@ -46,6 +46,7 @@ from psyop.rendering.scene import (
     SineBorder,
     Solid,
 )
+from psyop.protocol.factor_fields import resolve_factor_fields
 from psyop.schedule import interval_values
 from psyop.stimulus.placement import centre_angles_deg, circle_position_deg
 
@@ -245,6 +246,10 @@ def build_scene(
     for item in protocol.scene:
         if show != "all" and item.id not in show:
             continue
+        try:  # sizes and contrasts given as {factor: NAME} take this trial's (interval's) level
+            item = resolve_factor_fields(item, values)
+        except ValueError as error:
+            raise UserError(f"scene item '{item.id}': {error}") from None
         if isinstance(item, ps.Disc):
             mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
             az, el = centre_angles_deg(item.centre_deg)

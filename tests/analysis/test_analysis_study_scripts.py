@@ -19,6 +19,14 @@ from psyop.statistics.dataset import write_dataset
 ANALYSIS = Path(__file__).resolve().parents[2] / "analysis"
 
 
+def paper_protocol_hashes() -> dict[str, str]:
+    """study name -> the hash of the shipped paper protocol (what a simulated paper session records)."""
+    from psyop.protocol import load_protocol
+
+    return {name: load_protocol(ANALYSIS.parent / "protocols" / f"{name}.yaml").source_sha256
+            for name in ("detection", "discrimination", "ordinal", "egocentric", "realism")}
+
+
 def _script(name: str):
     if str(ANALYSIS) not in sys.path:
         sys.path.insert(0, str(ANALYSIS))
@@ -38,7 +46,7 @@ def built(tmp_path_factory):
     tables["ordinal"] = ordinal[~((ordinal["participant"] == "02") & (ordinal["mode"] == "reversed")
                                   & (ordinal["separation_D"] == 2.0))]
     data, res, fig = root / "data", root / "results", root / "figures"
-    write_dataset(data, tables, simulated=True)
+    write_dataset(data, tables, simulated=True, protocol_sha256=paper_protocol_hashes())
     common = ["--data", str(data), "--results", str(res)]
     for study in ("detection", "discrimination"):
         assert _script("fit_psychometric").main(
@@ -146,3 +154,104 @@ def test_results_name_no_machine_path_and_cite_the_paper_by_reference(built):
         assert str(built) not in text and "/work/" not in text, path.name
         absolute = re.findall(r"(?:^|[\s(`'\"\[])(/[A-Za-z0-9_.-]+/[^\s)`'\"]*)", text, flags=re.M)
         assert not absolute, f"{path.name}: absolute paths {absolute[:3]}"
+
+
+def _run_script(name: str, *args: str):
+    import subprocess
+
+    return subprocess.run([sys.executable, str(ANALYSIS / f"{name}.py"), *args], capture_output=True, text=True)
+
+
+def test_a_user_study_beside_the_papers_leaves_every_paper_row_and_figure_unchanged(built, tmp_path):
+    """Issue 18: a user's stereo ordinal study analysed beside the paper's data used to overwrite
+    results/ordinal.json and land in the paper's rows. Now its outputs carry its own name and the
+    paper's summary is byte-for-byte the same."""
+    import shutil
+
+    tree = tmp_path / "tree"
+    shutil.copytree(built, tree)
+    data, res, fig = tree / "data", tree / "results", tree / "figures"
+    before_md = (res / "summary.md").read_bytes()
+    before_json = (res / "summary.json").read_bytes()
+    paper_files = {p.name: p.read_bytes() for p in [*res.glob("*"), *fig.glob("*")]}
+    rng = np.random.default_rng(7)
+    user = sim.simulate_ordinal(rng, n_subjects=3)
+    user["study"] = "stereo_ordinal_blocked"
+    write_dataset(data, {"stereo_ordinal_blocked": user}, simulated=True, protocol_sha256={"stereo_ordinal_blocked": "ab" * 32})
+    common = ["--data", str(data), "--results", str(res)]
+    assert _script("fig_ordinal_depth").main(common + ["--study", "stereo_ordinal_blocked",
+                                                       "--out", str(fig / "stereo_ordinal_blocked_depth.png")]) == 0
+    assert _script("results_table").main(["--results", str(res), "--out", str(res / "summary.md")]) == 0
+    assert (res / "summary.md").read_bytes() == before_md
+    assert (res / "summary.json").read_bytes() == before_json
+    for name, content in paper_files.items():
+        target = res / name if (res / name).exists() else fig / name
+        assert target.read_bytes() == content or name.endswith(".pdf"), f"{name} changed"
+    payload = json.loads((res / "stereo_ordinal_blocked.json").read_text())
+    assert payload["study"] == "stereo_ordinal_blocked" and payload["protocol_sha256"] == ["ab" * 32]
+    assert (fig / "stereo_ordinal_blocked_depth.png").exists()
+    own = (res / "stereo_ordinal_blocked_summary.md").read_text()
+    assert "stereo_ordinal_blocked rm-ANOVA: mode" in own and "not one of the paper's protocols" in own
+
+
+def test_a_paper_named_study_run_from_another_protocol_does_not_fill_the_paper_rows(built, tmp_path):
+    """Identified by protocol hash, not by name: data/ordinal run from a user's own protocol."""
+    import shutil
+
+    tree = tmp_path / "tree"
+    shutil.copytree(built / "data", tree / "data", ignore=shutil.ignore_patterns("ordinal"))
+    rng = np.random.default_rng(3)
+    write_dataset(tree / "data", {"ordinal": sim.simulate_ordinal(rng, n_subjects=4)}, simulated=True,
+                  protocol_sha256={"ordinal": "cd" * 32})
+    res = tree / "results"
+    assert _script("fig_ordinal_depth").main(["--data", str(tree / "data"), "--results", str(res),
+                                              "--out", str(tree / "o.png")]) == 0
+    assert _script("results_table").main(["--results", str(res), "--out", str(res / "summary.md")]) == 0
+    rows = json.loads((res / "summary.json").read_text())["paper_comparison"]
+    assert {r["psyop"] for r in rows if r["study"] == "ordinal"} == {"study not run"}
+    assert (res / "ordinal_summary.md").exists()
+
+
+def test_supp_psychometric_and_thresholds_take_a_user_two_interval_study(built, tmp_path):
+    """supp_psychometric_functions.py refused any name but the paper's; the thresholds figure read
+    back_D whatever the study's factor was. A contrast study labels its axes from its own factors."""
+    rng = np.random.default_rng(5)
+    det = sim.simulate_detection(rng, n_subjects=2).rename(columns={"back_D": "size_deg"})
+    det["study"] = "contrast_study"
+    data, res = tmp_path / "data", tmp_path / "results"
+    write_dataset(data, {"contrast_study": det}, simulated=True)
+    common = ["--data", str(data), "--results", str(res), "--study", "contrast_study"]
+    assert _script("fit_psychometric").main(common + ["--condition-column", "size_deg", "--n-jobs", "1",
+                                                      "--n-bootstrap", "50"]) == 0
+    assert (res / "contrast_study_fits.csv").exists()
+    assert _script("supp_psychometric_functions").main(common + ["--out", str(tmp_path / "supp.png")]) == 0
+    assert _script("fig_detection_thresholds").main(common + ["--out", str(tmp_path / "thr.png")]) == 0
+    payload = json.loads((res / "contrast_study_thresholds.json").read_text())
+    assert payload["condition_column"] == "size_deg" and payload["study"] == "contrast_study"
+    assert any("size (deg)" in k for k in payload["summary"])
+
+
+@pytest.mark.parametrize("case", ["missing_fits", "fits_without_condition", "wrong_kind", "no_condition"])
+def test_bad_analysis_input_is_one_line_and_exit_2(built, tmp_path, case):
+    data, res = str(built / "data"), str(tmp_path / "res")
+    if case == "missing_fits":
+        result = _run_script("fig_detection_thresholds", "--data", data, "--fits", str(tmp_path / "none.csv"),
+                             "--results", res, "--out", str(tmp_path / "x.png"))
+        expected = "no fit cache here"
+    elif case == "fits_without_condition":
+        fits = pd.read_csv(built / "results" / "detection_fits.csv").drop(columns=["back_D", "condition_column"])
+        fits.to_csv(tmp_path / "f.csv", index=False)
+        result = _run_script("fig_detection_thresholds", "--data", data, "--fits", str(tmp_path / "f.csv"),
+                             "--results", res, "--out", str(tmp_path / "x.png"))
+        expected = "no column 'back_D'"
+    elif case == "wrong_kind":
+        result = _run_script("supp_psychometric_functions", "--data", data, "--study", "ordinal",
+                             "--results", res, "--out", str(tmp_path / "x.png"))
+        expected = "analyses two-interval"
+    else:
+        result = _run_script("fig_ordinal_depth", "--data", data, "--study", "nosuch", "--results", res,
+                             "--out", str(tmp_path / "x.png"))
+        expected = "no sessions found for study 'nosuch'"
+    assert result.returncode == 2, result.stderr
+    assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert expected in result.stderr

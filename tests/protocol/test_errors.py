@@ -67,6 +67,17 @@ CASES = [
     ("tab indentation", DETECTION, "  repetitions: 15", "\trepetitions: 15", "\trepetitions", "", ["tabs"]),
     ("wrong interval count", DETECTION, "    - kind: blank\n      duration_s: 0.5                   # Sec. 5.1: 0.5 s blank frame\n    - kind: interval\n      duration_s: 2                     # Sec. 5.1: 2-second intervals\n",
      "", "  phases:", "trial.phases", ["needs 2 interval phase(s)"]),
+    # design mistakes that used to run a whole session for nothing (issue 18)
+    ("a factor nothing uses", DETECTION, "    level_D:\n", "    contrast_fraction: {levels: [0.2, 0.8]}\n    level_D:\n",
+     "contrast_fraction:", "design.factors.contrast_fraction", ["used by nothing", "look the same on screen", "remove it"]),
+    ("observer level column is not the response's", DETECTION, "  level_column: level_D",
+     "  level_column: back_D", "level_column: back_D", "observer.level_column",
+     ["response's level factor is 'level_D'", "set level_column: level_D"]),
+    ("one-level factor for a threshold", DETECTION, "levels: [0, 0.25, 0.5, 0.75, 1]", "levels: [0.5]",
+     "levels: [0.5]", "design.factors.level_D.levels", ["has one level", "at least two levels"]),
+    ("realism pair in both orders", REALISM, '"ocular|reversed"]', '"ocular|reversed", "ocular|conventional"]',
+     "ocular|conventional", "design.factors.pair.levels[3]", ["'conventional|ocular' written in the other order",
+                                                               "remove 'ocular|conventional'"]),
 ]
 
 

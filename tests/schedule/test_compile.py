@@ -197,7 +197,9 @@ def test_adaptive_level_is_left_for_the_session() -> None:
 @st.composite
 def designs(draw):
     n_factors = draw(st.integers(1, 3))
-    factors = {f"f{i}_D": sorted(draw(st.sets(st.integers(0, 9), min_size=1, max_size=4))) for i in range(n_factors)}
+    # f0_D is the level factor (a threshold needs two levels or more); every factor moves the front surface
+    factors = {f"f{i}_D": sorted(draw(st.sets(st.integers(0, 9), min_size=2 if i == 0 else 1, max_size=4)))
+               for i in range(n_factors)}
     return factors, draw(st.integers(1, 9)), draw(st.sampled_from(["full", "sequential"])), draw(st.integers(0, 2**32))
 
 
@@ -212,7 +214,7 @@ def test_any_design_is_crossed_balanced_and_deterministic(design) -> None:
         f"response: {{kind: two_interval, test: {{mode: ocular}}, reference: {{mode: conventional}}, "
         f"level_factor: {first}}}\n"
     )
-    text = text.replace(f"[{first}, {first}]", f"[{first}]")
+    text = text.replace(f"[{first}, {first}]", f"[{', '.join(factors)}]")  # validation refuses an unused factor
     protocol = parse_protocol(text, "generated.yaml")
     schedule = compile_schedule(protocol, seed)
     n_conditions = int(np.prod([len(v) for v in factors.values()]))

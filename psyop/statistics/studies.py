@@ -1,0 +1,196 @@
+"""What the analysis needs to know of a study in ``data/``: its response kind, the protocol(s) its
+sessions ran (by hash), and the factors' names, descriptions and units (for columns and axis labels).
+
+Read from each session's ``session.json`` (``response_kind``, ``protocol_sha256`` and the
+``protocol_text`` it ran, written by psyop.session.runner). The protocol text is read as plain
+YAML, not re-validated: an old session stays analysable when validation grows stricter. A study
+written without session.json (psyop.statistics.dataset.write_dataset without hashes) has its kind
+read from its trial columns and no protocol hash.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import yaml
+
+from psyop import datacontract as dc
+from psyop.errors import UserError
+
+#: The response kinds (session.json ``response_kind``; psyop.session.responses.base.ResponseKind).
+TWO_INTERVAL, NEAR_SIDE, PREFERENCE, REACH = "2afc_interval", "near_side", "preference", "reach"
+#: Units by factor-name suffix (docs/protocols.md: a numeric factor says its unit in its name).
+UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (("_deg", "deg"), ("_arcmin", "arcmin"), ("_mm", "mm"), ("_m", "m"),
+                                              ("_D", "D"), ("_s", "s"), ("_hz", "Hz"), ("_px", "px"),
+                                              ("_fraction", "fraction"))
+
+#: Labels of the paper's factors when a study's sessions record no protocol description.
+PLAIN_NAMES = {"back_D": "back surface distance", "offset_D": "relative offset", "level_D": "level",
+               "separation_D": "separation of the two surfaces", "target_fraction": "target distance"}
+
+
+@dataclass(frozen=True)
+class FactorFacts:
+    """A design factor: its column name, description (or None) and unit (or None)."""
+
+    name: str
+    description: str | None = None
+    unit: str | None = None
+
+    @property
+    def text(self) -> str:
+        """The description, else a plain name (the paper's factors) or the name without its unit suffix."""
+        return self.description or PLAIN_NAMES.get(self.name) or _strip_unit(self.name).replace("_", " ")
+
+    @property
+    def label(self) -> str:
+        """An axis label: the description (else the name without its unit suffix) and the unit.
+
+        Examples
+        --------
+        >>> FactorFacts("back_D", None, "D").label
+        'back surface distance (D)'
+        >>> FactorFacts("contrast").label
+        'contrast'
+        >>> FactorFacts("size_deg", "target size", "deg").label
+        'target size (deg)'
+        """
+        return f"{self.text} ({self.unit})" if self.unit else self.text
+
+
+@dataclass(frozen=True)
+class StudyFacts:
+    """One study of a data root.
+
+    ``kind``: the response kind; ``protocol_sha256``: the distinct protocol hashes of its sessions
+    (empty when no session.json records one); ``factors``: the design's factors by name;
+    ``level_factor``: the 2AFC level factor (None for other kinds)."""
+
+    name: str
+    kind: str
+    protocol_sha256: tuple[str, ...] = ()
+    factors: dict[str, FactorFacts] = field(default_factory=dict)
+    level_factor: str | None = None
+    response_fields: dict[str, str] = field(default_factory=dict)
+
+    def response_column(self, key: str, default: str) -> str:
+        """The column a response field names (``separation_factor``, ``rendering_factor``, ...), else ``default``."""
+        return self.response_fields.get(key, default)
+
+    def factor(self, name: str) -> FactorFacts:
+        """The named factor's facts (a bare name with its suffix's unit when the protocol is unknown)."""
+        return self.factors.get(name) or FactorFacts(name, None, unit_of(name))
+
+    def condition_columns(self) -> list[str]:
+        """The 2AFC study's factors other than its level factor, in the protocol's order."""
+        return [n for n in self.factors if n != self.level_factor]
+
+
+def _strip_unit(name: str) -> str:
+    for suffix, _ in UNIT_SUFFIXES:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def unit_of(name: str) -> str | None:
+    """The unit a factor's name ends in, or None.
+
+    Examples
+    --------
+    >>> unit_of("back_D"), unit_of("contrast"), unit_of("eccentricity_deg")
+    ('D', None, 'deg')
+    """
+    for suffix, unit in UNIT_SUFFIXES:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return unit
+    return None
+
+
+def _kind_from_columns(path: Path) -> str:
+    from psyop.session.responses.base import response_kind
+
+    try:
+        columns = pq.read_schema(path).names
+    except Exception as exc:  # noqa: BLE001 - any unreadable parquet is bad input here
+        raise UserError(f"unreadable trial log ({exc})", str(path)) from exc
+    try:
+        return response_kind(columns).value
+    except Exception as exc:  # noqa: BLE001
+        # tables without the schedule's columns (psyop.statistics.simulate): a 2AFC level, or a mode, and correct
+        if "correct" in columns and "level_D" in columns:
+            return TWO_INTERVAL
+        if "correct" in columns and "mode" in columns:
+            return NEAR_SIDE
+        raise UserError(f"no response kind in its columns ({exc})", str(path)) from exc
+
+
+def _protocol_factors(text: str) -> tuple[dict[str, FactorFacts], str | None, dict[str, str]]:
+    try:
+        document = yaml.safe_load(text) or {}
+    except yaml.YAMLError:
+        return {}, None, {}
+    design = document.get("design") if isinstance(document, dict) else None
+    factors_in = design.get("factors") if isinstance(design, dict) else None
+    factors = {}
+    for name, spec in (factors_in or {}).items():
+        description = spec.get("description") if isinstance(spec, dict) else None
+        factors[str(name)] = FactorFacts(str(name), description if isinstance(description, str) else None,
+                                         unit_of(str(name)))
+    response = document.get("response") if isinstance(document, dict) else None
+    level = response.get("level_factor", "level_D") if isinstance(response, dict) and \
+        response.get("kind") == "two_interval" else None
+    fields = {str(k): v for k, v in response.items() if isinstance(v, str)} if isinstance(response, dict) else {}
+    return factors, level, fields
+
+
+def study_facts(data_root: Path, study: str) -> StudyFacts:
+    """The :class:`StudyFacts` of ``data_root/<study>``; a UserError naming the folder when it has no sessions.
+
+    Examples
+    --------
+    >>> import tempfile, pandas as pd
+    >>> from psyop.statistics.dataset import write_dataset
+    >>> root = Path(tempfile.mkdtemp())
+    >>> _ = write_dataset(root, {"s": pd.DataFrame({"participant": ["1"], "session": [1], "pair": ["a|b"],
+    ...                                              "mode_a": ["a"], "mode_b": ["b"]})}, simulated=True)
+    >>> study_facts(root, "s").kind
+    'preference'
+    """
+    files = dc.trials_files(data_root, study)
+    if not files:
+        raise UserError(f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
+                        str(Path(data_root)))
+    hashes: list[str] = []
+    kind: str | None = None
+    text: str | None = None
+    for trials in files:
+        meta_path = trials.parent / dc.SESSION_METADATA_FILE
+        if not meta_path.exists():
+            continue
+        try:
+            meta = json.loads(meta_path.read_text())
+        except (OSError, ValueError) as exc:
+            raise UserError(f"unreadable session metadata ({exc})", str(meta_path)) from exc
+        sha = meta.get("protocol_sha256")
+        if isinstance(sha, str) and sha and sha not in hashes:
+            hashes.append(sha)
+        kind = kind or meta.get("response_kind")
+        text = text or meta.get("protocol_text")
+    kind = kind or _kind_from_columns(files[0])
+    factors, level, fields = _protocol_factors(text) if text else ({}, None, {})
+    if kind == TWO_INTERVAL and level is None:
+        level = "level_D"
+    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields)
+
+
+def studies_in(data_root: Path) -> list[StudyFacts]:
+    """Every study folder of ``data_root`` that holds at least one trial log, by name."""
+    root = Path(data_root)
+    if not root.is_dir():
+        return []
+    return [study_facts(root, p.name) for p in sorted(root.iterdir())
+            if p.is_dir() and dc.STUDY_PATTERN.fullmatch(p.name) and dc.trials_files(root, p.name)]
