@@ -75,6 +75,7 @@ class OpenXRDisplay:
         #: session at frame N, so the tests see the real runtime take the session out of focus and stop it
         self._request_exit_at_frame = request_exit_at_frame
         self._plan, self._clock = plan, clock
+        self._swapchains: dict[str, _EyeSwapchain] = {}
         self._ctx = moderngl.create_standalone_context(backend="egl")
         try:
             self.runtime = XrRuntime(self._ctx, reference_space=reference_space)
@@ -254,9 +255,9 @@ class OpenXRDisplay:
 
     @signals_held
     def close(self) -> None:
-        rt = getattr(self, "runtime", None)
-        if rt is not None and rt.session is not None:
-            for chain in getattr(self, "_swapchains", {}).values():
+        rt = self.runtime
+        if rt.session is not None:
+            for chain in self._swapchains.values():
                 if chain.acquired:
                     try:
                         self.xr.release_swapchain_image(chain.handle, self.xr.SwapchainImageReleaseInfo())
@@ -274,7 +275,7 @@ class OpenXRDisplay:
                 except Exception:  # noqa: BLE001 - teardown goes on
                     pass
             rt.request_exit(self._empty_frame)
-            for chain in getattr(self, "_swapchains", {}).values():
+            for chain in self._swapchains.values():
                 for fbo in chain.framebuffers:
                     fbo.release()
                 try:
@@ -282,8 +283,7 @@ class OpenXRDisplay:
                 except Exception:  # noqa: BLE001
                     pass
             self._swapchains = {}
-        if rt is not None:
-            rt.close()
+        rt.close()
         if self._ctx is not None:
             self._ctx.release()
             self._ctx = None
