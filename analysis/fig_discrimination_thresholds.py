@@ -35,7 +35,8 @@ def main(argv: list[str] | None = None) -> int:
     facts = study_facts(args.data, args.study)
     check_two_interval(facts, "fig_discrimination_thresholds.py")
     fits_path = args.fits or results_file(args.results, args.study, "fits", "csv")
-    fits = read_fits(fits_path, data=args.data, study=args.study)
+    # a cache given by --fits is the user's: never rebuilt; the default one is rebuilt if unreadable
+    fits = read_fits(fits_path) if args.fits else read_fits(fits_path, data=args.data, study=args.study)
     cached = fits["condition_column"].iloc[0] if "condition_column" in fits and len(fits) else None
     cond = condition_column(facts, args.condition_column or cached)
     require_columns(fits, [cond, "threshold_D", "participant"], str(fits_path),

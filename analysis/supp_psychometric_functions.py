@@ -30,7 +30,8 @@ def main(argv: list[str] | None = None) -> int:
     facts = study_facts(args.data, args.study)
     check_two_interval(facts, "supp_psychometric_functions.py")
     fits_path = args.fits or results_file(args.results, args.study, "fits", "csv")
-    fits = read_fits(fits_path, data=args.data, study=args.study)
+    # a cache given by --fits is the user's: never rebuilt; the default one is rebuilt if unreadable
+    fits = read_fits(fits_path) if args.fits else read_fits(fits_path, data=args.data, study=args.study)
     first = fits.iloc[0] if len(fits) else {}
     cond = condition_column(facts, args.condition_column or (first.get("condition_column") if len(fits) else None))
     level = level_column(facts, args.level_column or (first.get("level_column") if len(fits) else None))

@@ -128,7 +128,7 @@ def test_deleting_session_json_does_not_turn_a_real_session_simulated(data: Path
     unverified = subprocess.run([sys.executable, "-m", "psyop", "sessions", str(data), "--require-simulated"],
                                 capture_output=True, text=True, timeout=120)
     _refused(unverified, "holds real sessions", "1 real")
-    for table in (real.trials_parquet, real.frames_parquet):  # only the log is left
+    for table in (real.trials_parquet, real.frames_parquet, real.gaze_parquet):  # only the log is left
         table.unlink()
     _refused(_sessions(data), "mixed", "2 simulated, 1 real")
     write_dataset_description(data, simulated=True)

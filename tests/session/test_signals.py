@@ -79,10 +79,10 @@ signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's Ctrl-C
 original_append, original_parquet = store.SessionStore.append_trial, store._write_parquet_atomic
 stop_at = 1 if where == "record" else 2
 
-def append(self, row, frames):  # the SIGINT arrives while this trial's record is written
+def append(self, row, frames, gaze=None):  # the SIGINT arrives while this trial's record is written
     if int(row["trial"]) == stop_at:
         os.kill(os.getpid(), signal.SIGINT)
-    original_append(self, row, frames)
+    original_append(self, row, frames, gaze)
 
 def parquet(*args, **kwargs):  # a second Ctrl-C, between the finalised files
     os.kill(os.getpid(), signal.SIGINT)
