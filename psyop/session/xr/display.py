@@ -94,12 +94,15 @@ class OpenXRDisplay:
         self.frames_not_rendered = 0
         self.frames_missed = 0
         self.wait_frame_s = 0.0  # time blocked in xrWaitFrame (the runtime pacing the loop)
-        self._offset_ns = self.runtime.xr_time_now_ns()
         try:
+            self._offset_ns = self.runtime.xr_time_now_ns()
             self._swapchains = self._create_swapchains()
         except Exception as exc:  # noqa: BLE001
             self.close()
             raise xr_error("creating the swapchains failed", exc, self.runtime.facts.runtime) from exc
+        except BaseException:  # a Ctrl-C during the start: close the runtime before it propagates
+            self.close()
+            raise
 
     # -- time ---------------------------------------------------------------------------------------
     def to_session_s(self, xr_time_ns: int) -> float:

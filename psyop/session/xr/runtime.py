@@ -158,12 +158,21 @@ def signals_held(method: Callable[..., T]) -> Callable[..., T]:
 class XrRuntime:
     """Instance, system and session of the runtime, bound to ``ctx`` (a moderngl EGL context)."""
 
-    @signals_held
     def __init__(self, ctx: Any, *, reference_space: str = "local", app_name: str = "psyop") -> None:
-        self._open(ctx, reference_space, app_name)
+        self.xr = import_xr()
+        self.instance = self.system = self.session = None
+        self._spaces: list[Any] = []
+        try:
+            with runtime_threads_without_signals():
+                self._open(ctx, reference_space, app_name)
+        except BaseException:
+            # a Ctrl-C held during the start is raised as the section ends: the runtime must not
+            # outlive it (an instance left open crashed the interpreter's exit, -11, under load)
+            self.close()
+            raise
 
     def _open(self, ctx: Any, reference_space: str, app_name: str) -> None:
-        xr = self.xr = import_xr()
+        xr = self.xr
         self.ctx = ctx
         self.facts = RuntimeFacts(reference_space=reference_space)
         self.instance = self.system = self.session = None

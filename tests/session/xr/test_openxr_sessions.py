@@ -290,15 +290,17 @@ def test_ctrl_c_mid_frame_ends_the_headset_session_cleanly_and_it_resumes(tmp_pa
     process = subprocess.Popen(argv, env=runtime_env(tmp_path), cwd=REPO, stdout=subprocess.DEVNULL,
                                stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    segment = session_paths(tmp_path / "data", "xr_tiny", "H1", 1).trial_segment(0)
-    deadline, first_size = time.monotonic() + 120, None
-    while time.monotonic() < deadline and process.poll() is None:  # once the first trial is durable
-        if segment.exists():
-            size = segment.stat().st_size
-            first_size = size if first_size is None else first_size
-            if size > first_size:
+    from psyop.session.log.store import recover_tables
+
+    paths = session_paths(tmp_path / "data", "xr_tiny", "H1", 1)
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline and process.poll() is None:  # once the first trial is durable in the log
+        if paths.trial_segment(0).exists():
+            logged = recover_tables(paths)[0]
+            if logged is not None and len(logged) >= 1:
                 break
-        time.sleep(0.02)
+        time.sleep(0.05)
+    assert process.poll() is None, "the session ended before a trial was durable"
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, stderr[-3000:]
