@@ -5,7 +5,9 @@ reports what it saw as one JSON line. Usage: probe.py MODE PROTOCOL [FRAMES]
   cameras psyop builds from them (centre of projection, rays through the image's edge midpoints);
 - readback: one stimulus frame rendered into the swapchain images, read back before release, and
   the same cameras rendered by a separate headless renderer;
-- teardown: what fd 0 is before the display opens and after it closes, and the open fds.
+- teardown: what fd 0 is before the display opens and after it closes, and the open fds;
+- abandon: a frame's stimulus drawn into the swapchain images many times over, then the display
+  closed with the frame still open and the draws still queued (what a Ctrl-C mid-frame leaves).
 """
 
 from __future__ import annotations
@@ -38,6 +40,8 @@ def main() -> None:
             out["frames"] = _cameras(plan, display, n_frames)
         elif mode == "readback":
             out.update(_readback(plan, display, protocol_path))
+        elif mode == "abandon":
+            out.update(_abandon(display, n_frames))
     finally:
         display.close()
     out["summary"] = display.summary()
@@ -87,6 +91,29 @@ def _cameras(plan, display, n_frames: int) -> list[dict]:
         display.end_frame(request, [])
         frames.append(record)
     return frames
+
+
+def _abandon(display, n_draws: int) -> dict:
+    """Begin a frame and queue ``n_draws`` full-image draws of a costly shader into each eye's
+    swapchain image, with nothing that waits for them; return with the frame open."""
+    ctx = display.gl_context
+    program = ctx.program(
+        vertex_shader="#version 330\nin vec2 p; void main() { gl_Position = vec4(p, 0.0, 1.0); }",
+        fragment_shader="#version 330\nout vec4 c; void main() { float a = 0.0;"
+                        " for (int i = 0; i < 64; ++i) a += sin(gl_FragCoord.x * 0.01 + float(i));"
+                        " c = vec4(fract(a), 0.5, 0.5, 1.0); }")
+    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4").tobytes())
+    vao = ctx.vertex_array(program, [(quad, "2f", "p")])
+    while True:
+        request = display.begin_frame(0.0)
+        if request.should_render and request.targets:
+            break
+        display.end_frame(request, [])
+    for target in request.targets.values():
+        target.framebuffer.use()
+        for _ in range(n_draws):
+            vao.render(mode=5)  # triangle strip: the whole image
+    return {"draws_queued": n_draws, "frame_open": display._frame is not None}
 
 
 def _readback(plan, display, protocol_path: Path) -> dict:
