@@ -186,6 +186,35 @@ def test_teardown_keeps_fd0_and_leaks_no_descriptor(tmp_path):
     assert report["fds_after"] == report["fds_before"]
 
 
+def test_ctrl_c_while_the_runtime_starts_exits_130_and_the_session_then_runs(tmp_path):
+    # The signal lands as the in-process runtime reports its devices, before the session is focused and
+    # before any trial: the runtime is closed, nothing is recorded as done, and the same command then runs.
+    import signal
+
+    protocol = _protocol(tmp_path)
+    argv = [sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1", "--data", str(tmp_path / "data"),
+            "--display", "openxr", "--pose", "openxr", "--clock", "real", "--responses", "none", "--no-progress"]
+    env = runtime_env(tmp_path)
+    env["XRT_LOG"] = "info"  # the runtime's start-up lines are the trigger
+    process = subprocess.Popen(argv, env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                               stdin=subprocess.DEVNULL, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    seen = []
+    for line in process.stderr:
+        seen.append(line)
+        if "Selected devices" in line:
+            process.send_signal(signal.SIGINT)
+            break
+    rest = process.stderr.read()
+    process.wait(timeout=120)
+    stderr = "".join(seen) + rest
+    assert any("Selected devices" in line for line in seen), stderr[-3000:]
+    assert process.returncode == 130, stderr[-3000:]
+    assert "Traceback" not in stderr and "psyop run: interrupted" in stderr
+    done = _psyop_run(tmp_path, protocol)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert json.loads((_session_dir(tmp_path) / "session.json").read_text())["status"] == "complete"
+
+
 def test_closing_mid_frame_with_draws_still_rasterising_does_not_crash(tmp_path):
     # What a Ctrl-C between a frame's draws and xrEndFrame leaves: GL draws queued into the swapchain
     # images and not finished. Before close() waited for them, destroying the swapchains and the
