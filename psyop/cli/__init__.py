@@ -79,6 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"psyop {args.command}: error: {error}", file=sys.stderr)
         return error.exit_code
     except KeyboardInterrupt:
+        # Exit status 130 (128 + SIGINT). A Ctrl-C that lands while scipy/pandas are still being
+        # imported can end the process by SIGINT itself after this return (CPython 3.11 keeps a flag
+        # set by an extension's nested code run; reproduced without psyop): a shell reports 130
+        # either way, and nothing has been recorded by then.
         print(f"psyop {args.command}: interrupted", file=sys.stderr)
         return 130
     except OSError as exc:  # disk full, I/O error, permissions: one line naming the file and the fix

@@ -240,7 +240,12 @@ def _headless_display(arg: str, ctx: BackendContext) -> Display:
 def _openxr_display(arg: str, ctx: BackendContext) -> Display:
     from psyop.session.xr.display import open_openxr_display
 
-    return open_openxr_display(ctx.plan, ctx.clock, ctx.xr_request_exit_at_frame)
+    from psyop.session.xr.binding import GRAPHICS_APIS
+
+    if arg not in ("", "auto", *GRAPHICS_APIS):
+        raise UserError(f"--display openxr:{arg}: expected openxr, openxr:egl or openxr:xlib (the OpenGL binding)",
+                        "--display")
+    return open_openxr_display(ctx.plan, ctx.clock, ctx.xr_request_exit_at_frame, graphics=arg or "auto")
 
 
 def _window_display(arg: str, ctx: BackendContext) -> Display:
@@ -286,8 +291,9 @@ BACKENDS: tuple[Backend[Any], ...] = (
             "cameras)", False, _headless_display),
     Backend("display", "window", "window", "a desktop window showing each eye (pip install 'psyop[window]')",
             False, _window_display, extra="window", modules=("glfw",)),
-    Backend("display", "openxr", "openxr", "a VR headset through its OpenXR runtime (SteamVR, Monado; docs/headset.md)",
-            True, _openxr_display, extra="xr", modules=("xr",)),
+    Backend("display", "openxr", "openxr[:egl|:xlib]", "a VR headset through its OpenXR runtime (SteamVR, Monado; "
+            "docs/headset.md); OpenGL through EGL where the runtime offers it, else GLX on $DISPLAY, or as named",
+            True, _openxr_display, extra="xr", modules=("xr",), takes_arg=None),
 )
 
 

@@ -12,7 +12,8 @@ Eye positions: the runtime's view position of an eye is taken to be that eye's c
 C (what the runtime's IPD setting places); the eye rig's ipd rule (``place_views``) then applies
 the protocol's fixed ipd, if it has one, about their mid-point. Swapchains are RGBA8 (linear:
 psyop's pixel values reach the display unchanged, as in its PNGs) at the runtime's recommended
-size per eye.
+size per eye. The OpenGL context is psyop's own, bound to the session through EGL or GLX/Xlib
+(:mod:`psyop.session.xr.binding`).
 """
 
 from __future__ import annotations
@@ -26,12 +27,15 @@ from typing import Any
 
 from psyop.optics.camera import ViewGeometry
 from psyop.session.frames import DisplayInterrupted, FrameRequest, RenderTarget
+from psyop.session.xr.binding import choose_binding, create_context
 from psyop.session.xr.runtime import (
     FOCUS_TIMEOUT_S,
     XrPose,
     XrRuntime,
+    import_xr,
     quaternion_multiply,
     rotate,
+    runtime_extensions,
     signals_held,
     tangents_from_fov,
     xr_error,
@@ -67,18 +71,22 @@ class OpenXRDisplay:
     name = "openxr"
     paced = True
 
-    def __init__(self, plan: Any, clock: Any, *, reference_space: str = "local",
+    def __init__(self, plan: Any, clock: Any, *, reference_space: str = "local", graphics: str = "auto",
                  request_exit_at_frame: int | None = None) -> None:
-        import moderngl
-
         #: a testing aid (``psyop run --xr-request-exit-at-frame N``, hidden): ask the runtime to end the
         #: session at frame N, so the tests see the real runtime take the session out of focus and stop it
         self._request_exit_at_frame = request_exit_at_frame
         self._plan, self._clock = plan, clock
         self._swapchains: dict[str, _EyeSwapchain] = {}
-        self._ctx = moderngl.create_standalone_context(backend="egl")
+        choice = choose_binding(runtime_extensions(import_xr()), graphics)
+        if isinstance(choice, str):
+            raise xr_error(choice, "unsupported")
         try:
-            self.runtime = XrRuntime(self._ctx, reference_space=reference_space)
+            self._ctx = create_context(choice.api)
+        except Exception as exc:  # noqa: BLE001 - no EGL device, or no GLX on $DISPLAY
+            raise xr_error(f"psyop could not create its OpenGL context for the {choice.api} binding", exc) from exc
+        try:
+            self.runtime = XrRuntime(self._ctx, choice, reference_space=reference_space)
         except BaseException:
             self._ctx.release()
             raise
@@ -251,7 +259,7 @@ class OpenXRDisplay:
         facts = self.runtime.facts
         return {"display": self.name, "runtime": facts.runtime, "system": facts.system, "extensions": facts.extensions,
                 "eye_gaze_supported": facts.eye_gaze_supported, "swapchain_sizes_px": facts.recommended_sizes_px,
-                "reference_space": facts.reference_space, "frames": self._index,
+                "reference_space": facts.reference_space, "graphics": facts.graphics, "frames": self._index,
                 "frames_not_rendered": self.frames_not_rendered, "frames_missed": self.frames_missed,
                 "wait_frame_s": self.wait_frame_s,
                 "session_states": list(facts.states)}
@@ -307,9 +315,11 @@ def _view_geometry(eye: str, view: Any) -> ViewGeometry:
                         tangents_from_fov(view.fov))
 
 
-def open_openxr_display(plan: Any, clock: Any, request_exit_at_frame: int | None = None) -> OpenXRDisplay:
-    """The OpenXR display for a session of ``plan`` on ``clock`` (a RealClock)."""
-    return OpenXRDisplay(plan, clock, request_exit_at_frame=request_exit_at_frame)
+def open_openxr_display(plan: Any, clock: Any, request_exit_at_frame: int | None = None,
+                        graphics: str = "auto") -> OpenXRDisplay:
+    """The OpenXR display for a session of ``plan`` on ``clock`` (a RealClock); ``graphics``: the
+    OpenGL binding, ``auto``, ``egl`` or ``xlib`` (:mod:`psyop.session.xr.binding`)."""
+    return OpenXRDisplay(plan, clock, graphics=graphics, request_exit_at_frame=request_exit_at_frame)
 
 
 __all__ = ["OpenXRDisplay", "open_openxr_display", "quaternion_multiply", "rotate"]

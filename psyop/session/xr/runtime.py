@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from psyop.errors import UserError
+from psyop.session.xr.binding import BindingChoice, current_binding
 
 T = TypeVar("T")
 
@@ -87,6 +88,7 @@ class RuntimeFacts:
     vive_trackers: bool = False
     recommended_sizes_px: list[tuple[int, int]] = field(default_factory=list)
     reference_space: str = "local"
+    graphics: str = ""  # the OpenGL binding: egl (XR_MNDX_egl_enable) or xlib (GLX on an X display)
     states: list[str] = field(default_factory=list)
 
 
@@ -155,42 +157,45 @@ def signals_held(method: Callable[..., T]) -> Callable[..., T]:
     return held
 
 
+def runtime_extensions(xr: Any) -> set[str]:
+    """The instance extensions the active runtime offers; no runtime is a one-line error (exit 3)."""
+    try:
+        return {_text(e.extension_name) for e in xr.enumerate_instance_extension_properties()}
+    except Exception as exc:  # noqa: BLE001 - the loader finds no runtime
+        raise xr_error("no OpenXR runtime could be loaded", exc) from exc
+
+
 class XrRuntime:
     """Instance, system and session of the runtime, bound to ``ctx`` (a moderngl EGL context)."""
 
-    def __init__(self, ctx: Any, *, reference_space: str = "local", app_name: str = "psyop") -> None:
+    def __init__(self, ctx: Any, binding: BindingChoice, *, reference_space: str = "local",
+                 app_name: str = "psyop") -> None:
         self.xr = import_xr()
         self.instance = self.system = self.session = None
         self._spaces: list[Any] = []
         try:
             with runtime_threads_without_signals():
-                self._open(ctx, reference_space, app_name)
+                self._open(ctx, binding, reference_space, app_name)
         except BaseException:
             # a Ctrl-C held during the start is raised as the section ends: the runtime must not
             # outlive it (an instance left open crashed the interpreter's exit, -11, under load)
             self.close()
             raise
 
-    def _open(self, ctx: Any, reference_space: str, app_name: str) -> None:
+    def _open(self, ctx: Any, binding: BindingChoice, reference_space: str, app_name: str) -> None:
         xr = self.xr
         self.ctx = ctx
-        self.facts = RuntimeFacts(reference_space=reference_space)
+        self.graphics = binding
+        self.facts = RuntimeFacts(reference_space=reference_space, graphics=binding.api)
         self.instance = self.system = self.session = None
         self._spaces: list[Any] = []
         self.state = xr.SessionState.UNKNOWN
         self.running = False
         self._lost = ""
         self.sync_count = 0  # input syncs so far (a press is reported once per sync)
-        try:
-            available = {_text(e.extension_name) for e in xr.enumerate_instance_extension_properties()}
-        except Exception as exc:  # noqa: BLE001 - the loader finds no runtime
-            raise xr_error("no OpenXR runtime could be loaded", exc) from exc
-        if "XR_MNDX_egl_enable" not in available or "XR_KHR_opengl_enable" not in available:
-            raise xr_error("the runtime offers no OpenGL-on-EGL binding (XR_MNDX_egl_enable with "
-                           "XR_KHR_opengl_enable); psyop's GLX/Xlib binding is not implemented", "unsupported")
-        wanted = ["XR_KHR_opengl_enable", "XR_MNDX_egl_enable", "XR_KHR_convert_timespec_time",
-                  "XR_EXT_eye_gaze_interaction", "XR_HTCX_vive_tracker_interaction"]
-        enable = [e for e in wanted if e in available]
+        available = runtime_extensions(xr)
+        wanted = ["XR_KHR_convert_timespec_time", "XR_EXT_eye_gaze_interaction", "XR_HTCX_vive_tracker_interaction"]
+        enable = list(binding.extensions) + [e for e in wanted if e in available]
         if "XR_KHR_convert_timespec_time" not in enable:
             raise xr_error("the runtime cannot convert its times to CLOCK_MONOTONIC (XR_KHR_convert_timespec_time)",
                            "unsupported")
@@ -229,9 +234,11 @@ class XrRuntime:
         self.facts.recommended_sizes_px = [(int(v.recommended_image_rect_width), int(v.recommended_image_rect_height))
                                            for v in views]
         xr.get_opengl_graphics_requirements_khr(self.instance, self.system)  # required before xrCreateSession
-        binding = self._egl_binding()
-        self.session = xr.create_session(self.instance, xr.SessionCreateInfo(
-            system_id=self.system, next=ctypes.cast(ctypes.pointer(binding), ctypes.c_void_p)))
+        binding = current_binding(xr, self.graphics.api)
+        if isinstance(binding, str):
+            raise xr_error(binding, "no graphics binding", self.facts.runtime)
+        self.session = xr.create_session(self.instance, xr.SessionCreateInfo(system_id=self.system,
+                                                                             next=binding.pointer()))
         self._binding = binding  # the runtime keeps pointers into it
         space_type = {"local": xr.ReferenceSpaceType.LOCAL, "stage": xr.ReferenceSpaceType.STAGE}[self.facts.reference_space]
         self.world = self._reference_space(space_type)
@@ -244,32 +251,6 @@ class XrRuntime:
             reference_space_type=kind, pose_in_reference_space=xr.Posef()))
         self._spaces.append(space)
         return space
-
-    def _egl_binding(self) -> Any:
-        xr = self.xr
-        egl = ctypes.CDLL("libEGL.so.1")
-        egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
-        egl.eglGetCurrentContext.restype = ctypes.c_void_p
-        egl.eglQueryContext.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.POINTER(ctypes.c_int)]
-        egl.eglChooseConfig.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_void_p),
-                                        ctypes.c_int, ctypes.POINTER(ctypes.c_int)]
-        dpy, ectx = egl.eglGetCurrentDisplay(), egl.eglGetCurrentContext()
-        config_id = ctypes.c_int()
-        egl.eglQueryContext(dpy, ectx, 0x3028, ctypes.byref(config_id))  # EGL_CONFIG_ID
-        attrs = (ctypes.c_int * 3)(0x3028, config_id.value, 0x3038)  # EGL_CONFIG_ID, id, EGL_NONE
-        config, n = ctypes.c_void_p(), ctypes.c_int()
-        egl.eglChooseConfig(dpy, attrs, ctypes.byref(config), 1, ctypes.byref(n))
-        if not (dpy and ectx and n.value == 1):
-            raise xr_error("psyop's OpenGL context is not a current EGL context", "no EGL display/context/config",
-                           self.facts.runtime)
-        binding = xr.GraphicsBindingEGLMNDX(
-            get_proc_address=ctypes.cast(egl.eglGetProcAddress, xr.PFN_xrEglGetProcAddressMNDX))
-        fields = dict(xr.GraphicsBindingEGLMNDX._fields_)
-        binding.display = ctypes.cast(ctypes.c_void_p(dpy), fields["display"])
-        binding.config = ctypes.cast(ctypes.c_void_p(config.value), fields["config"])
-        binding.context = ctypes.cast(ctypes.c_void_p(ectx), fields["context"])
-        self._egl = egl
-        return binding
 
     def _path(self, text: str) -> Any:
         return self.xr.string_to_path(self.instance, text)

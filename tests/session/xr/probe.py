@@ -1,5 +1,6 @@
 """Run in a child process by the headset tests: opens psyop's OpenXR display on the test runtime and
-reports what it saw as one JSON line. Usage: probe.py MODE PROTOCOL [FRAMES]
+reports what it saw as one JSON line. Usage: probe.py MODE PROTOCOL [FRAMES [GRAPHICS]]
+(GRAPHICS: the OpenGL binding, auto, egl or xlib; xlib needs an X display)
 
 - cameras: per frame, the views, head pose and gaze the display and tracking sources read, and the
   cameras psyop builds from them (centre of projection, rays through the image's edge midpoints);
@@ -23,6 +24,7 @@ import numpy as np
 def main() -> None:
     mode, protocol_path = sys.argv[1], Path(sys.argv[2])
     n_frames = int(sys.argv[3]) if len(sys.argv) > 3 else 40
+    graphics = sys.argv[4] if len(sys.argv) > 4 else "auto"
     from psyop.protocol import load_protocol
     from psyop.session.clock import RealClock
     from psyop.session.plan import compile_plan
@@ -32,7 +34,7 @@ def main() -> None:
     clock = RealClock()
     fd0_before = os.readlink("/proc/self/fd/0")
     fds_before = sorted(os.listdir("/proc/self/fd"))
-    display = OpenXRDisplay(plan, clock)
+    display = OpenXRDisplay(plan, clock, graphics=graphics)
     out: dict = {"summary_open": display.summary()}
     try:
         display.wait_until_ready()

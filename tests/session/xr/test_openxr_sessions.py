@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import subprocess
 import sys
 import time
@@ -160,12 +161,26 @@ def test_injected_fovs_eye_positions_head_yaw_and_gaze_reach_the_cameras_exactly
     assert report["frames"][-1]["hand"], "the right grip pose was sampled"
 
 
-def test_a_frame_read_back_from_the_swapchain_equals_the_headless_render(tmp_path):
-    done = subprocess.run([sys.executable, str(HERE / "probe.py"), "readback", str(_protocol(tmp_path))],
-                          env=runtime_env(tmp_path), cwd=REPO, capture_output=True, text=True, timeout=240,
+def _on_x_display(graphics: str, argv: list[str]) -> list[str]:
+    """``argv`` as run for the binding ``graphics``: under a private Xvfb server for GLX/Xlib."""
+    if graphics != "xlib":
+        return argv
+    if shutil.which("xvfb-run") is None:
+        pytest.skip("the GLX/Xlib binding needs an X server: xvfb-run (Debian xvfb) is not installed")
+    return ["xvfb-run", "-a", "-s", "-screen 0 640x480x24", *argv]
+
+
+@pytest.mark.parametrize("graphics", ["egl", "xlib"])
+def test_a_frame_read_back_from_the_swapchain_equals_the_headless_render(tmp_path, graphics):
+    # the swapchain images are drawn by psyop's context bound through EGL or through GLX on an X
+    # display; the reference is the headless (EGL) renderer in its own context
+    argv = _on_x_display(graphics, [sys.executable, str(HERE / "probe.py"), "readback", str(_protocol(tmp_path)), "40",
+                                    graphics])
+    done = subprocess.run(argv, env=runtime_env(tmp_path), cwd=REPO, capture_output=True, text=True, timeout=240,
                           stdin=subprocess.DEVNULL)
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads(done.stdout.strip().splitlines()[-1])
+    assert report["summary"]["graphics"] == graphics
     assert report["check_ok"]
     for eye in ("left", "right"):
         got = report["eyes"][eye]
@@ -184,6 +199,36 @@ def test_teardown_keeps_fd0_and_leaks_no_descriptor(tmp_path):
     report = json.loads(done.stdout.strip().splitlines()[-1])
     assert report["fd0_before"] == report["fd0_after"] == str(stdin_file)
     assert report["fds_after"] == report["fds_before"]
+
+
+def test_a_session_runs_through_the_glx_xlib_binding_when_the_runtime_lacks_egl(tmp_path):
+    # SteamVR on Linux offers only XR_KHR_opengl_enable's Xlib binding; Monado offers both, so the
+    # binding is forced here, on a private X server
+    argv = _on_x_display("xlib", [sys.executable, "-m", "psyop", "run", str(_protocol(tmp_path)), "--participant", "H1",
+                                  "--data", str(tmp_path / "data"), "--display", "openxr:xlib", "--pose", "openxr",
+                                  "--clock", "real", "--responses", "none", "--no-progress"])
+    done = subprocess.run(argv, env=runtime_env(tmp_path), cwd=REPO, capture_output=True, text=True, timeout=240,
+                          stdin=subprocess.DEVNULL)
+    assert done.returncode == 0, done.stderr[-3000:]
+    meta = json.loads((_session_dir(tmp_path) / "session.json").read_text())
+    assert meta["status"] == "complete" and meta["summary"]["display"]["graphics"] == "xlib"
+    frames = pd.read_parquet(_session_dir(tmp_path) / "frames.parquet")
+    assert frames["image_ok"].dropna().all() and frames["image_checked"].any()
+
+
+def test_openxr_binding_errors_are_one_line(tmp_path):
+    env = runtime_env(tmp_path)
+    env.pop("DISPLAY", None)
+    argv = [sys.executable, "-m", "psyop", "run", str(_protocol(tmp_path)), "--participant", "H1", "--data",
+            str(tmp_path / "data"), "--clock", "real", "--responses", "none", "--no-progress"]
+    unknown = subprocess.run(argv + ["--display", "openxr:vulkan"], env=env, cwd=REPO, capture_output=True, text=True,
+                             timeout=240, stdin=subprocess.DEVNULL)
+    assert unknown.returncode == 2 and "openxr:egl or openxr:xlib" in unknown.stderr, unknown.stderr[-2000:]
+    no_x = subprocess.run(argv + ["--display", "openxr:xlib"], env=env, cwd=REPO, capture_output=True, text=True,
+                          timeout=240, stdin=subprocess.DEVNULL)
+    assert no_x.returncode == 3 and "DISPLAY is not set" in no_x.stderr, no_x.stderr[-2000:]
+    assert "Traceback" not in unknown.stderr + no_x.stderr
+    assert not (tmp_path / "data" / "xr_tiny" / "sub-H1" / "ses-1" / "trials.parquet").exists()
 
 
 def test_ctrl_c_while_the_runtime_starts_exits_130_and_the_session_then_runs(tmp_path):
