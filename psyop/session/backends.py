@@ -277,7 +277,8 @@ BACKENDS: tuple[Backend[Any], ...] = (
     Backend("pose", "replay-by-condition", "replay-by-condition:SESSION_DIR", "each trial replays a logged "
             "trial of the same condition", False, _replay_pose(True), takes_arg=True),
     Backend("pose", "openxr", "openxr[:HAND]", "head pose from the OpenXR runtime (needs --display openxr); HAND "
-            "adds the hand: left, right or vive_tracker:ROLE", True, _openxr_pose, takes_arg=None),
+            "adds the hand: left or right (grip pose), left:aim or right:aim (pointing pose), or vive_tracker:ROLE",
+            True, _openxr_pose, takes_arg=None),
     Backend("responses", "sim", "sim", "the protocol's simulated observer", False, _sim_responses),
     Backend("responses", "keyboard", "keyboard", "keys of the session window (needs --display window)", True,
             _keyboard_responses),

@@ -14,7 +14,7 @@ y, z). Times: the runtime's ``XrTime`` (ns) is converted to the session clock th
 
 Input: one action set holds the eye-gaze pose (``XR_EXT_eye_gaze_interaction``, when the system
 supports it), each hand's grip pose and select button (khr/simple, htc/vive, valve/index and
-oculus/touch bindings suggested), and Vive tracker grip poses (``XR_HTCX_vive_tracker_interaction``,
+oculus/touch bindings suggested; the aim pose too, for pointing), and Vive tracker grip poses (``XR_HTCX_vive_tracker_interaction``,
 when offered). Actions are synced once per frame, only while the session is focused.
 """
 
@@ -264,6 +264,9 @@ class XrRuntime:
         self.grip = xr.create_action(self.action_set, xr.ActionCreateInfo(
             action_type=xr.ActionType.POSE_INPUT, action_name="hand_grip", localized_action_name="Hand grip",
             subaction_paths=hands))
+        self.aim = xr.create_action(self.action_set, xr.ActionCreateInfo(
+            action_type=xr.ActionType.POSE_INPUT, action_name="hand_aim", localized_action_name="Hand aim",
+            subaction_paths=hands))
         self.select = xr.create_action(self.action_set, xr.ActionCreateInfo(
             action_type=xr.ActionType.BOOLEAN_INPUT, action_name="select", localized_action_name="Select",
             subaction_paths=hands))
@@ -271,6 +274,7 @@ class XrRuntime:
             bindings = []
             for h in HANDS:
                 bindings.append(xr.ActionSuggestedBinding(self.grip, self._path(f"/user/hand/{h}/input/grip/pose")))
+                bindings.append(xr.ActionSuggestedBinding(self.aim, self._path(f"/user/hand/{h}/input/aim/pose")))
                 bindings.append(xr.ActionSuggestedBinding(self.select, self._path(f"/user/hand/{h}/input/{button}")))
             try:
                 xr.suggest_interaction_profile_bindings(self.instance, xr.InteractionProfileSuggestedBinding(
@@ -304,6 +308,7 @@ class XrRuntime:
                 self.tracker_action = None
         xr.attach_session_action_sets(self.session, xr.SessionActionSetsAttachInfo(action_sets=[self.action_set]))
         self.hand_spaces = {h: self._action_space(self.grip, self.hand_paths[h]) for h in HANDS}
+        self.aim_spaces = {h: self._action_space(self.aim, self.hand_paths[h]) for h in HANDS}
         self.gaze_space = self._action_space(self.gaze_action, xr.NULL_PATH) if self.gaze_action is not None else None
 
     def _action_space(self, action: Any, subaction: Any) -> Any:

@@ -110,8 +110,8 @@ class OpenXRGaze:
 
 
 class OpenXRPose:
-    """A PoseSource from the runtime: the head every frame; the hand (a controller's grip pose or
-    a Vive tracker's) sampled once per frame and kept for the reach."""
+    """A PoseSource from the runtime: the head every frame; the hand (a controller's grip or aim
+    pose, or a Vive tracker's grip pose) sampled once per frame and kept for the reach."""
 
     n_reused_hand_trials = 0  # live: every trial's own hand samples
 
@@ -120,13 +120,16 @@ class OpenXRPose:
         self.runtime = display.runtime
         self.hand_name = hand
         self._hand_space = None
-        if hand in HANDS:
-            self._hand_space = self.runtime.hand_spaces[hand]
-        elif hand.startswith("vive_tracker:"):
-            self._hand_space = self.runtime.tracker_space(hand.partition(":")[2])
+        side, _, pose_kind = hand.partition(":")
+        if side in HANDS and pose_kind in ("", "grip", "aim"):
+            spaces = self.runtime.aim_spaces if pose_kind == "aim" else self.runtime.hand_spaces
+            self._hand_space = spaces[side]
+        elif side == "vive_tracker" and pose_kind:
+            self._hand_space = self.runtime.tracker_space(pose_kind)
         elif hand:
-            raise UserError(f"unknown OpenXR hand {hand!r}; use openxr, openxr:left, openxr:right or "
-                            "openxr:vive_tracker:ROLE", "--pose")
+            raise UserError(f"unknown OpenXR hand {hand!r}; use openxr, openxr:left, openxr:right (the grip pose), "
+                            "openxr:left:aim, openxr:right:aim (the pointing pose) or openxr:vive_tracker:ROLE",
+                            "--pose")
         self._hands: deque[PoseSample] = deque(maxlen=4096)
         self._last_frame_ns: int | None = None
 

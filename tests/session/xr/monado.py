@@ -75,6 +75,7 @@ class RemoteState:
     head_position_m: tuple[float, float, float] = (0.1, 1.5, -0.2)
     gaze_pitch_deg: float = -10.0  # relative to the head
     right_trigger: bool = False
+    right_controller_position_m: tuple[float, float, float] = (0.2, 1.2, -0.5)  # left: mirrored in x
     extra: dict[str, float] = field(default_factory=dict)
 
     def head_quat_xyzw(self) -> tuple[float, float, float, float]:
@@ -95,7 +96,8 @@ class RemoteState:
             buttons = [0, 1] + [0] * 14  # hand tracking off, active; then the 11 buttons and padding
             if side == "right" and self.right_trigger:
                 buttons[8] = 1  # trigger_click
-            controllers += (_pose((0.0, 0.0, 0.0, 1.0), (0.2 if side == "right" else -0.2, 1.2, -0.5))
+            x, y, z = self.right_controller_position_m
+            controllers += (_pose((0.0, 0.0, 0.0, 1.0), (x if side == "right" else -x, y, z))
                             + struct.pack("<19f", *([0.0] * 19)) + bytes(buttons))
         gaze = _pose(self.gaze_quat_xyzw(), (0.0, 0.0, 0.0)) + struct.pack("<?3x", True)
         return b"mndrmtg\0" + head + controllers + gaze

@@ -58,6 +58,7 @@ def _cameras(plan, display, n_frames: int) -> list[dict]:
 
     gaze = OpenXRGaze.on_display(display) if display.runtime.gaze_space is not None else None
     pose = OpenXRPose.on_display(display, "right")
+    aim = OpenXRPose.on_display(display, "right:aim")
     buttons = OpenXRResponses.on_display(display, ResponseKind.TWO_INTERVAL)
     rt = display.runtime
     stage = rt._reference_space(rt.xr.ReferenceSpaceType.STAGE)  # where the runtime puts LOCAL's origin
@@ -66,12 +67,14 @@ def _cameras(plan, display, n_frames: int) -> list[dict]:
         request = display.begin_frame(0.0)
         sample = gaze.latest(0.0) if gaze is not None else None
         head = pose.head(0.0)
+        aim.head(0.0)
         fixation = sample.fixation_m if sample is not None and sample.valid else (0.0, 0.0, -1.0)
         record = {"display_time_s": request.display_time_s, "period_s": request.period_s,
                   "should_render": request.should_render, "missed": request.missed_frames,
                   "head": [list(head.position_m), list(head.orientation_wxyz), head.valid] if head else None,
                   "gaze": [sample.timestamp_s, list(sample.fixation_m), sample.valid] if sample else None,
-                  "hand": [list(h.position_m) for h in pose.hand({}, 1e9, 1, None)],
+                  "hand": [list(h.position_m) + list(h.orientation_wxyz) + [h.valid] for h in pose.hand({}, 1e9, 1, None)],
+                  "aim": [list(h.position_m) + list(h.orientation_wxyz) + [h.valid] for h in aim.hand({}, 1e9, 1, None)],
                   "response": None, "views": {},
                   "stage_in_world": list(rt.locate(stage, rt.world, display.frame_time_ns).position_m)}
         response = buttons.collect({"correct_interval": 2}, request.display_time_s)

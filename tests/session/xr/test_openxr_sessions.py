@@ -158,7 +158,14 @@ def test_injected_fovs_eye_positions_head_yaw_and_gaze_reach_the_cameras_exactly
             assert rays["bottom"][1] / -rays["bottom"][2] == pytest.approx(math.tan(angle_d), abs=1e-6)
     # the right controller's trigger answered "interval 2" exactly once
     assert [f["response"] for f in report["frames"] if f["response"] is not None] == ["2"]
-    assert report["frames"][-1]["hand"], "the right grip pose was sampled"
+    # the right controller's grip and aim poses (--pose openxr:right, openxr:right:aim): Monado's remote
+    # controller reports one pose for both, placed in LOCAL like the head
+    for kind in ("hand", "aim"):
+        (*position, qw, qx, qy, qz, valid), = report["frames"][-1][kind]
+        assert valid, kind
+        np.testing.assert_allclose(position, np.add(state.right_controller_position_m,
+                                                    report["frames"][-1]["stage_in_world"]), atol=1e-6)
+        np.testing.assert_allclose(np.abs([qw, qx, qy, qz]), [1.0, 0.0, 0.0, 0.0], atol=1e-6)
 
 
 def _on_x_display(graphics: str, argv: list[str]) -> list[str]:
