@@ -16,13 +16,10 @@ Two frame regimes:
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
-import signal
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
@@ -43,6 +40,7 @@ from psyop.session.gaze.sample import GazeSample, GazeSource, TrackerLost
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.log.store import SessionStore
+from psyop.session.signals import interrupts_deferred
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.reach import horizontal_reach_m
 from psyop.session.phases import PhaseSpec, mode_for
@@ -98,22 +96,6 @@ class SessionOutcome:
     @property
     def exit_code(self) -> int:
         return {"complete": 0, "interrupted": 130}.get(self.status, 3)
-
-
-@contextlib.contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """Hold SIGINT until the block ends, then raise KeyboardInterrupt (main thread only)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    received: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    if received:
-        raise KeyboardInterrupt
 
 
 class TrialLoop:
@@ -184,7 +166,7 @@ class TrialLoop:
                 if self.adaptive is not None:
                     record = self.adaptive.complete(record)
                 self.state = TrialState.RECORD
-                with _sigint_deferred():  # Ctrl-C never tears a record half-written
+                with interrupts_deferred():  # Ctrl-C (or SIGTERM) never tears a record half-written
                     self.store.append_trial(record, frames.table() if len(frames) else None,
                                             self.raw_gaze(int(record["trial"])))
                     recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
