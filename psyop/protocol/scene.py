@@ -134,10 +134,11 @@ Point2Deg = tuple[Annotated[Number, Field(gt=-90, lt=90)], Annotated[Number, Fie
 
 class PolarPoint(StrictModel):
     """A direction in the polar form (docs/optics.md, "Angles"): ``eccentricity_deg`` from straight
-    ahead, ``meridian_deg`` counter-clockwise from the right (0 right, 90 up, as the viewer sees it)."""
+    ahead, ``meridian_deg`` counter-clockwise from the right (0 right, 90 up, as the viewer sees it).
+    Either may be ``{factor: NAME}`` (a factor in deg; every level must fit the field's range)."""
 
-    eccentricity_deg: Number = Field(ge=0, lt=90)
-    meridian_deg: Number = Field(ge=-360, le=360)
+    eccentricity_deg: Annotated[Number, Field(ge=0, lt=90)] | FactorRef
+    meridian_deg: Annotated[Number, Field(ge=-360, le=360)] | FactorRef
 
 
 #: A primitive's centre [azimuth_deg, elevation_deg] whose angles may each be ``{factor: NAME}`` (a factor in deg).
@@ -153,7 +154,7 @@ def centre_eccentricity_deg(centre: "Centre") -> float:
     """Angle of a centre from straight ahead: ``acos(cos az cos el)`` for Fick angles (docs/optics.md);
     NaN while an angle is a factor (known per trial, once the factor's level is filled in)."""
     if isinstance(centre, PolarPoint):
-        return float(centre.eccentricity_deg)
+        return math.nan if isinstance(centre.eccentricity_deg, FactorRef) else float(centre.eccentricity_deg)
     if any(isinstance(c, FactorRef) for c in centre):
         return math.nan
     az, el = (math.radians(float(c)) for c in centre)
@@ -261,12 +262,13 @@ class TargetField(_Primitive):
 class CirclePath(StrictModel):
     """A circle of constant ``eccentricity_deg`` around the target's ``centre_deg``, whose polar angle
     turns at the constant ``speed_deg_s`` (docs/optics.md, "Angles"; the target's own angular speed
-    is ``speed_deg_s * sin(eccentricity_deg)``: 24.81 deg/s for 16 deg and 90 deg/s).
-    ``start: random`` / ``direction: random`` are drawn per trial and written to the schedule."""
+    is ``speed_deg_s * sin(eccentricity_deg)``: 24.81 deg/s for 16 deg and 90 deg/s). Either may be
+    ``{factor: NAME}`` (a factor in deg or deg/s): the drawn target and the simulated pursuit both take
+    the trial's level. ``start: random`` / ``direction: random`` are drawn per trial and written to the schedule."""
 
     kind: Literal["circle"]
-    eccentricity_deg: Number = Field(gt=0, lt=90)
-    speed_deg_s: Number = Field(gt=0, le=3600)
+    eccentricity_deg: Annotated[Number, Field(gt=0, lt=90)] | FactorRef
+    speed_deg_s: Annotated[Number, Field(gt=0, le=3600)] | FactorRef
     start: Literal["random"] | Annotated[Number, Field(ge=0, lt=360)] = "random"
     direction: Literal["random", "clockwise", "counterclockwise"] = "random"
 

@@ -179,17 +179,32 @@ class _Checker:
             if isinstance(item, ReachTarget) and isinstance(item.distance_fraction, FactorRef):
                 self.factor_exists(item.distance_fraction.factor, path + ("distance_fraction", "factor"), numeric=True)
             if isinstance(item, FixationTarget) and item.path is not None:
-                centre_ecc = centre_eccentricity_deg(item.centre_deg)
-                if centre_ecc + item.path.eccentricity_deg + item.size_deg / 2 >= 90:
-                    self.add(path + ("path", "eccentricity_deg"),
-                             f"the fixation path reaches {centre_ecc + item.path.eccentricity_deg:g} deg from straight "
-                             "ahead and leaves the forward field; make centre_deg plus eccentricity_deg less than 90")
+                self.check_fixation_field(item, path, conditions)
         for index, phase in enumerate(self.p.trial.phases):
             if isinstance(phase, (Interval, Blank)) and isinstance(phase.show, list):
                 for j, name in enumerate(phase.show):
                     if name not in ids:
                         self.add(("trial", "phases", index, "show", j),
                                  f"no scene primitive has id '{name}'.{_suggest(name, list(ids))} Ids: {', '.join(ids)}")
+
+    def check_fixation_field(self, item: FixationTarget, path: tuple[Any, ...],
+                             conditions: list[dict[str, Any]]) -> None:
+        """The circling target stays in the forward field for every level of a centre or path factor."""
+        from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
+
+        value_sets = self._value_sets(conditions) if any(True for _ in factor_fields(item)) else iter([{}])
+        for values in value_sets:
+            try:
+                resolved = resolve_factor_fields(item, values)
+                centre_ecc = centre_eccentricity_deg(resolved.centre_deg)
+                reach = centre_ecc + float(resolved.path.eccentricity_deg)
+            except (ValueError, TypeError):  # an adaptive level not yet known (its ends come next), a bad level:
+                continue                     # reported by check_factor_fields
+            if not math.isnan(reach) and reach + float(item.size_deg) / 2 >= 90:
+                self.add(path + ("path", "eccentricity_deg"),
+                         f"the fixation path reaches {reach:g} deg from straight ahead and leaves the forward field; "
+                         "make centre_deg plus eccentricity_deg less than 90")
+                return
 
     def _value_sets(self, conditions: list[dict[str, Any]]) -> Iterator[dict[str, Any]]:
         """Every set of factor values a scene is built from: each condition, each interval's ``set:``
@@ -227,8 +242,8 @@ class _Checker:
                 self.add(path + sub, f"{ref.factor} = {values.get(ref.factor)!r} does not fit this field: "
                                      f"{first['msg'].lower()}; give {ref.factor} levels (or an adaptive range) that do")
                 return
-            except ValueError:
-                return
+            except ValueError:  # an adaptive level, known at run time: its range's ends are checked next
+                continue
 
     def check_primitive_limit(self) -> None:
         """Each phase's scene (its ``show:`` items) must fit the renderer's MAX_PRIMITIVES; the

@@ -44,7 +44,8 @@ from psyop.session.signals import interrupts_deferred
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.reach import horizontal_reach_m
 from psyop.session.phases import PhaseSpec, mode_for
-from psyop.session.plan import TIMEOUT_RESPONSE, ResponsePlan
+from psyop.schedule.rows import interval_values
+from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, ResponsePlan
 from psyop.session.progress import session_progress
 from psyop.session.responses.base import Response, ResponseSource
 
@@ -71,6 +72,8 @@ class LoopConfig:
     pursuit_speed_deg_s: float = 90.0
     pursuit_centre_deg: tuple[float, float] = (0.0, 0.0)  # Fick angles the target circles (plan.fixation)
     pursuit_id: str = "fixation"  # the fixation target's id: schedule columns <id>_start_deg, <id>_direction
+    #: plan.fixation: when given, each trial's pursuit follows its path (factor levels of centre, radius, speed)
+    pursuit_path: FixationPath | None = None
     free_radius_deg: float = 10.0
     fixation_distance_m: float = 1.0
     phase_delay_s: float = 0.0  # real sleep per phase; only for crash-safety tests
@@ -317,9 +320,12 @@ class TrialLoop:
             # the schedule fixes where the target starts and which way it turns
             phase_deg = float(row.get(f"{c.pursuit_id}_start_deg", seed_for("pursuit", seed) % 360))
             direction = -1.0 if float(row.get(f"{c.pursuit_id}_direction", 1)) < 0 else 1.0
-            plan = FixationPlan("pursuit", start_s, c.fixation_distance_m, centre_deg=c.pursuit_centre_deg,
-                                target=circling_target(c.pursuit_eccentricity_deg, direction * c.pursuit_speed_deg_s,
-                                                       phase_deg, c.pursuit_centre_deg))
+            ecc, speed, centre = c.pursuit_eccentricity_deg, c.pursuit_speed_deg_s, c.pursuit_centre_deg
+            if c.pursuit_path is not None:  # the trial's (interval's) levels, as the target is drawn
+                path = c.pursuit_path.for_values(interval_values(row, max(1, phase.interval)))
+                ecc, speed, centre = path.eccentricity_deg, path.speed_deg_s, path.centre_deg
+            plan = FixationPlan("pursuit", start_s, c.fixation_distance_m, centre_deg=centre,
+                                target=circling_target(ecc, direction * speed, phase_deg, centre))
         elif phase.gaze == "free":
             plan = FixationPlan("free", start_s, c.fixation_distance_m, radius_deg=c.free_radius_deg, seed=seed_for(seed, phase.name))
         else:

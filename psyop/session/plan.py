@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from collections.abc import Mapping
 from typing import Any
 
 from psyop.adaptive.session import AdaptivePlan, adaptive_plan
@@ -26,6 +27,7 @@ from psyop.errors import UserError
 from psyop.optics.display import DisplayProfile
 from psyop.optics.ranges import IPD_M
 from psyop.optics.rig import EyeRig
+from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
 from psyop.protocol.response import LeftRightNearerResponse, ReachResponse, TwoIntervalResponse
@@ -40,7 +42,7 @@ from psyop.stimulus.placement import centre_angles_deg
 DEFAULT_IPD_M = 0.063
 
 __all__ = ["DEFAULT_IPD_M", "RESPONSE_KINDS", "TIMEOUT_RESPONSE", "FixationPath", "ResponsePlan", "SessionPlan",
-           "compile_phases", "compile_plan", "fixation_path"]
+           "compile_phases", "compile_plan", "fixation_path", "fixation_path_of"]
 
 #: The protocol's response kind -> the session's response kind.
 RESPONSE_KINDS: dict[str, ResponseKind] = {
@@ -54,7 +56,12 @@ RESPONSE_KINDS: dict[str, ResponseKind] = {
 
 @dataclass(frozen=True)
 class FixationPath:
-    """The circling fixation target of the threshold studies (drives pursuit gaze)."""
+    """The circling fixation target of the threshold studies (drives pursuit gaze).
+
+    When the target's centre, ``path.eccentricity_deg`` or ``path.speed_deg_s`` is ``{factor: NAME}``,
+    ``target`` holds the protocol's fixation target and the numbers here are NaN: :meth:`for_values`
+    gives the path of one trial (interval), resolved by the rule the stimulus builder draws it with
+    (psyop.protocol.factor_fields)."""
 
     eccentricity_deg: float = 16.0
     speed_deg_s: float = 90.0
@@ -63,6 +70,41 @@ class FixationPath:
     centre_deg: tuple[float, float] = (0.0, 0.0)
     #: the scene item's id: the schedule's ``<id>_start_deg`` / ``<id>_direction`` columns
     id: str = "fixation"
+    #: the protocol's fixation target when a field of its centre or path is a factor's level, else None
+    target: FixationTarget | None = None
+
+    def for_values(self, values: Mapping[str, Any]) -> "FixationPath":
+        """This path with the trial's (interval's) factor levels filled in (itself when it has no factor).
+
+        Examples
+        --------
+        >>> from psyop.protocol.scene import FixationTarget
+        >>> item = FixationTarget(id="fixation", kind="fixation_target", size_deg=0.5, depth={"D": 1},
+        ...                       path={"kind": "circle", "eccentricity_deg": {"factor": "radius_deg"},
+        ...                             "speed_deg_s": {"factor": "speed_deg_s"}})
+        >>> path = fixation_path_of(item)
+        >>> p = path.for_values({"radius_deg": 8.0, "speed_deg_s": 45.0})
+        >>> p.eccentricity_deg, p.speed_deg_s, p.target is None
+        (8.0, 45.0, True)
+        """
+        if self.target is None:
+            return self
+        try:
+            item = resolve_factor_fields(self.target, values)
+        except ValueError as error:
+            raise UserError(f"fixation target '{self.id}': {error}") from None
+        assert item.path is not None
+        return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s), self.distance_m,
+                            centre_angles_deg(item.centre_deg), self.id)
+
+    def as_dict(self) -> dict[str, Any]:
+        """What session.json records: the numbers, or ``{factor: NAME}`` for each field a factor sets."""
+        out: dict[str, Any] = {"eccentricity_deg": self.eccentricity_deg, "speed_deg_s": self.speed_deg_s,
+                               "distance_m": self.distance_m, "centre_deg": list(self.centre_deg), "id": self.id}
+        if self.target is not None:
+            out["centre_deg"] = self.target.model_dump(mode="json")["centre_deg"]
+            out.update({key: self.target.path.model_dump(mode="json")[key] for key in ("eccentricity_deg", "speed_deg_s")})
+        return out
 
 
 @dataclass(frozen=True)
@@ -153,7 +195,7 @@ class SessionPlan:
             "rig": self.rig.as_dict(),
             "display": {k: (v if not isinstance(v, float) or math.isfinite(v) else "inf")
                         for k, v in self.display.__dict__.items()},
-            "fixation_path": None if self.fixation is None else dict(self.fixation.__dict__),
+            "fixation_path": None if self.fixation is None else self.fixation.as_dict(),
             "adaptive": None if self.adaptive is None else {"factor": self.adaptive.factor,
                                                             "procedure": type(self.adaptive.spec).__name__},
             "min_valid_gaze_share": self.min_valid_gaze_share,
@@ -176,9 +218,18 @@ def fixation_path(protocol: Protocol) -> FixationPath | None:
     """The circling fixation target, if the scene has one."""
     for item in protocol.scene:
         if isinstance(item, FixationTarget) and item.path is not None:
-            return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s),
-                                centre_deg=centre_angles_deg(item.centre_deg), id=item.id)
+            return fixation_path_of(item)
     return None
+
+
+def fixation_path_of(item: FixationTarget) -> FixationPath:
+    """The path of a circling fixation target (``item.path`` is set); NaN numbers and ``target`` set when
+    a field of its centre or path is ``{factor: NAME}`` (:meth:`FixationPath.for_values`)."""
+    assert item.path is not None
+    if any(True for _ in factor_fields(item)):
+        return FixationPath(math.nan, math.nan, centre_deg=(math.nan, math.nan), id=item.id, target=item)
+    return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s),
+                        centre_deg=centre_angles_deg(item.centre_deg), id=item.id)
 
 
 def compile_phases(protocol: Protocol, gaze: str) -> tuple[tuple[PhaseSpec, ...], ResponsePhase | None]:

@@ -247,6 +247,7 @@ def run_session(
             pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
             pursuit_centre_deg=path.centre_deg if path else (0.0, 0.0),
             pursuit_id=path.id if path else "fixation",
+            pursuit_path=path,
             phase_delay_s=options.phase_delay_s,
             progress=options.progress,
             hand_last_n=plan.response.average_last_samples,

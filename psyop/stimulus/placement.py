@@ -28,7 +28,8 @@ def polar_centre_deg(eccentricity_deg: float, meridian_deg: float) -> tuple[floa
 
 
 def centre_angles_deg(centre: ps.Centre) -> tuple[float, float]:
-    """Fick (azimuth, elevation) of a protocol ``centre_deg`` in either form.
+    """Fick (azimuth, elevation) of a protocol ``centre_deg`` in either form (its factor levels filled in;
+    an angle still ``{factor: NAME}`` is a ValueError naming the factor).
 
     Examples
     --------
@@ -37,6 +38,11 @@ def centre_angles_deg(centre: ps.Centre) -> tuple[float, float]:
     >>> centre_angles_deg(ps.PolarPoint(eccentricity_deg=10.0, meridian_deg=90.0))
     (0.0, 10.0)
     """
+    parts = (centre.eccentricity_deg, centre.meridian_deg) if isinstance(centre, ps.PolarPoint) else tuple(centre)
+    unresolved = [p.factor for p in parts if isinstance(p, ps.FactorRef)]
+    if unresolved:  # resolve_factor_fields fills in a trial's levels first
+        raise ValueError(f"the centre's angle is factor {unresolved[0]!r}: give the trial's level "
+                         "(psyop.protocol.factor_fields.resolve_factor_fields)")
     if isinstance(centre, ps.PolarPoint):
         return polar_centre_deg(float(centre.eccentricity_deg), float(centre.meridian_deg))
     az, el = centre
