@@ -9,7 +9,8 @@ response kind (psyop.statistics.studies), never by name:
   of analysis/fig_discrimination_thresholds.py for sessions of the paper's discrimination protocol,
   identified by its hash) and every psychometric function (figures/supp_psychometric_<study>.png);
 - left/right nearer: figures/<study>_depth.png; reach: figures/<study>_reach.png;
-  pairwise preference: figures/<study>_preferences.png.
+  pairwise preference: figures/<study>_preferences.png; with/against (NC calibration):
+  figures/<study>_pss.png.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pathlib import Path
 #: Sessions of this shipped protocol (by hash) get the linear-fit thresholds figure.
 LINEAR_FIT_PROTOCOLS = ("discrimination.yaml",)
 KIND_NAMES = {"2afc_interval": "two-interval", "near_side": "left/right nearer", "preference": "pairwise preference",
-              "reach": "reach"}
+              "reach": "reach", "with_against": "with/against (NC calibration)"}
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,8 @@ def targets_for(study: str, kind: str, linear_fit: bool) -> list[Target]:
                 Target(f"supp_psychometric_{study}.png", "analysis/supp_psychometric_functions.py",
                        f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}")]
     figure = {"near_side": ("depth", "analysis/fig_ordinal_depth.py"), "reach": ("reach", "analysis/fig_egocentric_reach.py"),
-              "preference": ("preferences", "analysis/fig_realism.py")}[kind]
+              "preference": ("preferences", "analysis/fig_realism.py"),
+              "with_against": ("pss", "analysis/nc_calibration.py")}[kind]
     return [Target(f"{study}_{figure[0]}.png", figure[1], f"{trials} $(DRAW_SRC)", common)]
 
 

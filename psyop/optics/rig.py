@@ -9,6 +9,7 @@ one; the renderers take their eye centres and cameras from it.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -36,12 +37,32 @@ class NcRule:
     0.01
     >>> NcRule(scale=2.0).nc_m_for(0.005, None)
     0.01
+    >>> rule = NcRule(column="nc_mm", column_unit="mm", signed=True)
+    >>> rule.nc_m_for(0.0077, {"nc_mm": -4.0}), rule.signed_nc_m_for(0.0077, {"nc_mm": -4.0})
+    (0.004, -0.004)
+
+    ``signed``: the column's sign is the trial's mode (> 0 ocular, 0 conventional, < 0 reversed, set by the
+    schedule) and its size the NC; at 0 no NC is rendered (conventional) and the eye model's is returned.
     """
 
     nc_m: float | None = None
     scale: float | None = None
     column: str | None = None
     column_unit: str = "mm"
+    signed: bool = False
+
+    def signed_nc_m_for(self, eye_model_nc_m: float, row: Mapping[str, Any] | None) -> float:
+        """The signed NC of a ``signed`` rule's trial (its level in metres); for other rules :meth:`nc_m_for`."""
+        if not self.signed:
+            return self.nc_m_for(eye_model_nc_m, row)
+        level = self._level(row)
+        value = level / 1000.0 if self.column_unit == "mm" else level * eye_model_nc_m
+        return 0.0 if value == 0.0 else float(math.copysign(NC_M.check(abs(value), "the rendered NC"), value))
+
+    def _level(self, row: Mapping[str, Any] | None) -> float:
+        if row is None or self.column not in row:
+            raise ValueError(f"the rendered NC is the trial's {self.column!r}; this frame has no trial row")
+        return float(row[self.column])
 
     def nc_m_for(self, eye_model_nc_m: float, row: Mapping[str, Any] | None) -> float:
         if self.nc_m is not None:
@@ -49,14 +70,15 @@ class NcRule:
         elif self.scale is not None:
             value = self.scale * eye_model_nc_m
         else:
-            if row is None or self.column not in row:
-                raise ValueError(f"the rendered NC is the trial's {self.column!r}; this frame has no trial row")
-            level = float(row[self.column])
+            level = self._level(row)
             value = level / 1000.0 if self.column_unit == "mm" else level * eye_model_nc_m
+            if self.signed:  # the sign is the mode (reversed below 0); at 0 the camera is conventional
+                value = abs(value) if value != 0.0 else eye_model_nc_m
         return NC_M.check(value, "the rendered NC")
 
     def as_dict(self) -> dict[str, object]:
-        return {"nc_m": self.nc_m, "scale": self.scale, "column": self.column, "column_unit": self.column_unit}
+        return {"nc_m": self.nc_m, "scale": self.scale, "column": self.column, "column_unit": self.column_unit,
+                "signed": self.signed}
 
 
 @dataclass(frozen=True)

@@ -114,10 +114,13 @@ class FixedIpd(StrictModel):
 class RenderingNc(StrictModel):
     """The NC the renderer uses in ocular and reversed modes, instead of the eye model's: ``mm`` (a
     number or ``{factor: NAME}``, NAME ending in ``_mm``) or ``scale`` (a multiple of the eye model's
-    NC; a number or ``{factor: NAME}``). Give one. Every value must give an NC in psyop.optics.ranges.NC_M."""
+    NC; a number or ``{factor: NAME}``). Give one. Every value must give an NC in psyop.optics.ranges.NC_M.
+    ``signed: true`` (a factor, with a ``with_against`` response): the level's sign picks the trial's mode
+    (> 0 ocular, 0 conventional, < 0 reversed) and its size the NC."""
 
     mm: Number | FactorRef | None = None
     scale: Number | FactorRef | None = None
+    signed: bool = False
 
     @model_validator(mode="after")
     def _one(self) -> "RenderingNc":
@@ -164,9 +167,9 @@ def rendering_nc_rule(spec: DisplaySpec):
     if nc is None:
         return None
     if isinstance(nc.mm, FactorRef):
-        return NcRule(column=nc.mm.factor, column_unit="mm")
+        return NcRule(column=nc.mm.factor, column_unit="mm", signed=nc.signed)
     if isinstance(nc.scale, FactorRef):
-        return NcRule(column=nc.scale.factor, column_unit="scale")
+        return NcRule(column=nc.scale.factor, column_unit="scale", signed=nc.signed)
     if nc.mm is not None:
         return NcRule(nc_m=float(nc.mm) / 1000.0)
     return NcRule(scale=float(nc.scale))

@@ -45,7 +45,7 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                  "trial": "plan", "design": "schedule", "response": "plan", "observer": "plan"},
     "StudyInfo": {"name": "plan", "title": "summary", "citation": "summary", "description": "summary"},
     "DisplaySpec": {"profile": "display", "eye_model": "display", "ipd": "plan", "rendering_nc": "display"},
-    "RenderingNc": {"mm": "display", "scale": "display"},
+    "RenderingNc": {"mm": "display", "scale": "display", "signed": "display"},
     "InlineDisplayProfile": {k: "display" for k in ("name", "width_px", "height_px", "refresh_hz", "horizontal_fov_deg",
                                                       "vertical_fov_deg", "tan_left", "tan_right", "tan_bottom",
                                                       "tan_top", "left_tangents", "d_m")},
@@ -113,4 +113,6 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "Reach": {"kind": "observer", "arm_reach_m": "observer", "arm_reach_sd_m": "observer", "by_condition": "observer",
               "slope_sd": "observer", "intercept_sd_m": "observer", "max_reach_fraction": "observer"},
     "ReachCondition": {"slope": "observer", "intercept_m": "observer", "noise_sd_m": "observer"},
+    "WithAgainstResponse": {"kind": "plan", "question": "plan", "nc_factor": "schedule"},
+    "NcNulling": {k: "observer" for k in ("kind", "nc_mm", "width_mm", "lapse", "between_subject_sd_mm")},
 }

@@ -73,4 +73,18 @@ class Reach(StrictModel):
     by_condition: dict[str, ReachCondition] = Field(min_length=1)
 
 
-Observer = Annotated[Union[Psychometric2afc, OrdinalAccuracy, PairwisePreference, Reach], Field(discriminator="kind")]
+class NcNulling(StrictModel):
+    """An observer whose own NC is ``nc_mm`` (each simulated participant's drawn around it with sd
+    ``between_subject_sd_mm``): p(against) = lapse + (1 - 2 lapse) * Phi((r - nc) / width_mm), r the signed NC
+    the trial is rendered with (its camera's mode and NC rule); 'with' otherwise. Its point of subjective
+    stability (p = 0.5) is its own NC."""
+
+    kind: Literal["nc_nulling"]
+    nc_mm: Number = Field(gt=0, lt=30, description="the observer's own NC, mm")
+    width_mm: Number = Field(gt=0, le=30, description="sd of the cumulative normal, mm")
+    lapse: Number = Field(default=0.0, ge=0, lt=0.5)
+    between_subject_sd_mm: Number = Field(default=0.0, ge=0, le=10)
+
+
+Observer = Annotated[Union[Psychometric2afc, OrdinalAccuracy, PairwisePreference, Reach, NcNulling],
+                     Field(discriminator="kind")]

@@ -9,6 +9,8 @@
   ``mode_b``, ``pair``.
 - ``reach``: blind reach to the remembered target (egocentric). Columns ``rendering``,
   ``target_fraction``, ``mode``.
+- ``with_against``: did the scene move with the eye or against it (NC nulling, one interval). Columns
+  ``mode`` (from the sign of the rendered NC), ``rendered_nc_mm`` (the signed NC rendered).
 """
 
 from __future__ import annotations
@@ -81,11 +83,23 @@ class ReachResponse(StrictModel):
     average_last_samples: Annotated[int, Field(ge=1, le=10000)] = 10
 
 
+class WithAgainstResponse(StrictModel):
+    """NC nulling (docs/protocols.md, "NC calibration"): one interval rendered with the trial's signed NC
+    (``display.rendering_nc`` with ``signed: true`` reading ``nc_factor``: > 0 ocular, 0 conventional,
+    < 0 reversed); the participant answers whether the scene moved ``with`` the eye or ``against`` it."""
+
+    kind: Literal["with_against"]
+    question: str = "Did the scene move with your eye or against it?"
+    nc_factor: str = "nc_mm"
+
+
 Response = Annotated[
-    Union[TwoIntervalResponse, LeftRightNearerResponse, PairwisePreferenceResponse, ReachResponse],
+    Union[TwoIntervalResponse, LeftRightNearerResponse, PairwisePreferenceResponse, ReachResponse,
+          WithAgainstResponse],
     Field(discriminator="kind"),
 ]
 
 #: Number of interval phases each response kind needs.
-INTERVALS_NEEDED: dict[str, int] = {"two_interval": 2, "left_right_nearer": 1, "pairwise_preference": 2, "reach": 1}
+INTERVALS_NEEDED: dict[str, int] = {"two_interval": 2, "left_right_nearer": 1, "pairwise_preference": 2, "reach": 1,
+                                   "with_against": 1}
 

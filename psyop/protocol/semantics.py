@@ -362,6 +362,23 @@ class _Checker:
                         self.add(path + ("modes",), f"rendering level '{level}' has no mode; add '{level}: ocular' "
                                                     "(or conventional/reversed) under modes")
             self.factor_exists(response.target_factor, path + ("target_factor",), numeric=True)
+        elif response.kind == "with_against":
+            self.check_with_against(response, path)
+        if response.kind != "with_against" and self.p.display.rendering_nc is not None \
+                and self.p.display.rendering_nc.signed:
+            self.add(("display", "rendering_nc", "signed"), "a signed rendering NC sets each trial's mode from its "
+                                                           "sign: only a with_against response reads it; remove signed")
+
+    def check_with_against(self, response: Any, path: tuple[Any, ...]) -> None:
+        """NC nulling: the response's ``nc_factor`` is the signed factor ``display.rendering_nc`` reads."""
+        if not self.factor_exists(response.nc_factor, path + ("nc_factor",), numeric=True):
+            return
+        nc = self.p.display.rendering_nc
+        value = None if nc is None else (nc.mm if nc.mm is not None else nc.scale)
+        if not isinstance(value, FactorRef) or value.factor != response.nc_factor or not nc.signed:
+            self.add(path + ("nc_factor",), f"a with_against response renders each trial with the signed NC of "
+                                            f"'{response.nc_factor}': set display.rendering_nc: {{mm: {{factor: "
+                                            f"{response.nc_factor}}}, signed: true}}")
 
     def check_level_factor_levels(self) -> None:
         """A threshold needs its level to vary: a fixed two_interval level factor needs at least two levels
@@ -404,7 +421,8 @@ class _Checker:
         for item in self.p.scene:
             used |= _factor_refs(item)
         response = self.p.response
-        for key in ("level_factor", "separation_factor", "pair_factor", "rendering_factor", "target_factor"):
+        for key in ("level_factor", "separation_factor", "pair_factor", "rendering_factor", "target_factor",
+                    "nc_factor"):
             value = getattr(response, key, None)
             if isinstance(value, str):
                 used.add(value)
@@ -464,10 +482,13 @@ class _Checker:
                 candidates = [level_f]
             for candidate in candidates:
                 nc_m = candidate / 1000.0 if key == "mm" else candidate * eye_nc_m
+                if nc.signed and isinstance(value, FactorRef):  # the sign is the mode; 0 renders conventionally
+                    nc_m = abs(nc_m) if nc_m != 0.0 else eye_nc_m
                 if not NC_M.contains(nc_m):
+                    fix = ("a signed level's size must be in that range (its sign picks the mode)" if nc.signed else
+                           "for NC 0 render conventionally (mode: conventional), for a reversed NC use mode: reversed")
                     self.add(path, f"{key} {candidate:g} gives a rendered NC of {nc_m * 1000:g} mm, outside "
-                                   f"{NC_M.describe(1000, 'mm')}; for NC 0 render conventionally (mode: conventional), "
-                                   "for a reversed NC use mode: reversed")
+                                   f"{NC_M.describe(1000, 'mm')}; {fix}")
                     return
         assert rule is not None
 
@@ -495,7 +516,7 @@ class _Checker:
         path = ("observer",)
         response_kind = self.p.response.kind
         fits = {"psychometric_2afc": "two_interval", "ordinal_accuracy": "left_right_nearer",
-                "pairwise_preference": "pairwise_preference", "reach": "reach"}
+                "pairwise_preference": "pairwise_preference", "reach": "reach", "nc_nulling": "with_against"}
         if fits[observer.kind] != response_kind:
             self.add(path + ("kind",), f"a {observer.kind} observer cannot answer a {response_kind} response; use "
                                        f"kind: {next(k for k, v in fits.items() if v == response_kind)}")

@@ -18,7 +18,7 @@ from psyop.errors import UserError
 from psyop.protocol.conditions import condition_label, expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.response import (LeftRightNearerResponse, ModeFromFactor, PairwisePreferenceResponse,
-                                     ReachResponse, TwoIntervalResponse)
+                                     ReachResponse, TwoIntervalResponse, WithAgainstResponse)
 from psyop.protocol.scene import FixationTarget, SinusoidalBorder
 from psyop.schedule.counterbalance import latin_square_order
 from psyop.schedule.counts import expected_duration_s, trial_count  # noqa: F401 - re-exported
@@ -58,7 +58,7 @@ def _counterbalance(protocol: Protocol) -> str:
         return response.order
     if isinstance(response, LeftRightNearerResponse):
         return response.near_side
-    return "balanced"  # reach: unused
+    return "balanced"  # reach, with_against: unused
 
 
 def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.ndarray, rep_index: np.ndarray,
@@ -193,7 +193,21 @@ def _response_columns(protocol: Protocol, columns: dict[str, np.ndarray], binary
             out["rendering"] = rendering
         if response.target_factor != "target_fraction":
             out["target_fraction"] = columns[response.target_factor]
+    elif isinstance(response, WithAgainstResponse):
+        out.update(with_against_columns(protocol, columns[response.nc_factor]))
     return out
+
+
+def with_against_columns(protocol: Protocol, levels: np.ndarray) -> dict[str, np.ndarray]:
+    """A nulling trial's mode from the sign of its NC level (> 0 ocular, 0 conventional, < 0 reversed) and
+    ``rendered_nc_mm``, the signed NC it is rendered with in mm (a ``scale`` level times the eye model's NC)."""
+    from psyop.protocol.display import resolve_eye_model
+
+    levels = np.asarray(levels, dtype=np.float64)
+    nc = protocol.display.rendering_nc
+    scale_mm = resolve_eye_model(protocol.display).nc_m * 1000.0 if nc is not None and nc.scale is not None else 1.0
+    mode = np.where(levels > 0, "ocular", np.where(levels < 0, "reversed", "conventional")).astype(object)
+    return {"mode": mode, "mode_interval1": mode, "rendered_nc_mm": levels * scale_mm}
 
 
 def _stimulus_columns(protocol: Protocol, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:

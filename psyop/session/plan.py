@@ -50,6 +50,7 @@ RESPONSE_KINDS: dict[str, ResponseKind] = {
     "left_right_nearer": ResponseKind.NEAR_SIDE,
     "pairwise_preference": ResponseKind.PREFERENCE,
     "reach": ResponseKind.REACH,
+    "with_against": ResponseKind.WITH_AGAINST,
 }
 
 
@@ -181,6 +182,9 @@ class SessionPlan:
         params = self.observer.model_dump()
         if isinstance(self.protocol.response, LeftRightNearerResponse):
             params["separation_column"] = self.protocol.response.separation_factor
+        if self.observer.kind == "nc_nulling":  # it answers from the NC the camera renders (the rig's rule)
+            params["rendering_nc"] = None if self.rig.rendering_nc is None else self.rig.rendering_nc.as_dict()
+            params["eye_model_nc_m"] = self.rig.nc_m
         return params
 
     def metadata(self) -> dict[str, Any]:

@@ -22,6 +22,7 @@ from psyop.errors import UserError
 
 #: The response kinds (session.json ``response_kind``; psyop.session.responses.base.ResponseKind).
 TWO_INTERVAL, NEAR_SIDE, PREFERENCE, REACH = "2afc_interval", "near_side", "preference", "reach"
+WITH_AGAINST = "with_against"
 #: Units by factor-name suffix (docs/protocols.md: a numeric factor says its unit in its name).
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (("_deg", "deg"), ("_arcmin", "arcmin"), ("_mm", "mm"), ("_m", "m"),
                                               ("_D", "D"), ("_s", "s"), ("_hz", "Hz"), ("_px", "px"),

@@ -16,6 +16,7 @@ class ResponseKind(str, Enum):
     NEAR_SIDE = "near_side"  # 'left' or 'right'
     PREFERENCE = "preference"  # 'a' or 'b'
     REACH = "reach"  # a distance in metres
+    WITH_AGAINST = "with_against"  # 'with' or 'against' (NC nulling)
 
 
 def response_kind(columns: set[str] | list[str]) -> ResponseKind:
@@ -28,9 +29,11 @@ def response_kind(columns: set[str] | list[str]) -> ResponseKind:
         return ResponseKind.PREFERENCE
     if "target_fraction" in cols:
         return ResponseKind.REACH
+    if "rendered_nc_mm" in cols:
+        return ResponseKind.WITH_AGAINST
     raise ValueError(
         "cannot tell the response type from the schedule: expected one of the columns "
-        "correct_interval, near_side, mode_a/mode_b or target_fraction"
+        "correct_interval, near_side, mode_a/mode_b, target_fraction or rendered_nc_mm"
     )
 
 

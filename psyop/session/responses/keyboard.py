@@ -2,7 +2,8 @@
 
 Keys per response kind: 2AFC interval '1'/'2' (or left/right arrows); near side
 left/right arrows (or 'l'/'r'); preference '1'/'a' for the first and '2'/'b' for the
-second stimulus; reach: 'space' confirms and the reach is read from the hand pose.
+second stimulus; reach: 'space' confirms and the reach is read from the hand pose; NC nulling
+'w' (or left) for with the eye, 'a' (or right) for against it.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ KEYMAPS: dict[ResponseKind, dict[str, str]] = {
     ResponseKind.NEAR_SIDE: {"left": "left", "right": "right", "l": "left", "r": "right"},
     ResponseKind.PREFERENCE: {"1": "a", "2": "b", "a": "a", "b": "b", "left": "a", "right": "b"},
     ResponseKind.REACH: {"space": "confirm", "enter": "confirm"},
+    ResponseKind.WITH_AGAINST: {"w": "with", "a": "against", "left": "with", "right": "against"},
 }
 
 

@@ -17,6 +17,7 @@ BUTTONS: dict[ResponseKind, dict[str, str]] = {
     ResponseKind.TWO_INTERVAL: {"1": "1", "2": "2", "L": "1", "R": "2"},
     ResponseKind.NEAR_SIDE: {"L": "left", "R": "right", "1": "left", "2": "right"},
     ResponseKind.PREFERENCE: {"1": "a", "2": "b", "A": "a", "B": "b", "L": "a", "R": "b"},
+    ResponseKind.WITH_AGAINST: {"1": "with", "2": "against", "L": "with", "R": "against"},
 }
 
 

@@ -207,11 +207,57 @@ class Reach(SimulatedObserver):
         return Response(r.response, r.correct, r.reach_m, r.chosen_mode, r.response_time_s, extras)
 
 
+#: The sign of the NC each rendering mode renders (psyop.optics.camera: the centre of projection's lateral
+#: offset from the centre of rotation is +N ocular, 0 conventional, mirrored reversed).
+MODE_NC_SIGN: dict[str, float] = {"ocular": 1.0, "conventional": 0.0, "reversed": -1.0}
+
+
+class NcNulling(SimulatedObserver):
+    """An observer with its own NC (protocol ``observer: {kind: nc_nulling}``): p(against) =
+    lapse + (1 - 2 lapse) * Phi((r - nc_mm) / width_mm), r the signed NC the trial's interval is rendered
+    with, read as the camera reads it: the interval's mode (``mode_interval1``) and the protocol's rendering
+    NC rule (``rendering_nc``, the plan passes it with the eye model's NC, psyop.optics.rig.NcRule), never the
+    schedule's ``rendered_nc_mm``. Rendered below its own NC the scene lags the eye's parallax: 'with'.
+    Each participant's NC is ``nc_mm`` + N(0, ``between_subject_sd_mm``), drawn once (:attr:`own_nc_mm`)."""
+
+    kind = ResponseKind.WITH_AGAINST
+
+    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+        from psyop.optics.rig import NcRule
+
+        super().__init__(params, seed=seed, participant=participant)
+        self.width_mm = float(_get(params, "width_mm", required=True))
+        self.lapse = float(_get(params, "lapse", 0.0))
+        sd = float(_get(params, "between_subject_sd_mm", 0.0))
+        shift = float(self._participant_rng.normal(0.0, sd)) if sd > 0 else 0.0
+        self.own_nc_mm = float(_get(params, "nc_mm", required=True)) + shift
+        rule = _get(params, "rendering_nc", required=True)
+        self.rule = NcRule(**dict(rule))
+        self.eye_model_nc_m = float(_get(params, "eye_model_nc_m", required=True))
+        if self.width_mm <= 0 or not 0 <= self.lapse < 0.5:
+            raise UserError("observer: width_mm must be > 0 and lapse in [0, 0.5)", "protocol observer")
+
+    def rendered_nc_mm(self, row: Mapping[str, Any]) -> float:
+        """The signed NC this trial is rendered with (mm): the mode's sign times the camera's NC."""
+        mode = str(row["mode_interval1"])
+        if mode not in MODE_NC_SIGN:
+            raise UserError(f"observer: trial {row.get('trial')} has no rendering mode ({mode!r})", "protocol observer")
+        return MODE_NC_SIGN[mode] * self.rule.nc_m_for(self.eye_model_nc_m, row) * 1000.0
+
+    def p_against(self, row: Mapping[str, Any]) -> float:
+        z = (self.rendered_nc_mm(row) - self.own_nc_mm) / self.width_mm
+        return self.lapse + (1.0 - 2.0 * self.lapse) * _phi(z)
+
+    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+        return score(self.kind, row, "against" if self.trial_rng(row).uniform() < self.p_against(row) else "with")
+
+
 OBSERVERS: dict[str, type[SimulatedObserver]] = {
     "psychometric_2afc": Psychometric2AFC,
     "ordinal_accuracy": OrdinalAccuracy,
     "pairwise_preference": PairwisePreference,
     "reach": Reach,
+    "nc_nulling": NcNulling,
 }
 
 
