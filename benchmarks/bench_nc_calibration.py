@@ -44,7 +44,7 @@ def true_nc_mm(data_root: Path, study: str) -> dict[str, float]:
 def run(out_dir: Path, quick: bool = False) -> str:
     from psyop.session.simulate import simulate_dataset
 
-    n = 6 if quick else 200
+    n = 3 if quick else 200
     with tempfile.TemporaryDirectory(prefix="psyop-bench-nc-") as tmp:
         root, results = Path(tmp) / "data", Path(tmp) / "results"
         start = time.perf_counter()

@@ -57,3 +57,11 @@ def test_bench_statistics_lapse_coverage_quick_writes_its_table(tmp_path: Path) 
     report = bench_statistics_lapse_coverage.run(tmp_path, quick=True)
     assert "| trials per level | coverage, all | lapse < 0.01 | lapse >= 0.03 | sd < 0.2 D | sd >= 0.3 D |" in report
     assert "| 15 |" in report and "| 1000 |" in report
+
+
+def test_bench_nc_calibration_quick_writes_its_coverage_table(tmp_path: Path) -> None:
+    from benchmarks import bench_nc_calibration
+
+    report = bench_nc_calibration.run(tmp_path, quick=True)
+    assert "| participants | ok fits | 95 % interval covers the own NC |" in report
+    assert "| 3 | " in report and "Quick run" in report and (tmp_path / "nc_calibration.md").is_file()

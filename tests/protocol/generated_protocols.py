@@ -144,6 +144,10 @@ def designs(draw: Any, kind: str) -> tuple[dict[str, Any], dict[str, Any], dict[
         factors["pair"] = {"levels": pairs}
         response = {"kind": "pairwise_preference", "order": draw(st.sampled_from(["balanced", "random"]))}
         observer = {"kind": "pairwise_preference", "strength": {"conventional": 1.0, "ocular": 1.5, "reversed": 0.7}}
+    elif kind == "with_against":  # NC nulling: a signed rendered NC (display.rendering_nc, set in protocols())
+        factors["nc_mm"] = draw(levels([-4.0, 0.0, 4.0][: draw(st.integers(2, 3))]))
+        response = {"kind": "with_against", "nc_factor": "nc_mm"}
+        observer = {"kind": "nc_nulling", "nc_mm": 3.0, "width_mm": 3.0, "lapse": draw(st.sampled_from([0.0, 0.02]))}
     else:
         names = draw(st.sampled_from([["enabled", "disabled"], ["with_parallax", "flat"], ["a1"]]))
         factors["rendering"] = {"levels": names}
@@ -162,7 +166,7 @@ def designs(draw: Any, kind: str) -> tuple[dict[str, Any], dict[str, Any], dict[
     return design, response, observer, depth_factors
 
 
-INTERVALS = {"two_interval": 2, "left_right_nearer": 1, "pairwise_preference": 2, "reach": 1}
+INTERVALS = {"two_interval": 2, "left_right_nearer": 1, "pairwise_preference": 2, "reach": 1, "with_against": 1}
 
 
 @st.composite
@@ -247,6 +251,8 @@ def protocols(draw: Any) -> tuple[str, str | None]:
         "response": response,
         "observer": observer,
     }
+    if kind == "with_against":
+        doc["display"]["rendering_nc"] = {"mm": {"factor": "nc_mm"}, "signed": True}
     mistake = draw(st.one_of(st.none(), st.none(), st.none(), st.sampled_from(MISTAKES)))
     if mistake == "nc_30":
         doc["display"]["eye_model"] = {"nc_mm": 30}

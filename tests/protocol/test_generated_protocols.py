@@ -61,6 +61,10 @@ def analyse(kind: str, trials: pd.DataFrame, protocol) -> pd.DataFrame | dict:
         from psyop.statistics.binomial import pairwise_preferences
 
         return pairwise_preferences(trials)
+    if kind == "with_against":  # analysis/nc_calibration.py's fit
+        from psyop.statistics.nulling import fit_nulling, nulling_blocks
+
+        return {p: fit_nulling(nulling_blocks(g)) for p, g in trials.groupby("participant")}
     from psyop.statistics.regression import linear_fits_by
 
     return linear_fits_by(trials, "target_fraction", "reach_m", "rendering")
