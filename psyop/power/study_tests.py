@@ -2,7 +2,8 @@
 ``psyop.statistics`` calls the analysis scripts (analysis/*.py) make.
 
 - two-interval threshold studies (detection, discrimination): psignifit fits per participant and
-  condition (analysis/fit_psychometric.py options), then the rm-ANOVA of thresholds over the
+  condition (analysis/fit_psychometric.py options, less the free-eta posterior and the deviance
+  bootstrap no test reads: :func:`power_fit_options`), then the rm-ANOVA of thresholds over the
   condition (analysis/fig_detection_thresholds.py) and the linear slope of threshold against the
   condition (analysis/fig_discrimination_thresholds.py); flagged fits are left out as there;
 - left/right nearer (ordinal): rm-ANOVA of proportion correct over mode x separation and the
@@ -18,11 +19,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import pandas as pd
 
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
+
+if TYPE_CHECKING:
+    from psyop.statistics.psychometric import FitOptions
 
 REALISM_PAIRS = [("ocular", "conventional"), ("reversed", "conventional"), ("ocular", "reversed")]
 
@@ -50,14 +55,28 @@ def threshold_condition(protocol: Protocol) -> str:
     raise UserError("a threshold study needs a condition factor besides the level factor", "protocol design")
 
 
-def two_interval_tests(protocol: Protocol, trials: pd.DataFrame) -> list[TestOutcome]:
+def power_fit_options() -> FitOptions:
+    """analysis/fit_psychometric.py's fit options less what power's tests never read: the free-eta
+    posterior (``eta``, 72 % of a fit) and the deviance bootstrap (``deviance_p``). Thresholds, their
+    intervals and statuses are computed exactly as there (tests/power/test_study_tests.py checks
+    the p values, thresholds and statuses are identical with the full options)."""
+    from psyop.statistics.psychometric import FitOptions
+
+    return FitOptions(estimate_eta=False, n_bootstrap=0)
+
+
+def two_interval_tests(protocol: Protocol, trials: pd.DataFrame,
+                       options: FitOptions | None = None) -> list[TestOutcome]:
+    """The rm-ANOVA of thresholds over the condition and the slope of threshold on it; ``options``:
+    the psignifit fit options (default :func:`power_fit_options`)."""
     from psyop.statistics.anova import rm_anova
-    from psyop.statistics.psychometric import FitOptions, fit_psychometric_table, usable_for_analysis
+    from psyop.statistics.psychometric import fit_psychometric_table, usable_for_analysis
     from psyop.statistics.regression import linear_fit
 
     condition = threshold_condition(protocol)
     level = protocol.response.level_factor
-    fits = fit_psychometric_table(trials, level, ["participant", condition], options=FitOptions(), n_jobs=1)
+    options = power_fit_options() if options is None else options
+    fits = fit_psychometric_table(trials, level, ["participant", condition], options=options, n_jobs=1)
     clean, _ = usable_for_analysis(fits)  # the documented status rule (censored etc. left out)
     out = []
     name = f"rm-ANOVA: threshold ~ {condition}"

@@ -65,3 +65,30 @@ def test_a_mixed_model_fallback_is_flagged_and_counted() -> None:
     assert all(o.flag == "" for o in outcomes if o.test.startswith("pooled"))
     table = power_table([ReplicationResult(2, 0, tuple(outcomes), 1)])
     assert table.set_index("test").loc["mixed model: joint difference", "n_flagged"] == 1
+
+
+def test_power_fits_without_the_unread_estimates_give_identical_p_values_thresholds_and_statuses() -> None:
+    """power_fit_options skips the free-eta posterior and the deviance bootstrap: every p value, threshold,
+    interval, status and flag equals the one the full analysis options (analysis/fit_psychometric.py) give."""
+    from psyop.power.study_tests import power_fit_options, two_interval_tests
+    from psyop.statistics.psychometric import FitOptions, fit_psychometric_table
+
+    full = FitOptions()
+    assert power_fit_options() == FitOptions(estimate_eta=False, n_bootstrap=0)
+    rng = np.random.default_rng(21)
+    cases = [("detection", simulate.simulate_detection(rng, 3)), ("discrimination", simulate.simulate_discrimination(rng, 3, slope=0.4))]
+    for name, trials in cases:
+        protocol = load_protocol(ROOT / "protocols" / f"{name}.yaml")
+        fast, reference = two_interval_tests(protocol, trials), two_interval_tests(protocol, trials, full)
+        assert [o.test for o in fast] == [o.test for o in reference]
+        assert [(o.p, o.note, o.flag) for o in fast] == [(o.p, o.note, o.flag) for o in reference]
+        assert all(not math.isnan(o.p) for o in fast)
+        condition = "back_D" if name == "detection" else "offset_D"
+        groups = ["participant", condition]
+        a = fit_psychometric_table(trials, "level_D", groups, options=power_fit_options())
+        b = fit_psychometric_table(trials, "level_D", groups, options=full)
+        same = ["status", "flags", "threshold_D", "threshold_ci_low_D", "threshold_ci_high_D", "threshold_bound_D",
+                "width_D", "location_D", "lapse", "deviance"]
+        assert a[groups + same].equals(b[groups + same])
+        assert a["eta"].isna().all() and a["deviance_p"].isna().all()  # the skipped estimates are absent, not made up
+        assert b["eta"].notna().all() and b["deviance_p"].notna().all()
