@@ -6,6 +6,9 @@
 # analysis/ script; make's dependencies rebuild only what changed (new sessions, changed
 # statistics or drawing code). The slow psychometric fits are cached in results/<study>_fits.csv.
 # Every study in data/ is analysed by its response kind and its outputs carry its name.
+# make decides what to rebuild; the scripts it lists then run in one process (analysis/batch.py
+# runs make's dry run of figures-all), so the statistics stack is imported once, not per script.
+# `make figures-all` runs each script in a process of its own instead (same outputs).
 
 # A recipe that fails (a full disk, a crash) leaves no target behind for the next make to trust:
 # the scripts write atomically (psyop.atomic), and make deletes a target its failed recipe touched.
@@ -14,6 +17,10 @@
 DATA ?= data
 RESULTS ?= results
 FIGDIR ?= figures
+# what runs an analysis script: the venv's python (analysis/batch.py sets it to its own marker)
+ANALYSE ?= $(PY)
+# `make -n`: show the real graph (the analysis commands), run nothing
+DRY_RUN := $(findstring n,$(firstword -$(MAKEFLAGS)))
 
 OPTICS_SRC := $(wildcard psyop/optics/*.py) psyop/figures/optics_figures.py psyop/figures/labels.py
 STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py analysis/_twoafc.py
@@ -60,25 +67,30 @@ resimulate: $(STAMP)
 	@$(MAKE) --no-print-directory figures
 
 # The study rules depend on what data/ holds, so they are written first (psyop studies), then a
-# second make reads them. `+` runs both under `make -n` too, so a dry run shows the real graph.
+# second make reads them: its dry run lists what is out of date and analysis/batch.py runs that in
+# one process. `+` runs both under `make -n` too, so a dry run shows the real graph.
 figures-build:
 	+@$(PY) -m psyop studies $(DATA) --protocols protocols --make-rules $(RESULTS)/.studies.mk
+ifeq ($(DRY_RUN),)
+	+@$(PY) analysis/batch.py $(MAKE) -n -s --no-print-directory figures-all STUDIES_MK=$(RESULTS)/.studies.mk
+else
 	+@$(MAKE) --no-print-directory figures-all STUDIES_MK=$(RESULTS)/.studies.mk
+endif
 
 figures-all: $(MODEL_FIGURES) $(STUDY_FIGURES) $(TABLES)
 
 $(FIGDIR)/fig03_parallax_vs_eccentricity.png: analysis/fig03_parallax_vs_eccentricity.py $(OPTICS_SRC)
 	@mkdir -p $(FIGDIR)
 	@echo "[psyop] $@"
-	@$(PY) $< --out $@
+	@$(ANALYSE) $< --out $@
 
 $(FIGDIR)/supp_linearity.png: analysis/supp_linearity.py $(OPTICS_SRC)
 	@mkdir -p $(FIGDIR)
 	@echo "[psyop] $@"
-	@$(PY) $< --out $@
+	@$(ANALYSE) $< --out $@
 
 # The results table collects the JSON each figure script writes beside its figure: the paper's rows
 # from the paper's protocols (by hash), every other study in results/<study>_summary.md.
 $(RESULTS)/summary.md: analysis/results_table.py analysis/paper_values.py $(STUDY_FIGURES) $(STATS_SRC) $(wildcard protocols/*.yaml)
 	@echo "[psyop] $@"
-	@$(PY) $< --data $(DATA) --results $(RESULTS) --protocols protocols --out $@
+	@$(ANALYSE) $< --data $(DATA) --results $(RESULTS) --protocols protocols --out $@

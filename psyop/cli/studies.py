@@ -83,7 +83,7 @@ def make_rules(data: Path, protocols: Path) -> tuple[str, list[str]]:
             label = f"fitting psychometric functions: {facts.name}" if t.kind == "fits" else \
                 f"{facts.name} ({KIND_NAMES[facts.kind]}): $@"
             rules += [f"{where}/{t.output}: {t.script} {t.prerequisites}", f"\t@mkdir -p {where}",
-                      f"\t@echo \"[psyop] {label}\"", f"\t@$(PY) $< {t.arguments} --out $@", ""]
+                      f"\t@echo \"[psyop] {label}\"", f"\t@$(ANALYSE) $< {t.arguments} --out $@", ""]
         said.append(f"{facts.name} ({KIND_NAMES[facts.kind]}): " + ", ".join(t.output for t in figures))
     return "\n".join(rules) + "\n", said
 
