@@ -65,3 +65,16 @@ def test_bench_nc_calibration_quick_writes_its_coverage_table(tmp_path: Path) ->
     report = bench_nc_calibration.run(tmp_path, quick=True)
     assert "| participants | ok fits | 95 % interval covers the own NC |" in report
     assert "| 3 | " in report and "Quick run" in report and (tmp_path / "nc_calibration.md").is_file()
+
+
+def test_bench_figures_power_speed_quick_compares_before_and_after(tmp_path: Path) -> None:
+    """Before (the commit before issue 21's figure and power work) and after, side by side; the run
+    fails when any output differs byte for byte."""
+    from benchmarks import bench_figures_power_speed
+
+    report = bench_figures_power_speed.run(tmp_path, quick=True)
+    if "Skipped: " in report:  # a clone without the before commit (shallow): said, not measured
+        return
+    assert "| make figures-build, simulated data at 3 participants per study (quick), JOBS=2 |" in report
+    assert "| psyop power protocols/detection.yaml --participants 2 --replications 1 --jobs 1 |" in report
+    assert "| 4 | 12 |" in report and "nan" not in report

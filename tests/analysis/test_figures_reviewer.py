@@ -124,3 +124,18 @@ def test_egocentric_shows_participant_means_not_every_reach(figures):
     fig = figures["reach"]
     dots = sum(len(line.get_xdata()) for ax in fig.axes for line in ax.get_lines() if line.get_marker() == "o")
     assert dots == 5 * 6 * 2  # participants x targets x conditions (the old plot had every reach)
+
+
+def test_psychometric_panels_share_limits_without_shared_axes(figures):
+    """Every panel has the same y limits (below-chance points visible) and only the first column
+    draws y tick labels, as sharey would, without shared axes (whose every limit change and draw
+    visits all the other panels: quadratic in participants)."""
+    fig = figures["psychometric"]
+    fig.canvas.draw()
+    axes = [ax for ax in fig.axes if ax.get_subplotspec() is not None]
+    assert len(axes) == 9
+    assert {ax.get_ylim() for ax in axes} == {(0.0, 1.02)}
+    assert all(len(ax.get_shared_y_axes().get_siblings(ax)) == 1 for ax in axes)
+    for ax in axes:
+        labelled = [t.get_text() for t in ax.get_yticklabels() if t.get_visible() and t.get_text()]
+        assert bool(labelled) == ax.get_subplotspec().is_first_col(), labelled
