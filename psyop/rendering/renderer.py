@@ -30,7 +30,7 @@ from psyop.rendering.shaders import (
     edge_pass_shader,
     fragment_shader,
 )
-from psyop.rendering.screen_bounds import screen_bounds_px
+from psyop.rendering.screen_bounds import screen_bounds_px, screen_bounds_px_former
 from psyop.rendering.textures import pack_layers, texture_pixels
 
 
@@ -49,6 +49,12 @@ class RenderSettings:
     # Two-pass only: the first pass skips primitives whose conservative screen box misses the
     # pixel's 4x4 block (same image; kept switchable to measure what it saves).
     adaptive_cull: bool = True
+    # Per-frame CPU work only where the frame needs it (same images, same reuse decisions): the reuse
+    # bounds (Scene.depth_range_m, vectorised) computed only when a frame may be reused, each primitive's
+    # table row packed once while the primitive object stays in the scene, constant uniforms written once.
+    # False: the former path (bounds after every draw, one primitive at a time; table and uniforms
+    # rewritten each frame), kept for the side-by-side benchmark (benchmarks/bench_frame_cpu.py).
+    frame_caches: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "antialiasing", AntiAliasing(self.antialiasing))
@@ -89,7 +95,8 @@ class _EyeState:
     depth: Any | None = None
     last_valid_camera: Any = None
     last_rendered_camera: Any = None
-    depth_range_m: tuple[float, float] = (0.0, math.inf)
+    depth_range_m: tuple[float, float] | None = (0.0, math.inf)  # None: not computed yet (see depth_centre_m)
+    depth_centre_m: np.ndarray | None = None  # the centre of projection of the last image, for depth_range_m
     rendered_scene: Scene | None = None  # the scene of this eye's last image (reuse needs the same)
     released: list[Any] = field(default_factory=list)
 
@@ -102,9 +109,16 @@ def _eye_key(camera: Any) -> str:
 def _finite_extent_m(scene: Scene) -> float:
     """An upper bound on the distance from the head origin to any point of a finite primitive
     (the far clip is raised to it, so a far but finite surface is never dropped)."""
-    extent = [float(np.linalg.norm(p.centre_m) + np.linalg.norm(p.half_u_m) + np.linalg.norm(p.half_v_m))
-              for p in scene.primitives if not p.at_infinity]
-    return 1.001 * max(extent, default=0.0)
+    finite = [p for p in scene.primitives if not p.at_infinity]
+    if not finite:
+        return 0.0
+    c, u, v = (np.array([getattr(p, a) for p in finite], dtype=np.float64) for a in ("centre_m", "half_u_m", "half_v_m"))
+    return 1.001 * float(np.max(_row_norms(c) + _row_norms(u) + _row_norms(v)))
+
+
+def _row_norms(x: np.ndarray) -> np.ndarray:
+    """Row-wise Euclidean norms of an (n, 3) array, rounded like ``np.linalg.norm`` of each row."""
+    return np.sqrt((x[:, None, :] @ x[:, :, None])[:, 0, 0])
 
 
 def create_headless_context() -> moderngl.Context:
@@ -134,10 +148,26 @@ class Renderer:
             self._bounds = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
         self._prims_tex = None
         self._layers_tex = None
+        self._packed: dict[int, tuple[Any, int | None, np.ndarray]] = {}  # id(primitive) -> (it, layer, row)
         self._texture_keys: tuple = ()
         self._texture_sizes: list[tuple[int, int]] = []
         self._scene: Scene | None = None
+        self._uniform_values: dict[str, Any] = {}  # the last value written to each scene uniform
+        self._member_names: dict[int, frozenset[str]] = {}
+        if self.settings.frame_caches:  # uniforms no frame changes: written once
+            self._set_constant_uniforms()
         self.set_scene(scene)
+
+    def _set_constant_uniforms(self) -> None:
+        for prog in self._programs():
+            prog["Centres"].binding = 0
+            prog["u_prims"].value = 0
+            prog["u_textures"].value = 1
+            prog["u_aperture"].value = 2
+        if self._two_pass:
+            self._edge_prog["Bounds"].binding = 1
+            if "Bounds" in self._members(self._prog):
+                self._prog["Bounds"].binding = 1
 
     # -- scene upload (once per scene) ----------------------------------------------------------
     def set_scene(self, scene: Scene) -> None:
@@ -149,7 +179,7 @@ class Renderer:
         re-uploaded only when the set of texture materials changes, so a session can call this
         every frame (e.g. for a moving fixation target) at the cost of a few hundred bytes.
         """
-        if scene == self._scene:
+        if scene is self._scene or scene == self._scene:
             return
         if len(scene.primitives) > MAX_PRIMITIVES:
             raise ValueError(f"at most {MAX_PRIMITIVES} primitives, got {len(scene.primitives)}")
@@ -163,6 +193,7 @@ class Renderer:
                     textures.append(p.material)
         texture_keys = tuple(layer_of)
         if texture_keys != self._texture_keys or self._layers_tex is None:
+            self._packed = {}  # rows name texture layers: repacked for the new set
             layers, sizes = pack_layers([texture_pixels(t) for t in textures])
             if self._layers_tex is not None:
                 self._layers_tex.release()
@@ -172,39 +203,24 @@ class Renderer:
             self._texture_keys, self._texture_sizes = texture_keys, sizes
         sizes = self._texture_sizes
         data = np.zeros((max(1, len(scene.primitives)), TEXELS_PER_PRIMITIVE, 4), dtype=np.float32)
-        self._centres_head = np.zeros((len(scene.primitives), 3))
-        self._half_axes_m = np.zeros((2, len(scene.primitives), 3))
+        n = len(scene.primitives)
+        self._centres_head = np.array([p.centre_m for p in scene.primitives], dtype=np.float64).reshape(n, 3)
+        self._half_axes_m = np.array([[p.half_u_m for p in scene.primitives], [p.half_v_m for p in scene.primitives]],
+                                     dtype=np.float64).reshape(2, n, 3)
         # w of each centre: 1 = a point (made camera-relative), 0 = a direction (optical infinity)
         self._centre_w = np.array([0.0 if p.at_infinity else 1.0 for p in scene.primitives])
         self._scene_far_m = _finite_extent_m(scene)
+        packed: dict[int, tuple[Any, int | None, np.ndarray]] = {}
         for i, p in enumerate(scene.primitives):
-            self._centres_head[i] = p.centre_m
-            self._half_axes_m[:, i] = (p.half_u_m, p.half_v_m)
-            data[i, 0, :3] = p.half_u_m
-            data[i, 0, 3] = 0.0 if p.shape is Shape.DISC else 1.0
-            data[i, 1, :3] = p.half_v_m
             m = p.material
-            if isinstance(m, Solid):
-                data[i, 1, 3] = 0
-                data[i, 2, :3] = m.colour
-            elif isinstance(m, GridMaterial):
-                data[i, 1, 3] = 2
-                data[i, 2, :3] = m.background
-                data[i, 3, :3] = m.line_colour
-                data[i, 3, 3] = m.lines_per_side
-                data[i, 4, 3] = m.line_width_fraction
-            else:
-                layer = layer_of[m if isinstance(m, NoiseTexture) else ("image", m.key)]
-                data[i, 1, 3] = 1
-                data[i, 2, 3] = layer
-                data[i, 4, 0], data[i, 4, 1] = sizes[layer]
-                data[i, 4, 2] = m.repeats
-            if p.border is not None:
-                b = p.border
-                data[i, 5] = (1.0, b.amplitude, b.cycles, b.phase_rad)
-                data[i, 6, :2] = (b.offset, b.side)
-            data[i, 6, 2] = 0 if p.edge_samples_per_axis is None else min(int(p.edge_samples_per_axis),
-                                                                          self.settings.samples_per_axis)
+            layer = layer_of[m if isinstance(m, NoiseTexture) else ("image", m.key)] \
+                if isinstance(m, (NoiseTexture, ImageTexture)) else None
+            entry = self._packed.get(id(p)) if self.settings.frame_caches else None
+            if entry is None or entry[0] is not p or entry[1] != layer:
+                entry = (p, layer, self._pack(p, layer, sizes))
+            packed[id(p)] = entry  # only the current scene's primitives stay cached
+            data[i] = entry[2]
+        self._packed = packed if self.settings.frame_caches else {}
         if self._prims_tex is not None and self._prims_tex.size == (TEXELS_PER_PRIMITIVE, data.shape[0]):
             self._prims_tex.write(data.tobytes())
         else:
@@ -225,6 +241,36 @@ class Renderer:
         self._set_if_present("u_samples", int(self.settings.samples_per_axis))
         self._set_if_present("u_edge_margin_px", float(self.settings.edge_margin_px))
 
+    def _pack(self, p: Any, layer: int | None, sizes: list[tuple[int, int]]) -> np.ndarray:
+        """One primitive's rows of the primitive table (axes, shape, material, border, edge effort)."""
+        row = np.zeros((TEXELS_PER_PRIMITIVE, 4), dtype=np.float32)
+        row[0, :3] = p.half_u_m
+        row[0, 3] = 0.0 if p.shape is Shape.DISC else 1.0
+        row[1, :3] = p.half_v_m
+        m = p.material
+        if isinstance(m, Solid):
+            row[1, 3] = 0
+            row[2, :3] = m.colour
+        elif isinstance(m, GridMaterial):
+            row[1, 3] = 2
+            row[2, :3] = m.background
+            row[3, :3] = m.line_colour
+            row[3, 3] = m.lines_per_side
+            row[4, 3] = m.line_width_fraction
+        else:
+            assert layer is not None
+            row[1, 3] = 1
+            row[2, 3] = layer
+            row[4, 0], row[4, 1] = sizes[layer]
+            row[4, 2] = m.repeats
+        if p.border is not None:
+            b = p.border
+            row[5] = (1.0, b.amplitude, b.cycles, b.phase_rad)
+            row[6, :2] = (b.offset, b.side)
+        row[6, 2] = 0 if p.edge_samples_per_axis is None else min(int(p.edge_samples_per_axis),
+                                                                 self.settings.samples_per_axis)
+        return row
+
     @property
     def scene(self) -> Scene:
         assert self._scene is not None
@@ -234,9 +280,22 @@ class Renderer:
         return [p for p in (self._prog, self._edge_prog) if p is not None]
 
     def _set_if_present(self, name: str, value: Any) -> None:
+        if self.settings.frame_caches:  # a uniform is written when its value changes
+            if self._uniform_values.get(name) == value:
+                return
+            self._uniform_values[name] = value
         for prog in self._programs():
-            if name in prog:
+            if name in self._members(prog):
                 prog[name].value = value
+
+    def _members(self, prog: Any) -> Any:
+        """The names a program declares (``name in prog`` walks them all: looked up once per program)."""
+        if not self.settings.frame_caches:
+            return prog
+        names = self._member_names.get(id(prog))
+        if names is None:
+            names = self._member_names[id(prog)] = frozenset(prog)
+        return names
 
     # -- per-eye targets ------------------------------------------------------------------------
     def _eye_state(self, eye: str, width_px: int, height_px: int) -> _EyeState:
@@ -313,7 +372,7 @@ class Renderer:
         decision = None
         same_scene = state.rendered_scene is self._scene or state.rendered_scene == self._scene
         if use is not None and self.settings.reuse_tolerance_px is not None and same_scene:
-            decision = decide_reuse(state.last_rendered_camera, use, state.depth_range_m,
+            decision = decide_reuse(state.last_rendered_camera, use, lambda: self._depth_range_m(state),
                                     self.settings.reuse_tolerance_px)
             if decision.skip:
                 self.stats.frames_skipped += 1
@@ -322,6 +381,14 @@ class Renderer:
         self._draw(state, use)
         self.stats.frames_rendered += 1
         return FrameResult(eye, True, usable, use, decision)
+
+    @staticmethod
+    def _depth_range_m(state: _EyeState) -> tuple[float, float]:
+        """The depth range of the eye's last image's scene from its centre of projection (computed on first use)."""
+        if state.depth_range_m is None:
+            assert state.rendered_scene is not None and state.depth_centre_m is not None
+            state.depth_range_m = state.rendered_scene.depth_range_m(state.depth_centre_m)
+        return state.depth_range_m
 
     def _draw(self, state: _EyeState, camera: Any) -> None:
         if state.aperture is None and camera is not None:
@@ -347,15 +414,18 @@ class Renderer:
             near, far = near_far_m(camera)
             far = max(far, self._scene_far_m + float(np.linalg.norm(cop)))  # never clip a scene primitive
             ray = np.asarray(camera.pixel_to_ray, dtype=np.float32).T.tobytes()
+            constant = not self.settings.frame_caches
             for prog in self._programs():
-                prog["Centres"].binding = 0
+                if constant:
+                    prog["Centres"].binding = 0
                 prog["u_ray"].write(ray)
                 prog["u_size_px"].value = (float(state.width_px), float(state.height_px))
                 prog["u_near_m"].value = near
                 prog["u_far_m"].value = min(far, 3.0e38)
-                prog["u_prims"].value = 0
-                prog["u_textures"].value = 1
-                prog["u_aperture"].value = 2
+                if constant:
+                    prog["u_prims"].value = 0
+                    prog["u_textures"].value = 1
+                    prog["u_aperture"].value = 2
             self._prims_tex.use(0)
             self._layers_tex.use(1)
             state.aperture.use(2)
@@ -365,7 +435,10 @@ class Renderer:
                 self._vao.render(moderngl.TRIANGLES, vertices=3)
             state.last_rendered_camera = camera
             state.rendered_scene = self._scene
-            state.depth_range_m = self.scene.depth_range_m(cop)
+            if self.settings.frame_caches:  # the bounds wait until a frame may reuse this one
+                state.depth_range_m, state.depth_centre_m = None, cop
+            else:
+                state.depth_range_m = self.scene.depth_range_per_primitive_m(cop)
         if state.msaa_fbo is not None:
             self.ctx.copy_framebuffer(state.fbo, state.msaa_fbo)
 
@@ -373,13 +446,15 @@ class Renderer:
         """Adaptive sampling in two passes: one ray everywhere (edge pixels get depth 0), then
         the SxS grid only where the depth test (GREATER than 0) lets a fragment through."""
         bounds = np.zeros((MAX_PRIMITIVES, 4), dtype=np.float32)
-        bounds[: len(rel_m)] = screen_bounds_px(rel_m, self._half_axes_m[0], self._half_axes_m[1],
+        bounds_of = screen_bounds_px if self.settings.frame_caches else screen_bounds_px_former
+        bounds[: len(rel_m)] = bounds_of(rel_m, self._half_axes_m[0], self._half_axes_m[1],
                                                 camera.pixel_to_ray, state.width_px, state.height_px)
         self._bounds.write(bounds.tobytes())
         self._bounds.bind_to_uniform_block(1)
-        self._edge_prog["Bounds"].binding = 1
-        if "Bounds" in self._prog:
-            self._prog["Bounds"].binding = 1
+        if not self.settings.frame_caches:
+            self._edge_prog["Bounds"].binding = 1
+            if "Bounds" in self._prog:
+                self._prog["Bounds"].binding = 1
         self.ctx.enable(moderngl.DEPTH_TEST)
         try:
             self.ctx.depth_func = "1"  # always: the first pass writes every pixel's edge mark

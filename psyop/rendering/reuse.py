@@ -17,6 +17,7 @@ the eye, the image size and the scene must all match, otherwise the frame is ren
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,14 +54,23 @@ def shift_bound_px(
 def decide_reuse(
     last_camera: Any,
     new_camera: Any,
-    depth_range_m: tuple[float, float],
+    depth_range_m: tuple[float, float] | Callable[[], tuple[float, float]],
     tolerance_px: float = 0.01,
 ) -> ReuseDecision:
     """Decide whether ``new_camera`` may reuse the frame rendered with ``last_camera``.
 
     The image distance d comes from the cameras themselves: ``pixel_to_ray``'s third column is
     (display origin - P) / d, so it changes by -delta / d when P moves by delta (d = inf: no
-    change).
+    change). ``depth_range_m``: the scene's (nearest, farthest) distance from the last centre of
+    projection, or a function that computes it, called only when the bound needs it (the camera
+    checks passed and the centre moved).
+
+    Examples
+    --------
+    >>> from psyop.optics import VIVE_PRO, make_eye_camera
+    >>> cam = make_eye_camera(VIVE_PRO, "right", (0.0, 0.0, -1.0), 0.064, 0.0076916, "conventional")
+    >>> decide_reuse(cam, cam, lambda: (1.0, 2.0)).skip
+    True
     """
     if last_camera is None:
         return ReuseDecision(False, math.inf, "first frame")
@@ -80,6 +90,10 @@ def decide_reuse(
     if np.linalg.norm(column_change + inv_d * shift) > 1e-12 * scale or inv_d < 0.0:
         return ReuseDecision(False, math.inf, "pixel grid moved")
     d_m = math.inf if inv_d * scale <= 1e-15 else 1.0 / inv_d
-    bound = shift_bound_px(delta, depth_range_m[0], depth_range_m[1], d_m, max_px_per_rad(new_camera))
+    if delta == 0.0:
+        bound = 0.0  # shift_bound_px of no shift, whatever the depths
+    else:
+        near_m, far_m = depth_range_m() if callable(depth_range_m) else depth_range_m
+        bound = shift_bound_px(delta, near_m, far_m, d_m, max_px_per_rad(new_camera))
     return ReuseDecision(bound <= tolerance_px, bound, "within tolerance" if bound <= tolerance_px else "moved")
 

@@ -17,6 +17,7 @@ every finite primitive and no translation of the centre of projection moves it (
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -31,6 +32,10 @@ COPLANAR_RELATIVE_DEPTH = 1.0e-5
 
 
 def _vec3(value: object, name: str) -> tuple[float, float, float]:
+    if isinstance(value, tuple) and len(value) == 3 and all(isinstance(c, (int, float)) for c in value):
+        x, y, z = (float(c) for c in value)  # the common case without numpy (a primitive per item per frame)
+        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
+            return (x, y, z)
     arr = np.asarray(value, dtype=np.float64).reshape(-1)
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
@@ -248,9 +253,78 @@ class Scene:
                 raise TypeError(f"scene primitives must be Primitive, got {type(p).__name__}")
 
     def depth_range_m(self, point_m: np.ndarray) -> tuple[float, float]:
-        """(nearest, farthest) distance of any primitive point from ``point_m``; (inf, inf) if empty."""
+        """(nearest, farthest) distance of any primitive point from ``point_m``; (inf, inf) if empty.
+
+        Vectorised over the primitives, with the same float64 operations in the same order as
+        :meth:`Primitive.closest_distance_m` and :meth:`Primitive.farthest_distance_m`, so the result
+        equals :meth:`depth_range_per_primitive_m` bit for bit (tests/rendering/test_frame_cpu_equality.py).
+
+        Examples
+        --------
+        >>> from psyop.rendering.builders import frontoparallel_disc
+        >>> scene = Scene((frontoparallel_disc(2.0, 1.0, Solid((1, 0, 0))),))
+        >>> near, far = scene.depth_range_m(np.zeros(3))
+        >>> round(near, 6), far > near
+        (2.0, True)
+        """
+        finite = [p for p in self.primitives if not p.at_infinity]
+        if not finite:
+            return (float("inf"), float("inf"))
+        point = np.asarray(point_m, dtype=np.float64)
+        c = np.array([p.centre_m for p in finite])
+        u = np.array([p.half_u_m for p in finite])
+        v = np.array([p.half_v_m for p in finite])
+        near = float(np.min(_closest_distances_m(c, u, v, np.array([p.shape is Shape.RECT for p in finite]), point)))
+        far = float(np.max(_farthest_distances_m(c, u, v, np.array([p.shape is Shape.RECT for p in finite]), point)))
+        if len(finite) < len(self.primitives):  # a primitive at optical infinity: the farthest point is at infinity
+            far = float("inf")
+        return (near, far)
+
+    def depth_range_per_primitive_m(self, point_m: np.ndarray) -> tuple[float, float]:
+        """:meth:`depth_range_m` one primitive at a time (the former per-frame path, kept as the reference the
+        vectorised form is tested against and for benchmarks/bench_frame_cpu.py's "before" column)."""
         if not self.primitives:
             return (float("inf"), float("inf"))
         near = min(p.closest_distance_m(point_m) for p in self.primitives)
         far = max(p.farthest_distance_m(point_m) for p in self.primitives)
         return (near, far)
+
+
+def _rowwise_dot(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of (n, 3) arrays, computed like ``x[i] @ y[i]`` (the same rounding)."""
+    return (x[:, None, :] @ y[:, :, None])[:, 0, 0]
+
+
+def _closest_distances_m(c: np.ndarray, u: np.ndarray, v: np.ndarray, rect: np.ndarray,
+                         point_m: np.ndarray) -> np.ndarray:
+    """:meth:`Primitive.closest_distance_m` of n finite primitives at once (same operations, same order)."""
+    rel = point_m - c
+    a = _rowwise_dot(rel, u) / _rowwise_dot(u, u)
+    b = _rowwise_dot(rel, v) / _rowwise_dot(v, v)
+    r = np.hypot(a, b)
+    outside = ~rect & (r > 1)
+    a = np.where(rect, np.clip(a, -1, 1), np.where(outside, a / np.where(outside, r, 1.0), a))
+    b = np.where(rect, np.clip(b, -1, 1), np.where(outside, b / np.where(outside, r, 1.0), b))
+    d = rel - a[:, None] * u - b[:, None] * v
+    return np.sqrt(_rowwise_dot(d, d))
+
+
+_RIM_ANGLES_RAD = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+_CORNER_SIGNS = np.array([(su, sv) for su in (-1, 1) for sv in (-1, 1)], dtype=np.float64)
+
+
+def _farthest_distances_m(c: np.ndarray, u: np.ndarray, v: np.ndarray, rect: np.ndarray,
+                          point_m: np.ndarray) -> np.ndarray:
+    """:meth:`Primitive.farthest_distance_m` of n finite primitives at once (same points, same rounding)."""
+    out = np.empty(len(c))
+    if rect.any():
+        cr, ur, vr = c[rect], u[rect], v[rect]
+        pts = (cr[:, None, :] + _CORNER_SIGNS[None, :, :1] * ur[:, None, :]) + _CORNER_SIGNS[None, :, 1:] * vr[:, None, :]
+        out[rect] = np.max(np.linalg.norm(pts - point_m, axis=-1), axis=1)
+    disc = ~rect
+    if disc.any():
+        cd, ud, vd = c[disc], u[disc], v[disc]
+        pts = (cd[:, None, :] + np.cos(_RIM_ANGLES_RAD)[None, :, None] * ud[:, None, :]) \
+            + np.sin(_RIM_ANGLES_RAD)[None, :, None] * vd[:, None, :]
+        out[disc] = np.max(np.linalg.norm(pts - point_m, axis=-1), axis=1)
+    return out

@@ -37,10 +37,18 @@ class SceneRenderer:
     panel, psyop.stimulus.text_scene) and a blank phase its ``show:`` primitives (or the background);
     headless sampled checks (``max_images`` set) render interval frames only. Other phases
     compute cameras only. Cameras and eye centres come from the plan's eye rig.
+
+    Per frame only what changes is built (``frame_cache``, default): eyes that share a scene origin
+    (both eyes of a stereo protocol, :func:`psyop.stimulus.scene_origin_m`) share one scene, and the
+    scene items that do not depend on time (:func:`psyop.stimulus.build.depends_on_time`: all but a
+    moving fixation target) are built once per trial and phase, so a scene without a moving item is
+    the same object every frame. ``frame_cache=False``: the former path (the whole scene built for
+    each eye, every frame), kept for the side-by-side benchmark (benchmarks/bench_frame_cpu.py) and
+    the equality tests (tests/session/test_frame_cpu_equality.py: same scenes, same images).
     """
 
     def __init__(self, plan: SessionPlan, *, scale: float = 1.0, ctx: Any = None, max_images: int | None = None,
-                 owns_ctx: bool = True, check_every: int | None = None) -> None:
+                 owns_ctx: bool = True, check_every: int | None = None, frame_cache: bool = True) -> None:
         self.plan = plan
         self.protocol = plan.protocol
         display_profile = plan.display
@@ -78,6 +86,13 @@ class SceneRenderer:
 
         # a check of finiteness and content needs no anti-aliasing; a watched session gets the default
         self.settings = RenderSettings(antialiasing=AntiAliasing.NONE) if max_images is not None else RenderSettings()
+        self.frame_cache = frame_cache
+        if not frame_cache:  # the former path throughout, the renderer's per-frame work included
+            self.settings = dataclasses.replace(self.settings, frame_caches=False)
+        # the time-independent parts of the current trial's scenes: per (phase, eye centre) either the whole
+        # scene (nothing in it moves) or each shown item's primitives (None: the item moves, built per frame)
+        self._parts_row: dict[str, Any] | None = None
+        self._parts: dict[tuple[Any, ...], Any] = {}
 
     def _scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str,
                head_pose: HeadPose | None) -> Any:
@@ -101,6 +116,80 @@ class SceneRenderer:
         scene = build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
                             base_dir=self._base_dir, show=phase.primitives, images=self._images)
         return scene_in_head(scene, *head_pose) if head_pose is not None else scene
+
+    def _frame_scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str,
+                     head_pose: HeadPose | None, frame_scenes: dict[tuple[float, ...], Any]) -> Any:
+        """:meth:`_scene` for this frame, each scene built once for the eyes that share it and only its moving
+        items rebuilt (see the class docstring); ``frame_scenes``: this frame's scenes so far, by eye centre or
+        scene origin."""
+        if not self.frame_cache:
+            return self._scene(row, phase, t_in_phase_s, eye, head_pose)
+        from psyop.rendering.transform import scene_in_head
+        from psyop.stimulus import scene_origin_m
+
+        centre = self.rig.centre_m(eye)
+        # the cross is built around the eye's own centre; every other scene around the scene origin
+        where = centre if phase.show == "cross" else scene_origin_m(self.protocol, centre)
+        key = tuple(float(c) for c in where)
+        if key not in frame_scenes:
+            scene = self._world_scene(row, phase, t_in_phase_s, eye)
+            world_fixed = scene is not None and head_pose is not None and not self._head_fixed(phase)
+            frame_scenes[key] = scene_in_head(scene, *head_pose) if world_fixed else scene
+        return frame_scenes[key]
+
+    def _head_fixed(self, phase: PhaseSpec) -> bool:
+        """Whether :meth:`_scene` draws this phase head-fixed (the cross, the response text, an empty blank),
+        not as the world-fixed stimulus a tracked head moves through."""
+        text = phase == self.plan.response.phase and self.plan.response.participant_text is not None
+        return phase.show == "cross" or text or (phase.show == "blank" and not phase.primitives)
+
+    def _world_scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str) -> Any:
+        """:meth:`_scene` without a head pose, from the trial's cached time-independent parts."""
+        from psyop.rendering.scene import Scene
+        from psyop.stimulus import build_scene
+
+        if self._parts_row is None or row != self._parts_row:  # a new trial (or row): nothing cached applies
+            self._parts_row, self._parts = dict(row), {}
+        centre = self.rig.centre_m(eye)
+        key = (phase, tuple(float(c) for c in centre))
+        parts = self._parts.get(key)
+        if parts is None:
+            parts = self._parts[key] = self._static_parts(row, phase, eye)
+        if isinstance(parts, tuple):
+            return parts[0]
+        prims: list[Any] = []
+        aperture = None
+        for item_id, part in parts:
+            if part is None:  # a moving item: built for this frame's time
+                part = build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
+                                   base_dir=self._base_dir, show=(item_id,), images=self._images)
+            prims += part.primitives
+            aperture = part.aperture if part.aperture is not None else aperture
+        return Scene(tuple(prims), aperture=aperture)
+
+    def _static_parts(self, row: Mapping[str, Any], phase: PhaseSpec, eye: str) -> Any:
+        """What of this phase's scene does not depend on time: ``(scene,)`` when nothing in it moves (the
+        whole scene, or None), else ``[(id, its one-item scene, or None for an item that moves)]`` for
+        every shown item in the protocol's order (the order is the layer order; the last aperture wins)."""
+        from psyop.stimulus import build_scene, interval_phases
+        from psyop.stimulus.build import depends_on_time
+
+        whole = self._scene(row, phase, 0.0, eye, None)
+        if whole is None or phase.show not in ("stimulus", "blank") or self._head_fixed(phase):
+            return (whole,)  # the cross, the text, an empty blank, nothing drawn: never move
+        interval = max(1, phase.interval)
+        show: Any = phase.primitives
+        if show is None:  # build_scene's default: the interval's own show: list
+            phases = interval_phases(self.protocol)
+            show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
+        shown = [item for item in self.protocol.scene if show == "all" or item.id in show]
+        if not any(depends_on_time(item) for item in shown):
+            return (whole,)
+        centre = self.rig.centre_m(eye)
+        return [(item.id, None if depends_on_time(item) else
+                 build_scene(self.protocol, row, 0.0, centre, interval=interval, base_dir=self._base_dir,
+                             show=(item.id,), images=self._images))
+                for item in shown]
 
     def _camera(self, eye: str, fixation_m: tuple[float, float, float], mode: str, frame: FrameRequest | None,
                 row: Mapping[str, Any] | None = None) -> Any:
@@ -130,12 +219,13 @@ class SceneRenderer:
         cameras_ok = True
         ok = True
         images = checked = 0
+        frame_scenes: dict[tuple[float, ...], Any] = {}
         for eye in self.eyes:
             camera = self._camera(eye, fixation_m, mode, frame, row)
             cameras_ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
             if phase.show == "stimulus" and self.max_images is not None and self.images_rendered >= self.max_images:
                 return FrameCheck(False, cameras_ok)
-            scene = self._scene(row, phase, t_in_phase_s, eye, head_pose)
+            scene = self._frame_scene(row, phase, t_in_phase_s, eye, head_pose, frame_scenes)
             target = frame.targets.get(eye) if frame is not None else None
             if scene is None:
                 if target is not None:  # nothing drawn: the eye sees the background, not a stale image

@@ -156,6 +156,21 @@ def _fixation(item: ps.FixationTarget, values: Mapping[str, Any], time_s: float,
     return [outer, inner]
 
 
+def depends_on_time(item: Any) -> bool:
+    """Whether a scene item's primitives change with the time into the interval: only a fixation target
+    on a path moves (:func:`_fixation` is the one use of ``time_s`` in :func:`build_scene`). A session
+    builds every other item once per trial and phase (``psyop.session.scene_renderer``); an item kind
+    that starts to use the time must be named here.
+
+    Examples
+    --------
+    >>> from psyop.protocol import scene as ps
+    >>> depends_on_time(ps.Aperture(id="window", kind="aperture", diameter_deg=30))
+    False
+    """
+    return isinstance(item, ps.FixationTarget) and item.path is not None
+
+
 def _room(item: ps.Room) -> list[Primitive]:
     prims = builders.room_with_pencil(pencil_distance_m=1.0, room_half_width_m=float(item.width_m) / 2.0,
                                       room_depth_m=float(item.depth_m), eye_height_m=float(item.eye_height_m),

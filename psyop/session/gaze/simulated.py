@@ -65,15 +65,16 @@ class _EventTimes:
 
     def __init__(self, seed: int, stream: int, rate_hz: float, duration_s: float) -> None:
         self.seed, self.stream, self.rate_hz, self.duration_s = seed, stream, rate_hz, duration_s
-        self._cache: dict[int, np.ndarray] = {}
+        self._cache: dict[int, list[float]] = {}
 
-    def _starts(self, window: int) -> np.ndarray:
+    def _starts(self, window: int) -> list[float]:
+        """The window's event starts, ascending (Python floats: a sample looks through a few of them)."""
         starts = self._cache.get(window)
         if starts is None:
             if len(self._cache) > 64:
                 self._cache.clear()
             rng = _rng(self.seed, self.stream, window)
-            starts = window + np.sort(rng.uniform(0, 1, rng.poisson(self.rate_hz)))
+            starts = (window + np.sort(rng.uniform(0, 1, rng.poisson(self.rate_hz)))).tolist()
             self._cache[window] = starts
         return starts
 
@@ -82,10 +83,11 @@ class _EventTimes:
         if self.rate_hz <= 0:
             return None
         for w in range(int(math.floor(t_s - self.duration_s)), int(math.floor(t_s)) + 1):
-            starts = self._starts(w)
-            hit = starts[(starts <= t_s) & (t_s < starts + self.duration_s)]
-            if hit.size:
-                return float(hit[0])
+            for start in self._starts(w):
+                if start > t_s:
+                    break  # ascending: no later one has begun
+                if t_s < start + self.duration_s:
+                    return start
         return None
 
 
@@ -103,6 +105,7 @@ class SimulatedTracker:
         self._fixations: tuple[tuple[int, float], list[tuple[float, float, float]]] | None = None
         self._delivered = 0
         self._noise_cache: tuple[int, np.ndarray] | None = None
+        self._offset_cache: tuple[tuple[int, int], np.ndarray] | None = None  # the current plan's error offset
         self._dropouts = _EventTimes(self.seed, 3, c.dropout_rate_hz, c.dropout_s)
         self._blinks = _EventTimes(self.seed, 4, c.blink_rate_hz, c.blink_s)
         self._nan_bursts = _EventTimes(self.seed, 5, c.nan_burst_rate_hz, c.nan_burst_s)
@@ -167,10 +170,18 @@ class SimulatedTracker:
         return GazeSample(t_s, (float(f[0]), float(f[1]), float(f[2])), confidence, True)
 
     def _plan_offset(self, plan: FixationPlan) -> np.ndarray:
-        """Per-plan error offset; the difference of two has mean norm ``error_centre_deg``."""
+        """Per-plan error offset; the difference of two has mean norm ``error_centre_deg``. Drawn once per
+        plan (its key), not per sample: the same numbers, without a numpy Generator per sample."""
+        key = (int(round(plan.start_s * 1000.0)), plan.seed)
+        if self._offset_cache is None or self._offset_cache[0] != key:
+            self._offset_cache = (key, self._draw_plan_offset(*key))
+        return self._offset_cache[1]
+
+    def _draw_plan_offset(self, start_ms: int, plan_seed: int) -> np.ndarray:
         sigma = self.config.error_centre_deg / (math.sqrt(2.0) * math.sqrt(math.pi / 2.0))
-        rng = _rng(self.seed, 8, int(round(plan.start_s * 1000.0)), plan.seed)
-        return rng.normal(0.0, sigma, 2)
+        offset = _rng(self.seed, 8, start_ms, plan_seed).normal(0.0, sigma, 2)
+        offset.setflags(write=False)  # shared by every sample of the plan
+        return offset
 
     def _noise(self, tick: int) -> np.ndarray:
         """Three normal draws for ``tick`` (two angles scaled to the precision, one spare)."""
