@@ -227,14 +227,14 @@ def run(out_dir: Path, quick: bool) -> str:
     from psyop.rendering.renderer import create_headless_context
 
     scale = 0.05 if quick else 0.1
-    frames = 16 if quick else 160
+    frames, block = (8, 4) if quick else (160, 8)
     ctx = create_headless_context()
     try:
-        shipped = [(name, measure(protocol_text(name, False), ctx, scale, frames)) for name in PROTOCOLS]
-        stereo = [(name, measure(protocol_text(name, True), ctx, scale, frames)) for name in PROTOCOLS
-                  if name != "egocentric"]
+        shipped = [(name, measure(protocol_text(name, False), ctx, scale, frames, block)) for name in PROTOCOLS]
+        stereo = [(name, measure(protocol_text(name, True), ctx, scale, frames, block)) for name in PROTOCOLS
+                  if name != "egocentric" and (not quick or name == "detection")]
         counts = (4, 60) if quick else (4, 60, 124)
-        sized = [(c, measure(protocol_text("detection", True, c), ctx, scale, frames)) for c in counts]
+        sized = [(c, measure(protocol_text("detection", True, c), ctx, scale, frames, block)) for c in counts]
         full = None if quick else measure(protocol_text("detection", True), ctx, 1.0, 24, block=4)
     finally:
         ctx.release()

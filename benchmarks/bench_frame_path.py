@@ -2,7 +2,11 @@
 
 1. Session per-frame cost over the bare render: SceneRenderer.render (scene build, upload,
    camera, GPU-reduced check) against Renderer.render + finish for the same scene and camera,
-   and the former full float readback + NaN/uniform check for comparison.
+   and the former full float readback + NaN/uniform check for comparison. Every call is the next frame:
+   the gaze moves and the stimulus time advances 1/90 s, so the circling fixation target moves and the
+   session uploads a changed scene each frame (issue 21: the time was held at 0 and, through a frame
+   counter that restarted at every call, the gaze too, a case no real frame is). The CPU side alone,
+   before and after issue 21: benchmarks/bench_frame_cpu.py.
 2. Stereo reuse share: frames reused with a still gaze in a stereo (egocentric) session.
 3. The egocentric room: frame cost over one ray per pixel with the full 32x32 adaptive grid at
    every edge, and with the room's straight background edges at a few samples per axis.
@@ -15,6 +19,7 @@ Absolute llvmpipe times are context only; the ratios are the result.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import statistics
 import tempfile
 import time
@@ -24,6 +29,15 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 MOVING = [(0.03 * np.sin(0.3 * k), 0.02 * np.cos(0.3 * k), -1.0) for k in range(64)]
+# the stimulus time of frame k: it advances like a real interval's, so the circling fixation target moves and
+# every session frame uploads a changed scene (held at 0, the scene never changed: a case no real frame is)
+TIMES_S = [k / 90.0 for k in range(64)]
+
+
+def _timed_ms(fn, k: int) -> float:
+    start = time.perf_counter()
+    fn(k)
+    return (time.perf_counter() - start) * 1e3
 
 
 def _median_ms(fn, n: int) -> float:
@@ -53,22 +67,23 @@ def _session_vs_bare(scale: float, n: int) -> dict[str, float]:
         session.render(row, phase, "ocular", 0.0, MOVING[0])  # warm-up: compile, allocate
         renderer = session._renderer  # noqa: SLF001 - the same renderer, context and eye
         eye = session.eyes[0]
-        scene = session._scene(row, phase, 0.0, eye, None)  # noqa: SLF001 - the session's own scene
+        # the session's own scenes at each frame's time (built here, so the bare render only uploads them)
+        scenes = [session._scene(row, phase, t, eye, None) for t in TIMES_S]  # noqa: SLF001
         cams = [session.rig.camera(session.display, eye, f, "ocular") for f in MOVING]
 
         def bare(k: int) -> None:
-            renderer.set_scene(scene)
+            renderer.set_scene(scenes[k % len(scenes)])
             renderer.render(cams[k % len(cams)])
             renderer.finish()
 
         def with_session(k: int) -> None:  # finish(): a frame's GPU work counts in that frame (a flip waits too)
-            session.render(row, phase, "ocular", 0.0, MOVING[k % len(MOVING)])
+            session.render(row, phase, "ocular", TIMES_S[k % len(TIMES_S)], MOVING[k % len(MOVING)])
             renderer.finish()
 
         def checking_every_frame(k: int) -> None:  # the session frame with the reduced check on every image
             session.check_every = 1
             try:
-                session.render(row, phase, "ocular", 0.0, MOVING[k % len(MOVING)])
+                session.render(row, phase, "ocular", TIMES_S[k % len(TIMES_S)], MOVING[k % len(MOVING)])
                 renderer.finish()
             finally:
                 session.check_every = WATCHED_CHECK_EVERY
@@ -80,13 +95,14 @@ def _session_vs_bare(scale: float, n: int) -> dict[str, float]:
 
         out: dict[str, list[float]] = {"bare": [], "session": [], "every": [], "readback": []}
         fns = {"bare": bare, "session": with_session, "every": checking_every_frame, "readback": full_readback}
+        frame = {name: itertools.count(1) for name in fns}  # frame 0 was the warm-up
         for rep in range(n):  # interleaved, rotating order; the session's own frames run back to back
             names = list(fns)
             names = names[rep % 4:] + names[: rep % 4]
             for name in names:
                 reps = WATCHED_CHECK_EVERY if name == "session" else 1  # a whole check cycle, per frame
-                out[name].append(_median_ms(fns[name], 1) if reps == 1 else
-                                 sum(_median_ms(fns[name], 1) for _ in range(reps)) / reps)
+                # each path's own frame counter: every call is the next frame (gaze and stimulus time move on)
+                out[name].append(sum(_timed_ms(fns[name], next(frame[name])) for _ in range(reps)) / reps)
         size = f"{session.display.width_px}x{session.display.height_px}"
     finally:
         session.close()
@@ -219,8 +235,9 @@ def run(out_dir: Path, quick: bool) -> str:
     lines = [
         "## Frame path of a real session (90 Hz budget: 11.1 ms)",
         "",
-        f"Session per-frame cost over the bare render (detection, {sess['size']} px, moving gaze, every frame "
-        f"rendered; median of {n} interleaved repetitions, per-repetition ratios):",
+        f"Session per-frame cost over the bare render (detection, {sess['size']} px, moving gaze, stimulus time "
+        f"advancing 1/90 s per frame so the fixation target moves, every frame rendered; median of {n} interleaved "
+        "repetitions, per-repetition ratios; the bare render uploads the same scenes, prebuilt):",
         "",
         "| path | median ms | ratio to bare render |",
         "|---|---|---|",

@@ -78,3 +78,15 @@ def test_bench_figures_power_speed_quick_compares_before_and_after(tmp_path: Pat
     assert "| make figures-build, simulated data at 3 participants per study (quick), JOBS=2 |" in report
     assert "| psyop power protocols/detection.yaml --participants 2 --replications 1 --jobs 1 |" in report
     assert "| 4 | 12 |" in report and "nan" not in report
+
+
+def test_bench_frame_cpu_quick_reports_every_protocol_before_and_after(tmp_path: Path) -> None:
+    from benchmarks import bench_frame_cpu
+
+    report = bench_frame_cpu.run(tmp_path, quick=True)
+    assert "| scene | eyes | primitives | mode | before ms | of budget | after ms | of budget | after / before |" in report
+    for name in bench_frame_cpu.PROTOCOLS:
+        assert f"| {name} (as shipped) |" in report
+    assert "| detection rendered stereo | 2 |" in report and "| detection stereo + 60 discs | 2 | 64 |" in report
+    assert "Cost per primitive per stereo frame" in report and "samples identical: True" in report
+    assert "nan" not in report
