@@ -32,8 +32,13 @@ COPLANAR_RELATIVE_DEPTH = 1.0e-5
 
 
 def _vec3(value: object, name: str) -> tuple[float, float, float]:
-    if isinstance(value, tuple) and len(value) == 3 and all(isinstance(c, (int, float)) for c in value):
-        x, y, z = (float(c) for c in value)  # the common case without numpy (a primitive per item per frame)
+    # the common cases in few steps (primitives are built every frame): 3 Python numbers, a float64 3-vector
+    if isinstance(value, np.ndarray) and value.shape == (3,) and value.dtype == np.float64:
+        x, y, z = value.tolist()
+        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
+            return (x, y, z)
+    elif isinstance(value, tuple) and len(value) == 3 and all(isinstance(c, (int, float)) for c in value):
+        x, y, z = (float(c) for c in value)
         if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
             return (x, y, z)
     arr = np.asarray(value, dtype=np.float64).reshape(-1)
@@ -257,7 +262,7 @@ class Scene:
 
         Vectorised over the primitives, with the same float64 operations in the same order as
         :meth:`Primitive.closest_distance_m` and :meth:`Primitive.farthest_distance_m`, so the result
-        equals :meth:`depth_range_per_primitive_m` bit for bit (tests/rendering/test_frame_cpu_equality.py).
+        equals :meth:`depth_range_per_primitive_m` bit for bit (tests/rendering/test_renderer_cache_equality.py).
 
         Examples
         --------

@@ -56,7 +56,7 @@ def screen_bounds_px(centres_rel_m: np.ndarray, half_u_m: np.ndarray, half_v_m: 
 def screen_bounds_px_former(centres_rel_m: np.ndarray, half_u_m: np.ndarray, half_v_m: np.ndarray,
                             pixel_to_ray: np.ndarray, width_px: int, height_px: int) -> np.ndarray:
     """:func:`screen_bounds_px` as first written (more numpy calls, the same boxes bit for bit): the reference
-    tests/rendering/test_frame_cpu_equality.py holds it to, and the renderer's ``frame_caches=False`` path."""
+    tests/rendering/test_renderer_cache_equality.py holds it to, and the renderer's ``frame_caches=False`` path."""
     c = np.asarray(centres_rel_m, dtype=np.float64).reshape(-1, 3)
     hu = np.asarray(half_u_m, dtype=np.float64).reshape(-1, 3)
     hv = np.asarray(half_v_m, dtype=np.float64).reshape(-1, 3)
