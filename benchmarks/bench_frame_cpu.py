@@ -4,7 +4,9 @@ What a frame is here: the loop's software path up to the GPU (``psyop.session.lo
 less the display and the log), on real frames of each shipped protocol's first interval of a trial
 whose interval is rendered with ocular parallax where the protocol has one: the simulated tracker's
 newest sample (``SimulatedTracker.latest``, following the phase's fixation plan: pursuit of the
-circling target, or free viewing), the gaze conditioner, and ``SceneRenderer.render`` for every eye
+circling target, or free viewing), the gaze conditioner, the simulated head pose (``--pose sim``, a
+session's default; a headset tracks the head too) and its conditioner, so the world-fixed scene is
+moved into head space every frame, and ``SceneRenderer.render`` for every eye
 of the frame (scene build, head pose, upload, cameras, reuse decision, the OpenGL calls that queue
 the draw, the GPU-reduced image check of each eye's first and every 8th image, as a watched session
 runs it). The stimulus time advances 1/90 s per frame, so a moving fixation target really moves and
@@ -20,12 +22,14 @@ that claim.
 
 Rows: each shipped protocol as it runs (one eye, or two for the stereo egocentric study), then each
 monocular protocol rendered stereo (``eyes: stereo``: what a headset's stereo frame of that scene
-costs), and detection with more disc items (8, 64 and 128 primitives, stereo) for the cost per
-primitive.
+costs), detection with more disc items (8, 64 and 128 primitives, stereo) for the cost per primitive,
+and detection stereo with the head not tracked (the identity pose: the scene passes through).
 
 Before: the former path, kept callable: ``SceneRenderer(frame_cache=False)`` (the whole scene built
-for each eye, every frame) with ``RenderSettings.frame_caches=False`` (reuse bounds after every draw,
-one primitive at a time; primitive table and uniforms rewritten every frame), and a simulated
+for each eye, every frame, and moved into head space one primitive at a time:
+``scene_in_head_per_primitive``) with ``RenderSettings.frame_caches=False`` (reuse bounds after every
+draw, one primitive at a time; primitive table and uniforms rewritten every frame; the former screen
+bounds), and a simulated
 tracker that draws its per-plan error offset with a new numpy Generator per sample
 (:func:`former_tracker`, the former code). After: the defaults. Before and after
 run interleaved (alternating blocks of frames), on one OpenGL context; per row the medians of the
@@ -49,7 +53,6 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 BUDGET_MS = 1000.0 / 90.0
 PROTOCOLS = ("detection", "discrimination", "egocentric", "ordinal", "realism")
-HEAD = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))  # the conditioned head pose of a session without tracking
 
 
 def former_tracker(seed: int, config: Any = None) -> Any:
@@ -124,16 +127,20 @@ class _Variant:
     renderer: Any
     gaze: Any
     conditioner: Any
+    pose: Any  # the head pose source (None: not tracked, the identity pose every frame)
+    head_conditioner: Any
     k: int = 0
 
 
-def _setup(protocol: Any, ctx: Any, scale: float, before: bool, seed: int) -> tuple[_Variant, Any, Any, Any]:
+def _setup(protocol: Any, ctx: Any, scale: float, before: bool, seed: int,
+           head_tracked: bool = True) -> tuple[_Variant, Any, Any, Any]:
     from psyop.schedule import compile_schedule
     from psyop.session.gaze.filter import GazeConditioner
     from psyop.session.gaze.simulated import SimulatedTracker
     from psyop.session.loop import LoopConfig, TrialLoop
     from psyop.session.phases import mode_for
     from psyop.session.plan import compile_plan
+    from psyop.session.pose import PoseConditioner, SimulatedPose
     from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
 
     plan = compile_plan(protocol, tracker_ipd_m=0.064)
@@ -148,23 +155,27 @@ def _setup(protocol: Any, ctx: Any, scale: float, before: bool, seed: int) -> tu
     planner = TrialLoop.__new__(TrialLoop)
     planner.config, planner.gaze = LoopConfig(), gaze
     planner._set_plan(phase, row, 1.0)  # noqa: SLF001 - the loop's fixation plan, started at 1 s
-    return _Variant("before" if before else "after", renderer, gaze, GazeConditioner()), row, phase, mode_for(phase, row)
+    pose = SimulatedPose(seed) if head_tracked else None  # `--pose sim`, the default (a headset tracks too)
+    variant = _Variant("before" if before else "after", renderer, gaze, GazeConditioner(), pose, PoseConditioner())
+    return variant, row, phase, mode_for(phase, row)
 
 
 def _frame(v: _Variant, row: Any, phase: Any, mode: str) -> float:
     """One frame's CPU ms (thread time), the GPU wait after it untimed."""
     t_in_phase = (v.k % max(1, int(phase.duration_s * 90))) / 90.0
     v.k += 1
+    now_s = 1.0 + t_in_phase
     start = time.thread_time()
-    sample = v.gaze.latest(1.0 + t_in_phase)
-    gaze = v.conditioner.condition(sample)
-    v.renderer.render(row, phase, mode, t_in_phase, gaze.fixation_m, head_pose=HEAD)
+    gaze = v.conditioner.condition(v.gaze.latest(now_s))
+    head = v.head_conditioner.condition(v.pose.head(now_s) if v.pose is not None else None)
+    v.renderer.render(row, phase, mode, t_in_phase, gaze.fixation_m, head_pose=(head.position_m, head.orientation_wxyz))
     elapsed = time.thread_time() - start
     v.renderer._renderer.finish()  # noqa: SLF001 - the GPU wait, outside the timed region
     return elapsed * 1e3
 
 
-def measure(text: str, ctx: Any, scale: float, frames: int, block: int = 8, seed: int = 1) -> dict[str, Any]:
+def measure(text: str, ctx: Any, scale: float, frames: int, block: int = 8, seed: int = 1,
+            head_tracked: bool = True) -> dict[str, Any]:
     """Median CPU ms per frame before and after for one protocol text (see the module docstring)."""
     from psyop.protocol import load_protocol
 
@@ -175,7 +186,7 @@ def measure(text: str, ctx: Any, scale: float, frames: int, block: int = 8, seed
         variants = []
         try:
             for before in (True, False):
-                v, row, phase, mode = _setup(protocol, ctx, scale, before, seed)
+                v, row, phase, mode = _setup(protocol, ctx, scale, before, seed, head_tracked)
                 variants.append(v)
             for v in variants:  # warm-up: programs, textures, the aperture mask, the first check
                 for _ in range(4):
@@ -235,6 +246,7 @@ def run(out_dir: Path, quick: bool) -> str:
                   if name != "egocentric" and (not quick or name == "detection")]
         counts = (4, 60) if quick else (4, 60, 124)
         sized = [(c, measure(protocol_text("detection", True, c), ctx, scale, frames, block)) for c in counts]
+        untracked = measure(protocol_text("detection", True), ctx, scale, frames, block, head_tracked=False)
         full = None if quick else measure(protocol_text("detection", True), ctx, 1.0, 24, block=4)
     finally:
         ctx.release()
@@ -249,12 +261,14 @@ def run(out_dir: Path, quick: bool) -> str:
     lines = [
         "## CPU per frame against the 90 Hz budget (11.1 ms), before and after (issue 21)",
         "",
-        f"CPU (thread) ms per frame outside GL waits: simulated gaze + conditioning + SceneRenderer.render of "
-        f"every eye, stimulus time advancing 1/90 s per frame (moving fixation target); {size} px per eye "
+        f"CPU (thread) ms per frame outside GL waits: simulated gaze and head pose (`--pose sim`) + conditioning + "
+        f"SceneRenderer.render of every eye, stimulus time advancing 1/90 s per frame (moving fixation target), "
+        f"the head moving; {size} px per eye "
         f"(the CPU path does not depend on it: full-resolution row below); median over {shipped[0][1]['frames']} "
-        "frames each, before and after interleaved in blocks of 8. Before: SceneRenderer(frame_cache=False), "
-        "RenderSettings(frame_caches=False), a Generator per gaze sample; after: the defaults "
-        "(benchmarks/bench_frame_cpu.py docstring).",
+        f"frames each, before and after interleaved in blocks of {block}. Before: SceneRenderer(frame_cache=False), "
+        "RenderSettings(frame_caches=False), the per-primitive head transform, the former simulated tracker; "
+        "after: the defaults (benchmarks/bench_frame_cpu.py docstring). Full-resolution row: the CPU ms are the "
+        "same at any image size (the GPU work is not timed).",
         "",
         "| scene | eyes | primitives | mode | before ms | of budget | after ms | of budget | after / before |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -262,6 +276,7 @@ def run(out_dir: Path, quick: bool) -> str:
     lines += [line(f"{name} (as shipped)", r) for name, r in shipped]
     lines += [line(f"{name} rendered stereo", r) for name, r in stereo]
     lines += [line(f"detection stereo + {c} discs", r) for c, r in sized]
+    lines.append(line("detection stereo, head not tracked (identity pose)", untracked))
     if full is not None:
         lines.append(line(f"detection stereo at full resolution ({full['size']}, {full['frames']} frames)", full))
     slope_b, slope_a = _slope(sized, "before_ms"), _slope(sized, "after_ms")

@@ -210,8 +210,9 @@ class Renderer:
         # w of each centre: 1 = a point (made camera-relative), 0 = a direction (optical infinity)
         self._centre_w = np.array([0.0 if p.at_infinity else 1.0 for p in scene.primitives])
         self._scene_far_m = _finite_extent_m(scene)
-        packed: dict[int, tuple[Any, int | None, np.ndarray]] = {}
-        for i, p in enumerate(scene.primitives):
+        packed: dict[int, tuple[Any, int | None, list[float]]] = {}
+        rows = []
+        for p in scene.primitives:
             m = p.material
             layer = layer_of[m if isinstance(m, NoiseTexture) else ("image", m.key)] \
                 if isinstance(m, (NoiseTexture, ImageTexture)) else None
@@ -219,7 +220,9 @@ class Renderer:
             if entry is None or entry[0] is not p or entry[1] != layer:
                 entry = (p, layer, self._pack(p, layer, sizes))
             packed[id(p)] = entry  # only the current scene's primitives stay cached
-            data[i] = entry[2]
+            rows.append(entry[2])
+        if rows:
+            data[:n] = np.array(rows, dtype=np.float32).reshape(n, TEXELS_PER_PRIMITIVE, 4)
         self._packed = packed if self.settings.frame_caches else {}
         if self._prims_tex is not None and self._prims_tex.size == (TEXELS_PER_PRIMITIVE, data.shape[0]):
             self._prims_tex.write(data.tobytes())
@@ -241,34 +244,23 @@ class Renderer:
         self._set_if_present("u_samples", int(self.settings.samples_per_axis))
         self._set_if_present("u_edge_margin_px", float(self.settings.edge_margin_px))
 
-    def _pack(self, p: Any, layer: int | None, sizes: list[tuple[int, int]]) -> np.ndarray:
-        """One primitive's rows of the primitive table (axes, shape, material, border, edge effort)."""
-        row = np.zeros((TEXELS_PER_PRIMITIVE, 4), dtype=np.float32)
-        row[0, :3] = p.half_u_m
-        row[0, 3] = 0.0 if p.shape is Shape.DISC else 1.0
-        row[1, :3] = p.half_v_m
+    def _pack(self, p: Any, layer: int | None, sizes: list[tuple[int, int]]) -> list[float]:
+        """One primitive's rows of the primitive table, flat (TEXELS_PER_PRIMITIVE x 4: axes and shape,
+        material, border, edge effort), as Python numbers: a head-tracked frame packs every primitive."""
         m = p.material
+        u, v = p.half_u_m, p.half_v_m
+        row: list[float] = [u[0], u[1], u[2], 0.0 if p.shape is Shape.DISC else 1.0, v[0], v[1], v[2]]
         if isinstance(m, Solid):
-            row[1, 3] = 0
-            row[2, :3] = m.colour
+            row += [0.0, *m.colour, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
         elif isinstance(m, GridMaterial):
-            row[1, 3] = 2
-            row[2, :3] = m.background
-            row[3, :3] = m.line_colour
-            row[3, 3] = m.lines_per_side
-            row[4, 3] = m.line_width_fraction
+            row += [2.0, *m.background, 0.0, *m.line_colour, m.lines_per_side, 0.0, 0.0, 0.0, m.line_width_fraction]
         else:
             assert layer is not None
-            row[1, 3] = 1
-            row[2, 3] = layer
-            row[4, 0], row[4, 1] = sizes[layer]
-            row[4, 2] = m.repeats
-        if p.border is not None:
-            b = p.border
-            row[5] = (1.0, b.amplitude, b.cycles, b.phase_rad)
-            row[6, :2] = (b.offset, b.side)
-        row[6, 2] = 0 if p.edge_samples_per_axis is None else min(int(p.edge_samples_per_axis),
-                                                                 self.settings.samples_per_axis)
+            row += [1.0, 0.0, 0.0, 0.0, layer, 0.0, 0.0, 0.0, 0.0, sizes[layer][0], sizes[layer][1], m.repeats, 0.0]
+        b = p.border
+        row += [0.0, 0.0, 0.0, 0.0, 0.0, 0.0] if b is None else [1.0, b.amplitude, b.cycles, b.phase_rad, b.offset, b.side]
+        row += [0 if p.edge_samples_per_axis is None else min(int(p.edge_samples_per_axis), self.settings.samples_per_axis),
+                0.0]
         return row
 
     @property

@@ -192,6 +192,26 @@ class Primitive:
         if abs(float(u @ v)) > 1e-9 * nu * nv:
             raise ValueError(f"primitive {self.name!r}: half_u_m and half_v_m must be orthogonal")
 
+    def moved(self, centre_m: tuple[float, float, float], half_u_m: tuple[float, float, float],
+              half_v_m: tuple[float, float, float]) -> Primitive:
+        """This primitive after a rigid motion (``psyop.rendering.transform.scene_in_head``): the new
+        coordinates, everything else kept. A rotation keeps the half axes orthogonal and non-zero, so only
+        finiteness is checked again (the full check costs more than the motion, every frame).
+
+        Examples
+        --------
+        >>> p = Primitive(Shape.DISC, (0, 0, -1), (0.1, 0, 0), (0, 0.1, 0), Solid((1, 0, 0)))
+        >>> p.moved((0.0, 0.0, -2.0), (0.0, 0.1, 0.0), (-0.1, 0.0, 0.0)).centre_m
+        (0.0, 0.0, -2.0)
+        """
+        values = (*centre_m, *half_u_m, *half_v_m)
+        if len(values) != 9 or not all(isinstance(x, float) and math.isfinite(x) for x in values):
+            raise ValueError(f"primitive {self.name!r}: a moved primitive needs 3 finite numbers each, got "
+                             f"{centre_m!r}, {half_u_m!r}, {half_v_m!r}")
+        out = object.__new__(Primitive)
+        out.__dict__.update(self.__dict__, centre_m=tuple(centre_m), half_u_m=tuple(half_u_m), half_v_m=tuple(half_v_m))
+        return out
+
     def closest_distance_m(self, point_m: np.ndarray) -> float:
         """Exact distance from ``point_m`` to the primitive (ignoring the sine clip, which only removes area);
         inf at optical infinity."""

@@ -34,8 +34,37 @@ def scene_in_head(scene: Scene, head_position_m: Sequence[float], head_orientati
     """``scene`` (world coordinates) expressed in the head space of the given head pose.
 
     The identity pose returns ``scene`` itself, so a still head keeps frame reuse and
-    uploads nothing new.
+    uploads nothing new. Runs every frame of a head-tracked session, so every primitive is moved in
+    one numpy product (the same numbers as :func:`scene_in_head_per_primitive`, bit for bit:
+    tests/rendering/test_renderer_cache_equality.py).
+
+    Examples
+    --------
+    >>> from psyop.rendering.builders import frontoparallel_disc
+    >>> from psyop.rendering.scene import Solid
+    >>> scene = Scene((frontoparallel_disc(1.0, 2.0, Solid((1, 0, 0))),))
+    >>> scene_in_head(scene, (0.0, 0.0, 0.5), IDENTITY_WXYZ).primitives[0].centre_m
+    (0.0, 0.0, -1.5)
     """
+    t = np.asarray(head_position_m, dtype=np.float64)
+    if not np.any(t) and tuple(float(c) for c in head_orientation_wxyz) == IDENTITY_WXYZ:
+        return scene
+    if not scene.primitives:
+        return dataclasses.replace(scene, primitives=())
+    r_t = rotation_matrix(head_orientation_wxyz).T
+    prims = scene.primitives
+    shift = np.array([(0.0, 0.0, 0.0) if p.at_infinity else t for p in prims], dtype=np.float64)
+    centres = ((np.array([p.centre_m for p in prims]) - shift) @ r_t.T).tolist()
+    half_u = (np.array([p.half_u_m for p in prims]) @ r_t.T).tolist()
+    half_v = (np.array([p.half_v_m for p in prims]) @ r_t.T).tolist()
+    moved = tuple(p.moved(tuple(c), tuple(u), tuple(v)) for p, c, u, v in zip(prims, centres, half_u, half_v, strict=True))
+    return dataclasses.replace(scene, primitives=moved)
+
+
+def scene_in_head_per_primitive(scene: Scene, head_position_m: Sequence[float],
+                                head_orientation_wxyz: Sequence[float]) -> Scene:
+    """:func:`scene_in_head` one primitive at a time (the former per-frame path, kept as the reference the
+    vectorised form is tested against and for benchmarks/bench_frame_cpu.py's "before" column)."""
     t = np.asarray(head_position_m, dtype=np.float64)
     if not np.any(t) and tuple(float(c) for c in head_orientation_wxyz) == IDENTITY_WXYZ:
         return scene

@@ -97,7 +97,7 @@ class SceneRenderer:
     def _scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str,
                head_pose: HeadPose | None) -> Any:
         """The scene this eye sees in this phase, or None when nothing is drawn (cameras only)."""
-        from psyop.rendering.transform import scene_in_head
+        from psyop.rendering.transform import scene_in_head_per_primitive as scene_in_head  # the former path
         from psyop.stimulus import blank_scene, build_scene, recalibration_cross_scene, scene_origin_m, text_scene
 
         centre = self.rig.centre_m(eye)

@@ -101,3 +101,19 @@ def test_frame_caches_render_the_same_images_and_reuse_decisions() -> None:
         for r in renderers.values():
             r.release()
         ctx.release()
+
+
+def test_vectorised_scene_in_head_equals_the_per_primitive_one_bit_for_bit() -> None:
+    from psyop.rendering.transform import scene_in_head, scene_in_head_per_primitive
+
+    rng = np.random.default_rng(8)
+    for n in (1, 5, 64):
+        scene = _random_scene(rng, n, with_infinity=True)
+        for _ in range(10):
+            q = rng.normal(size=4)
+            t = rng.normal(size=3) * 0.1
+            got, want = scene_in_head(scene, t, q), scene_in_head_per_primitive(scene, t, q)
+            assert got == want and all(type(c) is float for p in got.primitives for c in p.centre_m)
+    assert scene_in_head(scene, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)) is scene
+    with pytest.raises(ValueError, match="finite"):
+        scene_in_head(scene, (math.nan, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
