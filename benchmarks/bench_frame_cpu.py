@@ -264,11 +264,11 @@ def run(out_dir: Path, quick: bool) -> str:
         f"CPU (thread) ms per frame outside GL waits: simulated gaze and head pose (`--pose sim`) + conditioning + "
         f"SceneRenderer.render of every eye, stimulus time advancing 1/90 s per frame (moving fixation target), "
         f"the head moving; {size} px per eye "
-        f"(the CPU path does not depend on it: full-resolution row below); median over {shipped[0][1]['frames']} "
+        f"(the CPU path should not depend on it: full-resolution row below); median over {shipped[0][1]['frames']} "
         f"frames each, before and after interleaved in blocks of {block}. Before: SceneRenderer(frame_cache=False), "
         "RenderSettings(frame_caches=False), the per-primitive head transform, the former simulated tracker; "
-        "after: the defaults (benchmarks/bench_frame_cpu.py docstring). Full-resolution row: the CPU ms are the "
-        "same at any image size (the GPU work is not timed).",
+        "after: the defaults (benchmarks/bench_frame_cpu.py docstring). Full-resolution row: the same frames at the "
+        "display's own size, to compare with the reduced size (the GPU work is not timed).",
         "",
         "| scene | eyes | primitives | mode | before ms | of budget | after ms | of budget | after / before |",
         "|---|---|---|---|---|---|---|---|---|",
