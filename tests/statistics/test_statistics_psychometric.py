@@ -11,7 +11,7 @@ import pytest
 
 from psyop.statistics.psychometric import (
     STATUSES, FitOptions, InvalidPsychometricData, aggregate_blocks, fit_many, fit_psychometric,
-    fit_psychometric_table, is_bimodal, log_posterior_2afc, tabulate_priors, usable_for_analysis,
+    fit_psychometric_table, grid_posterior, is_bimodal, log_posterior_2afc, tabulate_priors, usable_for_analysis,
 )
 from psyop.statistics.simulate import DETECTION_LEVELS_D, pc_2afc, simulate_detection, true_t75
 
@@ -122,6 +122,26 @@ def test_ci_coverage_holds_from_15_to_10000_trials_per_level(n_per_level):
     assert 0.88 <= coverage <= 0.995, coverage
     usable = [f for f in fits if f.usable]
     assert all(f.threshold_ci_low_D < f.threshold_D < f.threshold_ci_high_D for f in usable)
+
+
+def test_grid_follows_the_posterior_when_psignifits_tightened_bounds_cut_it():
+    """10,000 trials per level, lapse 0.03, 5 levels: psignifit's sparse grid (lapse rows 0, 0.1, ...)
+    tightens the width bounds to 1.85-2.44 around a lapse-0 curve, excluding the true width 1.25;
+    the old CI was read inside that box (fitted sd 0.56 against 0.38; the CI missed in every seed).
+    The grid's cut edges now move out to the mass."""
+    levels = np.linspace(0.0, 1.5, 5)
+    truth = true_t75(0.33, 0.38, 0.03)
+    options = FitOptions(n_bootstrap=0, estimate_eta=False)
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        data = np.c_[levels, rng.binomial(10000, pc_2afc(levels, 0.33, 0.38, 0.03)), np.full(5, 10000)]
+        gp = grid_posterior(data, options)
+        assert gp.dense_grid["width"][0] > 0.38 * 3.29 * 1.3  # psignifit's tightened box excludes the truth
+        assert gp.n_moves >= 1 and not gp.cut_axes
+        fit = fit_psychometric(data, options)
+        assert fit.status == "ok"
+        assert abs(fit.sigma_D - 0.38) < 0.02
+        assert fit.threshold_ci_low_D <= truth <= fit.threshold_ci_high_D
 
 
 def test_two_modes_are_flagged_bimodal():
