@@ -47,8 +47,8 @@ def run(out_dir: Path, quick: bool = False) -> str:
              f"{n_obs} simulated observers per row: threshold U(0.2, 1.0) D, sd U(0.1, 0.4) D, lapse U(0, 0.05), "
              "5-7 levels over 0-1.5 D; truth = the 75 % point with the lapse; default fit options.", "",
              "| trials per level | coverage, all | lapse < 0.01 | lapse >= 0.03 | sd < 0.2 D | sd >= 0.3 D | usable fits "
-             "| wall s |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| bimodal | grid peaks joined | wall s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     notes: list[str] = []
     lowest = 1.0
     for n_per in counts:
@@ -69,7 +69,8 @@ def run(out_dir: Path, quick: bool = False) -> str:
         low, high = lapse < 0.01, lapse >= 0.03
         steep, shallow = sd < 0.2, sd >= 0.3
         lines.append(f"| {n_per} | {_rate(cover)} | {_rate(cover[low])} | {_rate(cover[high])} | {_rate(cover[steep])} | "
-                     f"{_rate(cover[shallow])} | {sum(f.usable for f in fits)} | {wall:.1f} |")
+                     f"{_rate(cover[shallow])} | {sum(f.usable for f in fits)} | {sum(f.status == 'bimodal' for f in fits)} | "
+                     f"{sum('grid_peaks_joined' in f.flags for f in fits)} | {wall:.1f} |")
         misses = [i for i in range(n_obs) if not cover[i] and np.isfinite(fits[i].sigma_D)]
         if misses:
             ratio = np.array([fits[i].sigma_D / sd[i] for i in misses])

@@ -192,7 +192,7 @@ def test_audit_areas_match_exact_geometry(ctx):
 
 def test_small_primitives_read_their_exact_area_at_the_default_audit_scale(ctx):
     """At the default scale (0.125) a Vive Pro pixel is ~0.6 deg: a 0.5 deg target covers a third of
-    one and its S x S count was off by up to ~50 % (the issue's '0 px^2 in some frames'). Small
+    one and its S x S count in the frame's pixels is off by more than 10 % (asserted below). Small
     primitives are measured in a magnified window: discs, eye-facing discs and rects of 0.5-3 deg
     out to 30 deg, and a small disc partly behind a nearer one, within 2 % of exact geometry."""
     import dataclasses

@@ -32,14 +32,17 @@ no threshold (NaN), censored above the highest level;
 ``censored_below`` the MAP 75 % point lies below the lowest tested level (e.g. all correct):
 ``threshold_D`` NaN, ``threshold_bound_D`` = lowest level, read "< lowest level";
 ``censored_above`` ... above the highest level (e.g. chance performance): NaN, "> highest level";
-``bimodal`` the dense-grid posterior has two separated modes (:func:`is_bimodal`); the MAP
-is then arbitrary between them;
+``bimodal`` the refined-grid posterior has two separated modes (:func:`separated_peaks`)
+that climbs on the exact posterior do not join (:func:`climbs_apart`), or a second zoomed
+mode's 75 % point differs; the MAP is then arbitrary between them;
 ``posterior_at_grid_edge`` the threshold or width marginal has > 0.1 % mass at a prior bound
-(psignifit's own check);
+(psignifit's own check), or the final grid still cuts the mass at an edge that is no bound;
 ``no_upper_bound`` the upper CI bound is infinite (threshold itself is in range);
 ``ok`` none of these.
 
-``flags`` lists every condition that applies (the status among them), plus ``all_correct``
+``flags`` lists every condition that applies (the status among them), plus ``grid_peaks_joined``
+(the grid showed separated peaks that hill-climbs on the exact posterior join: one mode, not
+``bimodal``), ``all_correct``
 and ``ci_below_range`` / ``ci_above_range`` (a CI bound beyond the tested levels: a posterior
 percentile under the fitted model, kept as a number but never unflagged).
 
@@ -746,8 +749,8 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), sourc
     elif t_map > hi_level:
         conditions.append("censored_above")
     pairs = separated_peaks(np.asarray(gp.posterior))
-    if any(climbs_apart(data, gp.priors, gp.grid, gp.bounds, top, other) for top, other in pairs) \
-            or _distinct_thresholds(gp.modes, high - low):
+    apart = any(climbs_apart(data, gp.priors, gp.grid, gp.bounds, top, other) for top, other in pairs)
+    if apart or _distinct_thresholds(gp.modes, high - low):
         conditions.append("bimodal")
     if _edge_mass(gp.dense_grid, gp.dense_posterior, gp.bounds, gp.names) or gp.cut_axes:
         conditions.append("posterior_at_grid_edge")
@@ -756,6 +759,8 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), sourc
     status = next((s for s in STATUSES if s in conditions), "ok")
 
     flags = [s for s in STATUSES if s in conditions]
+    if pairs and not apart:
+        flags.append("grid_peaks_joined")
     if np.all(data[:, 1] == data[:, 2]):
         flags.append("all_correct")
     if np.isfinite(low) and low < lo_level:

@@ -11,7 +11,7 @@ import pytest
 
 from psyop.statistics.psychometric import (
     STATUSES, FitOptions, InvalidPsychometricData, aggregate_blocks, fit_many, fit_psychometric,
-    fit_psychometric_table, grid_posterior, is_bimodal, log_posterior_2afc, tabulate_priors, usable_for_analysis,
+    fit_psychometric_table, grid_cuts_posterior, grid_posterior, is_bimodal, log_posterior_2afc, tabulate_priors, refine_posterior, usable_for_analysis,
 )
 from psyop.statistics.simulate import DETECTION_LEVELS_D, pc_2afc, simulate_detection, true_t75
 
@@ -124,6 +124,18 @@ def test_ci_coverage_holds_from_15_to_10000_trials_per_level(n_per_level):
     assert all(f.threshold_ci_low_D < f.threshold_D < f.threshold_ci_high_D for f in usable)
 
 
+def test_a_grid_edge_that_cuts_the_mass_moves_out_but_a_prior_bound_stays():
+    grid = {"eta": np.array([0.0]), "gamma": np.array([0.5]), "lambda": np.linspace(0.0, 0.1, 5),
+            "threshold": np.linspace(0.0, 1.0, 11), "width": np.linspace(1.0, 2.0, 5)}
+    bounds = {"eta": (0.0, 0.0), "gamma": (0.5, 0.5), "lambda": (0.0, 0.5), "threshold": (-1.0, 3.0), "width": (0.5, 4.0)}
+    post = np.zeros((1, 1, 5, 11, 5))
+    post[0, 0, 0, -1, 2] = 1.0  # all mass at the top threshold edge and at lambda = 0, its prior bound
+    assert grid_cuts_posterior(grid, post, bounds) == ["threshold"]
+    new, done = refine_posterior(grid, post, bounds, {"threshold": 1.0, "lambda": 0.1, "width": 1.0})
+    assert not done
+    assert new["threshold"][-1] == pytest.approx(2.0) and new["lambda"][0] == 0.0
+
+
 def test_grid_follows_the_posterior_when_psignifits_tightened_bounds_cut_it():
     """10,000 trials per level, lapse 0.03, 5 levels: psignifit's sparse grid (lapse rows 0, 0.1, ...)
     tightens the width bounds to 1.85-2.44 around a lapse-0 curve, excluding the true width 1.25;
@@ -142,6 +154,15 @@ def test_grid_follows_the_posterior_when_psignifits_tightened_bounds_cut_it():
         assert fit.status == "ok"
         assert abs(fit.sigma_D - 0.38) < 0.02
         assert fit.threshold_ci_low_D <= truth <= fit.threshold_ci_high_D
+        if seed == 0:  # public psignifit reads its CIs off the same tightened grid: its width CI misses its own MAP
+            import warnings
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = psignifit.psignifit(data, experiment_type="2AFC", sigmoid="norm", fixed_parameters={"eta": 0.0})
+            low, high = res.confidence_intervals["width"]["0.95"]
+            assert not low <= res.parameter_estimate["width"] <= high
+            assert fit.width_D == pytest.approx(res.parameter_estimate["width"], rel=0.02)
 
 
 def test_two_modes_are_flagged_bimodal():
