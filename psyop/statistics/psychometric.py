@@ -6,13 +6,18 @@ search whose objective calls ``scipy.stats.norm.ppf`` on scalars; that step is m
 of ms. psyop runs psignifit's own pipeline (its Configuration, parameter bounds, default
 priors, sparse grid -> tightened bounds -> dense grid), then
 
+- **moves a grid edge that cuts the posterior** out to the mass (:func:`refine_posterior`,
+  :data:`CUT_MASS`): with thousands of trials per level the bounds psignifit tightens on its
+  sparse grid can exclude the mode, and a CI read inside them misses;
 - **refines the posterior grid** around the posterior mass (:func:`refine_posterior`): the
   dense grid spans the tightened prior bounds, so with many trials per level the whole
   posterior falls between two grid points and a CI read off that grid collapses to the grid
   step. The refined grid spans the mass at the same number of points, repeated until each
   axis's central 95 % spans at least :data:`MIN_CI_POINTS` points;
 - **zooms into the posterior mode** with vectorised grids (:func:`_refine_map`) instead of
-  the scalar Nelder-Mead search.
+  the scalar Nelder-Mead search;
+- **confirms two grid peaks** by hill-climbs on the exact posterior (:func:`climbs_apart`)
+  before calling a fit ``bimodal``.
 
 Reported:
 
@@ -84,6 +89,9 @@ LAPSE_NO_THRESHOLD = 0.25
 MIN_CI_POINTS = 10
 #: Tail mass left outside a refined grid, per side and axis.
 REFINE_TAIL = 1e-5
+#: A grid edge (no prior bound) whose marginal holds more than this cuts the posterior and moves out
+#: (psignifit's own edge value: smaller tails moved out made 15-trial CIs no closer to a 2.5x grid's).
+CUT_MASS = EDGE_MASS
 #: At most this many moves of a grid edge that cuts the posterior mass (:func:`refine_posterior`).
 MAX_GRID_MOVES = 8
 
@@ -352,10 +360,10 @@ def _marginal(post: np.ndarray, axis: int) -> np.ndarray:
 
 
 def _cut_edges(values: np.ndarray, marginal: np.ndarray, bound: tuple[float, float]) -> tuple[bool, bool]:
-    """Whether a marginal holds more than :data:`REFINE_TAIL` at its first / last grid point
+    """Whether a marginal holds more than :data:`CUT_MASS` at its first / last grid point
     while that point is not the parameter's bound: the grid cuts the posterior there."""
-    lo_cut = marginal[0] > REFINE_TAIL and values[0] > bound[0] and not np.isclose(values[0], bound[0])
-    hi_cut = marginal[-1] > REFINE_TAIL and values[-1] < bound[1] and not np.isclose(values[-1], bound[1])
+    lo_cut = marginal[0] > CUT_MASS and values[0] > bound[0] and not np.isclose(values[0], bound[0])
+    hi_cut = marginal[-1] > CUT_MASS and values[-1] < bound[1] and not np.isclose(values[-1], bound[1])
     return bool(lo_cut), bool(hi_cut)
 
 
