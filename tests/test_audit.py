@@ -135,6 +135,14 @@ def test_identical_intervals_at_a_non_zero_level_fail(ctx, tmp_path):
     assert "level_D" in report.failures[0]
 
 
+def test_the_audit_api_takes_the_sessions_default_ipd_like_the_cli():
+    """The issue's small things: a 64 mm default beside the sessions' 63 mm; AuditSettings() was 64 mm."""
+    from psyop.cli.render import DEFAULT_IPD_MM
+    from psyop.session.plan import DEFAULT_IPD_M
+
+    assert AuditSettings().ipd_m == DEFAULT_IPD_M == DEFAULT_IPD_MM / 1000.0
+
+
 def test_bad_options_exit_2(tmp_path, capsys):
     assert main(["audit", str(PROTOCOLS / "detection.yaml"), "--scale", "3"]) == 2
     assert "--scale" in capsys.readouterr().err
@@ -182,6 +190,49 @@ def test_audit_areas_match_exact_geometry(ctx):
         measurer.release()
 
 
+def test_small_primitives_read_their_exact_area_at_the_default_audit_scale(ctx):
+    """At the default scale (0.125) a Vive Pro pixel is ~0.6 deg: a 0.5 deg target covers a third of
+    one and its S x S count in the frame's pixels is off by more than 10 % (asserted below). Small
+    primitives are measured in a magnified window: discs, eye-facing discs and rects of 0.5-3 deg
+    out to 30 deg, and a small disc partly behind a nearer one, within 2 % of exact geometry."""
+    import dataclasses
+
+    from psyop.optics.display import VIVE_PRO
+    from psyop.rendering.builders import eye_facing_disc
+    from psyop.rendering.exact_coverage import projected_area_px
+
+    settings = AuditSettings()
+    display = dataclasses.replace(VIVE_PRO, width_px=round(VIVE_PRO.width_px * settings.scale),
+                                  height_px=round(VIVE_PRO.height_px * settings.scale))
+    cam = right_eye_camera(0.0, 0.0, "ocular", display=display)
+    white = Solid((1, 1, 1))
+    measurer = FrameMeasurer(ctx, RenderSettings(reuse_tolerance_px=None, samples_per_axis=settings.samples_per_axis))
+    worst, worst_unzoomed = 0.0, 0.0
+    try:
+        for size_deg in (0.5, 1.0, 3.0):
+            for az, el in ((0.0, 0.37), (-10.0, -11.3), (20.0, 7.9), (-30.0, 0.37)):
+                for prim in (frontoparallel_disc(1.0, size_deg, white, az, el, RIGHT_CENTRE_M),
+                             eye_facing_disc(1.0, size_deg, white, az, el, RIGHT_CENTRE_M),
+                             frontoparallel_rect(1.0, size_deg, size_deg, white, az, el, RIGHT_CENTRE_M)):
+                    exact = projected_area_px(cam, prim)
+                    scene = Scene((prim,), background=(0.0, 0.0, 0.0))
+                    worst = max(worst, abs(measurer.visible_areas_px(scene, cam)[0] / exact - 1.0))
+                    if size_deg == 0.5:
+                        worst_unzoomed = max(worst_unzoomed,
+                                             abs(measurer.visible_areas_px(scene, cam, zoom=False)[0] / exact - 1.0))
+        back = frontoparallel_disc(1.0, 1.0, Solid((1, 0, 0)), 5.0, 2.0, RIGHT_CENTRE_M, "back")
+        front = frontoparallel_disc(0.5, 0.6, white, 5.3, 2.1, RIGHT_CENTRE_M, "front")
+        areas = measurer.visible_areas_px(Scene((back, front)), cam)
+        exact_back = visible_back_area_px(cam, back, front)
+        assert 0.0 < exact_back < projected_area_px(cam, back)
+        assert areas[0] == pytest.approx(exact_back, rel=0.02)
+        assert areas[1] == pytest.approx(projected_area_px(cam, front), rel=0.02)
+    finally:
+        measurer.release()
+    assert worst < 0.02, worst
+    assert worst_unzoomed > 0.1  # what the frame's own pixels give: the magnified window is what passes
+
+
 def test_occlusion_geometry_knows_optical_infinity():
     far = frontoparallel_disc(math.inf, 2.0, Solid((1, 0, 0)), name="far")
     wall = frontoparallel_rect(2.0, 10.0, 10.0, Solid((0, 0, 0)), name="wall")
@@ -219,9 +270,11 @@ def test_masks_sample_every_edge_alike_so_the_packing_decodes(ctx):
         from psyop.rendering.camera_math import crop_camera
 
         crop = crop_camera(right_eye_camera(0.0, -10.0, "ocular"), 600, 900, 96, 96)  # corners of table and floor
-        areas = measurer.visible_areas_px(room, crop)
+        areas = measurer.visible_areas_px(room, crop, zoom=False)
         assert slots(room) == 2
         assert areas.sum() == pytest.approx(96 * 96, abs=0.5)  # the room encloses the eye: every pixel covered
+        # the thin pencil is measured again magnified: finer than the 8 x 8 grid, so the sum moves a little
+        assert measurer.visible_areas_px(room, crop).sum() == pytest.approx(96 * 96, rel=1e-3)
     finally:
         measurer.release()
 

@@ -57,6 +57,7 @@ def test_bench_statistics_lapse_coverage_quick_writes_its_table(tmp_path: Path) 
     report = bench_statistics_lapse_coverage.run(tmp_path, quick=True)
     assert "| trials per level | coverage, all | lapse < 0.01 | lapse >= 0.03 | sd < 0.2 D | sd >= 0.3 D |" in report
     assert "| 15 |" in report and "| 1000 |" in report
+    assert "Lowest coverage over the rows:" in report and "grid peaks joined" in report
 
 
 def test_bench_nc_calibration_quick_writes_its_coverage_table(tmp_path: Path) -> None:

@@ -29,6 +29,7 @@ from psyop.audit.frames import AuditFrame, fixation_point, representative_rows
 from psyop.audit.masks import FrameMeasurer
 from psyop.audit.occlusion import hidden_by
 from psyop.errors import UserError
+from psyop.session.plan import DEFAULT_IPD_M
 
 # Visible means covering at least half of one of the S x S samples of an edge pixel; exact
 # occlusion leaves a hidden primitive's mask at exactly 0.
@@ -45,7 +46,7 @@ class AuditSettings:
     scale: float = 0.125
     gazes: int = 4
     samples_per_axis: int = 16
-    ipd_m: float = 0.064
+    ipd_m: float = DEFAULT_IPD_M  # the sessions' default, as ``psyop audit --ipd-mm``
     seed: int = 0
     #: an adaptive factor's levels to audit (each condition at each); empty: the range's min, start and max
     levels: tuple[float, ...] = ()

@@ -64,3 +64,39 @@ def coverage_px(corners_px: np.ndarray, width_px: int, height_px: int) -> np.nda
         for i in range(max(0, x0), min(width_px, x1)):
             cov[j, i] = _area(_clip(_clip(row, 0, float(i), False), 0, float(i + 1), True))
     return cov
+
+
+def projected_area_px(camera: Any, primitive: Primitive, boundary_points: int = 4096) -> float:
+    """Exact image area (px^2) of a disc or rect wholly in front of the centre of projection and
+    inside the image: the shoelace area of its projected outline (a rect's four corners; a disc's
+    outline at ``boundary_points`` points, relative error ~ (2 pi / n)^2 / 6, 4e-7 at 4096). A
+    primitive at optical infinity is projected as directions. Borders are not supported.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from psyop.optics.display import VIVE_PRO
+    >>> from psyop.rendering.builders import frontoparallel_rect
+    >>> from psyop.rendering.measure import right_eye_camera
+    >>> from psyop.rendering.scene import Solid
+    >>> cam = right_eye_camera(0.0, 0.0, "ocular")
+    >>> rect = frontoparallel_rect(1.0, 2.0, 2.0, Solid((1, 1, 1)))
+    >>> bool(300 < projected_area_px(cam, rect) < 800)
+    True
+    """
+    from psyop.rendering.camera_math import project_directions_px
+
+    if primitive.border is not None:
+        raise ValueError("projected_area_px does not take bordered primitives")
+    c, u, v = (np.asarray(x, dtype=np.float64) for x in (primitive.centre_m, primitive.half_u_m, primitive.half_v_m))
+    if primitive.shape is Shape.RECT:
+        outline = np.array([c - u - v, c + u - v, c + u + v, c - u + v])
+    else:
+        t = np.linspace(0.0, 2.0 * np.pi, boundary_points, endpoint=False)[:, None]
+        outline = c + np.cos(t) * u + np.sin(t) * v
+    project = project_directions_px if primitive.at_infinity else project_points_px
+    xy = project(camera, outline)
+    if not np.isfinite(xy).all():
+        raise ValueError("the primitive must lie entirely in front of the centre of projection")
+    x, y = xy[:, 0], xy[:, 1]
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))

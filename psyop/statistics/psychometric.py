@@ -6,13 +6,18 @@ search whose objective calls ``scipy.stats.norm.ppf`` on scalars; that step is m
 of ms. psyop runs psignifit's own pipeline (its Configuration, parameter bounds, default
 priors, sparse grid -> tightened bounds -> dense grid), then
 
+- **moves a grid edge that cuts the posterior** out to the mass (:func:`refine_posterior`,
+  :data:`CUT_MASS`): with thousands of trials per level the bounds psignifit tightens on its
+  sparse grid can exclude the mode, and a CI read inside them misses;
 - **refines the posterior grid** around the posterior mass (:func:`refine_posterior`): the
   dense grid spans the tightened prior bounds, so with many trials per level the whole
   posterior falls between two grid points and a CI read off that grid collapses to the grid
   step. The refined grid spans the mass at the same number of points, repeated until each
   axis's central 95 % spans at least :data:`MIN_CI_POINTS` points;
 - **zooms into the posterior mode** with vectorised grids (:func:`_refine_map`) instead of
-  the scalar Nelder-Mead search.
+  the scalar Nelder-Mead search;
+- **confirms two grid peaks** by hill-climbs on the exact posterior (:func:`climbs_apart`)
+  before calling a fit ``bimodal``.
 
 Reported:
 
@@ -32,14 +37,17 @@ no threshold (NaN), censored above the highest level;
 ``censored_below`` the MAP 75 % point lies below the lowest tested level (e.g. all correct):
 ``threshold_D`` NaN, ``threshold_bound_D`` = lowest level, read "< lowest level";
 ``censored_above`` ... above the highest level (e.g. chance performance): NaN, "> highest level";
-``bimodal`` the dense-grid posterior has two separated modes (:func:`is_bimodal`); the MAP
-is then arbitrary between them;
+``bimodal`` the refined-grid posterior has two separated modes (:func:`separated_peaks`)
+that climbs on the exact posterior do not join (:func:`climbs_apart`), or a second zoomed
+mode's 75 % point differs; the MAP is then arbitrary between them;
 ``posterior_at_grid_edge`` the threshold or width marginal has > 0.1 % mass at a prior bound
-(psignifit's own check);
+(psignifit's own check), or the final grid still cuts the mass at an edge that is no bound;
 ``no_upper_bound`` the upper CI bound is infinite (threshold itself is in range);
 ``ok`` none of these.
 
-``flags`` lists every condition that applies (the status among them), plus ``all_correct``
+``flags`` lists every condition that applies (the status among them), plus ``grid_peaks_joined``
+(the grid showed separated peaks that hill-climbs on the exact posterior join: one mode, not
+``bimodal``), ``all_correct``
 and ``ci_below_range`` / ``ci_above_range`` (a CI bound beyond the tested levels: a posterior
 percentile under the fitted model, kept as a number but never unflagged).
 
@@ -54,7 +62,7 @@ rows.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 
@@ -64,7 +72,7 @@ import psignifit
 from psignifit._parameter import masked_parameter_bounds, parameter_bounds, parameter_grid
 from psignifit._posterior import integral_weights
 from psignifit._priors import setup_priors
-from scipy import ndimage, special
+from scipy import ndimage, optimize, special
 from scipy.stats import norm
 
 from psyop.errors import UserError
@@ -81,6 +89,11 @@ LAPSE_NO_THRESHOLD = 0.25
 MIN_CI_POINTS = 10
 #: Tail mass left outside a refined grid, per side and axis.
 REFINE_TAIL = 1e-5
+#: A grid edge (no prior bound) whose marginal holds more than this cuts the posterior and moves out
+#: (psignifit's own edge value: smaller tails moved out made 15-trial CIs no closer to a 2.5x grid's).
+CUT_MASS = EDGE_MASS
+#: At most this many moves of a grid edge that cuts the posterior mass (:func:`refine_posterior`).
+MAX_GRID_MOVES = 8
 
 STATUSES = ("no_fit", "lapse_at_bound", "censored_below", "censored_above", "bimodal",
             "posterior_at_grid_edge", "no_upper_bound", "ok")
@@ -321,6 +334,12 @@ class GridPosterior:
     n_refinements: int
     #: distinct local maxima (log posterior, parameters), best first; ``grid_max`` is the first
     modes: tuple[tuple[float, dict[str, float]], ...] = ()
+    #: free axes whose mass the final grid still cuts at an edge that is no prior bound
+    cut_axes: tuple[str, ...] = ()
+    #: how often a cutting grid edge was moved out (:func:`refine_posterior`)
+    n_moves: int = 0
+    #: psignifit's normalised priors (tabulated, :func:`tabulate_priors`) the posterior was computed with
+    priors: dict[str, Callable[[np.ndarray], np.ndarray]] = field(default_factory=dict)
 
 
 def _t75_mesh(grid: dict[str, np.ndarray], sigmoid) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
@@ -340,11 +359,39 @@ def _marginal(post: np.ndarray, axis: int) -> np.ndarray:
     return m / m.sum()
 
 
-def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict[str, tuple[float, float]]
-                     ) -> tuple[dict[str, np.ndarray], bool]:
+def _cut_edges(values: np.ndarray, marginal: np.ndarray, bound: tuple[float, float]) -> tuple[bool, bool]:
+    """Whether a marginal holds more than :data:`CUT_MASS` at its first / last grid point
+    while that point is not the parameter's bound: the grid cuts the posterior there."""
+    lo_cut = marginal[0] > CUT_MASS and values[0] > bound[0] and not np.isclose(values[0], bound[0])
+    hi_cut = marginal[-1] > CUT_MASS and values[-1] < bound[1] and not np.isclose(values[-1], bound[1])
+    return bool(lo_cut), bool(hi_cut)
+
+
+def grid_cuts_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict[str, tuple[float, float]]
+                        ) -> list[str]:
+    """The free axes whose posterior mass the grid cuts off at an edge that is not a prior bound."""
+    names = sorted(grid)
+    cut = []
+    for axis, name in enumerate(names):
+        values = np.atleast_1d(grid[name])
+        if len(values) > 1 and any(_cut_edges(values, _marginal(post, axis), bounds[name])):
+            cut.append(name)
+    return cut
+
+
+def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict[str, tuple[float, float]],
+                     move_D: dict[str, float] | None = None) -> tuple[dict[str, np.ndarray], bool]:
     """A grid spanning each free axis's posterior mass (tails <= :data:`REFINE_TAIL` cut) with
     the same number of points; ``done`` is True when the threshold and width axes already resolve
-    their central 95 % with >= :data:`MIN_CI_POINTS` points (or half the axis)."""
+    their central 95 % with >= :data:`MIN_CI_POINTS` points (or half the axis) and no axis's
+    mass is cut by the grid.
+
+    Where the grid cuts the mass at an edge that is not a prior bound (psignifit's bounds,
+    tightened on its sparse grid, can exclude the mode: with thousands of trials per level
+    the sparse grid's best cell lies on a lapse row next to the true one, and the tightened
+    box around it excludes the true width), that edge moves outwards by ``move_D[axis]``
+    (default: the axis's span), clipped to the bound, so repeated calls walk the grid to the mass.
+    """
     names = sorted(grid)
     new, done = {}, True
     for axis, name in enumerate(names):
@@ -352,13 +399,20 @@ def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict
         if len(values) < 2:
             new[name] = grid[name]
             continue
-        cdf = np.cumsum(_marginal(post, axis))
+        marginal = _marginal(post, axis)
+        cdf = np.cumsum(marginal)
         inner = np.searchsorted(cdf, [0.025, 0.975])
         if name in ("threshold", "width") and inner[1] - inner[0] + 1 < min(MIN_CI_POINTS, len(values) // 2):
             done = False
         lo_i = max(int(np.searchsorted(cdf, REFINE_TAIL)) - 1, 0)
         hi_i = min(int(np.searchsorted(cdf, 1.0 - REFINE_TAIL)) + 1, len(values) - 1)
         lo, hi = values[lo_i], values[hi_i]
+        lo_cut, hi_cut = _cut_edges(values, marginal, bounds[name])
+        move = (move_D or {}).get(name, values[-1] - values[0])
+        if lo_cut:
+            lo, done = values[0] - move, False
+        if hi_cut:
+            hi, done = values[-1] + move, False
         lo, hi = max(lo, bounds[name][0]), min(hi, bounds[name][1])
         new[name] = np.linspace(lo, hi, len(values)) if hi > lo else values
     unchanged = all(np.allclose(np.atleast_1d(new[n]), np.atleast_1d(grid[n])) for n in names)
@@ -469,18 +523,26 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
     _, dense_t75, names = _t75_mesh(dense_grid, sigmoid)
 
     grid, post, n_ref, lp = dense_grid, dense_post, 0, dense_lp
-    for _ in range(options.posterior_refinements):
-        new_grid, done = refine_posterior(grid, post, bounds)
+    # a grid edge that cuts the mass moves out in steps of the dense grid's span (at most
+    # MAX_GRID_MOVES times); refinements for resolution are at most ``posterior_refinements``
+    move_D = {n: float(np.ptp(np.atleast_1d(v))) for n, v in dense_grid.items()}
+    n_moves = 0
+    while True:
+        cut = grid_cuts_posterior(grid, post, bounds)
+        if cut and n_moves >= MAX_GRID_MOVES or not cut and n_ref - n_moves >= options.posterior_refinements:
+            break
+        new_grid, done = refine_posterior(grid, post, bounds, move_D)
         if done:
             break
         lp = log_posterior_2afc(data, priors, new_grid)
         post, grid_max = posterior_2afc(data, priors, new_grid, lp)
-        grid, n_ref = new_grid, n_ref + 1
+        grid, n_ref, n_moves = new_grid, n_ref + 1, n_moves + bool(cut)
+    cut = grid_cuts_posterior(grid, post, bounds)
     mesh, t75, names = _t75_mesh(grid, sigmoid)
     modes = _find_modes(data, priors, grid, bounds, options.map_refinements, lp) if options.map_refinements else []
     grid_max = modes[0][1] if modes else grid_max
     return GridPosterior(mesh, post, t75, grid, bounds, grid_max, names, dense_grid, dense_post, dense_t75, n_ref,
-                         tuple(modes))
+                         tuple(modes), tuple(cut), n_moves, priors)
 
 
 def _find_modes(data, priors, grid, bounds, zooms: int, lp: np.ndarray, max_starts: int = 4,
@@ -547,24 +609,24 @@ def _t75(params: dict[str, float]) -> float:
     return float(params["threshold"] + norm.ppf(scaled) * params["width"] / (2.0 * norm.ppf(0.95)))
 
 
-def is_bimodal(post: np.ndarray, min_ratio: float = 0.1, max_dip: float = 0.75) -> bool:
-    """Whether a grid posterior has two separated modes (the MAP is then arbitrary between them).
+def separated_peaks(post: np.ndarray, min_ratio: float = 0.1, max_dip: float = 0.75) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Pairs (highest peak, other peak) of grid indices that :func:`is_bimodal` calls separated.
 
     Local maxima of the joint posterior (each >= its 3^d grid neighbourhood) with at least
     ``min_ratio`` of the highest density are candidates; two are separate modes when the
     density along the straight line between them (linear interpolation on the grid) drops
-    below ``max_dip`` of the lower one. Two modes within a few hundredths of a log unit
-    (e.g. a small-lapse shallow curve and a large-lapse steep one) are the typical case.
+    below ``max_dip`` of the lower one.
     """
-    p = np.squeeze(np.asarray(post, float))
-    if p.ndim == 0 or p.max() <= 0:
-        return False
+    p = np.asarray(post, float)
+    if p.size == 0 or p.max() <= 0:
+        return []
     p = p / p.max()
     is_max = (p == ndimage.maximum_filter(p, size=3, mode="nearest")) & (p >= min_ratio)
     peaks = np.argwhere(is_max)
     if len(peaks) < 2:
-        return False
+        return []
     top = peaks[np.argmax(p[tuple(peaks.T)])]
+    pairs = []
     for other in peaks:
         dist = np.abs(other - top).max()
         if dist < 2:
@@ -573,8 +635,57 @@ def is_bimodal(post: np.ndarray, min_ratio: float = 0.1, max_dip: float = 0.75) 
         line = top[:, None] + (other - top)[:, None] * t[None, :]
         along = ndimage.map_coordinates(p, line, order=1, mode="nearest")
         if along.min() < max_dip * p[tuple(other)]:
-            return True
-    return False
+            pairs.append((top, other))
+    return pairs
+
+
+def is_bimodal(post: np.ndarray, min_ratio: float = 0.1, max_dip: float = 0.75) -> bool:
+    """Whether a grid posterior has two separated modes (the MAP is then arbitrary between them).
+
+    See :func:`separated_peaks`. Two modes within a few hundredths of a log unit (e.g. a
+    small-lapse shallow curve and a large-lapse steep one) are the typical case. On a grid, a
+    narrow diagonal ridge also shows separated peaks; :func:`fit_psychometric` therefore
+    confirms each pair by climbing the exact posterior (:func:`climbs_apart`).
+    """
+    p = np.squeeze(np.asarray(post, float))
+    if p.ndim == 0:
+        return False
+    return bool(separated_peaks(p, min_ratio, max_dip))
+
+
+def _climb(data, priors, grid: dict[str, np.ndarray], bounds, index: np.ndarray) -> np.ndarray:
+    """The local maximum of the exact log posterior reached from grid point ``index`` (free axes
+    only, in grid-step units)."""
+    names = sorted(grid)
+    free = [n for n in names if len(np.atleast_1d(grid[n])) > 1]
+    start = {n: float(np.atleast_1d(grid[n])[i]) for n, i in zip(names, index)}
+    step = np.array([np.ptp(grid[n]) / (len(grid[n]) - 1) for n in free])
+    x0 = np.array([start[n] for n in free])
+    lo = np.array([bounds[n][0] for n in free])
+    hi = np.array([bounds[n][1] for n in free])
+
+    def negative(u: np.ndarray) -> float:
+        x = np.clip(x0 + u * step, lo, hi)
+        point = dict(start, **{n: np.atleast_1d(v) for n, v in zip(free, x)})
+        value = float(log_posterior_2afc(data, priors, {k: np.atleast_1d(v) for k, v in point.items()}).max())
+        return -value if np.isfinite(value) else 1e300
+
+    res = optimize.minimize(negative, np.zeros(len(free)), method="Nelder-Mead",
+                            bounds=list(zip((lo - x0) / step, (hi - x0) / step)),
+                            options={"xatol": 1e-3, "fatol": 1e-9, "maxiter": 2000})
+    return np.asarray(res.x, float)  # offset from ``index`` in grid steps
+
+
+def climbs_apart(data, priors, grid: dict[str, np.ndarray], bounds, top: np.ndarray, other: np.ndarray) -> bool:
+    """Whether hill-climbs on the exact posterior from two grid peaks end more than one grid step
+    apart on some axis, i.e. whether the two peaks are two modes and not one ridge seen on a grid."""
+    names = sorted(grid)
+    free_axes = [i for i, n in enumerate(names) if len(np.atleast_1d(grid[n])) > 1]
+    top_free = np.asarray(top)[free_axes].astype(float)
+    other_free = np.asarray(other)[free_axes].astype(float)
+    end_top = top_free + _climb(data, priors, grid, bounds, top)
+    end_other = other_free + _climb(data, priors, grid, bounds, other)
+    return bool(np.abs(end_top - end_other).max() > 1.0)
 
 
 def _distinct_thresholds(modes, ci_width_D: float, min_log_ratio: float = -1.0, min_shift: float = 0.25) -> bool:
@@ -645,15 +756,19 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), sourc
         conditions.append("censored_below")
     elif t_map > hi_level:
         conditions.append("censored_above")
-    if is_bimodal(gp.posterior) or _distinct_thresholds(gp.modes, high - low):
+    pairs = separated_peaks(np.asarray(gp.posterior))
+    apart = any(climbs_apart(data, gp.priors, gp.grid, gp.bounds, top, other) for top, other in pairs)
+    if apart or _distinct_thresholds(gp.modes, high - low):
         conditions.append("bimodal")
-    if _edge_mass(gp.dense_grid, gp.dense_posterior, gp.bounds, gp.names):
+    if _edge_mass(gp.dense_grid, gp.dense_posterior, gp.bounds, gp.names) or gp.cut_axes:
         conditions.append("posterior_at_grid_edge")
     if not np.isfinite(high):
         conditions.append("no_upper_bound")
     status = next((s for s in STATUSES if s in conditions), "ok")
 
     flags = [s for s in STATUSES if s in conditions]
+    if pairs and not apart:
+        flags.append("grid_peaks_joined")
     if np.all(data[:, 1] == data[:, 2]):
         flags.append("all_correct")
     if np.isfinite(low) and low < lo_level:

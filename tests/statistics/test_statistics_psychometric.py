@@ -11,7 +11,7 @@ import pytest
 
 from psyop.statistics.psychometric import (
     STATUSES, FitOptions, InvalidPsychometricData, aggregate_blocks, fit_many, fit_psychometric,
-    fit_psychometric_table, is_bimodal, log_posterior_2afc, tabulate_priors, usable_for_analysis,
+    fit_psychometric_table, grid_cuts_posterior, grid_posterior, is_bimodal, log_posterior_2afc, tabulate_priors, refine_posterior, usable_for_analysis,
 )
 from psyop.statistics.simulate import DETECTION_LEVELS_D, pc_2afc, simulate_detection, true_t75
 
@@ -122,6 +122,47 @@ def test_ci_coverage_holds_from_15_to_10000_trials_per_level(n_per_level):
     assert 0.88 <= coverage <= 0.995, coverage
     usable = [f for f in fits if f.usable]
     assert all(f.threshold_ci_low_D < f.threshold_D < f.threshold_ci_high_D for f in usable)
+
+
+def test_a_grid_edge_that_cuts_the_mass_moves_out_but_a_prior_bound_stays():
+    grid = {"eta": np.array([0.0]), "gamma": np.array([0.5]), "lambda": np.linspace(0.0, 0.1, 5),
+            "threshold": np.linspace(0.0, 1.0, 11), "width": np.linspace(1.0, 2.0, 5)}
+    bounds = {"eta": (0.0, 0.0), "gamma": (0.5, 0.5), "lambda": (0.0, 0.5), "threshold": (-1.0, 3.0), "width": (0.5, 4.0)}
+    post = np.zeros((1, 1, 5, 11, 5))
+    post[0, 0, 0, -1, 2] = 1.0  # all mass at the top threshold edge and at lambda = 0, its prior bound
+    assert grid_cuts_posterior(grid, post, bounds) == ["threshold"]
+    new, done = refine_posterior(grid, post, bounds, {"threshold": 1.0, "lambda": 0.1, "width": 1.0})
+    assert not done
+    assert new["threshold"][-1] == pytest.approx(2.0) and new["lambda"][0] == 0.0
+
+
+def test_grid_follows_the_posterior_when_psignifits_tightened_bounds_cut_it():
+    """10,000 trials per level, lapse 0.03, 5 levels: psignifit's sparse grid (lapse rows 0, 0.1, ...)
+    tightens the width bounds to 1.85-2.44 around a lapse-0 curve, excluding the true width 1.25;
+    the old CI was read inside that box (fitted sd 0.56 against 0.38; the CI missed in every seed).
+    The grid's cut edges now move out to the mass."""
+    levels = np.linspace(0.0, 1.5, 5)
+    truth = true_t75(0.33, 0.38, 0.03)
+    options = FitOptions(n_bootstrap=0, estimate_eta=False)
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        data = np.c_[levels, rng.binomial(10000, pc_2afc(levels, 0.33, 0.38, 0.03)), np.full(5, 10000)]
+        gp = grid_posterior(data, options)
+        assert gp.dense_grid["width"][0] > 0.38 * 3.29 * 1.3  # psignifit's tightened box excludes the truth
+        assert gp.n_moves >= 1 and not gp.cut_axes
+        fit = fit_psychometric(data, options)
+        assert fit.status == "ok"
+        assert abs(fit.sigma_D - 0.38) < 0.02
+        assert fit.threshold_ci_low_D <= truth <= fit.threshold_ci_high_D
+        if seed == 0:  # public psignifit reads its CIs off the same tightened grid: its width CI misses its own MAP
+            import warnings
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = psignifit.psignifit(data, experiment_type="2AFC", sigmoid="norm", fixed_parameters={"eta": 0.0})
+            low, high = res.confidence_intervals["width"]["0.95"]
+            assert not low <= res.parameter_estimate["width"] <= high
+            assert fit.width_D == pytest.approx(res.parameter_estimate["width"], rel=0.02)
 
 
 def test_two_modes_are_flagged_bimodal():
