@@ -123,7 +123,7 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
                 except TimeoutError:
                     done = set()
                 except Exception as exc:  # noqa: BLE001 - the futures of a dead scheduler are cancelled
-                    if "Cancelled" in type(exc).__name__:
+                    if "Cancelled" in type(exc).__name__ or _connection_lost(exc):
                         raise lost(f"the scheduler connection was lost ({type(exc).__name__})") from None
                     raise
                 for future in done:
@@ -134,6 +134,8 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
                     except Exception as exc:  # noqa: BLE001 - a cancelled future of a dead scheduler
                         if type(exc).__name__ in ("CancelledError", "FutureCancelledError"):
                             raise lost(f"the scheduler cancelled its tasks ({type(exc).__name__})") from None
+                        if future.status != "error" and _connection_lost(exc):  # not the replication's own error
+                            raise lost(f"the scheduler connection was lost ({type(exc).__name__})") from None
                         raise
                     on_result(index[future.key], results[index[future.key]])  # type: ignore[arg-type]
                     bar.update(1)
@@ -162,6 +164,16 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
             pass
         finally:
             quiet.setLevel(level)
+
+
+def _connection_lost(exc: BaseException) -> bool:
+    """Whether ``exc`` is the client's connection to the scheduler failing (a reset or closed
+    socket: an OSError, or distributed's CommClosedError), not a replication's own error. Under load
+    a killed scheduler surfaces as ``ConnectionResetError`` from the wait, which the CLI would
+    otherwise report as a file I/O error (exit 2) instead of a lost cluster (exit 3)."""
+    from distributed.comm.core import CommClosedError
+
+    return isinstance(exc, (OSError, CommClosedError))
 
 
 def _n_workers(client: object, timeout_s: float) -> int | None:
