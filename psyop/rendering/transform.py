@@ -30,6 +30,16 @@ def rotation_matrix(orientation_wxyz: Sequence[float]) -> np.ndarray:
     ])
 
 
+def rotate_rows(r: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """``r @ v`` for each row ``v`` of ``vectors`` ((n, 3) -> (n, 3)), as three elementwise products and
+    two sums in a fixed order.
+
+    Not a BLAS product: ``vectors @ r.T`` (gemm) and ``r @ v`` (gemv) may round differently on another CPU
+    (FMA, other blocking), and the vectorised and per-primitive motions must agree bit for bit everywhere.
+    """
+    return vectors[:, 0:1] * r[:, 0] + vectors[:, 1:2] * r[:, 1] + vectors[:, 2:3] * r[:, 2]
+
+
 def scene_in_head(scene: Scene, head_position_m: Sequence[float], head_orientation_wxyz: Sequence[float]) -> Scene:
     """``scene`` (world coordinates) expressed in the head space of the given head pose.
 
@@ -54,9 +64,9 @@ def scene_in_head(scene: Scene, head_position_m: Sequence[float], head_orientati
     r_t = rotation_matrix(head_orientation_wxyz).T
     prims = scene.primitives
     shift = np.array([(0.0, 0.0, 0.0) if p.at_infinity else t for p in prims], dtype=np.float64)
-    centres = ((np.array([p.centre_m for p in prims]) - shift) @ r_t.T).tolist()
-    half_u = (np.array([p.half_u_m for p in prims]) @ r_t.T).tolist()
-    half_v = (np.array([p.half_v_m for p in prims]) @ r_t.T).tolist()
+    centres = rotate_rows(r_t, np.array([p.centre_m for p in prims]) - shift).tolist()
+    half_u = rotate_rows(r_t, np.array([p.half_u_m for p in prims])).tolist()
+    half_v = rotate_rows(r_t, np.array([p.half_v_m for p in prims])).tolist()
     moved = tuple(p.moved(tuple(c), tuple(u), tuple(v)) for p, c, u, v in zip(prims, centres, half_u, half_v, strict=True))
     return dataclasses.replace(scene, primitives=moved)
 
@@ -72,9 +82,9 @@ def scene_in_head_per_primitive(scene: Scene, head_position_m: Sequence[float],
     primitives = tuple(
         dataclasses.replace(
             p,
-            centre_m=tuple(r_t @ (np.asarray(p.centre_m) - (0.0 if p.at_infinity else t))),
-            half_u_m=tuple(r_t @ np.asarray(p.half_u_m)),
-            half_v_m=tuple(r_t @ np.asarray(p.half_v_m)),
+            centre_m=tuple(rotate_rows(r_t, (np.asarray(p.centre_m) - (0.0 if p.at_infinity else t))[None])[0].tolist()),
+            half_u_m=tuple(rotate_rows(r_t, np.asarray(p.half_u_m)[None])[0].tolist()),
+            half_v_m=tuple(rotate_rows(r_t, np.asarray(p.half_v_m)[None])[0].tolist()),
         )
         for p in scene.primitives
     )
