@@ -17,6 +17,11 @@
 DATA ?= data
 RESULTS ?= results
 FIGDIR ?= figures
+# DATA may hold spaces (quoted in every recipe; its sessions are escaped by `psyop studies`);
+# RESULTS and FIGDIR name make targets, which make cannot hold with spaces: refused here
+ifneq ($(words $(RESULTS)) $(words $(FIGDIR)),1 1)
+$(error RESULTS='$(RESULTS)' / FIGDIR='$(FIGDIR)': these folders are make targets and may not contain spaces; choose paths without spaces (DATA may have them))
+endif
 # what runs an analysis script: the venv's python (analysis/batch.py sets it to its own marker)
 ANALYSE ?= $(PY)
 # `make -n`: show the real graph (the analysis commands), run nothing
@@ -25,7 +30,7 @@ DRY_RUN := $(findstring n,$(firstword -$(MAKEFLAGS)))
 OPTICS_SRC := $(wildcard psyop/optics/*.py) psyop/figures/optics_figures.py psyop/figures/labels.py
 STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py analysis/_twoafc.py
 DRAW_SRC := $(STATS_SRC) psyop/figures/study_figures.py psyop/figures/labels.py
-trials_of = $(wildcard $(DATA)/$(1)/sub-*/ses-*/trials.parquet)
+# each study's sessions (its trials.parquet files) are listed, escaped, by `psyop studies --make-rules`
 
 MODEL_FIGURES := $(FIGDIR)/fig03_parallax_vs_eccentricity.png $(FIGDIR)/supp_linearity.png
 TABLES := $(RESULTS)/summary.md
@@ -48,29 +53,29 @@ figures: $(STAMP) $(SYSDEPS_STAMP)
 # Then say which sessions the figures use (per study: count, simulated or real) and refuse
 # a study that mixes simulated and real sessions unless MIX=1.
 figures-data: $(STAMP)
-	@if find $(DATA) -name trials.parquet -print -quit 2>/dev/null | grep -q .; then \
+	@if find "$(DATA)" -name trials.parquet -print -quit 2>/dev/null | grep -q .; then \
 	  echo "[psyop] using the sessions in $(DATA)/"; \
 	else \
 	  echo "[psyop] $(DATA)/ holds no sessions: simulating all five studies (marked simulated)"; \
-	  $(PY) -m psyop simulate --data $(DATA) --protocols protocols --jobs $(JOBS); \
+	  $(PY) -m psyop simulate --data "$(DATA)" --protocols protocols --jobs $(JOBS); \
 	fi
-	@$(PY) -m psyop sessions $(DATA) $(if $(filter 1,$(MIX)),--allow-mixed) | sed 's/^/[psyop] /'; \
+	@$(PY) -m psyop sessions "$(DATA)" $(if $(filter 1,$(MIX)),--allow-mixed) | sed 's/^/[psyop] /'; \
 	  test $${PIPESTATUS[0]} -eq 0
 
 # Re-simulate from scratch: only when every session in $(DATA)/ is simulated (real data is
 # never deleted), remove them with the results and figures, then `make figures`.
 resimulate: $(STAMP)
-	@$(PY) -m psyop sessions $(DATA) --require-simulated --allow-mixed >/dev/null
+	@$(PY) -m psyop sessions "$(DATA)" --require-simulated --allow-mixed >/dev/null
 	@echo "[psyop] removing the simulated sessions in $(DATA)/, $(RESULTS)/ and $(FIGDIR)/"
-	@find $(DATA) -mindepth 1 -maxdepth 1 ! -name README.md -exec rm -rf {} + 2>/dev/null || true
-	@rm -rf $(RESULTS) $(FIGDIR)
+	@find "$(DATA)" -mindepth 1 -maxdepth 1 ! -name README.md -exec rm -rf {} + 2>/dev/null || true
+	@rm -rf "$(RESULTS)" "$(FIGDIR)"
 	@$(MAKE) --no-print-directory figures
 
 # The study rules depend on what data/ holds, so they are written first (psyop studies), then a
 # second make reads them: its dry run lists what is out of date and analysis/batch.py runs that in
 # one process. `+` runs both under `make -n` too, so a dry run shows the real graph.
 figures-build:
-	+@$(PY) -m psyop studies $(DATA) --protocols protocols --make-rules $(RESULTS)/.studies.mk
+	+@$(PY) -m psyop studies "$(DATA)" --protocols protocols --make-rules $(RESULTS)/.studies.mk
 ifeq ($(DRY_RUN),)
 	+@$(PY) analysis/batch.py $(MAKE) -n -s --no-print-directory figures-all STUDIES_MK=$(RESULTS)/.studies.mk
 else
@@ -93,4 +98,4 @@ $(FIGDIR)/supp_linearity.png: analysis/supp_linearity.py $(OPTICS_SRC)
 # from the paper's protocols (by hash), every other study in results/<study>_summary.md.
 $(RESULTS)/summary.md: analysis/results_table.py analysis/paper_values.py $(STUDY_FIGURES) $(STATS_SRC) $(wildcard protocols/*.yaml)
 	@echo "[psyop] $@"
-	@$(ANALYSE) $< --data $(DATA) --results $(RESULTS) --protocols protocols --out $@
+	@$(ANALYSE) $< --data "$(DATA)" --results "$(RESULTS)" --protocols protocols --out $@

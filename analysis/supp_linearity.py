@@ -9,6 +9,8 @@ from pathlib import Path
 from psyop.figures.optics_figures import plot_linearity
 from psyop.figures.output import save_figure
 
+from _common import run
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
@@ -19,4 +21,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run(main))

@@ -140,6 +140,33 @@ def check_finalised(meta: Mapping[str, Any], directory: Path) -> list[FileProble
     return problems
 
 
+def unfinished_finalisation(meta: Mapping[str, Any]) -> bool:
+    """True when session.json says the last run ended but its finalisation never finished (the
+    process was killed while the parquet files were being written): ``runs[-1].ended`` is set and
+    ``finalised`` is missing or older. ``psyop recover`` finishes such a session from its log.
+
+    Examples
+    --------
+    >>> unfinished_finalisation({"runs": [{"ended": "2026-12-02T09:00:05+00:00"}]})
+    True
+    >>> unfinished_finalisation({"runs": [{"ended": "2026-12-02T09:00:05+00:00"}],
+    ...                          "finalised": "2026-12-02T09:00:06+00:00"})
+    False
+    """
+    runs = meta.get("runs")
+    last = runs[-1] if isinstance(runs, list) and runs and isinstance(runs[-1], Mapping) else None
+    ended = last.get("ended") if last is not None else None
+    if not isinstance(ended, str):
+        return False
+    finalised = meta.get("finalised")
+    if not isinstance(finalised, str):
+        return True
+    try:
+        return dt.datetime.fromisoformat(finalised) < dt.datetime.fromisoformat(ended)
+    except ValueError:
+        return False
+
+
 def read_session_meta(directory: Path) -> dict[str, Any] | None:
     """A session directory's session.json as a dict (None when absent); unreadable: UserError."""
     path = Path(directory) / SESSION_METADATA_FILE
@@ -191,6 +218,11 @@ def verify_session(directory: Path) -> None:
     problems = check_finalised(meta, directory)
     if not problems:
         return
+    if unfinished_finalisation(meta):
+        raise UserError(
+            "this session's finalisation was interrupted before it finished (its parquet files are not all "
+            f"written and sealed); every recorded trial is in its checksummed log: run `psyop recover {directory}` "
+            "to finish it", str(directory))
     more = f" (and {len(problems) - 1} more file(s))" if len(problems) > 1 else ""
     raise UserError(
         f"session refused: {problems[0].describe()}{more}. Restore the file, or delete it and run "

@@ -32,23 +32,22 @@ def _sha(study: str) -> str:
     return hashlib.sha256((REPO / "protocols" / f"{study}.yaml").read_bytes()).hexdigest()
 
 
-def dry_run(tmp: Path) -> str:
+def dry_run(tmp: Path, data: str = "data") -> str:
     cmd = ["make", "--no-print-directory", "-n", "-C", str(REPO), "figures-build",
-           f"DATA={tmp / 'data'}", f"RESULTS={tmp / 'results'}", f"FIGDIR={tmp / 'figures'}"]
+           f"DATA={tmp / data}", f"RESULTS={tmp / 'results'}", f"FIGDIR={tmp / 'figures'}"]
     return subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
 
 
-@pytest.fixture()
-def built_tree(tmp_path: Path) -> Path:
+def _build_tree(tmp_path: Path, data: str = "data") -> Path:
     newest_source = max(p.stat().st_mtime for p in [*REPO.glob("psyop/**/*.py"), *REPO.glob("analysis/*.py")])
     t = newest_source + 10
     for study, kind in STUDIES.items():
-        f = tmp_path / "data" / study / "sub-S01" / "ses-1" / "trials.parquet"
+        f = tmp_path / data / study / "sub-S01" / "ses-1" / "trials.parquet"
         f.parent.mkdir(parents=True)
         f.write_bytes(b"")
         (f.parent / "session.json").write_text(json.dumps({"response_kind": kind, "protocol_sha256": _sha(study)}))
         os.utime(f, (t, t))
-    subprocess.run([sys.executable, "-m", "psyop", "studies", str(tmp_path / "data"), "--protocols",
+    subprocess.run([sys.executable, "-m", "psyop", "studies", str(tmp_path / data), "--protocols",
                     str(REPO / "protocols"), "--make-rules", str(tmp_path / STUDIES_MK)], check=True, cwd=REPO,
                    capture_output=True)
     for i, rel in enumerate(OUTPUTS, start=1):
@@ -57,6 +56,35 @@ def built_tree(tmp_path: Path) -> Path:
         f.write_bytes(b"")
         os.utime(f, (t + i, t + i))
     return tmp_path
+
+
+@pytest.fixture()
+def built_tree(tmp_path: Path) -> Path:
+    return _build_tree(tmp_path)
+
+
+def test_a_data_root_with_spaces(tmp_path: Path) -> None:
+    """`make figures DATA='/path/with a space/data'` was `psyop: error: unrecognized arguments`:
+    every recipe quotes the path and the sessions are escaped prerequisites."""
+    import shlex
+
+    tree = _build_tree(tmp_path, "with a space/data")
+    assert "analysis/" not in dry_run(tree, "with a space/data")
+    new = tree / "with a space" / "data" / "detection" / "sub-S02" / "ses-1" / "trials.parquet"
+    new.parent.mkdir(parents=True)
+    new.write_bytes(b"")
+    later = (tree / "results" / "summary.md").stat().st_mtime + 10
+    os.utime(new, (later, later))
+    commands = [shlex.split(line) for line in dry_run(tree, "with a space/data").splitlines() if "analysis/" in line]
+    assert len(commands) == 4
+    for words in commands:
+        assert words[words.index("--data") + 1] == str(tree / "with a space" / "data")
+
+
+def test_results_with_spaces_is_refused_with_one_line(tmp_path: Path) -> None:
+    done = subprocess.run(["make", "--no-print-directory", "-n", "-C", str(REPO), "figures-build",
+                           f"RESULTS={tmp_path / 'my results'}"], capture_output=True, text=True)
+    assert done.returncode == 2 and "may not contain spaces" in done.stderr, done.stderr
 
 
 def test_up_to_date_tree_rebuilds_nothing(built_tree: Path) -> None:

@@ -38,8 +38,23 @@ class Target:
     kind: str = "figure"  # figure (in $(FIGDIR)) or fits (in $(RESULTS))
 
 
-def targets_for(study: str, kind: str, linear_fit: bool) -> list[Target]:
-    """The analysis of one study, by its response kind.
+def make_escaped(path: Path) -> str:
+    r"""``path`` as one word in a make prerequisite list (spaces, ``#``, ``:`` and ``$`` escaped).
+
+    Examples
+    --------
+    >>> make_escaped(Path("my data/sub-1/ses-1/trials.parquet"))
+    'my\\ data/sub-1/ses-1/trials.parquet'
+    """
+    text = path.as_posix().replace("$", "$$")
+    for character in " #:":
+        text = text.replace(character, "\\" + character)
+    return text
+
+
+def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "") -> list[Target]:
+    """The analysis of one study, by its response kind; ``trials`` is its sessions' trials.parquet
+    files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces).
 
     Examples
     --------
@@ -47,8 +62,8 @@ def targets_for(study: str, kind: str, linear_fit: bool) -> list[Target]:
     ['mine_depth.png']
     """
     fits = f"$(RESULTS)/{study}_fits.csv"
-    trials = f"$(call trials_of,{study})"
-    common = f"--study {study} --data $(DATA) --results $(RESULTS)"
+    common = f'--study {study} --data "$(DATA)" --results "$(RESULTS)"'
+
     if kind == "2afc_interval":
         script = "analysis/fig_discrimination_thresholds.py" if linear_fit else "analysis/fig_detection_thresholds.py"
         return [Target(f"{study}_fits.csv", "analysis/fit_psychometric.py", f"$(STATS_SRC) {trials}",
@@ -75,7 +90,8 @@ def make_rules(data: Path, protocols: Path) -> tuple[str, list[str]]:
     said = []
     for facts in studies_in(data):
         uses_linear = bool(facts.protocol_sha256) and set(facts.protocol_sha256) <= linear
-        targets = targets_for(facts.name, facts.kind, uses_linear)
+        sessions = sorted((data / facts.name).glob("sub-*/ses-*/trials.parquet"))
+        targets = targets_for(facts.name, facts.kind, uses_linear, " ".join(make_escaped(p) for p in sessions))
         figures = [t for t in targets if t.kind == "figure"]
         rules.append("STUDY_FIGURES += " + " ".join(f"$(FIGDIR)/{t.output}" for t in figures))
         for t in targets:

@@ -18,11 +18,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from psyop.protocol import load_protocol
+    from psyop.protocol.plausibility import located_warnings
     from psyop.schedule.counts import trial_count
 
     paths = args.protocol if isinstance(args.protocol, list) else [args.protocol]
     if len(paths) == 1:  # a single file: let the CLI report the error as usual
         protocol = load_protocol(paths[0])
+        for line in located_warnings(protocol):
+            print(line, file=sys.stderr)
         print(f"{paths[0]}: ok ({protocol.study.name}: {trial_count(protocol)} trials)")
         return 0
     failed = 0
@@ -33,5 +36,7 @@ def run(args: argparse.Namespace) -> int:
             failed += 1
             print(f"psyop validate: error: {error}", file=sys.stderr)
             continue
+        for line in located_warnings(protocol):
+            print(line, file=sys.stderr)
         print(f"{path}: ok ({protocol.study.name}: {trial_count(protocol)} trials)")
     return 2 if failed else 0

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import Field, model_validator
 
@@ -34,6 +34,13 @@ class Depth(StrictModel):
                              description="dioptres (1/m); 0 = optical infinity; range psyop.optics.ranges.DEPTH_D")
     m: Number | None = Field(default=None, ge=1.0 / DEPTH_D.high, description="metres (at least 1 / the largest depth in D)")
     factor: str | list[str] | None = Field(default=None, description="factor column(s) to add, by name")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _a_unit_is_given(cls, value: Any) -> Any:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            raise ValueError(f"a depth needs its unit: write {{D: {value:g}}} (dioptres) or {{m: {value:g}}} (metres)")
+        return value
 
     @model_validator(mode="after")
     def _one_unit(self) -> "Depth":

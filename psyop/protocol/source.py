@@ -78,6 +78,7 @@ def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDocument, seen: set
     if depth > 200:
         raise UserError("the protocol is nested more than 200 levels deep; flatten it", doc.location(_mark(node)))
     doc.value_marks.setdefault(path, _mark(node))
+    _check_tag(loader, node, doc)
     if id(node) in seen:  # an alias: marks of the anchor already recorded
         return
     seen.add(id(node))
@@ -113,9 +114,27 @@ def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDocument, seen: set
         _check_scalar(loader, node, doc)
 
 
+#: explicit tags a protocol may carry (``!!str 12`` keeps a number as text); any other explicit tag
+#: (``!!binary``, ``!!set``, ``!!omap``, ``!!timestamp``, ``!!python/...``, ``!foo``) makes a value
+#: no protocol field takes, so it is refused at the value with one line
+_PLAIN_TAGS = frozenset(f"tag:yaml.org,2002:{name}" for name in ("str", "int", "float", "bool", "null", "seq", "map"))
+
+
+def _check_tag(loader: Any, node: yaml.Node, doc: YamlDocument) -> None:
+    if node.tag in _PLAIN_TAGS:
+        return
+    value = node.value if isinstance(node, yaml.ScalarNode) else None
+    if node.tag == loader.resolve(type(node), value, (True, False)):
+        return  # resolved from the plain text (a date, a merge key `<<`), not written as a tag
+    tag = str(node.tag)
+    shown = "!!" + tag.removeprefix("tag:yaml.org,2002:") if tag.startswith("tag:yaml.org,2002:") else tag
+    raise UserError(f"the YAML tag {shown} is not used in psyop protocols; remove the tag and write the value "
+                    "plainly (quote it to keep it as text)", doc.location(_mark(node)))
+
+
 #: what a scalar's constructor may raise on a bad value (``!!int abc``, ``!!bool maybe``,
 #: ``2020-02-30``, a 5000-digit integer): reported at the value, never as a traceback
-_CONSTRUCT_ERRORS = (ValueError, KeyError, TypeError, OverflowError, ArithmeticError, yaml.YAMLError)
+_CONSTRUCT_ERRORS = (ValueError, KeyError, TypeError, OverflowError, ArithmeticError, AttributeError, yaml.YAMLError)
 
 
 def _check_scalar(loader: Any, node: yaml.Node, doc: YamlDocument) -> None:

@@ -27,7 +27,7 @@ from pathlib import Path
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
-from psyop.finalised import verify_session
+from psyop.finalised import unfinished_finalisation, verify_session
 from psyop.input_files import MAX_LOG_TABLE_BYTES, MAX_SESSION_JSON_BYTES, InputFile
 
 #: the largest log segment header read to learn a session's identity (a schema record is a few kB)
@@ -50,6 +50,8 @@ class StudySessions:
     participants: tuple[str, ...]
     #: sessions with no record saying simulated or not (counted as real), as ``sub-X/ses-N``
     undescribed: tuple[str, ...] = ()
+    #: sessions whose finalisation was interrupted (counted as incomplete), as their directories
+    unfinished: tuple[Path, ...] = ()
 
     @property
     def mixed(self) -> bool:
@@ -60,6 +62,9 @@ class StudySessions:
         extra = f", {self.n_incomplete} incomplete" if self.n_incomplete else ""
         if self.undescribed:
             extra += f"; no record says simulated, counted as real: {', '.join(self.undescribed[:5])}"
+        if self.unfinished:
+            extra += ("; finalisation interrupted (finish it with `psyop recover DIR`): "
+                      + ", ".join(str(d) for d in self.unfinished[:5]))
         return f"{self.study}: {self.n_simulated + self.n_real} sessions ({', '.join(kinds)}{extra})"
 
 
@@ -72,6 +77,8 @@ class SessionRecord:
     simulated: bool | None  # None: no record says
     complete: bool
     sources: tuple[str, ...]  # which records decided ``simulated``
+    #: the last run ended but its finalisation did not finish (psyop.finalised.unfinished_finalisation)
+    unfinished: bool = False
 
 
 def _regular(path: Path) -> os.stat_result | None:
@@ -160,8 +167,10 @@ def session_record(directory: Path, data_root: Path) -> SessionRecord | None:
     if (value := _segment_simulated(log_dir)) is not None:
         said["log header"] = value
     simulated = None if not said else all(said.values())
-    complete = meta is not None and meta.get("status") == "complete"
-    return SessionRecord(directory, directory.parent.name.removeprefix("sub-"), simulated, complete, tuple(said))
+    unfinished = meta is not None and unfinished_finalisation(meta)
+    complete = meta is not None and meta.get("status") == "complete" and not unfinished
+    return SessionRecord(directory, directory.parent.name.removeprefix("sub-"), simulated, complete, tuple(said),
+                         unfinished)
 
 
 def session_records(data_root: Path, *, verify: bool = True) -> dict[str, list[SessionRecord]]:
@@ -192,7 +201,7 @@ def session_records(data_root: Path, *, verify: bool = True) -> dict[str, list[S
                 once(directory / name)
             record = session_record(directory, root)
             if record is not None:
-                if verify:
+                if verify and not record.unfinished:  # an unfinished one is listed as incomplete, with its fix
                     verify_session(directory)
                 records.append(record)
         if records:
@@ -212,7 +221,8 @@ def inventory(data_root: Path, *, verify: bool = True) -> dict[str, StudySession
         studies[study] = StudySessions(
             study, simulated, len(records) - simulated, sum(1 for r in records if not r.complete),
             tuple(r.participant for r in records),
-            tuple(f"{r.directory.parent.name}/{r.directory.name}" for r in records if r.simulated is None))
+            tuple(f"{r.directory.parent.name}/{r.directory.name}" for r in records if r.simulated is None),
+            tuple(r.directory for r in records if r.unfinished))
     return studies
 
 

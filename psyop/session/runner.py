@@ -70,9 +70,25 @@ class SessionOptions:
     participant_index: int | None = None  # keys block_order: latin_square (None: the number the ID ends in)
 
     @property
+    def simulated_sources(self) -> tuple[str, ...]:
+        """Every source of the session that is not a participant's live input, as ``kind:spec``: a
+        simulated or replayed gaze stream, the simulated observer, a simulated or replayed head pose."""
+        sources = []
+        if self.tracker == "sim" or self.tracker.startswith("replay:"):
+            sources.append(f"tracker:{self.tracker}")
+        if self.responses == "sim":
+            sources.append("responses:sim")
+        if self.pose == "sim" or self.pose.startswith(("replay:", "replay-by-condition:")):
+            sources.append(f"pose:{self.pose}")
+        return tuple(sources)
+
+    @property
     def simulated(self) -> bool:
-        """No person took part: simulated gaze, and a simulated observer or nobody answering."""
-        return self.tracker == "sim" and self.responses in ("sim", "none")
+        """Not a person's data: the gaze is simulated or replayed (it drove the rendering, whoever answered:
+        ``--tracker sim --responses openxr`` included), or the simulated observer answered. A simulated or
+        replayed head pose alone is listed in :attr:`simulated_sources` but does not decide: a desktop
+        session has no head tracker to take it from."""
+        return any(source.startswith(("tracker:", "responses:")) for source in self.simulated_sources)
 
 
 def package_versions() -> dict[str, str]:
@@ -167,7 +183,8 @@ def run_session(
     store = SessionStore(paths, trial_schema(schedule), fsync=options.fsync)
     metadata = {
         "study": study, "participant": options.participant, "session": options.session, "seed": seed,
-        "simulated": options.simulated, "protocol_sha256": protocol_sha256,
+        "simulated": options.simulated, "simulated_sources": list(options.simulated_sources),
+        "protocol_sha256": protocol_sha256,
         "protocol_file_sha256": protocol.source_sha256,
         "protocol_text": protocol.source_text, "protocol_file": protocol.source_name,
         "n_trials_scheduled": int(len(schedule)), **plan.metadata(), "packages": package_versions(),

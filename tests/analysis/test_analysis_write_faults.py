@@ -93,3 +93,21 @@ def test_make_deletes_the_target_of_a_failed_recipe(tmp_path: Path) -> None:
     assert done.returncode != 0
     assert "Deleting file" in done.stderr, done.stderr
     assert not (tmp_path / "half.png").exists()
+
+
+@pytest.mark.parametrize("script", ["fig03_parallax_vs_eccentricity", "supp_linearity"])
+def test_model_figures_on_a_full_disk_are_one_line(tmp_path: Path, script: str) -> None:
+    """The two optics figures did not go through _common.run: a full disk was an OSError traceback
+    (run on their own and inside make figures' batch)."""
+    out = tmp_path / "figures" / f"{script}.png"
+    fault = ("import errno, os, runpy, sys\n"
+             "def full(*a):\n    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))\n"
+             "os.fsync = full\n"
+             f"sys.argv = [{str(ANALYSIS / (script + '.py'))!r}, '--out', {str(out)!r}]\n"
+             f"sys.path.insert(0, {str(ANALYSIS)!r})\n"
+             "runpy.run_path(sys.argv[0], run_name='__main__')\n")
+    done = subprocess.run([sys.executable, "-c", fault], capture_output=True, text=True, cwd=ROOT,
+                          env=dict(os.environ, MPLBACKEND="Agg"))
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "No space left on device" in done.stderr and not out.exists()

@@ -135,6 +135,28 @@ def test_data_root_that_is_a_file(protocol: Path, tmp_path: Path, capsys: pytest
     _fails_cleanly(capsys, _run(protocol, target), "not a directory", str(target))
 
 
+@pytest.mark.parametrize("linked", ["study", "participant", "session", "log"])
+def test_a_folder_linked_outside_the_data_root_is_refused(protocol: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str], linked: str) -> None:
+    """`data/detection/sub-L1 -> /elsewhere` was followed: `psyop run` wrote 8 files outside the root."""
+    data, elsewhere = tmp_path / "data", tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    study = next(line.split(":", 1)[1].strip() for line in protocol.read_text().splitlines()
+                 if line.strip().startswith("name:"))
+    parts = {"study": [study], "participant": [study, "sub-L1"], "session": [study, "sub-L1", "ses-1"],
+             "log": [study, "sub-L1", "ses-1", "log"]}[linked]
+    link = data.joinpath(*parts)
+    link.parent.mkdir(parents=True, exist_ok=True)
+    link.symlink_to(elsewhere, target_is_directory=True)
+    _fails_cleanly(capsys, _run(protocol, data, participant="L1"), "outside the data root", str(link))
+    assert list(elsewhere.iterdir()) == []
+    inside = data / "inside"
+    inside.mkdir()
+    link.unlink()
+    link.symlink_to(inside, target_is_directory=True)  # a link that stays inside the root is fine
+    assert cli_main(_run(protocol, data, participant="L1")) == 0
+
+
 def test_read_only_filesystem(protocol: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
                               monkeypatch: pytest.MonkeyPatch) -> None:
     real_open = os.open

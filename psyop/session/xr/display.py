@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -98,6 +99,9 @@ class OpenXRDisplay:
         self._last_display_ns: int | None = None
         self.head_pose: XrPose | None = None  # VIEW space in the reference space at the frame's display time
         self.head_pose_time_s = math.nan
+        #: set by a response source that answers with the controllers (``--responses openxr``): the first
+        #: trial waits until one is active, or the session ends with one line (:meth:`_wait_for_controller`)
+        self.needs_controller = False
         self.frame_time_ns: int | None = None  # the current frame's predicted display time (XrTime)
         self.frames_not_rendered = 0
         self.frames_missed = 0
@@ -151,6 +155,8 @@ class OpenXRDisplay:
             if self.runtime.lost:
                 raise DisplayInterrupted(self.runtime.lost, rerun=False)
             if self.runtime.focused:
+                if self.needs_controller:
+                    self._wait_for_controller()
                 return
             if time.monotonic() > deadline:
                 raise xr_error(f"the session never became FOCUSED within {FOCUS_TIMEOUT_S:g} s (state "
@@ -160,6 +166,35 @@ class OpenXRDisplay:
                 self._empty_frame()
             else:
                 time.sleep(0.005)
+
+    def _wait_for_controller(self) -> None:
+        """Before the first trial of a session answered with the controllers: wait (submitting empty
+        frames, input synced) until the runtime binds a controller to either hand, else end with one
+        line, exit 3 (the session finalised as incomplete: a rerun resumes). A runtime without controllers recorded every trial as a timeout and said
+        'complete'."""
+        from psyop.session.xr import runtime as xr_runtime
+
+        timeout_s = xr_runtime.CONTROLLER_TIMEOUT_S
+        deadline = time.monotonic() + timeout_s
+        said = False
+        while True:
+            self.runtime.sync_actions()
+            if self.runtime.active_controllers():
+                self.needs_controller = False
+                return
+            if time.monotonic() > deadline:
+                raise DisplayInterrupted(  # ends the session before its first trial, finalised and resumable: exit 3
+                    f"{self.runtime.facts.runtime}: no controller became active within {timeout_s:g} s, and "
+                    "--responses openxr answers with the controllers' buttons; switch a controller on (or pair it) "
+                    "and run again, or answer with --responses keyboard or serial:DEVICE", rerun=False)
+            if not said:
+                print(f"psyop run: waiting up to {timeout_s:g} s for a controller to become active "
+                      "(--responses openxr)", file=sys.stderr, flush=True)
+                said = True
+            self.runtime.poll_events()
+            if self.runtime.lost:
+                raise DisplayInterrupted(self.runtime.lost, rerun=False)
+            self._empty_frame()
 
     @signals_held
     def _wait_and_begin(self) -> Any:

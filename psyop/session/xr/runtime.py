@@ -40,6 +40,9 @@ T = TypeVar("T")
 XR_EXIT_CODE = 3
 #: how long a runtime may take to reach the FOCUSED state before the session gives up
 FOCUS_TIMEOUT_S = 60.0
+#: with ``--responses openxr``: how long the session waits, before its first trial, for a controller
+#: to be active (switched on, paired) before it ends with one line (exit 3)
+CONTROLLER_TIMEOUT_S = 30.0
 
 HANDS: tuple[str, ...] = ("left", "right")
 _SELECT_BINDINGS = {
@@ -407,6 +410,20 @@ class XrRuntime:
         except xr.SessionNotFocused:
             return
         self.sync_count += 1
+
+    @signals_held
+    def active_controllers(self) -> tuple[str, ...]:
+        """The hands with a controller bound now (a current interaction profile, known after a sync)."""
+        xr = self.xr
+        active = []
+        for hand, path in self.hand_paths.items():
+            try:
+                state = xr.get_current_interaction_profile(self.session, path)
+            except xr.XrException:
+                continue
+            if state.interaction_profile != xr.NULL_PATH:
+                active.append(hand)
+        return tuple(active)
 
     @signals_held
     def select_presses(self) -> dict[str, int]:

@@ -191,6 +191,7 @@ class OpenXRResponses(KeyboardResponses):
     @classmethod
     def on_display(cls, display: Any, kind: ResponseKind) -> "OpenXRResponses":
         display = _openxr_display(display, "--responses")
+        display.needs_controller = True  # the first trial waits for one (OpenXRDisplay._wait_for_controller)
 
         def right_hand_reach_m() -> float:
             rt, t_ns = display.runtime, display.frame_time_ns

@@ -406,3 +406,25 @@ def test_ctrl_c_mid_frame_ends_the_headset_session_cleanly_and_it_resumes(tmp_pa
     resumed = _psyop_run(tmp_path, protocol, "--render", "cameras")
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     assert sorted(pd.read_parquet(_session_dir(tmp_path) / "trials.parquet")["trial"]) == [0, 1, 2, 3]
+
+
+#: psyop run with a shorter controller wait (the real code path; 30 s by default)
+_SHORT_CONTROLLER_WAIT = ("import sys; import psyop.session.xr.runtime as r; r.CONTROLLER_TIMEOUT_S = 2.0; "
+                          "from psyop.cli import main; sys.exit(main(sys.argv[1:]))")
+
+
+def test_controller_responses_on_a_runtime_without_controllers_end_before_the_first_trial(tmp_path):
+    """Monado's simulated HMD has no controllers: `--responses openxr` recorded every trial as a timeout
+    and ended 'complete'. Now it waits for one before the first trial, then ends with one line, exit 3,
+    no trial recorded."""
+    protocol = _protocol(tmp_path, timeout_s=0.5)
+    argv = ["run", str(protocol), "--participant", "H1", "--data", str(tmp_path / "data"), "--display", "openxr",
+            "--pose", "openxr", "--clock", "real", "--responses", "openxr", "--no-progress"]
+    done = subprocess.run([sys.executable, "-c", _SHORT_CONTROLLER_WAIT, *argv], env=runtime_env(tmp_path), cwd=REPO,
+                          capture_output=True, text=True, timeout=240, stdin=subprocess.DEVNULL)
+    assert done.returncode == 3, done.stderr[-3000:]
+    last = done.stderr.strip().splitlines()[-1]
+    assert "no controller became active within 2 s" in last and "--responses keyboard" in last, done.stderr[-2000:]
+    assert "Traceback" not in done.stderr and "waiting up to 2 s for a controller" in done.stderr
+    assert pd.read_parquet(_session_dir(tmp_path) / "trials.parquet").empty
+    assert json.loads((_session_dir(tmp_path) / "session.json").read_text())["status"] == "incomplete"  # resumable

@@ -1,0 +1,74 @@
+"""Values that validate but that no eye or display can show: located warnings, not errors.
+
+``depth: {D: 50}`` (2 cm from the eyes) is a valid depth (psyop.optics.ranges.DEPTH_D) that only
+``psyop audit`` noticed; ``psyop validate`` now says so at the value, with the plausible range,
+and still exits 0 (a deliberate near stimulus stays possible).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from psyop.protocol.conditions import expand_conditions
+from psyop.protocol.model import Protocol
+from psyop.protocol.scene import Depth
+from psyop.protocol.source import read_yaml
+
+#: The nearest depth a participant can see sharp and fuse: 10 D (0.1 m) is about the near point of a
+#: young adult eye (accommodation amplitude ~10 D at 20 years) and about the nearest a headset's
+#: near clip plane shows (0.05-0.1 m).
+NEAREST_SEEN_D = 10.0
+#: the scene-item fields that hold a depth
+DEPTH_FIELDS = ("depth", "near", "far", "near_depth", "far_depth")
+
+
+def _nearest_D(depth: Depth, conditions: list[dict[str, Any]]) -> float:
+    values = []
+    for condition in conditions or [{}]:
+        try:
+            value = depth.resolve_D(condition)
+        except (ZeroDivisionError, KeyError, TypeError, ValueError):
+            continue
+        if math.isfinite(value):
+            values.append(value)  # an adaptive level (NaN until run time) is left out
+    return max(values, default=0.0)
+
+
+def plausibility_warnings(protocol: Protocol) -> list[tuple[tuple[Any, ...], str]]:
+    """(key path, message) for every depth nearer than :data:`NEAREST_SEEN_D` in some condition.
+
+    Examples
+    --------
+    >>> from psyop.protocol.scene import Depth
+    >>> round(_nearest_D(Depth(D=50), []), 1)
+    50.0
+    """
+    conditions = expand_conditions(protocol.design)
+    found = []
+    for index, item in enumerate(protocol.scene):
+        for name in DEPTH_FIELDS:
+            depth = getattr(item, name, None)
+            if not isinstance(depth, Depth):
+                continue
+            nearest = _nearest_D(depth, conditions)
+            if nearest > NEAREST_SEEN_D:
+                metres = f"{{m: {depth.D:g}}}" if depth.D is not None and depth.factor is None else "{m: ...}"
+                found.append((("scene", index, name),
+                              f"this depth reaches {nearest:g} D ({100.0 / nearest:.1f} cm from the eyes), nearer than "
+                              f"an eye can focus or a headset shows; plausible depths are 0-{NEAREST_SEEN_D:g} D "
+                              f"(optical infinity to {100.0 / NEAREST_SEEN_D:g} cm); if you meant metres, write {metres}"))
+    return found
+
+
+def located_warnings(protocol: Protocol) -> list[str]:
+    """:func:`plausibility_warnings` as ``file:line:column: warning: ...`` lines."""
+    warnings = plausibility_warnings(protocol)
+    if not warnings:
+        return []
+    document = read_yaml(protocol.source_text, protocol.source_name)
+    lines = []
+    for path, message in warnings:
+        _, mark = document.nearest(path)
+        lines.append(f"{document.location(mark)}: warning: {message}")
+    return lines

@@ -1,0 +1,60 @@
+"""A kill during finalisation: `psyop sessions` (and so `make figures`) said a parquet file 'has no
+SHA-256 in session.json ... delete it and run psyop recover'. It is an unfinished finalisation:
+reported as incomplete with the command that finishes it, and nothing tells the user to delete data."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from psyop.errors import UserError
+from psyop.statistics.dataset import load_dataset
+from session_helpers import small_protocol
+
+REPO = Path(__file__).resolve().parents[2]
+
+#: a `psyop run` killed (os._exit, as SIGKILL: no cleanup) right after the parquet files were written,
+#: before session.json recorded their SHA-256
+KILLED_IN_FINALISATION = """
+import os, sys
+import psyop.session.log.store as store
+def killed(*args, **kwargs):
+    os._exit(9)
+store.record_finalised = killed
+from psyop.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def _psyop(*argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "psyop", *argv], capture_output=True, text=True, cwd=REPO)
+
+
+def test_an_unfinished_finalisation_is_incomplete_and_recover_finishes_it(tmp_path: Path) -> None:
+    protocol = small_protocol(tmp_path, "ordinal", 1)
+    data = tmp_path / "data"
+    run = ["run", str(protocol), "--participant", "K1", "--data", str(data), "--no-progress", "--render", "cameras"]
+    killed = subprocess.run([sys.executable, "-c", KILLED_IN_FINALISATION, *run], capture_output=True, text=True,
+                            cwd=REPO)
+    assert killed.returncode == 9, killed.stderr
+    session = next(data.glob("*/sub-K1/ses-1"))
+    assert (session / "trials.parquet").is_file()
+    assert "trials.parquet" not in json.loads((session / "session.json").read_text()).get("finalised_files", {})
+
+    listed = _psyop("sessions", str(data))
+    assert listed.returncode == 0, listed.stderr
+    assert "1 incomplete" in listed.stdout and f"psyop recover" in listed.stdout and str(session) in listed.stdout
+    assert "delete" not in listed.stdout + listed.stderr
+
+    with pytest.raises(UserError) as refused:  # the analysis does not read half-sealed files: it says how to finish
+        load_dataset(data, session.parent.parent.name)
+    assert f"psyop recover {session}" in str(refused.value) and "delete" not in str(refused.value)
+
+    recovered = _psyop("recover", str(session))
+    assert recovered.returncode == 0, recovered.stderr
+    listed = _psyop("sessions", str(data))
+    assert listed.returncode == 0 and "incomplete" not in listed.stdout and "recover" not in listed.stdout, listed.stdout
