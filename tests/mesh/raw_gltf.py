@@ -45,7 +45,7 @@ class RawGltf:
                                "count": int(values.shape[0]), "type": _TYPE[width]}
         if normalized:
             acc["normalized"] = True
-        if values.dtype == np.float32 and width == 3:
+        if values.dtype == np.float32 and width == 3 and np.all(np.isfinite(values)):
             acc["min"] = values.min(axis=0).tolist()
             acc["max"] = values.max(axis=0).tolist()
         self.doc["accessors"].append(acc)
