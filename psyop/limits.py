@@ -22,3 +22,5 @@ MAX_MESH_TRIANGLES = 2_000_000
 #: the largest side of a base-colour texture, in texels (GPUs guarantee 16384; 8192 keeps an
 #: RGBA float32 upload at 1 GiB at most)
 MAX_TEXTURE_SIDE_PX = 8192
+#: the largest image file psyop reads as a texture (an image surface or a glTF model's image)
+MAX_IMAGE_FILE_BYTES = 128 << 20
