@@ -60,6 +60,8 @@ _WRAPS = {10497: Wrap.REPEAT, 33071: Wrap.CLAMP, 33648: Wrap.MIRROR}
 _MIN_FILTERS = {9728: Filter.NEAREST, 9729: Filter.LINEAR, 9984: Filter.LINEAR_MIPMAP, 9985: Filter.LINEAR_MIPMAP,
                 9986: Filter.LINEAR_MIPMAP, 9987: Filter.LINEAR_MIPMAP}
 _MAG_FILTERS = {9728: Filter.NEAREST, 9729: Filter.LINEAR}
+#: the most elements an accessor may hold (three indices per triangle of the largest model)
+_MAX_ACCESSOR_COUNT = 3 * MAX_MESH_TRIANGLES
 _SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
 _IMAGE_FORMATS = {"PNG": "image/png", "JPEG": "image/jpeg"}
 
@@ -290,6 +292,9 @@ class _Reader:
         width, count = _WIDTHS[acc.type], acc.count
         if not isinstance(count, int) or count < 0:
             raise self.fail(where, f"count {count!r} is not a count; re-export the model")
+        if count > _MAX_ACCESSOR_COUNT:  # an accessor without a bufferView is zeros: bound it before allocating
+            raise self.fail(where, f"{count} elements, more than a model of {MAX_MESH_TRIANGLES} triangles "
+                                   "needs; decimate the model")
         element = dtype.itemsize * width
         if acc.bufferView is None:
             values = np.zeros((count, width), dtype=dtype)
