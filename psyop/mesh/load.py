@@ -413,6 +413,8 @@ class _Reader:
             raise self.fail(where, "is a skinned mesh; psyop draws static meshes: apply the pose in your "
                                    "modelling tool and export without the armature")
         mesh = self.item(self.gltf.meshes, node.mesh, "mesh", where)
+        if np.linalg.det(matrix[:3, :3]) == 0:  # a zero scale hides a node (glTF's idiom): nothing to draw
+            return []
         raw_node = _listed(self.document, "nodes")[node_index]
         node_weights = raw_node.get("weights") if isinstance(raw_node, dict) else None
         weights = list(node_weights) if isinstance(node_weights, list) else list(mesh.weights or [])

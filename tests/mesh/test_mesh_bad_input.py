@@ -241,3 +241,11 @@ def test_not_a_model_file(tmp_path: Path) -> None:
     (tmp_path / "m.obj").write_text("v 0 0 0\n")
     _refused(tmp_path, "m.obj", ".gltf or .glb")
     _refused(tmp_path, "absent.glb", "not found")
+
+
+def test_zero_scale_node_is_hidden_not_an_error(tmp_path: Path) -> None:
+    raw = _model()
+    raw.node(name="hidden", mesh=0, scale=[0.0, 0.0, 0.0])
+    raw.save_glb(tmp_path / "m.glb")
+    assert [p.node for p in load_mesh(Path("m.glb"), base_dir=tmp_path).parts] == ["square"]
+    _refused(tmp_path, "m.glb", "node 'hidden' has no triangles", node="hidden")
