@@ -36,3 +36,26 @@ def test_triangle_without_indices() -> None:
     np.testing.assert_array_equal(part.indices, [[0, 1, 2]])
     np.testing.assert_array_equal(part.positions, [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
     assert part.normals is None and part.texcoords is None and part.base_colour == (1.0, 1.0, 1.0, 1.0)
+
+
+def test_box_textured_texture_sampler_and_uvs_match_trimesh() -> None:
+    from psyop.mesh import Filter, Wrap
+    from psyop.mesh.load import srgb_to_linear
+
+    asset = load_mesh(Path("BoxTextured.gltf"), base_dir=DATA)
+    (part,) = asset.parts  # the empty node {} contributes nothing
+    tex = part.texture
+    assert tex is not None and tex.rgba_linear.shape == (211, 211, 4)
+    assert (tex.wrap_s, tex.wrap_t, tex.mag_filter, tex.min_filter) == (Wrap.REPEAT, Wrap.REPEAT, Filter.LINEAR,
+                                                                         Filter.LINEAR_MIPMAP)
+    theirs = next(iter(trimesh.load(DATA / "BoxTextured.gltf", force="scene").geometry.values()))
+    image = np.asarray(theirs.visual.material.baseColorTexture.convert("RGBA"), dtype=np.float64) / 255.0
+    np.testing.assert_allclose(tex.rgba_linear[..., :3], srgb_to_linear(image[..., :3]), atol=1e-6)
+    assert part.texcoords is not None and float(part.texcoords[:, 0].max()) == 6.0  # u repeats six times
+    # trimesh (unprocessed: vertices in file order) keeps uv with v up, 1 - glTF's v
+    scene = trimesh.load(DATA / "BoxTextured.gltf", force="scene", process=False)
+    (name,) = scene.geometry
+    world, _ = scene.graph[scene.graph.geometry_nodes[name][0]]
+    np.testing.assert_allclose(part.positions, trimesh.transform_points(scene.geometry[name].vertices, world), atol=1e-7)
+    uv = scene.geometry[name].visual.uv
+    np.testing.assert_allclose(part.texcoords, np.column_stack([uv[:, 0], 1 - uv[:, 1]]), atol=1e-6)
