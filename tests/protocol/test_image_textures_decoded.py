@@ -35,7 +35,7 @@ def _study(tmp_path: Path, texture: bytes) -> Path:
 
 @pytest.mark.parametrize("texture", [b"this is a text file, not a PNG\n", b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR\0\0"],
                          ids=["text", "truncated_png"])
-def test_undecodable_texture_is_refused_by_validate_and_run(tmp_path: Path, texture: bytes) -> None:
+def test_undecodable_texture_is_refused_by_validate_run_render_and_audit(tmp_path: Path, texture: bytes) -> None:
     study = _study(tmp_path, texture)
     line = next(i for i, text in enumerate(study.read_text().splitlines(), 1) if "checker.png" in text)
     validate = _psyop("validate", str(study), cwd=tmp_path)
@@ -48,6 +48,11 @@ def test_undecodable_texture_is_refused_by_validate_and_run(tmp_path: Path, text
     assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
     assert "checker.png" in run.stderr
     assert not (tmp_path / "data").exists() or not any((tmp_path / "data").rglob("session.json"))
+    render = _psyop("render", str(study), "--out", str(tmp_path / "frame.png"), cwd=tmp_path)
+    assert render.returncode == 2 and "Traceback" not in render.stderr and "checker.png" in render.stderr, render.stderr
+    assert not (tmp_path / "frame.png").exists()
+    audit = _psyop("audit", str(study), cwd=tmp_path)
+    assert audit.returncode == 2 and "Traceback" not in audit.stderr and "checker.png" in audit.stderr, audit.stderr
 
 
 def test_a_real_image_still_validates(tmp_path: Path) -> None:
