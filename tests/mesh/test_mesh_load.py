@@ -237,3 +237,34 @@ def test_mesh_files_loads_each_content_once(tmp_path: Path) -> None:
     edited[0] ^= 1  # a vertex moves
     (tmp_path / "model.bin").write_bytes(bytes(edited))
     assert files.load("h.gltf") is not again and files.loads == 4
+
+
+def test_sparse_accessor_and_quantized_positions(tmp_path: Path) -> None:
+    raw = RawGltf()
+    positions, indices, _ = quad()
+    m = raw.mesh(positions, indices)
+    acc = raw.doc["accessors"][0]
+    # sparse: vertex 2 moves to (2, 3, 0) on top of the stored positions
+    acc["sparse"] = {"count": 1,
+                     "indices": {"bufferView": raw.view(np.array([2], dtype=np.uint16).tobytes()), "componentType": 5123},
+                     "values": {"bufferView": raw.view(np.array([2, 3, 0], dtype=np.float32).tobytes())}}
+    del acc["min"], acc["max"]
+    raw.node(name="sparse", mesh=m)
+    # KHR_mesh_quantization: int16 positions, not normalized, scaled by the node
+    raw.doc["meshes"].append({"primitives": [{"attributes": {"POSITION": raw.accessor(
+        np.array([[0, 0, 0], [1000, 0, 0], [0, 1000, 0]], dtype=np.int16))}}]})
+    q = len(raw.doc["meshes"]) - 1
+    raw.node(name="quantized", mesh=q, scale=[0.001, 0.001, 0.001])
+    raw.doc["extensionsUsed"] = raw.doc["extensionsRequired"] = ["KHR_mesh_quantization"]
+    doc = raw.document()
+    (tmp_path / "s.bin").write_bytes(bytes(raw.blob))
+    doc["buffers"][0]["uri"] = "s.bin"
+    (tmp_path / "s.gltf").write_text(json.dumps(doc))
+    sparse, quantized = load_mesh(Path("s.gltf"), base_dir=tmp_path).parts
+    expected = positions.astype(np.float64)
+    expected[2] = [2, 3, 0]
+    np.testing.assert_array_equal(sparse.positions, expected)
+    np.testing.assert_allclose(quantized.positions, [[0, 0, 0], [1, 0, 0], [0, 1, 0]], atol=1e-12)
+    theirs = trimesh.load(tmp_path / "s.gltf", force="scene", process=False)
+    world, geometry = theirs.graph["quantized"]
+    np.testing.assert_allclose(quantized.positions, trimesh.transform_points(theirs.geometry[geometry].vertices, world))
