@@ -683,8 +683,8 @@ class MeshFiles:
     ``load`` reads the model file (bounded) and hashes it; an entry is reused when the path,
     the node and the SHA-256 of the model and of every file it read match, so an edited model
     or texture is loaded again and an unchanged one never is (``loads`` counts real loads).
-    Looking up costs reading and hashing the files (about 2 ms per MB), no parsing or decoding:
-    call it once per item and session (or per trial where a factor picks the file).
+    Looking up costs reading and hashing the files, no parsing or decoding: call it once per
+    item and session (or per trial where a factor picks the file).
     """
 
     def __init__(self, base_dir: Path) -> None:
