@@ -249,3 +249,25 @@ def test_zero_scale_node_is_hidden_not_an_error(tmp_path: Path) -> None:
     raw.save_glb(tmp_path / "m.glb")
     assert [p.node for p in load_mesh(Path("m.glb"), base_dir=tmp_path).parts] == ["square"]
     _refused(tmp_path, "m.glb", "node 'hidden' has no triangles", node="hidden")
+
+
+@pytest.mark.parametrize("fmt, ok", [("JPEG", True), ("PNG", True), ("GIF", False), ("BMP", False)])
+def test_texture_formats(tmp_path: Path, fmt: str, ok: bool) -> None:
+    import io
+
+    from PIL import Image
+
+    out = io.BytesIO()
+    Image.fromarray(np.full((4, 4, 3), 128, dtype=np.uint8)).save(out, format=fmt)
+    raw = _model()
+    raw.doc["images"] = [{"uri": "data:image/x;base64," + base64.b64encode(out.getvalue()).decode()}]
+    raw.doc["textures"] = [{"source": 0}]
+    raw.doc["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+    raw.doc["meshes"][0]["primitives"][0]["material"] = 0
+    raw.save_glb(tmp_path / "m.glb")
+    if ok:
+        tex = load_mesh(Path("m.glb"), base_dir=tmp_path).parts[0].texture
+        assert tex is not None and tex.rgba_linear.shape == (4, 4, 4)
+        np.testing.assert_allclose(tex.rgba_linear[..., 3], 1.0)
+    else:
+        _refused(tmp_path, "m.glb", f"a {fmt} image", "PNG or JPEG")
