@@ -149,10 +149,10 @@ class _Resources:
             raise UserError(f"{where} has no uri; re-export the model")
         if uri.startswith("data:"):
             return self._data_uri(uri, where)
-        if _SCHEME.match(uri) or uri.startswith(("/", "\\")):
+        relative = unquote(uri)
+        if _SCHEME.match(uri) or uri.startswith(("/", "\\")) or relative.startswith(("/", "\\")):
             raise UserError(f"{where}: uri '{uri[:80]}' is not a path inside the model's folder (no schemes such as "
                             "file: or http:, no absolute paths); copy the file next to the model and name it relatively")
-        relative = unquote(uri)
         parts = PurePosixPath(relative.replace("\\", "/")).parts
         if ".." in parts or "\x00" in relative:
             raise UserError(f"{where}: uri '{uri[:80]}' leaves the model's folder; copy the file next to the "

@@ -80,7 +80,7 @@ def test_missing_bin_and_texture(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("uri", ["../outside.bin", "sub/../../outside.bin", "/etc/passwd", "file:///etc/passwd",
                                  "http://example.com/m.bin", "https://example.com/m.bin", "C:\\models\\m.bin",
-                                 "..\\outside.bin"])
+                                 "..\\outside.bin", "%2e%2e/outside.bin", "%2Fetc%2Fpasswd"])
 def test_uris_that_leave_the_models_folder(tmp_path: Path, uri: str) -> None:
     folder = tmp_path / "model"
     folder.mkdir()
