@@ -68,3 +68,16 @@ def test_teaser_candle_stands_in_front_of_the_bottle() -> None:
     # seen along -z the candle covers the bottle's middle but not its edges: parallax can reveal them
     assert bottle.bbox_min[0] < candle.bbox_min[0] and candle.bbox_max[0] < bottle.bbox_max[0]
     assert any(p.texture is not None for p in bottle.parts)  # the label behind the candle
+
+
+@pytest.mark.parametrize("name", ["dining_room.glb", "pencil.glb", "teaser.glb"])
+def test_assets_load_as_trimesh_reads_them(name: str) -> None:
+    import trimesh
+
+    ours = load_mesh(Path(name), base_dir=ASSETS)
+    theirs = trimesh.load(ASSETS / name, force="scene", process=False)
+    assert ours.triangle_count == sum(len(g.faces) for g in theirs.geometry.values())
+    for part in ours.parts:
+        world, geometry = theirs.graph[part.node]
+        np.testing.assert_allclose(part.positions, trimesh.transform_points(theirs.geometry[geometry].vertices, world),
+                                   atol=1e-6)
