@@ -4,6 +4,10 @@
 uniform arrays are sized by it, psyop.rendering.shaders). Validation
 (psyop.protocol.semantics) counts what each phase's scene expands to
 (psyop.protocol.primitive_count) and refuses a protocol over it, with the scene item's file:line.
+
+The glTF limits (``MAX_MESH_FILE_BYTES``, ``MAX_DATA_URI_BYTES``, ``MAX_MESH_TRIANGLES``,
+``MAX_TEXTURE_SIDE_PX``) are enforced by psyop.mesh.load at load time, which validation runs;
+``MAX_IMAGE_FILE_BYTES`` and ``MAX_TEXTURE_SIDE_PX`` also bound image surfaces (psyop.images).
 """
 
 from __future__ import annotations
