@@ -15,6 +15,8 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from psyop.errors import UserError
+from psyop.images import check_image_file
 from psyop.limits import MAX_PRIMITIVES
 from psyop.optics.ranges import DEPTH_D
 from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
@@ -313,6 +315,11 @@ class _Checker:
         if not target.is_file():
             self.add(path, f"texture file '{surface.path}' not found (looked for {target}); paths are relative "
                            "to the protocol file. Fix the path or add the file.")
+            return
+        try:  # decode it now: run, render and audit would otherwise fail on it mid-session (issue 26)
+            check_image_file(target, surface.path)
+        except UserError as error:
+            self.add(path, error.message)
 
     # -- trial, response, observer ----------------------------------------------------------
     def check_phase_order(self) -> None:

@@ -21,7 +21,7 @@ def decode_image_rgb(path: Path) -> np.ndarray:
         import matplotlib.image as mpimg
 
         pixels = np.asarray(mpimg.imread(path), dtype=np.float64)
-    except (OSError, ValueError) as error:
+    except Exception as error:  # noqa: BLE001 - a bad file raises OSError, ValueError, SyntaxError (PNG), ...
         raise UserError(f"cannot read image {path}: {error}") from None
     if pixels.max() > 1.0:
         pixels = pixels / 255.0

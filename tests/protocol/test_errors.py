@@ -106,7 +106,12 @@ def test_missing_texture_file_is_reported_and_found_relative_to_the_protocol(tmp
     assert info.value.location == f"{protocol_file}:{_line_of(text, 'tex/red.png')}:{text.splitlines()[_line_of(text, 'tex/red.png') - 1].index('tex/red.png') + 1}"
     assert "not found" in str(info.value) and "relative to the protocol file" in str(info.value)
     (tmp_path / "tex").mkdir()
-    (tmp_path / "tex" / "red.png").write_bytes(b"\x89PNG")
+    (tmp_path / "tex" / "red.png").write_bytes(b"\x89PNG")  # a PNG signature and nothing else
+    with pytest.raises(UserError) as info:
+        load_protocol(protocol_file)
+    assert "'tex/red.png' is not a readable image" in str(info.value)
+    import matplotlib.image as mpimg
+    mpimg.imsave(tmp_path / "tex" / "red.png", [[[1.0, 0.0, 0.0]]])
     assert load_protocol(protocol_file).primitive("back").surface.path == "tex/red.png"
 
 
