@@ -31,7 +31,13 @@ import numpy as np
 
 from psyop.mesh.asset import AlphaMode, Filter, MeshAsset, MeshTexture, Wrap
 from psyop.rendering.camera_math import near_far_m
-from psyop.rendering.mesh_data import MeshBatch, PreparedMesh, draw_ranges, prepare_mesh, visible_parts
+from psyop.rendering.mesh_data import (
+    MeshBatch,
+    PreparedMesh,
+    draw_ranges,
+    prepare_mesh,
+    visible_parts,
+)
 from psyop.rendering.mesh_scene import MeshInstance
 
 #: Multisample anti-aliasing of the mesh pass: 4 samples per pixel on every display (llvmpipe's maximum,

@@ -22,7 +22,6 @@ from psyop.rendering.mesh_exact import exact_coverage
 from psyop.rendering.mesh_scene import MeshInstance, model_matrix
 from psyop.rendering.scene import Primitive, Shape
 from psyop.rendering.transform import scene_in_head
-
 from tests.rendering.mesh_helpers import asset, checker_texture, disc_part, quad_part
 
 RED = (1.0, 0.0, 0.0, 1.0)
@@ -59,7 +58,7 @@ def test_mesh_quad_and_disc_equal_the_analytic_primitives(gl_context, mode):
         assert abs(_red(mesh).sum() - exact) / exact < 0.01
         assert abs(_red(analytic).sum() - exact) / exact < 0.01
         diff = np.abs(_red(mesh) - _red(analytic))
-        partial = lambda x: (x > 1e-6) & (x < 1 - 1e-6)  # noqa: E731
+        partial = lambda x: (x > 1e-6) & (x < 1 - 1e-6)
         assert diff.max() <= 0.5 + 1e-6  # edge pixels only: 4 MSAA samples vs the analytic grid
         assert not np.any((diff > 1e-6) & ~partial(_red(analytic)) & ~partial(_red(mesh)))
 

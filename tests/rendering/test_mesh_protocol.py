@@ -18,7 +18,7 @@ from psyop.rendering.measure import RIGHT_CENTRE_M, right_eye_camera
 from psyop.stimulus import build_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from protocol_texts import TWO_INTERVAL_TAIL  # noqa: E402
+from protocol_texts import TWO_INTERVAL_TAIL
 
 ASSETS = Path(__file__).resolve().parents[2] / "assets"
 
