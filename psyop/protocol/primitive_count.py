@@ -6,7 +6,7 @@ compares); validation sums them per phase against psyop.limits.MAX_PRIMITIVES.
 
 from __future__ import annotations
 
-from psyop.protocol.scene import (Aperture, Disc, FixationTarget, GridPlanes, Primitive, Quad, ReachTarget, Room,
+from psyop.protocol.scene import (Aperture, Disc, FixationTarget, GridPlanes, Mesh, Primitive, Quad, ReachTarget, Room,
                                   SinusoidalBorder, TargetField)
 
 #: Room: floor, ceiling, two side walls, back wall; with a table also the table top, a plate and a bottle.
@@ -20,8 +20,8 @@ def primitive_count(item: Primitive) -> int:
         return 1
     if isinstance(item, (SinusoidalBorder, FixationTarget)):
         return 2  # near + far surface; outer + inner disc
-    if isinstance(item, Aperture):
-        return 0
+    if isinstance(item, (Aperture, Mesh)):
+        return 0  # a mesh is rasterised, outside the ray-caster's table (its budget: triangles)
     if isinstance(item, GridPlanes):
         return len(item.planes)
     if isinstance(item, TargetField):

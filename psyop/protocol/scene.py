@@ -319,7 +319,61 @@ class ReachTarget(_Primitive):
 
 ReachTarget.model_rebuild()
 
+
+class MeshLight(StrictModel):
+    """The distant white light of ``shading: lambert``: ``direction`` points from the surface towards the
+    light, in world (head-at-start) space; colour = albedo x (ambient + (1 - ambient) max(0, n . l))."""
+
+    direction: tuple[Number, Number, Number]
+    ambient: Number = Field(default=0.2, ge=0, le=1)
+
+
+FactorNumber = Union[Number, FactorRef]
+
+
+class Mesh(_Primitive):
+    """A glTF 2.0 model (``.gltf`` or ``.glb``, path relative to the protocol file), or one ``node`` of its
+    scene, rasterised beside the analytic primitives with the same per-eye camera (docs/protocols.md, "Meshes").
+
+    Placement (world space: a tracked head moves through it): ``position_m: [x, y, z]`` puts the model's
+    origin there; or ``depth`` (and ``centre_deg``, either angle form) puts its bounding-box centre at that
+    distance in that direction from the scene origin. ``rotation_deg: [yaw, pitch, roll]`` turns it about
+    that point. Size: ``scale`` (model units to metres), ``size_m`` or ``size_deg`` (the bounding box's
+    largest extent; size_deg at ``depth``), default scale 1. Numbers may be ``{factor: NAME}``."""
+
+    kind: Literal["mesh"]
+    file: str = Field(min_length=1)
+    node: str | None = Field(default=None, min_length=1)
+    position_m: tuple[FactorNumber, FactorNumber, FactorNumber] | None = None
+    centre_deg: Centre | None = None
+    depth: Depth | None = None
+    rotation_deg: tuple[FactorNumber, FactorNumber, FactorNumber] = (0.0, 0.0, 0.0)
+    scale: Annotated[Number, Field(gt=0, le=1e6)] | FactorRef | None = None
+    size_m: Annotated[Number, Field(gt=0, le=1000)] | FactorRef | None = None
+    size_deg: Annotated[Number, Field(gt=0, lt=180)] | FactorRef | None = None
+    shading: Literal["unlit", "lambert"] = "unlit"
+    light: MeshLight | None = None
+
+    @model_validator(mode="after")
+    def _placement(self) -> "Mesh":
+        if self.position_m is not None and (self.depth is not None or self.centre_deg is not None):
+            raise ValueError("place a mesh either by position_m or by centre_deg and depth, not both")
+        if self.centre_deg is not None and self.depth is None:
+            raise ValueError("centre_deg needs a depth: give depth: {m: ...} or {D: ...}")
+        if self.position_m is None and self.depth is None:
+            raise ValueError("place the mesh: give position_m: [x, y, z] or depth (with centre_deg)")
+        if sum(v is not None for v in (self.scale, self.size_m, self.size_deg)) > 1:
+            raise ValueError("give at most one of scale, size_m and size_deg")
+        if self.size_deg is not None and self.depth is None:
+            raise ValueError("size_deg is the angle the model subtends at its depth: it needs depth, not position_m")
+        if self.shading == "lambert" and self.light is None:
+            raise ValueError("shading: lambert needs a light: {direction: [x, y, z], ambient: 0.2}")
+        if self.shading == "unlit" and self.light is not None:
+            raise ValueError("a light is used only with shading: lambert; remove it or set shading: lambert")
+        return self
+
+
 Primitive = Annotated[
-    Union[Disc, Quad, SinusoidalBorder, Aperture, GridPlanes, TargetField, FixationTarget, Room, ReachTarget],
+    Union[Disc, Quad, SinusoidalBorder, Aperture, GridPlanes, TargetField, FixationTarget, Room, ReachTarget, Mesh],
     Field(discriminator="kind"),
 ]

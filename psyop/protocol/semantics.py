@@ -17,7 +17,7 @@ from pydantic import BaseModel
 
 from psyop.errors import UserError
 from psyop.images import check_image_file
-from psyop.limits import MAX_PRIMITIVES
+from psyop.limits import MAX_MESH_TRIANGLES, MAX_PRIMITIVES
 from psyop.optics.ranges import DEPTH_D
 from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
 from psyop.protocol.conditions import expand_conditions
@@ -25,7 +25,7 @@ from psyop.protocol.model import Protocol
 from psyop.protocol.primitive_count import primitive_count
 from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, PinkNoiseSurface,
-                                  ReachTarget, Room, SinusoidalBorder, TargetField, centre_eccentricity_deg)
+                                  Mesh, ReachTarget, Room, SinusoidalBorder, TargetField, centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
 
 #: Random sequential placement of equal discs jams at about 54.7 % area coverage. Measured for
@@ -59,6 +59,7 @@ class _Checker:
         self.base_dir = base_dir
         self.issues: list[Issue] = []
         self.factors = protocol.design.factors
+        self.mesh_triangles: dict[str, int] = {}  # mesh item id -> triangles of its model (read by check_mesh)
 
     def add(self, path: tuple[Any, ...], message: str) -> None:
         self.issues.append(Issue(path, message))
@@ -168,6 +169,8 @@ class _Checker:
                 self.add(path + ("eye_height_m",), "the eyes are above the ceiling; make eye_height_m less than height_m")
             if isinstance(item, TargetField):
                 self.check_target_field(item, path, conditions)
+            if isinstance(item, Mesh):
+                self.check_mesh(item, path)
             if isinstance(item, SinusoidalBorder):
                 self.check_order(item.near_depth, item.far_depth, path + ("near_depth",), conditions,
                                  "near_depth must be nearer (more dioptres) than far_depth")
@@ -246,6 +249,36 @@ class _Checker:
                 return
             except ValueError:  # an adaptive level, known at run time: its range's ends are checked next
                 continue
+
+    def check_mesh(self, item: Mesh, path: tuple[Any, ...]) -> None:
+        """The model is read now (psyop.mesh.load: every file-level problem is one line at the item's ``file``),
+        and a mesh at optical infinity is refused (a model has a place, not only directions)."""
+        from psyop.mesh.load import load_mesh
+
+        try:
+            asset = load_mesh(FsPath(item.file), item.node, base_dir=self.base_dir or FsPath.cwd())
+        except UserError as error:
+            self.add(path + (("node",) if item.node is not None and "node" in str(error) else ("file",)), str(error))
+            return
+        self.mesh_triangles[item.id] = asset.triangle_count
+        if item.depth is not None and item.depth.constant_D() == 0.0:
+            self.add(path + ("depth",), "a mesh cannot lie at optical infinity (0 D); give a finite depth")
+
+    def check_mesh_budget(self) -> None:
+        """Each phase's mesh items together hold at most MAX_MESH_TRIANGLES triangles."""
+        for index, phase in enumerate(self.p.trial.phases):
+            if not isinstance(phase, (Interval, Blank)) or getattr(phase, "display_off", False):
+                continue
+            shown = [(i, item) for i, item in enumerate(self.p.scene)
+                     if isinstance(item, Mesh) and (phase.show == "all" or item.id in phase.show)]
+            counts = [(self.mesh_triangles.get(item.id, 0), i, item) for i, item in shown]
+            total = sum(c for c, _, _ in counts)
+            if total > MAX_MESH_TRIANGLES:
+                most, i, item = max(counts, key=lambda t: t[0])
+                self.add(("scene", i), f"phase trial.phases[{index}] ({phase.kind}) draws {total} mesh triangles, more "
+                                       f"than the budget of {MAX_MESH_TRIANGLES} (psyop.limits.MAX_MESH_TRIANGLES); "
+                                       f"'{item.id}' has {most}. Fix: a simpler model, or show fewer meshes in that phase")
+                return
 
     def check_primitive_limit(self) -> None:
         """Each phase's scene (its ``show:`` items) must fit the renderer's MAX_PRIMITIVES; the
@@ -615,6 +648,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None) -> list[Issue]:
                                                "repetitions is over 10 million trials; reduce them")
     checker.check_scene(conditions)
     checker.check_primitive_limit()
+    checker.check_mesh_budget()
     checker.check_response()
     checker.check_level_factor_levels()
     checker.check_pair_orders()

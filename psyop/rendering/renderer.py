@@ -93,6 +93,7 @@ class _EyeState:
     msaa_fbo: Any | None
     aperture: Any
     depth: Any | None = None
+    mesh_target: Any | None = None  # the mesh pass's multisampled target (psyop.rendering.mesh_pass), when drawn
     last_valid_camera: Any = None
     last_rendered_camera: Any = None
     depth_range_m: tuple[float, float] | None = (0.0, math.inf)  # None: not computed yet (see depth_centre_m)
@@ -154,6 +155,11 @@ class Renderer:
         self._scene: Scene | None = None
         self._uniform_values: dict[str, Any] = {}  # the last value written to each scene uniform
         self._member_names: dict[int, frozenset[str]] = {}
+        # the ray-cast programs without and (compiled on first use) with the mesh layer, and the mesh pass
+        self._variants: dict[bool, tuple[Any, Any, Any, Any]] = {
+            False: (self._prog, self._edge_prog, self._vao, self._edge_vao)}
+        self._with_meshes = False
+        self._mesh_pass: Any = None
         if self.settings.frame_caches:  # uniforms no frame changes: written once
             self._set_constant_uniforms()
         self.set_scene(scene)
@@ -181,6 +187,8 @@ class Renderer:
         """
         if scene is self._scene or scene == self._scene:
             return
+        if bool(scene.meshes) != self._with_meshes:
+            self._use_variant(bool(scene.meshes))
         if len(scene.primitives) > MAX_PRIMITIVES:
             raise ValueError(f"at most {MAX_PRIMITIVES} primitives, got {len(scene.primitives)}")
         textures: list[NoiseTexture | ImageTexture] = []
@@ -243,6 +251,42 @@ class Renderer:
         self._set_if_present("u_aperture_colour", ap_colour)
         self._set_if_present("u_samples", int(self.settings.samples_per_axis))
         self._set_if_present("u_edge_margin_px", float(self.settings.edge_margin_px))
+
+    def _use_variant(self, meshes: bool) -> None:
+        """Switch to the ray-cast programs with (or without) the mesh layer: a scene without meshes runs exactly
+        the analytic programs it always ran; the mesh variant and the mesh pass are built on first use."""
+        if meshes not in self._variants:
+            prog = self.ctx.program(vertex_shader=VERTEX_SHADER,
+                                    fragment_shader=fragment_shader(self.settings.antialiasing, self._two_pass,
+                                                                    self.settings.adaptive_cull, meshes=True))
+            edge_prog = edge_vao = None
+            if self._two_pass:
+                edge_prog = self.ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=edge_pass_shader(meshes=True))
+                edge_vao = self.ctx.vertex_array(edge_prog, [])
+            self._variants[meshes] = (prog, edge_prog, self.ctx.vertex_array(prog, []), edge_vao)
+            from psyop.rendering.mesh_pass import MeshPass
+
+            self._mesh_pass = MeshPass(self.ctx)
+        self._prog, self._edge_prog, self._vao, self._edge_vao = self._variants[meshes]
+        self._with_meshes = meshes
+        self._uniform_values = {}  # the other programs hold other values: every scene uniform is written again
+        if self.settings.frame_caches:
+            self._set_constant_uniforms()
+        if meshes:
+            for prog in self._programs():
+                prog["u_mesh_colour"].value = 3
+                prog["u_mesh_inv_distance"].value = 4
+
+    def _draw_meshes(self, state: _EyeState, camera: Any) -> None:
+        """The mesh pass for this eye (before the ray-cast, which composites its target per ray sample)."""
+        assert self._mesh_pass is not None
+        if state.mesh_target is None:
+            state.mesh_target = self._mesh_pass.target(state.width_px, state.height_px)
+        self._mesh_pass.draw(state.mesh_target, camera, self.scene.meshes)
+        state.mesh_target.colour.use(3)
+        state.mesh_target.inv_distance.use(4)
+        for prog in self._programs():
+            prog["u_mesh_samples"].value = self._mesh_pass.samples
 
     def _pack(self, p: Any, layer: int | None, sizes: list[tuple[int, int]]) -> list[float]:
         """One primitive's rows of the primitive table, flat (TEXELS_PER_PRIMITIVE x 4: axes and shape,
@@ -314,6 +358,8 @@ class Renderer:
 
     def _release_eye(self, state: _EyeState) -> None:
         self._release_eye_aperture(state)
+        if state.mesh_target is not None:
+            state.mesh_target.release()
         for obj in (state.fbo, state.colour, state.msaa_fbo, state.depth):
             if obj is not None:
                 obj.release()
@@ -387,6 +433,8 @@ class Renderer:
             mask = self._aperture_mask(camera)
             state.aperture = self.ctx.texture((state.width_px, state.height_px), 1, mask.tobytes(), dtype="f4")
             state.aperture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        if camera is not None and self.scene.meshes:
+            self._draw_meshes(state, camera)
         target = state.msaa_fbo if state.msaa_fbo is not None else state.fbo
         target.use()
         self.ctx.viewport = (0, 0, state.width_px, state.height_px)
@@ -520,10 +568,12 @@ class Renderer:
         for state in self._eyes.values():
             self._release_eye(state)
         self._eyes.clear()
-        for obj in (self._prims_tex, self._layers_tex, self._centres, self._vao, self._prog,
-                    self._bounds, self._edge_vao, self._edge_prog):
+        for obj in (self._prims_tex, self._layers_tex, self._centres, self._bounds,
+                    *(o for variant in self._variants.values() for o in variant)):
             if obj is not None:
                 obj.release()
+        if self._mesh_pass is not None:
+            self._mesh_pass.release()
         self._prims_tex = self._layers_tex = None
         if self._owns_ctx:
             self.ctx.release()

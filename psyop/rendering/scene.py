@@ -23,6 +23,8 @@ from enum import Enum
 
 import numpy as np
 
+from psyop.rendering.mesh_scene import MeshInstance
+
 Colour = tuple[float, float, float]
 
 # Two hits whose distances along a ray differ by at most this fraction count as coplanar; the
@@ -264,14 +266,20 @@ class Aperture:
 
 @dataclass(frozen=True)
 class Scene:
-    """What to draw: primitives (nearest hit wins), a background and an optional aperture."""
+    """What to draw: primitives (nearest hit wins), a background, an optional aperture, and mesh items
+    (psyop.rendering.mesh_scene; rasterised first, sharing the primitives' depth: docs/rendering.md)."""
 
     primitives: tuple[Primitive, ...]
     background: Colour = (0.5, 0.5, 0.5)
     aperture: Aperture | None = None
+    meshes: tuple[MeshInstance, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "primitives", tuple(self.primitives))
+        object.__setattr__(self, "meshes", tuple(self.meshes))
+        for m in self.meshes:
+            if not isinstance(m, MeshInstance):
+                raise TypeError(f"scene meshes must be MeshInstance, got {type(m).__name__}")
         object.__setattr__(self, "background", _colour(self.background, "background"))
         for p in self.primitives:
             if not isinstance(p, Primitive):
@@ -292,6 +300,8 @@ class Scene:
         >>> round(near, 6), far > near
         (2.0, True)
         """
+        if self.meshes:
+            return self._depth_range_with_meshes_m(point_m)
         finite = [p for p in self.primitives if not p.at_infinity]
         if not finite:
             return (float("inf"), float("inf"))
@@ -303,6 +313,18 @@ class Scene:
         far = float(np.max(_farthest_distances_m(c, u, v, np.array([p.shape is Shape.RECT for p in finite]), point)))
         if len(finite) < len(self.primitives):  # a primitive at optical infinity: the farthest point is at infinity
             far = float("inf")
+        return (near, far)
+
+    def _depth_range_with_meshes_m(self, point_m: np.ndarray) -> tuple[float, float]:
+        """:meth:`depth_range_m` of a scene with meshes: each mesh bounded by the sphere around its placed
+        bounding box (conservative: a point inside a sphere gives nearest 0, so no frame is reused)."""
+        near, far = Scene(self.primitives).depth_range_m(point_m)
+        point = np.asarray(point_m, dtype=np.float64)
+        for mesh in self.meshes:
+            centre, radius = mesh.bounding_sphere_m()
+            distance = float(np.linalg.norm(centre - point))
+            near = min(near, max(0.0, distance - radius))
+            far = max(far, distance + radius)  # inf without finite primitives: a wider range, still a bound
         return (near, far)
 
     def depth_range_per_primitive_m(self, point_m: np.ndarray) -> tuple[float, float]:

@@ -84,6 +84,30 @@ uniform vec3 u_aperture_colour;
 
 out vec4 frag_colour;
 
+#ifdef MESH_LAYER
+// The mesh pass's multisampled target (psyop.rendering.mesh_pass): premultiplied colour and 1 / distance
+// from the centre of projection per sample (0 = no mesh). A ray sample shows its analytic hit where it is
+// nearer than the pixel's nearest mesh sample, else the pixel's resolved mesh colour over it.
+uniform sampler2DMS u_mesh_colour;
+uniform sampler2DMS u_mesh_inv_distance;
+uniform int u_mesh_samples;
+vec4 mesh_rgba = vec4(0.0);
+float mesh_inv = 0.0;
+void load_mesh_pixel(ivec2 fc) {
+    for (int s = 0; s < u_mesh_samples; ++s) {
+        mesh_rgba += texelFetch(u_mesh_colour, fc, s);
+        mesh_inv = max(mesh_inv, texelFetch(u_mesh_inv_distance, fc, s).r);
+    }
+    mesh_rgba /= float(u_mesh_samples);
+}
+vec3 mesh_over(vec3 colour, float dist) {
+    return (dist * mesh_inv < 1.0) ? colour : mesh_rgba.rgb + (1.0 - mesh_rgba.a) * colour;
+}
+#define MESH_OVER(c, dist) mesh_over(c, dist)
+#else
+#define MESH_OVER(c, dist) (c)
+#endif
+
 struct Hit { bool plane; bool inside; float t; float a; float b; float g; };
 
 vec4 P(int i, int k) { return texelFetch(u_prims, ivec2(k, i), 0); }
@@ -143,7 +167,7 @@ vec3 sample_colour(vec3 d, float footprint) {
         Hit h = intersect(i, d);
         if (h.inside && replaces(h.t, best_t)) { best = i; best_t = h.t; ba = h.a; bb = h.b; }
     }
-    return best < 0 ? u_background : shade(best, ba, bb, footprint);
+    return MESH_OVER(best < 0 ? u_background : shade(best, ba, bb, footprint), best_t * length(d));
 }
 
 vec3 grid_colour(vec2 corner_px, int n) {
@@ -208,7 +232,7 @@ vec3 grid_colour_relevant(vec2 corner_px, int n) {
                                * (a - (relevant[r].side.x + bd.y * sin(TWO_PI * bd.z * 0.5 * (b + 1.0) + bd.w))));
                 if (g <= 0.0) { best = relevant[r].index; best_t = relevant[r].at_inf ? T_INFINITY : t; ba = a; bb = b; }
             }
-            acc += best < 0 ? u_background : shade(best, ba, bb, 0.0);
+            acc += MESH_OVER(best < 0 ? u_background : shade(best, ba, bb, 0.0), best_t * length(d));
         }
     return acc * inv * inv;
 }
@@ -219,6 +243,9 @@ void main() {
     ivec2 fc = ivec2(gl_FragCoord.xy);
     vec2 corner = vec2(float(fc.x), u_size_px.y - 1.0 - float(fc.y));  // top-left, y down
     vec3 colour;
+#ifdef MESH_LAYER
+    load_mesh_pixel(fc);
+#endif
     float alpha = 1.0;  // 0.5 marks an adaptively supersampled (edge) pixel, for work accounting
 #if defined(AA_NONE)
     colour = sample_colour(ray_at(corner + 0.5), 0.0);
@@ -285,7 +312,7 @@ void main() {
             best = i; best_t = h0.t; ba = h0.a; bb = h0.b; fw = max(dab.x, dab.y);
         }
     }
-    colour = best < 0 ? u_background : shade(best, ba, bb, fw);
+    colour = MESH_OVER(best < 0 ? u_background : shade(best, ba, bb, fw), best_t * length(d0));
 #if defined(ADAPTIVE_TWO_PASS)
     // First pass: one ray per pixel; edge pixels are marked in the depth buffer for the second.
     gl_FragDepth = edge ? 0.0 : 1.0;
@@ -304,14 +331,16 @@ void main() {
 """
 
 
-def fragment_shader(antialiasing: AntiAliasing, two_pass: bool = False, cull: bool = False) -> str:
+def fragment_shader(antialiasing: AntiAliasing, two_pass: bool = False, cull: bool = False,
+                    meshes: bool = False) -> str:
     """The fragment shader source for one anti-aliasing variant.
 
     ``two_pass`` (adaptive only): the source of the first pass, which shades one ray per pixel
     and marks edge pixels in the depth buffer (0 = edge) instead of supersampling them in place;
     :func:`edge_pass_shader` is the second pass. ``cull`` (two-pass only): the first pass skips,
     per aligned 4x4 pixel block, the primitives whose screen box (uniform block ``Bounds``)
-    cannot reach the block.
+    cannot reach the block. ``meshes``: the variant that composites the mesh pass's target
+    (``MESH_LAYER``); without it the source compiles to the analytic-only shader.
     """
     define = {
         AntiAliasing.NONE: "AA_NONE",
@@ -321,10 +350,14 @@ def fragment_shader(antialiasing: AntiAliasing, two_pass: bool = False, cull: bo
     }[AntiAliasing(antialiasing)]
     if two_pass and define == "AA_ADAPTIVE":
         define = "AA_ADAPTIVE\n#define ADAPTIVE_TWO_PASS" + ("\n#define ADAPTIVE_CULL" if cull else "")
+    if meshes:
+        define += "\n#define MESH_LAYER"
     return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": define, "coplanar": COPLANAR_RELATIVE_DEPTH}
 
 
-def edge_pass_shader() -> str:
-    """Second pass of the two-pass adaptive sampler: SxS rays in the pixels the first pass marked."""
-    return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": "AA_EDGE_PASS",
+def edge_pass_shader(meshes: bool = False) -> str:
+    """Second pass of the two-pass adaptive sampler: SxS rays in the pixels the first pass marked
+    (``meshes``: compositing the mesh pass, see :func:`fragment_shader`)."""
+    define = "AA_EDGE_PASS" + ("\n#define MESH_LAYER" if meshes else "")
+    return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": define,
                                 "coplanar": COPLANAR_RELATIVE_DEPTH}

@@ -60,7 +60,7 @@ def scene_in_head(scene: Scene, head_position_m: Sequence[float], head_orientati
     if not np.any(t) and tuple(float(c) for c in head_orientation_wxyz) == IDENTITY_WXYZ:
         return scene
     if not scene.primitives:
-        return dataclasses.replace(scene, primitives=())
+        return dataclasses.replace(scene, primitives=(), meshes=_moved_meshes(scene, t, head_orientation_wxyz))
     r_t = rotation_matrix(head_orientation_wxyz).T
     prims = scene.primitives
     shift = np.array([(0.0, 0.0, 0.0) if p.at_infinity else t for p in prims], dtype=np.float64)
@@ -68,7 +68,21 @@ def scene_in_head(scene: Scene, head_position_m: Sequence[float], head_orientati
     half_u = rotate_rows(r_t, np.array([p.half_u_m for p in prims])).tolist()
     half_v = rotate_rows(r_t, np.array([p.half_v_m for p in prims])).tolist()
     moved = tuple(p.moved(tuple(c), tuple(u), tuple(v)) for p, c, u, v in zip(prims, centres, half_u, half_v, strict=True))
+    if scene.meshes:
+        return dataclasses.replace(scene, primitives=moved, meshes=_moved_meshes(scene, t, head_orientation_wxyz))
     return dataclasses.replace(scene, primitives=moved)
+
+
+def _moved_meshes(scene: Scene, head_position_m: np.ndarray, head_orientation_wxyz: Sequence[float]) -> tuple:
+    """The scene's mesh instances in the head space of the pose: ``p_head = R^T (M p - t)`` folded into each
+    model matrix (float64), lights rotated alike."""
+    if not scene.meshes:
+        return ()
+    r_t = rotation_matrix(head_orientation_wxyz).T
+    head_from_world = np.eye(4)
+    head_from_world[:3, :3] = r_t
+    head_from_world[:3, 3] = -(r_t @ np.asarray(head_position_m, dtype=np.float64))
+    return tuple(m.moved(head_from_world, r_t) for m in scene.meshes)
 
 
 def scene_in_head_per_primitive(scene: Scene, head_position_m: Sequence[float],
@@ -88,4 +102,4 @@ def scene_in_head_per_primitive(scene: Scene, head_position_m: Sequence[float],
         )
         for p in scene.primitives
     )
-    return dataclasses.replace(scene, primitives=primitives)
+    return dataclasses.replace(scene, primitives=primitives, meshes=_moved_meshes(scene, t, head_orientation_wxyz))

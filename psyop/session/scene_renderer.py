@@ -75,6 +75,9 @@ class SceneRenderer:
         from psyop.rendering.textures import ImageFiles
 
         self._images = ImageFiles(self._base_dir)  # image surfaces decoded once per session
+        from psyop.stimulus.meshes import MeshFiles
+
+        self._meshes = MeshFiles(self._base_dir)  # glTF models loaded once per session (uploaded once)
         from psyop.rendering.text import TextImages, em_px_for_display
         from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
 
@@ -114,7 +117,7 @@ class SceneRenderer:
         if phase.show not in ("stimulus", "blank"):
             return None
         scene = build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
-                            base_dir=self._base_dir, show=phase.primitives, images=self._images)
+                            base_dir=self._base_dir, show=phase.primitives, images=self._images, meshes=self._meshes)
         return scene_in_head(scene, *head_pose) if head_pose is not None else scene
 
     def _frame_scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str,
@@ -158,14 +161,16 @@ class SceneRenderer:
         if isinstance(parts, tuple):
             return parts[0]
         prims: list[Any] = []
+        meshes: list[Any] = []
         aperture = None
         for item_id, part in parts:
             if part is None:  # a moving item: built for this frame's time
                 part = build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
-                                   base_dir=self._base_dir, show=(item_id,), images=self._images)
+                                   base_dir=self._base_dir, show=(item_id,), images=self._images, meshes=self._meshes)
             prims += part.primitives
+            meshes += part.meshes
             aperture = part.aperture if part.aperture is not None else aperture
-        return Scene(tuple(prims), aperture=aperture)
+        return Scene(tuple(prims), aperture=aperture, meshes=tuple(meshes))
 
     def _static_parts(self, row: Mapping[str, Any], phase: PhaseSpec, eye: str) -> Any:
         """What of this phase's scene does not depend on time: ``(scene,)`` when nothing in it moves (the
@@ -188,7 +193,7 @@ class SceneRenderer:
         centre = self.rig.centre_m(eye)
         return [(item.id, None if depends_on_time(item) else
                  build_scene(self.protocol, row, 0.0, centre, interval=interval, base_dir=self._base_dir,
-                             show=(item.id,), images=self._images))
+                             show=(item.id,), images=self._images, meshes=self._meshes))
                 for item in shown]
 
     def _camera(self, eye: str, fixation_m: tuple[float, float, float], mode: str, frame: FrameRequest | None,

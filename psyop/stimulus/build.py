@@ -237,6 +237,7 @@ def build_scene(
     background: tuple[float, float, float] = (0.5, 0.5, 0.5),
     show: Sequence[str] | None = None,
     images: ImageFiles | None = None,
+    meshes: Any = None,
 ) -> Scene:
     """The rendering scene of one trial during interval ``interval`` at ``time_s`` into it.
 
@@ -248,8 +249,14 @@ def build_scene(
     item's ``id`` or starts with ``<id>_`` (``psyop audit`` maps primitives back to items by it).
 
     ``images``: the session's decoded image files (decoded once, reused every frame); without
-    it image surfaces are decoded from ``base_dir`` on every call.
+    it image surfaces are decoded from ``base_dir`` on every call. ``meshes``: the session's
+    :class:`psyop.stimulus.meshes.MeshFiles` (each model loaded once); without it models are read from
+    ``base_dir`` on this call.
     """
+    from psyop.stimulus.meshes import MeshFiles, mesh_instance
+
+    mesh_files = meshes if meshes is not None else MeshFiles(base_dir)
+    instances = []
     values = interval_values(row, interval)
     values = {**values, "trial_seed": row.get("trial_seed", 0)}
     origin = scene_origin_m(protocol, eye_centre_m)
@@ -298,9 +305,11 @@ def build_scene(
             prims += _room(item)
         elif isinstance(item, ps.ReachTarget):
             prims += _reach_target(item, values, arm_reach_m)
+        elif isinstance(item, ps.Mesh):
+            instances.append(mesh_instance(item, values, origin, mesh_files))
         else:  # pragma: no cover - the protocol model is a closed union
             raise UserError(f"unsupported scene element kind {getattr(item, 'kind', item)!r}")
-    return Scene(tuple(prims), background=background, aperture=aperture)
+    return Scene(tuple(prims), background=background, aperture=aperture, meshes=tuple(instances))
 
 
 def recalibration_cross_scene(

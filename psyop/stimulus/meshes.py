@@ -1,0 +1,76 @@
+"""Mesh scene items (``kind: mesh``) -> placed :class:`psyop.rendering.mesh_scene.MeshInstance`.
+
+:class:`MeshFiles` loads each (file, node) once per session (psyop.mesh.load.load_mesh) and hands the
+same :class:`psyop.mesh.MeshAsset` object to every frame, so the renderer uploads it once.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from psyop.errors import UserError
+from psyop.mesh.asset import MeshAsset
+from psyop.protocol import scene as ps
+from psyop.rendering.builders import direction_from_angles, place_centre_m
+from psyop.rendering.mesh_scene import MeshInstance, model_matrix
+from psyop.stimulus.placement import centre_angles_deg
+
+
+class MeshFiles:
+    """The session's loaded models, by (file, node), read once from ``base_dir``."""
+
+    def __init__(self, base_dir: Path | None) -> None:
+        self.base_dir = base_dir or Path.cwd()
+        self._assets: dict[tuple[str, str | None], MeshAsset] = {}
+
+    def asset(self, file: str, node: str | None) -> MeshAsset:
+        key = (file, node)
+        if key not in self._assets:
+            from psyop.mesh.load import load_mesh
+
+            self._assets[key] = load_mesh(Path(file), node, base_dir=self.base_dir)
+        return self._assets[key]
+
+    def records(self) -> list[dict[str, object]]:
+        """What session.json records of every model read (MeshAsset.record)."""
+        return [asset.record() for asset in self._assets.values()]
+
+
+def mesh_instance(item: ps.Mesh, values: Mapping[str, Any], origin_m: np.ndarray, files: MeshFiles) -> MeshInstance:
+    """The placed model of a mesh item whose factor fields hold this trial's numbers."""
+    asset = files.asset(item.file, item.node)
+    extent = asset.largest_extent
+    rotation = tuple(float(a) for a in item.rotation_deg)
+    if item.position_m is not None:
+        position = np.array([float(v) for v in item.position_m])
+        pivot = np.zeros(3)
+        distance = float(np.linalg.norm(position - origin_m))
+    else:
+        assert item.depth is not None
+        depth_D = item.depth.resolve_D(values)
+        if not (math.isfinite(depth_D) and depth_D > 0):
+            raise UserError(f"scene item '{item.id}': a mesh needs a finite depth, got {depth_D} D")
+        distance = 1.0 / depth_D
+        az, el = centre_angles_deg(item.centre_deg if item.centre_deg is not None else (0.0, 0.0))
+        position = place_centre_m(direction_from_angles(az, el), distance, origin_m, facing="eye")
+        pivot = (np.asarray(asset.bbox_min, dtype=np.float64) + np.asarray(asset.bbox_max, dtype=np.float64)) / 2.0
+    if item.scale is not None:
+        scale = float(item.scale)
+    elif item.size_m is not None or item.size_deg is not None:
+        if not extent > 0:
+            raise UserError(f"scene item '{item.id}': the model has no extent to size (a flat point set)")
+        size_m = float(item.size_m) if item.size_m is not None else \
+            2.0 * distance * math.tan(math.radians(float(item.size_deg)) / 2.0)
+        scale = size_m / extent
+    else:
+        scale = 1.0
+    model = model_matrix(position, rotation, scale, pivot)
+    if item.light is not None:
+        return MeshInstance(asset, tuple(model.reshape(-1).tolist()), item.id, item.shading,
+                            tuple(float(v) for v in item.light.direction), float(item.light.ambient))
+    return MeshInstance(asset, tuple(model.reshape(-1).tolist()), item.id, item.shading)
