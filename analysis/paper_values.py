@@ -144,13 +144,19 @@ def _reach_difference(s: dict) -> Judged:
     m, c = s.get("mixed"), s.get("comparison")
     if not m:
         return ("missing", [Check("conclusion", "missing", None)])
-    text = (f"primary {m['method'].split(',')[0]}: {m.get('joint_text') or 'chi2(2) = %.2f' % m['joint_chi2']}, "
+    if m.get("joint_test", "Wald chi2") == "Wald chi2":
+        joint = f"chi2(2) = {m['joint_chi2']:.2f}"
+    else:  # the CR2 fallback: an F with its small-sample denominator df
+        joint = f"F(2, {m['joint_df_denom']:.2f}) = {m['joint_statistic']:.2f} ({m['joint_test']})"
+    if m.get("flags"):
+        joint += f" [flags: {m['flags']}]"
+    text = (f"primary {m['method'].split(',')[0]}: {joint}, "
             f"{_fmt_p(m['joint_p'])}; "
             f"pooled regression F({c['joint_df1']}, {c['joint_df2']}) = {c['joint_F']:.2f}, {_fmt_p(c['joint_p'])}")
     if m.get("fallback_reason"):
         text += f" (fallback: {m['fallback_reason']})"
-    if m.get("joint_p") is None:
-        return text, [Check("conclusion", "not testable: " + str(m.get("refused") or "no p"), None)]
+    if m.get("joint_p") is None or m["joint_p"] != m["joint_p"]:  # None or NaN: refused, not judged
+        return text, [Check("conclusion", "not testable: " + (m.get("flag_text") or "no p"), None)]
     return text, [_significance(m["joint_p"], False)]
 
 

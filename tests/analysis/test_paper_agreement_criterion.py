@@ -56,3 +56,18 @@ def test_a_significant_posthoc_in_the_wrong_direction_fails():
 def test_a_study_not_run_is_not_judged():
     row = next(r for r in _paper_values().rows_for({}) if r["study"] == "realism")
     assert row["agrees"] == "n/a" and "study not run" in row["criteria"]
+
+
+def test_a_cr2_fallback_is_named_with_its_df_and_flags_and_an_untestable_joint_is_not_judged():
+    pv = _paper_values()
+    comparison = {"joint_df1": 2, "joint_df2": 100, "joint_F": 1.0, "joint_p": 0.4}
+    mixed = {"method": "OLS with CR2 participant-clustered standard errors (Satterthwaite t, HTZ F; ...)",
+             "joint_test": "HTZ F", "joint_chi2": 3.5, "joint_statistic": 0.87, "joint_df_denom": 0.99, "joint_p": 0.6,
+             "flags": "few_participants;low_df", "flag_text": "LOW DF", "fallback_reason": "no mixed model"}
+    row = next(r for r in pv.rows_for({"egocentric": {"mixed": mixed, "comparison": comparison, "fits": []}})
+               if r["statistic"].startswith("enabled vs disabled"))
+    assert "F(2, 0.99) = 0.87 (HTZ F)" in row["psyop"] and "low_df" in row["psyop"] and "chi2" not in row["psyop"]
+    mixed = {**mixed, "joint_p": float("nan")}
+    row = next(r for r in pv.rows_for({"egocentric": {"mixed": mixed, "comparison": comparison, "fits": []}})
+               if r["statistic"].startswith("enabled vs disabled"))
+    assert row["agrees"] == "n/a"
