@@ -62,7 +62,9 @@ def main(argv: list[str] | None = None) -> int:
         "fits": fits.to_dict("records"), "comparison": comparison.__dict__, "mixed": mixed.__dict__, "summary": summary,
     })
     title = "Egocentric blind reaching" if args.study == "egocentric" else f"Blind reaching: {args.study}"
-    save_figure(plot_reach(t, fits, x=target, condition=rendering, simulated=ds.simulated, title=title), out_path(args))
+    save_figure(plot_reach(t, fits, x=target, condition=rendering, simulated=ds.simulated, title=title,
+                                test_model=mixed.method.split(" (")[0] + (" [FLAGGED: " + mixed.flags + "]" if mixed.flags else "")),
+                out_path(args))
     return 0
 
 

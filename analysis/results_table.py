@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from _common import parser, run, write_json, write_text
-from paper_values import PAPER_PROTOCOLS, paper_hashes, rows_for
+from paper_values import CRITERION, PAPER_PROTOCOLS, paper_hashes, rows_for
 
 from psyop.errors import UserError
 
@@ -135,12 +135,14 @@ def main(argv: list[str] | None = None) -> int:
                   "shows the analysis reproduces the paper's conclusions from data generated to resemble it.", ""]
     agree = sum(r["agrees"] == "yes" for r in rows)
     judged = sum(r["agrees"] != "n/a" for r in rows)
-    lines += [f"Paper: {PAPER_REFERENCE}. Conclusions agree for {agree} of {judged} statistics judged "
-              "(alpha 0.05 after the same correction; a value agrees when it lies in psyop's 95 % CI). "
-              "Rows come only from sessions of the paper's protocols (protocols/*.yaml, by hash).", "",
-              "| study | statistic | paper | psyop | conclusion agrees |", "|---|---|---|---|---|"]
+    lines += [f"Paper: {PAPER_REFERENCE}. **{agree} of {judged} statistics judged agree with the paper** "
+              f"({len(rows) - judged} not judged). Rows come only from sessions of the paper's protocols "
+              "(protocols/*.yaml, by hash).", "",
+              f"Criterion: {CRITERION}", "",
+              "| study | statistic | paper | psyop | agrees | criteria |", "|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['study'].split('_')[0]} | {r['statistic']} | {r['paper']} | {r['psyop']} | {r['agrees']} |")
+        lines.append(f"| {r['study'].split('_')[0]} | {r['statistic']} | {r['paper']} | {r['psyop']} | {r['agrees']} "
+                     f"| {r['criteria']} |")
     lines.append("")
     lines += _methods(studies)
     lines += ["## Every statistic psyop computed", ""]
@@ -149,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
             lines += _statistics(studies[name], name)
     write_text(out, "\n".join(lines) + "\n")
     write_json(out.with_suffix(".json"), {
-        "simulated": simulated, "paper_comparison": rows,
+        "simulated": simulated, "agreement_criterion": CRITERION, "paper_comparison": rows,
         "summary": {n: s.get("summary", {}) for n, s in studies.items()}, "studies": studies,
     })
     return 0

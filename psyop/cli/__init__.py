@@ -65,6 +65,23 @@ def attach_negative_lists(argv: Sequence[str]) -> list[str]:
     return out
 
 
+def closed_pipe_exit() -> int:
+    """The reader of stdout went away (``psyop show P | head -1``): end quietly, as ``cat`` does.
+
+    Python's documented recipe (library/signal.html, "Note on SIGPIPE"): point stdout at devnull so
+    that the interpreter's final flush at exit does not raise a second BrokenPipeError, and exit with
+    128 + SIGPIPE (141), the status a shell reports for other tools killed by the closed pipe.
+    """
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout is no file descriptor (a test's StringIO): nothing to flush
+        pass
+    return 141
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = attach_negative_lists(sys.argv[1:] if argv is None else argv)
     first = next((a for a in argv if not a.startswith("-")), None)
@@ -74,7 +91,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 0
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, inside the handler, not in the interpreter's exit
+        return code
+    except BrokenPipeError:
+        return closed_pipe_exit()
     except UserError as error:
         print(f"psyop {args.command}: error: {error}", file=sys.stderr)
         return error.exit_code

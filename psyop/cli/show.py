@@ -47,8 +47,10 @@ def run(args: argparse.Namespace) -> int:
     protocol = load_protocol(args.protocol)
     print(summarise(protocol))
     # the display's pixel angles where they differ most: the axis and the edges (docs/optics.md, "Pixel angles")
-    eye = protocol.eyes if protocol.eyes in ("left", "right") else "right"
-    print("\n".join(pixel_angles(resolve_display_profile(protocol.display), eye).lines()))
+    # a stereo protocol shows both eyes, whose frusta are mirror images (asymmetric): print each
+    profile = resolve_display_profile(protocol.display)
+    for eye in (("left", "right") if protocol.eyes == "stereo" else (protocol.eyes,)):
+        print("\n".join(pixel_angles(profile, eye).lines()))
     randomisation = protocol.design.randomisation
     if args.participants is not None and args.participants < 1:
         raise UserError(f"--participants {args.participants}: give 1 or more", "--participants")

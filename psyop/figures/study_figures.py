@@ -228,7 +228,7 @@ def plot_ordinal(cells: pd.DataFrame, posthoc: pd.DataFrame, dv: str = "correct"
 
 def plot_reach(reaches: pd.DataFrame, lines: pd.DataFrame, x: str = "target_fraction", y: str = "reach_fraction",
                condition: str = "rendering", simulated: bool = False,
-               title: str = "Egocentric blind reaching") -> plt.Figure:
+               title: str = "Egocentric blind reaching", test_model: str = "") -> plt.Figure:
     """Reach against target (fractions of arm reach): one panel per condition with each participant's
     mean reach per target (dots) and the condition's fitted line; the other condition's line dashed."""
     conds = sorted(reaches[condition].astype(str).unique())
@@ -265,8 +265,10 @@ def plot_reach(reaches: pd.DataFrame, lines: pd.DataFrame, x: str = "target_frac
         fig.tight_layout(rect=(0, 0.2, 1, 1))
         fig.legend(list(handles.values()), list(handles.keys()), loc="lower center", ncol=2, frameon=False,
                    bbox_to_anchor=(0.5, 0.04))
+        # the caption names the model the condition test actually fitted (a fallback included), never an assumed one
+        model = test_model or "see results/summary.md"
         caption(fig, "Distances along the horizontal eye-to-target direction. Lines: linear fits to all reaches of a "
-                     "condition;\nthe condition test is a mixed model with participants random (results/summary.md).")
+                     f"condition;\ncondition test: {model} (results/summary.md).")
         mark_simulated(fig, simulated)
     return fig
 

@@ -23,9 +23,21 @@ def _df(value: float) -> str:
     return f"{value:.0f}" if abs(value - round(value)) < 1e-9 else f"{value:.2f}"
 
 
+def _low_df(df: float) -> str:
+    from psyop.statistics.small_sample import low_df_note
+
+    note = low_df_note(float(df))
+    return f" [{note}]" if note else ""
+
+
 def format_anova(row: Mapping) -> str:
     """One ANOVA effect. GG-corrected df and p, with eps, when eps < 1; plain otherwise.
-    A degenerate row (``status`` other than 'ok') is spelled out, not given numbers."""
+    A degenerate row (``status`` other than 'ok') is spelled out, not given numbers. Fewer than
+    ``small_sample.MIN_RELIABLE_DF`` error df (e.g. F(1, 1)) append a LOW DF flag."""
+    return _format_anova(row) + (_low_df(row["df2"]) if row.get("status", "ok") != "zero_error_variance" else "")
+
+
+def _format_anova(row: Mapping) -> str:
     status = row.get("status", "ok") if hasattr(row, "get") else "ok"
     if status == "zero_error_variance":
         return f"not testable: zero error variance (F undefined; F({_df(row['df1'])}, {_df(row['df2'])}))"
@@ -43,7 +55,8 @@ def format_ttest(row: Mapping) -> str:
     """A Bonferroni-corrected paired t-test row from :func:`psyop.statistics.anova.posthoc_paired`."""
     if (row.get("status", "ok") if hasattr(row, "get") else "ok") == "zero_variance":
         return f"not testable: the differences have zero variance (df = {_df(row['dof'])})"
-    return f"t({_df(row['dof'])}) = {row['T']:.2f}, {format_p(row['p_bonf'])} (Bonferroni x{int(row['m'])})"
+    return (f"t({_df(row['dof'])}) = {row['T']:.2f}, {format_p(row['p_bonf'])} (Bonferroni x{int(row['m'])})"
+            + _low_df(row["dof"]))
 
 
 def format_binomial(row: Mapping) -> str:
@@ -65,12 +78,22 @@ def format_condition_comparison(c: ConditionComparison) -> str:
             f"joint F({c.joint_df1}, {c.joint_df2}) = {c.joint_F:.2f}, {format_p(c.joint_p)}")
 
 
+def format_joint_test(m: MixedComparison) -> str:
+    """The joint test of both differences with its df: 'chi2(2) = 0.85' or 'F(2, 1.31) = 2.10 (HTZ)'."""
+    if m.joint_test == "Wald chi2":
+        return f"joint Wald chi2({m.joint_df}) = {m.joint_chi2:.2f}"
+    suffix = " (HTZ)" if m.joint_test == "HTZ F" else ""
+    return f"joint F({m.joint_df}, {_df(m.joint_df_denom)}) = {m.joint_statistic:.2f}{suffix}"
+
+
 def format_mixed_comparison(m: MixedComparison) -> str:
-    """The subject-aware reach test: method, differences, joint Wald chi2, and any fallback reason."""
+    """The subject-aware reach test: method, differences, the joint test with its df, any fallback reason
+    and every small-sample flag."""
     out = (f"{m.other} vs {m.reference}: intercept difference = {m.intercept_diff:.3f} ({format_p(m.intercept_diff_p)}), "
-           f"slope difference = {m.slope_diff:.3f} ({format_p(m.slope_diff_p)}); joint chi2({m.joint_df}) = "
-           f"{m.joint_chi2:.2f}, {format_p(m.joint_p)} [{m.method}; {m.n_subjects} participants, {m.n} reaches]")
-    return out + (f" (fallback: {m.fallback_reason})" if m.fallback_reason else "")
+           f"slope difference = {m.slope_diff:.3f} ({format_p(m.slope_diff_p)}); {format_joint_test(m)}, "
+           f"{format_p(m.joint_p)} [{m.method}; {m.n_subjects} participants, {m.n} reaches]")
+    out += f" (fallback: {m.fallback_reason})" if m.fallback_reason else ""
+    return out + (f" [{m.flag_text}]" if m.flag_text else "")
 
 
 def format_threshold(row: Mapping) -> str:

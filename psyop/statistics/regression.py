@@ -9,7 +9,8 @@
 - :func:`mixed_condition_comparison`: the same contrasts in a linear mixed model with a random
   intercept and slope per participant (statsmodels MixedLM, REML), the subject-aware primary
   test; when that model cannot be fitted it falls back, in order, to a random intercept only and
-  to OLS with participant-clustered standard errors, and says why (``fallback_reason``).
+  to OLS with CR2 participant-clustered standard errors and small-sample df (Satterthwaite t, HTZ F:
+  psyop.statistics.small_sample), and says why (``fallback_reason``) and what it flags (``flags``).
 """
 
 from __future__ import annotations
@@ -130,11 +131,27 @@ class MixedComparison:
     intercept_diff_p: float
     slope_diff: float
     slope_diff_p: float
-    joint_chi2: float
+    joint_chi2: float  # the Wald statistic Q of both differences (chi2 under the mixed model's asymptotics)
     joint_df: int
     joint_p: float
     n: int
     n_subjects: int
+    #: how the joint test was referred: 'Wald chi2' (MixedLM, asymptotic), 'HTZ F' (CR2 small-sample),
+    #: 'F' (OLS, one participant)
+    joint_test: str = "Wald chi2"
+    joint_statistic: float = float("nan")  # chi2, or the (HTZ-scaled) F
+    joint_df_denom: float = float("inf")  # inf for chi2
+    #: ';'-joined flags: 'low_df' (denominator df < MIN_RELIABLE_DF), 'few_participants' (a mixed model
+    #: or cluster-robust test from fewer than MIN_PARTICIPANTS participants), 'one_participant'
+    flags: str = ""
+    flag_text: str = ""  # the flags in words (what a reader must know about this p-value)
+
+
+#: A random-effects variance or a cluster-robust covariance from fewer participants than this is
+#: flagged: with so few groups variance components are poorly estimated and the mixed model's Wald
+#: chi2 and z tests (which ignore their uncertainty) are anti-conservative (Bolker et al. 2009, TREE
+#: 24:127, recommend at least 5-6 levels of a random factor).
+MIN_PARTICIPANTS = 5
 
 
 def _mixed_fit(d: pd.DataFrame, re_formula: str):
@@ -165,7 +182,8 @@ def mixed_condition_comparison(data: pd.DataFrame, x: str, y: str, condition: st
     Model: y = b0 + b1 x + b2 [other] + b3 x [other] + u0_s + u1_s x + e, (u0, u1) ~ N(0, G) per
     participant (MixedLM, REML). b2, b3 are tested by Wald z; both jointly by a Wald chi2 (2 df).
     Fallbacks (``method`` and ``fallback_reason`` say which and why): random intercept only when
-    the slope variance is not estimable; OLS with participant-clustered SEs when no mixed model fits.
+    the slope variance is not estimable; OLS with CR2 participant-clustered SEs and small-sample df
+    (Satterthwaite, HTZ) when no mixed model fits. Few participants and low df are flagged (``flags``).
     """
     d = _clean(data, [x, y, condition, subject]).rename(columns={x: "x", y: "y", condition: "cond", subject: "subject"})
     d["x"], d["y"] = d["x"].astype(float), d["y"].astype(float)
@@ -194,18 +212,16 @@ def mixed_condition_comparison(data: pd.DataFrame, x: str, y: str, condition: st
                 break
             reasons.append(f"{name.split(', ')[1].split(' (')[0]}: {'; '.join(problems)}")
     if fit is None:
-        ols = smf.ols("y ~ xc * other", d)
-        fit = ols.fit(cov_type="cluster", cov_kwds={"groups": pd.factorize(d["subject"])[0]}) if n_subjects >= 2 else ols.fit()
-        method = "OLS, participant-clustered standard errors" if n_subjects >= 2 else "OLS (one participant)"
+        return _cr2_fallback(d, x_mean, method_reasons=reasons, reference=reference, other=other, n_subjects=n_subjects)
     # x is centred for the fit (intercept and slope variances are otherwise nearly collinear and
     # the covariance lands on its boundary); intercepts are reported at x = 0 by linear contrasts.
-    names = list(fit.fe_params.index) if hasattr(fit, "fe_params") else list(fit.params.index)
+    names = list(fit.fe_params.index)
 
     def contrast(weights: dict[str, float]):
         vec = np.zeros(len(names))
         for k, v in weights.items():
             vec[names.index(k)] = v
-        res = fit.t_test(vec.reshape(1, -1), use_t=False) if hasattr(fit, "cov_re") else fit.t_test(vec.reshape(1, -1))
+        res = fit.t_test(vec.reshape(1, -1), use_t=False)
         return float(np.squeeze(res.effect)), float(np.squeeze(res.pvalue))
     intercept, _ = contrast({"Intercept": 1.0, "xc": -x_mean})
     intercept_diff, intercept_diff_p = contrast({"other": 1.0, "xc:other": -x_mean})
@@ -213,13 +229,82 @@ def mixed_condition_comparison(data: pd.DataFrame, x: str, y: str, condition: st
     b = np.asarray(fit.params[terms], float)
     v = np.asarray(fit.cov_params().loc[terms, terms], float)
     joint_chi2 = float(b @ np.linalg.solve(v, b))
+    flags, texts = [], []
+    if n_subjects < MIN_PARTICIPANTS:
+        flags.append("few_participants")
+        texts.append(f"FEW PARTICIPANTS: random effects estimated from {n_subjects} < {MIN_PARTICIPANTS} participants; "
+                     "the asymptotic Wald chi2 ignores their uncertainty and is optimistic")
     return MixedComparison(
         method=method, fallback_reason="; ".join(reasons), reference=reference, other=other,
         slope=float(fit.params["xc"]), intercept=intercept,
         intercept_diff=intercept_diff, intercept_diff_p=intercept_diff_p,
         slope_diff=float(fit.params["xc:other"]), slope_diff_p=float(fit.pvalues["xc:other"]),
         joint_chi2=joint_chi2, joint_df=2, joint_p=float(chi2.sf(joint_chi2, 2)), n=int(len(d)), n_subjects=n_subjects,
+        joint_test="Wald chi2", joint_statistic=joint_chi2, joint_df_denom=float("inf"),
+        flags=";".join(flags), flag_text="; ".join(texts),
     )
+
+
+def _cr2_fallback(d: pd.DataFrame, x_mean: float, method_reasons: list[str], reference: str, other: str,
+                  n_subjects: int) -> MixedComparison:
+    """No mixed model fits: OLS of y ~ xc * other with CR2 participant-clustered errors, Satterthwaite t for
+    each difference and the HTZ F for both (psyop.statistics.small_sample; clubSandwich's defaults). With
+    one participant there is nothing to cluster: plain OLS, flagged."""
+    from psyop.statistics.small_sample import MIN_RELIABLE_DF, cr2_test
+
+    xc, other_col, y = d["xc"].to_numpy(float), d["other"].to_numpy(float), d["y"].to_numpy(float)
+    design = np.column_stack([np.ones_like(xc), xc, other_col, xc * other_col])
+    intercept_w = np.array([1.0, -x_mean, 0.0, 0.0])
+    intercept_diff_w = np.array([0.0, 0.0, 1.0, -x_mean])
+    slope_diff_w = np.array([0.0, 0.0, 0.0, 1.0])
+    joint_c = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    flags, texts = [], []
+    if n_subjects >= 2:
+        clusters = d["subject"].astype(str).to_numpy()
+        method = ("OLS with CR2 participant-clustered standard errors (Satterthwaite t, HTZ F; "
+                  "small-sample cluster-robust, as R's clubSandwich)")
+        inter = cr2_test(design, y, clusters, intercept_w)
+        idiff = cr2_test(design, y, clusters, intercept_diff_w)
+        sdiff = cr2_test(design, y, clusters, slope_diff_w)
+        beta = np.linalg.lstsq(design, y, rcond=None)[0]
+        values = dict(intercept=inter.estimate[0], intercept_diff=idiff.estimate[0], intercept_diff_p=idiff.p,
+                      slope_diff=sdiff.estimate[0], slope_diff_p=sdiff.p, slope=float(beta[1]))
+        try:
+            joint = cr2_test(design, y, clusters, joint_c)
+        except ValueError as exc:  # 2 clusters cannot inform 2 contrasts: refused, not a number
+            joint = None
+            flags.append("joint_not_testable")
+            texts.append(f"JOINT TEST NOT COMPUTED with {n_subjects} participants: {exc}")
+            values.update(joint_chi2=float("nan"), joint_p=float("nan"), joint_test="HTZ F",
+                          joint_statistic=float("nan"), joint_df_denom=float("nan"))
+        else:
+            values.update(joint_chi2=joint.wald_q, joint_p=joint.p, joint_test="HTZ F", joint_statistic=joint.statistic,
+                          joint_df_denom=joint.df_denom)
+        if n_subjects < MIN_PARTICIPANTS:
+            flags.append("few_participants")
+            texts.append(f"FEW PARTICIPANTS: {n_subjects} clusters (< {MIN_PARTICIPANTS}); CR2 with small-sample df is "
+                         "the established correction, but its power is low and its df small")
+        low = [f"{name} {t.df_denom:.3g}" for name, t in (("joint", joint), ("slope difference", sdiff),
+                                                            ("intercept difference", idiff)) if t is not None and t.low_df]
+        if low:
+            flags.append("low_df")
+            texts.append(f"LOW DF: small-sample df {', '.join(low)} < {MIN_RELIABLE_DF:g}; the approximation is "
+                         "unreliable there (Tipton 2015): treat these p-values as descriptive")
+    else:
+        fit = sm.OLS(y, design).fit()
+        method = "OLS (one participant: reaches as independent, no generalisation to participants)"
+        joint_f = fit.f_test(joint_c)
+        values = dict(intercept=float(intercept_w @ fit.params), intercept_diff=float(intercept_diff_w @ fit.params),
+                      intercept_diff_p=float(np.squeeze(fit.t_test(intercept_diff_w.reshape(1, -1)).pvalue)),
+                      slope_diff=float(fit.params[3]), slope_diff_p=float(fit.pvalues[3]),
+                      joint_chi2=float(np.squeeze(joint_f.fvalue)) * 2, joint_p=float(np.squeeze(joint_f.pvalue)),
+                      joint_test="F", joint_statistic=float(np.squeeze(joint_f.fvalue)),
+                      joint_df_denom=float(fit.df_resid), slope=float(fit.params[1]))
+        flags.append("one_participant")
+        texts.append("ONE PARTICIPANT: the test is about this participant's reaches only")
+    return MixedComparison(method=method, fallback_reason="; ".join(method_reasons), reference=reference, other=other,
+                           joint_df=2, n=int(len(d)), n_subjects=n_subjects, flags=";".join(flags),
+                           flag_text="; ".join(texts), **values)
 
 
 def as_frame(result) -> pd.DataFrame:

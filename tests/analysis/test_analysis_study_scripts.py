@@ -101,7 +101,9 @@ def test_summary_puts_the_paper_beside_psyop_for_all_five_studies(built):
     assert all(r["agrees"] in ("yes", "no", "n/a") and r["paper"] and r["psyop"] for r in rows)
     for paper_value in ("0.36 D", "F(1.7, 30.65) = 17.98", "1.141", "76.8 %", "0.38 D"):
         assert paper_value in md
-    assert "| study | statistic | paper | psyop | conclusion agrees |" in md
+    assert "| study | statistic | paper | psyop | agrees | criteria |" in md
+    assert "Criterion: A row agrees when every criterion it has passes" in md
+    assert all(r["criteria"] for r in rows)
     assert "Bonferroni over the 3 mode pairs within each separation (m = 3)" in md
     assert "--bonferroni-family" in md and "Eta (overdispersion) is fixed at 0" in md
     assert "random intercept and slope per participant" in md
