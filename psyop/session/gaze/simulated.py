@@ -312,7 +312,6 @@ class SimulatedTracker:
         return active
 
     def _eye_angles(self, plan: FixationPlan, t_s: float) -> tuple[float, float]:
-        c = self.config
         if plan.kind == "pursuit" and plan.target is not None:
             az, el = self._pursuit(plan, np.array([t_s - plan.start_s]))[0]
             return float(az), float(el)
