@@ -108,3 +108,22 @@ def test_bad_streams_are_loss_or_flagged_never_a_traceback(session) -> None:
 def test_too_few_samples_give_no_events() -> None:
     events, velocity = detect_events(np.arange(3) / 120, np.zeros(3), np.zeros(3), 120.0, EventMethod())
     assert len(events) == 0 and velocity.shape == (3, 2)
+
+
+def test_psyop_gaze_refuses_a_path_without_sessions(tmp_path: Path) -> None:
+    import argparse
+
+    from psyop.cli.gaze import main
+    from psyop.errors import UserError
+
+    with pytest.raises(UserError, match="no sessions here"):
+        main(argparse.Namespace(path=tmp_path))
+
+
+def test_summary_states_the_measures(session) -> None:
+    from psyop.quality.session import summary_lines
+
+    measures = session[0].assign(participant="R1", session=1)
+    (line,) = summary_lines(measures)
+    assert line.startswith("sub-R1 ses-1: 16 trials") or "trials; data loss" in line
+    assert "pursuit gain 0.8" in line
