@@ -46,6 +46,7 @@ def run_replication(task: ReplicationTask) -> ReplicationResult:
     from psyop.power.study_tests import study_tests
     from psyop.protocol import parse_protocol
     from psyop.schedule import compile_schedule
+    from psyop.session.gaze.simulated import SimulatedTrackerConfig
     from psyop.session.runner import SessionOptions, run_session
     from psyop.statistics.dataset import load_dataset
 
@@ -57,7 +58,9 @@ def run_replication(task: ReplicationTask) -> ReplicationResult:
             options = SessionOptions(participant=f"S{j + 1:02d}",
                                      seed=session_seed(task.seed, task.participants, task.replication, j),
                                      data_root=data_root, progress=False, write_description=False,
-                                     render="cameras", fsync=False)
+                                     render="cameras", fsync=False,
+                                     # power reads trials only: no 120 Hz raw gaze stream (issue 27)
+                                     tracker_faults=SimulatedTrackerConfig(raw_stream="requested"))
             run_session(protocol, compile_schedule, options)
         trials = load_dataset(data_root, study).trials
         outcomes = tuple(study_tests(protocol, trials))

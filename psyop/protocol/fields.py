@@ -11,7 +11,8 @@ Every field of every protocol model is listed here with the part of psyop that r
 - ``summary``: ``psyop show`` and session.json's copy of the protocol text (descriptive fields);
 - ``validation``: a field that only selects or checks (discriminators, the format version);
 - ``refused``: validated structurally, then refused with its file:line (not available yet);
-- ``adaptive``: the session's adaptive levels (psyop.adaptive.session builds each procedure).
+- ``adaptive``: the session's adaptive levels (psyop.adaptive.session builds each procedure);
+- ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``).
 
 tests/protocol/test_protocol_fields.py walks the pydantic schema and checks that every field is
 listed, and that each listed field's name appears in its user's source.
@@ -31,6 +32,7 @@ USERS: dict[str, tuple[str, ...]] = {
                    "psyop/protocol/design.py", "psyop/protocol/display.py"),
     "refused": ("psyop/protocol/semantics.py",),
     "adaptive": ("psyop/adaptive/session.py",),
+    "tracker": ("psyop/session/gaze/simulated.py",),
 }
 
 _SCENE_COMMON = {"id": "stimulus", "kind": "validation"}
@@ -119,4 +121,13 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "ReachCondition": {"slope": "observer", "intercept_m": "observer", "noise_sd_m": "observer"},
     "WithAgainstResponse": {"kind": "plan", "question": "plan", "nc_factor": "schedule"},
     "NcNulling": {k: "observer" for k in ("kind", "nc_mm", "width_mm", "lapse", "between_subject_sd_mm")},
+    "EyeOverride": {k: "tracker" for k in ("precision_deg", "pursuit_gain", "pursuit_lag_s", "blink_rate_hz",
+                                           "dropout_rate_hz", "dropout_s", "nan_burst_rate_hz")},
+    "SimulatedEye": {k: "tracker" for k in ("precision_deg", "pursuit_gain", "pursuit_lag_s", "blink_rate_hz",
+                                            "dropout_rate_hz", "dropout_s", "nan_burst_rate_hz", "rate_hz", "latency_s",
+                                            "catch_up_threshold_deg", "main_sequence_vmax_deg_s",
+                                            "main_sequence_c_deg", "blink_s", "nan_burst_s", "raw_stream",
+                                            "participants")},
 }
+for _observer in ("Psychometric2afc", "OrdinalAccuracy", "PairwisePreference", "Reach", "NcNulling"):
+    FIELD_USERS[_observer]["eye"] = "tracker"  # observer: eye: (psyop.protocol.simulated_eye)

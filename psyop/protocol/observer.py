@@ -11,9 +11,16 @@ from pydantic import Field, model_validator
 
 from psyop.protocol.base import Number, StrictModel
 from psyop.protocol.scene import RenderingMode
+from psyop.protocol.simulated_eye import SimulatedEye
 
 
-class Psychometric2afc(StrictModel):
+class _ObserverBase(StrictModel):
+    """What every simulated observer has: ``eye``, the simulated eye and tracker (psyop.protocol.simulated_eye)."""
+
+    eye: SimulatedEye | None = None
+
+
+class Psychometric2afc(_ObserverBase):
     """p(correct) = 0.5 + (0.5 - lapse) * Phi((level - t) / width_D + z75), where t =
     threshold_D + threshold_slope * row[threshold_offset_column] is the 75 % point (without lapse);
     each simulated participant's threshold is shifted by N(0, between_subject_sd_D)."""
@@ -37,7 +44,7 @@ class Psychometric2afc(StrictModel):
 Probability = Annotated[Number, Field(ge=0, le=1)]
 
 
-class OrdinalAccuracy(StrictModel):
+class OrdinalAccuracy(_ObserverBase):
     """p(correct) by rendering mode and separation: ``p_correct: {ocular: {1: 0.667, 2: 0.758}}``."""
 
     kind: Literal["ordinal_accuracy"]
@@ -45,7 +52,7 @@ class OrdinalAccuracy(StrictModel):
     between_subject_sd: Number = Field(default=0.0, ge=0, le=0.5, description="sd of p across participants")
 
 
-class PairwisePreference(StrictModel):
+class PairwisePreference(_ObserverBase):
     """Bradley-Terry: p(a preferred over b) = s_a / (s_a + s_b)."""
 
     kind: Literal["pairwise_preference"]
@@ -60,7 +67,7 @@ class ReachCondition(StrictModel):
     noise_sd_m: Number = Field(ge=0)
 
 
-class Reach(StrictModel):
+class Reach(_ObserverBase):
     """Blind-reach model per rendering condition (keys: levels of the rendering factor)."""
 
     kind: Literal["reach"]
@@ -73,7 +80,7 @@ class Reach(StrictModel):
     by_condition: dict[str, ReachCondition] = Field(min_length=1)
 
 
-class NcNulling(StrictModel):
+class NcNulling(_ObserverBase):
     """An observer whose own NC is ``nc_mm`` (each simulated participant's drawn around it with sd
     ``between_subject_sd_mm``): p(against) = lapse + (1 - 2 lapse) * Phi((r - nc) / width_mm), r the signed NC
     the trial is rendered with (its camera's mode and NC rule); 'with' otherwise. Its point of subjective

@@ -112,9 +112,10 @@ class Backend(Generic[T]):
 # -- factories (each imports its backend's module only when used) ----------------------------------
 
 def _sim_tracker(arg: str, ctx: BackendContext) -> GazeSource:
-    from psyop.session.gaze.simulated import SimulatedTracker, seed_for
+    from psyop.session.gaze.simulated import SimulatedTracker, seed_for, tracker_config
 
-    return SimulatedTracker(seed_for(ctx.seed, "tracker"), ctx.tracker_faults)
+    eye = ctx.plan.observer.eye if ctx.plan.observer is not None else None  # the protocol's observer: eye:
+    return SimulatedTracker(seed_for(ctx.seed, "tracker"), tracker_config(eye, ctx.participant, ctx.tracker_faults))
 
 
 def _replay_tracker(arg: str, ctx: BackendContext) -> GazeSource:

@@ -314,23 +314,7 @@ class TrialLoop:
 
     def _set_plan(self, phase: PhaseSpec, row: Mapping[str, Any], start_s: float) -> None:
         """Tell the gaze source where the observer is asked to look (a real tracker ignores it)."""
-        c = self.config
-        seed = int(row.get("trial_seed", 0)) & 0xFFFFFFFF
-        if phase.gaze == "pursuit":
-            # the schedule fixes where the target starts and which way it turns
-            phase_deg = float(row.get(f"{c.pursuit_id}_start_deg", seed_for("pursuit", seed) % 360))
-            direction = -1.0 if float(row.get(f"{c.pursuit_id}_direction", 1)) < 0 else 1.0
-            ecc, speed, centre = c.pursuit_eccentricity_deg, c.pursuit_speed_deg_s, c.pursuit_centre_deg
-            if c.pursuit_path is not None:  # the trial's (interval's) levels, as the target is drawn
-                path = c.pursuit_path.for_values(interval_values(row, max(1, phase.interval)))
-                ecc, speed, centre = path.eccentricity_deg, path.speed_deg_s, path.centre_deg
-            plan = FixationPlan("pursuit", start_s, c.fixation_distance_m, centre_deg=centre,
-                                target=circling_target(ecc, direction * speed, phase_deg, centre))
-        elif phase.gaze == "free":
-            plan = FixationPlan("free", start_s, c.fixation_distance_m, radius_deg=c.free_radius_deg, seed=seed_for(seed, phase.name))
-        else:
-            plan = FixationPlan("cross", start_s, c.fixation_distance_m)
-        self.gaze.set_plan(plan)
+        self.gaze.set_plan(fixation_plan(self.config, phase, row, start_s))
 
     def _fresh(self, sample: GazeSample | None) -> GazeSample | None:
         """A sample older than ``stale_after_s`` (tracker dropout) counts as invalid."""
@@ -430,3 +414,31 @@ def _pose_columns(prefix: str, pose: ConditionedPose) -> dict[str, Any]:
     return {f"{prefix}_sample_t_s": pose.sample_t_s, f"{prefix}_x_m": x, f"{prefix}_y_m": y, f"{prefix}_z_m": z,
             f"{prefix}_qw": qw, f"{prefix}_qx": qx, f"{prefix}_qy": qy, f"{prefix}_qz": qz,
             f"{prefix}_valid": pose.valid, f"{prefix}_held": pose.held}
+
+
+def pursuit_fields(path: FixationPath | None) -> dict[str, Any]:
+    """The :class:`LoopConfig` fields of the protocol's moving fixation target (``plan.fixation``)."""
+    return dict(pursuit_eccentricity_deg=path.eccentricity_deg if path else 16.0,
+                pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
+                pursuit_centre_deg=path.centre_deg if path else (0.0, 0.0),
+                pursuit_id=path.id if path else "fixation", pursuit_path=path)
+
+
+def fixation_plan(c: LoopConfig, phase: PhaseSpec, row: Mapping[str, Any], start_s: float) -> FixationPlan:
+    """Where the observer is asked to look in ``phase`` of trial ``row`` from ``start_s`` on: the pursuit
+    target's path (the schedule fixes where it starts and which way it turns), free viewing, or the
+    cross. The loop sets it on the gaze source; psyop.quality rebuilds the target from it."""
+    seed = int(row.get("trial_seed", 0)) & 0xFFFFFFFF
+    if phase.gaze == "pursuit":
+        phase_deg = float(row.get(f"{c.pursuit_id}_start_deg", seed_for("pursuit", seed) % 360))
+        direction = -1.0 if float(row.get(f"{c.pursuit_id}_direction", 1)) < 0 else 1.0
+        ecc, speed, centre = c.pursuit_eccentricity_deg, c.pursuit_speed_deg_s, c.pursuit_centre_deg
+        if c.pursuit_path is not None:  # the trial's (interval's) levels, as the target is drawn
+            path = c.pursuit_path.for_values(interval_values(row, max(1, phase.interval)))
+            ecc, speed, centre = path.eccentricity_deg, path.speed_deg_s, path.centre_deg
+        return FixationPlan("pursuit", start_s, c.fixation_distance_m, centre_deg=centre,
+                            target=circling_target(ecc, direction * speed, phase_deg, centre))
+    if phase.gaze == "free":
+        return FixationPlan("free", start_s, c.fixation_distance_m, radius_deg=c.free_radius_deg,
+                            seed=seed_for(seed, phase.name))
+    return FixationPlan("cross", start_s, c.fixation_distance_m)

@@ -31,7 +31,7 @@ from psyop.session.log.layout import session_paths, write_dataset_description
 from psyop.session.log.schema import trial_schema
 from psyop.adaptive.session import AdaptiveLevels, add_log_columns
 from psyop.session.log.store import SessionStore, recover_tables
-from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop
+from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop, pursuit_fields
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.resume import accept_protocol_change, check_options, resolve_seed
@@ -260,11 +260,7 @@ def run_session(
         config = LoopConfig(
             refresh_hz=float(display_profile.refresh_hz),
             every_frame=every_frame,
-            pursuit_eccentricity_deg=path.eccentricity_deg if path else 16.0,
-            pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
-            pursuit_centre_deg=path.centre_deg if path else (0.0, 0.0),
-            pursuit_id=path.id if path else "fixation",
-            pursuit_path=path,
+            **pursuit_fields(path),  # the moving target's path (psyop.quality rebuilds the target the same way)
             phase_delay_s=options.phase_delay_s,
             progress=options.progress,
             hand_last_n=plan.response.average_last_samples,

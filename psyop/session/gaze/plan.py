@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from psyop.session.gaze.sample import angles_to_direction
+from psyop.optics.angles import fick_angles_deg, offset_direction
 from psyop.stimulus.placement import circle_position_deg
 
 
@@ -36,8 +37,32 @@ class FixationPlan:
         return angles_to_direction(*self.centre_deg)
 
 
+@dataclass(frozen=True)
+class CirclingTarget:
+    """A target circling ``centre_deg`` (Fick angles) at constant ``eccentricity_deg``, its polar angle
+    ``phase_deg + speed_deg_s * t`` (:func:`psyop.stimulus.placement.circle_position_deg`, the one path the
+    stimulus draws). Called with a time it returns Fick (az, el); :meth:`positions` does many at once."""
+
+    eccentricity_deg: float
+    speed_deg_s: float
+    phase_deg: float
+    centre_deg: tuple[float, float]
+
+    def __call__(self, t_rel_s: float) -> tuple[float, float]:
+        return circle_position_deg(self.centre_deg[0], self.centre_deg[1], self.eccentricity_deg, self.phase_deg,
+                                   self.speed_deg_s, t_rel_s)
+
+    def positions(self, t_rel_s: np.ndarray) -> np.ndarray:
+        """Fick (az, el) at each of ``t_rel_s``; shape (n, 2) (equal to calling it per time, to round-off)."""
+        polar = self.phase_deg + self.speed_deg_s * np.asarray(t_rel_s, dtype=np.float64)
+        d = offset_direction(self.centre_deg[0], self.centre_deg[1], self.eccentricity_deg, polar)
+        az, el = fick_angles_deg(d)
+        return np.stack([np.asarray(az, dtype=np.float64).reshape(-1), np.asarray(el, dtype=np.float64).reshape(-1)],
+                        axis=-1)
+
+
 def circling_target(eccentricity_deg: float = 16.0, speed_deg_s: float = 90.0, phase_deg: float = 0.0,
-                    centre_deg: tuple[float, float] = (0.0, 0.0)) -> Callable[[float], tuple[float, float]]:
+                    centre_deg: tuple[float, float] = (0.0, 0.0)) -> CirclingTarget:
     """A target circling ``centre_deg`` (Fick angles) at constant ``eccentricity_deg`` (the threshold
     studies' fixation target), the one path the stimulus draws (:func:`psyop.stimulus.placement.circle_position_deg`).
 
@@ -50,9 +75,5 @@ def circling_target(eccentricity_deg: float = 16.0, speed_deg_s: float = 90.0, p
     >>> round(az, 9), round(el, 9)
     (0.0, 16.0)
     """
-    centre_az, centre_el = (float(c) for c in centre_deg)
-
-    def position(t_rel_s: float) -> tuple[float, float]:
-        return circle_position_deg(centre_az, centre_el, eccentricity_deg, phase_deg, speed_deg_s, t_rel_s)
-
-    return position
+    return CirclingTarget(float(eccentricity_deg), float(speed_deg_s), float(phase_deg),
+                          (float(centre_deg[0]), float(centre_deg[1])))

@@ -7,8 +7,9 @@ in between.
 
 Model (defaults from the paper and its supplement):
 - 120 Hz, 10 ms latency (a sample of time t is available at t + latency).
-- Pursuit of a moving target with gain < 1, modelled as a phase lag of
-  ``(1 - gain) * pursuit_time_constant_s``; fixational noise 0.08 deg sd (precision).
+- Pursuit of a moving target (:mod:`psyop.session.gaze.pursuit`): smooth pursuit at ``pursuit_gain``
+  times the target's velocity, ``pursuit_lag_s`` late, with catch-up saccades on the main sequence
+  whenever the eye falls ``catch_up_threshold_deg`` behind; fixational noise 0.08 deg sd (precision).
 - Free viewing: fixations of gamma-distributed duration (mean 0.3 s) at random points of
   the aperture, joined by 30 ms saccades.
 - Tracker error: a random offset per fixation plan (phase) whose size is such that,
@@ -19,20 +20,34 @@ Model (defaults from the paper and its supplement):
 - Drift: a per-session offset that grows ``drift_deg_per_min``; the per-trial
   recalibration removes it.
 - Blinks (Poisson, 150 ms), NaN bursts and dropouts (no samples at all) on request.
+
+The raw stream (:meth:`SimulatedTracker.drain_raw`): ``raw_stream="requested"`` holds each tick a
+:meth:`~SimulatedTracker.latest` call delivered (a headless session on a virtual clock asks for a few
+per trial); ``"every_sample"`` holds every tick at ``rate_hz`` from the first call on, as a real
+tracker delivers them (computed in blocks, :meth:`SimulatedTracker.samples_block`; a tick's values
+agree with :meth:`~SimulatedTracker.sample_at` to round-off).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from psyop.session.gaze.plan import FixationPlan
-from psyop.optics.angles import fick_angles_deg, offset_direction
+from collections.abc import Callable
+
+from psyop.session.gaze.plan import CirclingTarget, FixationPlan
+from psyop.session.gaze.pursuit import CatchUp, PursuitParams, catch_up_schedule, eye_positions
+from psyop.optics.angles import fick_angles_deg, fick_direction, offset_direction
 from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample, angles_to_direction
 from psyop.session.gaze.sync import ClockSync
+
+if TYPE_CHECKING:
+    from psyop.protocol.simulated_eye import SimulatedEye
 
 
 @dataclass(frozen=True)
@@ -41,7 +56,10 @@ class SimulatedTrackerConfig:
     latency_s: float = 0.010
     precision_deg: float = 0.08
     pursuit_gain: float = 0.9
-    pursuit_time_constant_s: float = 0.2
+    pursuit_lag_s: float = 0.02
+    catch_up_threshold_deg: float = 1.5
+    main_sequence_vmax_deg_s: float = 500.0
+    main_sequence_c_deg: float = 8.0
     error_centre_deg: float = 0.9
     error_per_15deg: float = 0.8
     drift_start_deg: float = 0.5
@@ -54,10 +72,25 @@ class SimulatedTrackerConfig:
     dropout_s: float = 0.5
     fixation_mean_s: float = 0.3
     saccade_s: float = 0.03
+    #: requested | every_sample (module docstring); None: the protocol's observer: eye: decides (else requested).
+    #: Set here (psyop power: requested) it wins over the protocol.
+    raw_stream: str | None = None
 
 
 def _rng(*keys: int) -> np.random.Generator:
     return np.random.default_rng([k & 0xFFFFFFFF for k in keys])
+
+
+@dataclass(frozen=True)
+class SampleBlock:
+    """Many ticks' samples (:meth:`SimulatedTracker.samples_block`): times (s), fixation points (n, 3),
+    confidence, valid (not in a blink or NaN burst) and delivered (not in a dropout)."""
+
+    t_s: np.ndarray
+    fixation_m: np.ndarray
+    confidence: np.ndarray
+    valid: np.ndarray
+    delivered: np.ndarray
 
 
 class _EventTimes:
@@ -90,6 +123,17 @@ class _EventTimes:
                     return start
         return None
 
+    def covers(self, t_s: np.ndarray) -> np.ndarray:
+        """Whether an event covers each of ``t_s`` (ascending), at once."""
+        t_s = np.asarray(t_s, dtype=np.float64)
+        covered = np.zeros(len(t_s), dtype=bool)
+        if self.rate_hz <= 0 or not len(t_s):
+            return covered
+        for w in range(int(math.floor(t_s[0] - self.duration_s)), int(math.floor(t_s[-1])) + 1):
+            for start in self._starts(w):
+                covered |= (t_s >= start) & (t_s < start + self.duration_s)
+        return covered
+
 
 class SimulatedTracker:
     """Implements :class:`~psyop.session.gaze.sample.GazeSource` from a fixation plan."""
@@ -111,6 +155,10 @@ class SimulatedTracker:
         self._nan_bursts = _EventTimes(self.seed, 5, c.nan_burst_rate_hz, c.nan_burst_s)
         self._raw = RawBuffer()
         self._last_raw_tick = -1
+        self._stream_next: int | None = None  # every_sample: the next tick to stream (None: not started)
+        self._catch_up_cache: tuple[tuple[int, int, int], float, list[CatchUp]] | None = None
+        if c.raw_stream not in (None, "requested", "every_sample"):
+            raise ValueError(f"raw_stream must be requested or every_sample, not {c.raw_stream!r}")
 
     # GazeSource --------------------------------------------------------------------
     def start(self) -> None:
@@ -133,6 +181,8 @@ class SimulatedTracker:
 
     def set_plan(self, plan: FixationPlan) -> None:
         """Gaze follows ``plan`` from ``plan.start_s`` on (plans must come in time order)."""
+        if self.config.raw_stream == "every_sample":  # the ticks before it, under the plans they belong to
+            self._stream_until(math.ceil(plan.start_s * self.config.rate_hz) - 1)
         self._plans = [p for p in self._plans if p.start_s < plan.start_s][-1:] + [plan]
 
     def latest(self, now_s: float) -> GazeSample | None:
@@ -149,10 +199,69 @@ class SimulatedTracker:
             return None
         self._delivered += 1
         sample = self.sample_at(k / c.rate_hz, k)
-        if k > self._last_raw_tick:
+        if c.raw_stream == "every_sample":
+            self._stream_until(k)
+        elif k > self._last_raw_tick:
             self._last_raw_tick = k
             self._raw.add(RawGazeSample.of(sample, received_s=sample.timestamp_s + c.latency_s))
         return sample
+
+    def _stream_until(self, last_tick: int) -> None:
+        """every_sample: add the ticks after the last one streamed up to ``last_tick`` to the raw stream
+        (the first call starts the stream at ``last_tick``: a resumed session does not replay the past)."""
+        if self._stream_next is None:
+            self._stream_next = max(0, last_tick)
+        first = self._stream_next
+        if last_tick < first:
+            return
+        self._stream_next = last_tick + 1
+        ticks = np.arange(first, last_tick + 1)
+        block = self.samples_block(ticks)
+        latency = self.config.latency_s
+        for i in np.flatnonzero(block.delivered):
+            t = float(block.t_s[i])
+            fixation = (float(block.fixation_m[i, 0]), float(block.fixation_m[i, 1]), float(block.fixation_m[i, 2]))
+            self._raw.add(RawGazeSample(t, t, t + latency, bool(block.valid[i]), float(block.confidence[i]), fixation))
+
+    def samples_block(self, ticks: np.ndarray) -> SampleBlock:
+        """The samples of ``ticks`` (ascending) at once: what :meth:`sample_at` gives per tick (to
+        round-off), and which ticks a dropout keeps from being delivered. Uses the plans set so far."""
+        c = self.config
+        ticks = np.asarray(ticks, dtype=np.int64)
+        t = ticks / c.rate_hz
+        delivered = ~self._dropouts.covers(t)
+        invalid = self._blinks.covers(t) | self._nan_bursts.covers(t)
+        angles = np.zeros((len(t), 2))
+        offsets = np.zeros((len(t), 2))
+        distance = np.ones(len(t))
+        starts = np.array([p.start_s for p in self._plans])
+        which = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(self._plans) - 1)
+        for index in np.unique(which):
+            plan = self._plans[index]
+            rows = which == index
+            t_rel = t[rows] - plan.start_s
+            if plan.kind == "pursuit" and plan.target is not None:
+                angles[rows] = self._pursuit(plan, t_rel)
+            elif plan.kind == "free":
+                angles[rows] = self._free_block(plan, t_rel)
+            else:
+                angles[rows] = plan.centre_deg
+            offsets[rows] = self._plan_offset(plan)
+            distance[rows] = plan.distance_m
+        windows, index = np.divmod(ticks, 256)
+        noise = np.empty((len(t), 3))
+        for window in np.unique(windows):
+            rows = windows == window
+            self._noise(int(window) * 256)
+            noise[rows] = self._noise_cache[1][index[rows]]  # type: ignore[index]
+        ecc = np.hypot(angles[:, 0], angles[:, 1])
+        err = offsets + self._error_grow_dir[None, :] * c.error_per_15deg * (ecc / 15.0)[:, None]
+        drift = self._drift_dir[None, :] * (c.drift_start_deg + c.drift_deg_per_min * t / 60.0)[:, None]
+        total = angles + noise[:, :2] + err + drift
+        fixation = fick_direction(total[:, 0], total[:, 1]) * distance[:, None]
+        fixation[invalid] = np.nan
+        confidence = np.where(invalid, 0.0, np.clip(0.95 + 0.02 * noise[:, 2] / c.precision_deg, 0.0, 1.0))
+        return SampleBlock(t, fixation, confidence, ~invalid, delivered)
 
     # model -------------------------------------------------------------------------
     def sample_at(self, t_s: float, tick: int) -> GazeSample:
@@ -203,13 +312,60 @@ class SimulatedTracker:
         return active
 
     def _eye_angles(self, plan: FixationPlan, t_s: float) -> tuple[float, float]:
-        c = self.config
         if plan.kind == "pursuit" and plan.target is not None:
-            lag = (1.0 - c.pursuit_gain) * c.pursuit_time_constant_s
-            return plan.target(max(0.0, t_s - plan.start_s - lag))
+            az, el = self._pursuit(plan, np.array([t_s - plan.start_s]))[0]
+            return float(az), float(el)
         if plan.kind == "free":
             return self._free_viewing(plan, t_s - plan.start_s)
         return plan.centre_deg
+
+    def _pursuit_params(self) -> PursuitParams:
+        c = self.config
+        return PursuitParams(c.pursuit_gain, c.pursuit_lag_s, c.catch_up_threshold_deg, c.main_sequence_vmax_deg_s,
+                             c.main_sequence_c_deg)
+
+    def catch_ups(self, plan: FixationPlan, until_rel_s: float) -> list[CatchUp]:
+        """The catch-up saccades the simulated eye makes pursuing ``plan`` up to ``until_rel_s`` after its
+        start (the ground truth recovery tests compare psyop's measures with)."""
+        key = (int(round(plan.start_s * 1e6)), plan.seed, id(plan.target))
+        cached = self._catch_up_cache
+        if cached is None or cached[0] != key or cached[1] < until_rel_s:
+            horizon = max(until_rel_s, 0.5) + 0.5
+            rng = _rng(self.seed, 9, key[0] & 0xFFFFFFFF, plan.seed)
+            self._catch_up_cache = cached = (key, horizon,
+                                             catch_up_schedule(self._positions(plan), self._pursuit_params(), horizon, rng))
+        return [s for s in cached[2] if s.onset_s <= until_rel_s]
+
+    @staticmethod
+    def _positions(plan: FixationPlan) -> Callable[[np.ndarray], np.ndarray]:
+        target = plan.target
+        if isinstance(target, CirclingTarget):
+            return target.positions
+        assert target is not None
+
+        def one_by_one(t: np.ndarray) -> np.ndarray:
+            return np.array([target(float(x)) for x in np.asarray(t).reshape(-1)], dtype=np.float64).reshape(-1, 2)
+
+        return one_by_one
+
+    def _pursuit(self, plan: FixationPlan, t_rel_s: np.ndarray) -> np.ndarray:
+        saccades = self.catch_ups(plan, float(np.max(t_rel_s)) + 1.0)
+        return eye_positions(self._positions(plan), self._pursuit_params(), saccades, t_rel_s)
+
+    def _free_block(self, plan: FixationPlan, t_rel_s: np.ndarray) -> np.ndarray:
+        """:meth:`_free_viewing` at many times at once (the same arithmetic)."""
+        self._free_viewing(plan, float(np.max(t_rel_s)))  # fills the fixation list far enough
+        assert self._fixations is not None
+        fixations = np.array(self._fixations[1])
+        t = np.asarray(t_rel_s, dtype=np.float64)
+        index = np.searchsorted(fixations[:, 0], np.maximum(t, 0.0), side="right") - 1
+        out = fixations[index, 1:].copy()
+        moving = (index > 0) & (t - fixations[index, 0] < self.config.saccade_s)
+        if np.any(moving):
+            w = ((t - fixations[index, 0]) / self.config.saccade_s)[moving, None]
+            previous = fixations[index[moving] - 1, 1:]
+            out[moving] = previous + w * (fixations[index[moving], 1:] - previous)
+        return out
 
     def _free_viewing(self, plan: FixationPlan, t_rel_s: float) -> tuple[float, float]:
         c = self.config
@@ -249,3 +405,40 @@ def angular_error_deg(measured: np.ndarray, truth: np.ndarray) -> float:
 def seed_for(*parts: object) -> int:
     """A stable 32-bit seed from strings/ints (Python's hash() is salted per process)."""
     return zlib.crc32("|".join(str(p) for p in parts).encode())
+
+
+#: the fields of ``observer: eye:`` (psyop.protocol.simulated_eye) that set a SimulatedTrackerConfig field
+_EYE_FIELDS = ("rate_hz", "latency_s", "precision_deg", "pursuit_gain", "pursuit_lag_s", "catch_up_threshold_deg",
+               "main_sequence_vmax_deg_s", "main_sequence_c_deg", "blink_rate_hz", "blink_s", "dropout_rate_hz",
+               "dropout_s", "nan_burst_rate_hz", "nan_burst_s", "raw_stream")
+
+
+def tracker_config(eye: SimulatedEye | None, participant: str,
+                   base: SimulatedTrackerConfig | None = None) -> SimulatedTrackerConfig:
+    """The simulated tracker of ``participant``: ``base`` (the command line's faults, else the defaults),
+    then each field the protocol's ``observer: eye:`` sets, then its ``participants[participant]`` overrides.
+    A fault rate the command line sets (``--sim-dropout-rate-hz``, ``--sim-nan-burst-rate-hz``) is kept
+    when it is higher than the protocol's (a crash-safety test asks for faults); a ``raw_stream`` that
+    ``base`` sets wins over the protocol's.
+
+    Examples
+    --------
+    >>> from psyop.protocol.simulated_eye import SimulatedEye
+    >>> eye = SimulatedEye(pursuit_gain=0.8, participants={"S02": {"dropout_rate_hz": 1.0}})
+    >>> tracker_config(eye, "S01").pursuit_gain, tracker_config(eye, "S02").dropout_rate_hz
+    (0.8, 1.0)
+    """
+    config = base or SimulatedTrackerConfig()
+    if eye is None:
+        return config
+    values = {name: getattr(eye, name) for name in _EYE_FIELDS}  # every field of the typed section, by name
+    override = eye.participants.get(participant)
+    if override is not None:
+        values.update({name: value for name, value in override.model_dump().items() if value is not None})
+    values = {name: value for name, value in values.items() if value is not None}
+    if config.raw_stream is not None:  # the caller's choice (psyop power never reads the raw stream)
+        values.pop("raw_stream", None)
+    for fault in ("dropout_rate_hz", "nan_burst_rate_hz"):
+        if fault in values:
+            values[fault] = max(values[fault], getattr(config, fault))
+    return dataclasses.replace(config, **values)

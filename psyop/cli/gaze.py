@@ -1,0 +1,36 @@
+"""``psyop gaze PATH``: the gaze quality summary of a session or of every session under a data root."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from psyop.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "gaze", help="gaze data quality (loss, accuracy, precision, pursuit gain and lag, saccades) of sessions",
+        description="Measures the raw gaze stream of a session (or of every session under a data root) against "
+        "the targets its protocol showed, in degrees, with eye-movement events from pymovements (docs/quality.md). "
+        "Reads the sessions, changes nothing.")
+    parser.add_argument("path", type=Path, help="a session directory (data/<study>/sub-<ID>/ses-<N>) or a data root")
+    parser.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    from psyop import datacontract as dc
+    from psyop.quality.session import measure_session, summary_lines
+
+    path: Path = args.path
+    if not path.exists():
+        raise UserError("no such session directory or data root", str(path))
+    sessions = [path] if (path / dc.TRIALS_FILE).is_file() else sorted(p.parent for p in path.rglob(dc.TRIALS_FILE))
+    if not sessions:
+        raise UserError("no sessions here (expected <study>/sub-<ID>/ses-<N>/trials.parquet)", str(path))
+    for session in sessions:
+        measures, _ = measure_session(session)
+        print(f"{session}:")
+        for line in summary_lines(measures):
+            print(f"  {line}")
+    return 0

@@ -1,0 +1,167 @@
+"""Per-trial gaze data quality in degrees (issue 27 item 1), against the target the participant was asked
+to look at (rebuilt with :func:`psyop.session.loop.fixation_plan` from the trial row and the phase timing:
+phase k starts at ``trial_start_s`` plus the durations before it; exact on the virtual clock, within a
+frame of it on a real one).
+
+Measures (:data:`TRIAL_MEASURES`): data loss against the nominal rate and the longest gap; accuracy
+(mean and max angular error) on fixation (cross) and pursuit phases, before and after drift correction
+(the trial's median error over the last 0.25 s of its first cross phase removed); precision (pymovements'
+``rms_s2s`` and ``std_rms``) over fixation phases outside saccades; pursuit gain (median eye velocity along the
+target's over its speed, smooth samples from 0.1 s into a pursuit phase), lag (median angle between eye and target
+velocity over the target velocity's turning rate) and catch-up saccades per second of pursuit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from psyop.optics.angles import angle_between_deg, fick_direction
+from psyop.quality.events import EventMethod, detect_events
+from psyop.quality.samples import GazeGrid
+from psyop.session.gaze.plan import CirclingTarget
+from psyop.session.loop import LoopConfig, fixation_plan, pursuit_fields
+from psyop.session.plan import SessionPlan
+
+TRIAL_MEASURES: dict[str, str] = {
+    "data_loss_share": "share of the samples expected at the nominal rate that are missing or invalid",
+    "longest_gap_s": "longest stretch without a valid sample (s)",
+    "accuracy_fixation_mean_deg": "mean angular error on the cross (deg)",
+    "accuracy_fixation_max_deg": "largest angular error on the cross (deg)",
+    "accuracy_fixation_corrected_mean_deg": "mean error on the cross after drift correction (deg)",
+    "accuracy_pursuit_mean_deg": "mean angular error to the pursuit target (deg)",
+    "accuracy_pursuit_max_deg": "largest angular error to the pursuit target (deg)",
+    "accuracy_pursuit_corrected_mean_deg": "mean error to the pursuit target after drift correction (deg)",
+    "precision_rms_s2s_deg": "RMS sample-to-sample displacement on the cross (deg)",
+    "precision_sd_deg": "radial SD of the samples on the cross (deg)",
+    "pursuit_gain": "median eye velocity along the target's / target speed in smooth pursuit",
+    "pursuit_lag_s": "how late the eye's velocity follows the target's (s)",
+    "catch_up_saccades_per_s": "saccades per second of pursuit",
+    "n_fixations": "fixations (pymovements I-VT) in the trial",
+    "n_saccades": "saccades (pymovements microsaccades detector) in the trial",
+}
+
+
+def _err(az: np.ndarray, el: np.ndarray, taz: np.ndarray, tel: np.ndarray) -> np.ndarray:
+    return np.asarray(angle_between_deg(fick_direction(az, el), fick_direction(taz, tel)), dtype=np.float64)
+
+
+def _precision(az: np.ndarray, el: np.ndarray) -> tuple[float, float]:
+    """pymovements' rms_s2s and std_rms of these samples (NaN with fewer than 3)."""
+    ok = np.isfinite(az)
+    if ok.sum() < 3:
+        return math.nan, math.nan
+    import polars as pl
+    from pymovements.measure.samples import rms_s2s, std_rms
+
+    frame = pl.DataFrame({"position": np.stack([az[ok], el[ok]], axis=1).tolist()})
+    out = frame.select(rms_s2s(column="position"), std_rms(column="position"))
+    return float(out["rms_s2s"][0]), float(out["std_rms"][0])
+
+
+def trial_measures(grid: GazeGrid, trials: pd.DataFrame, plan: SessionPlan,
+                   method: EventMethod | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(per-trial measures, events) of one session: one row per trial of ``trials`` (columns ``trial`` and
+    :data:`TRIAL_MEASURES`), and the pymovements events with the trial (-1: between trials) and phase
+    each began in."""
+    method = method or EventMethod()
+    events, velocity = detect_events(grid.t_s, grid.az_deg, grid.el_deg, grid.rate_hz, method)
+    events["trial"], events["phase"] = -1, ""
+    in_saccade = np.zeros(len(grid.t_s), dtype=bool)
+    for onset, offset in events.loc[events["name"] != "fixation", ["onset_s", "offset_s"]].itertuples(index=False):
+        in_saccade |= (grid.t_s >= onset) & (grid.t_s <= offset)
+    near_saccade = in_saccade.copy()  # a velocity next to a saccade still carries part of it: 2 samples each side
+    for k in (1, 2):
+        near_saccade[k:] |= in_saccade[:-k]
+        near_saccade[:-k] |= in_saccade[k:]
+    config = LoopConfig(**pursuit_fields(plan.fixation))
+    rows = []
+    for row in trials.to_dict("records"):
+        start, end = float(row["trial_start_s"]), float(row["trial_end_s"])
+        window = (grid.t_s >= start) & (grid.t_s < end)
+        expected = max(1, int(round((end - start) * grid.rate_hz))) if math.isfinite(grid.rate_hz) else 0
+        valid_t = grid.t_s[window & grid.valid]
+        edges = np.concatenate([[start], valid_t, [end]])
+        out = {"trial": int(row["trial"]), "n_samples_valid": int(len(valid_t)), "n_samples_expected": expected,
+               "data_loss_share": max(0.0, 1.0 - len(valid_t) / expected) if expected else 1.0,
+               "longest_gap_s": float(np.max(np.diff(edges)))}
+        fix_err, fix_corr, pur_err, pur_corr, fix_az, fix_el = [], [], [], [], [], []
+        speed_ratio, angle_diff, turn, pursuit_s, n_catch = [], [], [], 0.0, 0
+        offset = None
+        t0 = start
+        for phase in plan.phases:
+            p_end = t0 + phase.duration_s
+            sel = window & grid.valid & (grid.t_s >= t0) & (grid.t_s < p_end)
+            fplan = fixation_plan(config, phase, row, t0)
+            ev = (events["onset_s"] >= t0) & (events["onset_s"] < p_end)
+            events.loc[ev, "trial"], events.loc[ev, "phase"] = int(row["trial"]), phase.name
+            az, el, t = grid.az_deg[sel], grid.el_deg[sel], grid.t_s[sel]
+            if phase.gaze == "cross" and len(t):
+                taz, tel = np.full(len(t), fplan.centre_deg[0]), np.full(len(t), fplan.centre_deg[1])
+                if offset is None:
+                    last = t >= p_end - 0.25
+                    offset = (float(np.median(az[last] - taz[last])), float(np.median(el[last] - tel[last]))) \
+                        if last.any() else None
+                fix_err.append(_err(az, el, taz, tel))
+                if offset is not None:
+                    fix_corr.append(_err(az - offset[0], el - offset[1], taz, tel))
+                still = ~in_saccade[sel]
+                fix_az.append(az[still])
+                fix_el.append(el[still])
+            elif phase.gaze == "pursuit" and fplan.target is not None and len(t):
+                target = fplan.target
+
+                def at(times: np.ndarray) -> np.ndarray:
+                    if isinstance(target, CirclingTarget):
+                        return target.positions(times)
+                    return np.array([target(float(x)) for x in times]).reshape(-1, 2)
+
+                tpos = at(t - t0)
+                pur_err.append(_err(az, el, tpos[:, 0], tpos[:, 1]))
+                if offset is not None:
+                    pur_corr.append(_err(az - offset[0], el - offset[1], tpos[:, 0], tpos[:, 1]))
+                h = 1e-3
+                ahead, behind = at(t - t0 + h), at(t - t0 - h)
+                v_t = (ahead - behind) / (2 * h)
+                a_t = (ahead - 2 * tpos + behind) / h**2
+                v_e = velocity[sel]
+                smooth = (~near_saccade[sel]) & np.all(np.isfinite(v_e), axis=1) & (t >= t0 + 0.1)
+                s_t = np.hypot(*v_t.T)
+                good = smooth & (s_t > 1.0)
+                # the eye's velocity along the target's (zero-mean noise does not bias it, unlike |v|)
+                speed_ratio.append(np.sum(v_e[good] * v_t[good], axis=1) / s_t[good] ** 2)
+                angle_diff.append(np.arctan2(v_t[good, 0] * v_e[good, 1] - v_t[good, 1] * v_e[good, 0],
+                                             np.sum(v_t[good] * v_e[good], axis=1)))
+                turn.append((v_t[good, 0] * a_t[good, 1] - v_t[good, 1] * a_t[good, 0]) / s_t[good] ** 2)
+                pursuit_s += phase.duration_s
+                n_catch += int((ev & (events["name"] != "fixation")).sum())
+            t0 = p_end
+
+        def stat(parts: list[np.ndarray], fn) -> float:
+            values = np.concatenate(parts) if parts else np.zeros(0)
+            return float(fn(values)) if len(values) else math.nan
+
+        out.update(accuracy_fixation_mean_deg=stat(fix_err, np.mean), accuracy_fixation_max_deg=stat(fix_err, np.max),
+                   accuracy_fixation_corrected_mean_deg=stat(fix_corr, np.mean),
+                   accuracy_pursuit_mean_deg=stat(pur_err, np.mean), accuracy_pursuit_max_deg=stat(pur_err, np.max),
+                   accuracy_pursuit_corrected_mean_deg=stat(pur_corr, np.mean))
+        rms, sd = _precision(np.concatenate(fix_az) if fix_az else np.zeros(0),
+                             np.concatenate(fix_el) if fix_el else np.zeros(0))
+        out.update(precision_rms_s2s_deg=rms, precision_sd_deg=sd)
+        out["pursuit_gain"] = stat(speed_ratio, np.median)
+        # the eye's velocity direction is the target's turned back by (turning rate x lag): lag = -angle / rate
+        rate = stat(turn, np.median)
+        out["pursuit_lag_s"] = (-stat(angle_diff, np.median) / rate) if math.isfinite(rate) and abs(rate) > 0.1 \
+            else math.nan
+        out["catch_up_saccades_per_s"] = n_catch / pursuit_s if pursuit_s > 0 else math.nan
+        in_trial = events["trial"] == int(row["trial"])
+        out["n_fixations"] = int((in_trial & (events["name"] == "fixation")).sum())
+        out["n_saccades"] = int((in_trial & (events["name"] != "fixation")).sum())
+        rows.append(out)
+    table = pd.DataFrame(rows)
+    for name, value in grid.flags.items():
+        table[name] = value  # the session's stream faults, by name, on every row
+    table["rate_hz"], table["rate_source"] = grid.rate_hz, grid.rate_source
+    return table, events

@@ -1,0 +1,116 @@
+"""A session's raw gaze stream on the tracker's clock grid, in degrees, with its faults counted by name.
+
+Samples are placed on the grid ``t_first + k / rate_hz`` (the nominal rate: the simulated tracker's
+stated rate, else the median interval between samples, ``rate_source`` says which). A tick without a
+valid sample is NaN (loss); duplicated timestamps, timestamps that go backwards, samples between ticks
+(a mixed rate) and non-finite times are dropped and counted (``flags``), never a traceback.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from psyop.optics.angles import fick_angles_deg
+
+FLAG_NAMES = ("n_non_finite_time", "n_duplicate_timestamps", "n_non_monotonic", "n_off_grid")
+
+
+@dataclass(frozen=True)
+class GazeGrid:
+    """Samples on a regular grid: ``t_s`` (s, session clock), Fick ``az_deg``/``el_deg`` of the binocular
+    gaze (NaN: no valid sample at that tick), ``valid``; ``eyes``: per eye (left/right) the (az, el) of
+    its gaze normal where the tracker gives it; ``flags``: counts by :data:`FLAG_NAMES`."""
+
+    t_s: np.ndarray
+    az_deg: np.ndarray
+    el_deg: np.ndarray
+    valid: np.ndarray
+    rate_hz: float
+    rate_source: str
+    flags: dict[str, int]
+    eyes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+    @staticmethod
+    def empty(rate_hz: float, rate_source: str, flags: dict[str, int]) -> GazeGrid:
+        nothing = np.zeros(0)
+        return GazeGrid(nothing, nothing, nothing, np.zeros(0, dtype=bool), rate_hz, rate_source, flags)
+
+
+def _angles(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d = np.stack([x, y, z], axis=-1)
+    usable = np.all(np.isfinite(d), axis=-1) & (np.linalg.norm(d, axis=-1) > 0)
+    az, el = fick_angles_deg(np.where(usable[:, None], d, [0.0, 0.0, -1.0]))
+    az = np.where(usable, np.asarray(az, dtype=np.float64).reshape(-1), np.nan)
+    el = np.where(usable, np.asarray(el, dtype=np.float64).reshape(-1), np.nan)
+    return az, el
+
+
+def gaze_grid(gaze: pd.DataFrame, nominal_rate_hz: float | None) -> GazeGrid:
+    """``gaze`` (columns of :data:`psyop.session.log.schema.GAZE_SCHEMA`; one session) on its grid.
+
+    Examples
+    --------
+    >>> g = pd.DataFrame({"gaze_sample_t_s": [0.0, 0.01, 0.01, 0.03, 0.02], "gaze_valid": [True] * 5,
+    ...                   "fixation_x_m": [0.0] * 5, "fixation_y_m": [0.0] * 5, "fixation_z_m": [-1.0] * 5})
+    >>> grid = gaze_grid(g, 100.0)
+    >>> len(grid.t_s), grid.flags["n_duplicate_timestamps"], grid.flags["n_non_monotonic"]
+    (4, 1, 1)
+    """
+    flags = dict.fromkeys(FLAG_NAMES, 0)
+    if len(gaze) == 0 or "gaze_sample_t_s" not in gaze:
+        return GazeGrid.empty(float(nominal_rate_hz or math.nan), "no samples", flags)
+    t = gaze["gaze_sample_t_s"].to_numpy(dtype=np.float64)
+    finite = np.isfinite(t)
+    flags["n_non_finite_time"] = int((~finite).sum())
+    running = np.fmax.accumulate(np.where(finite, t, -np.inf))
+    backwards = finite & (t < np.concatenate([[-np.inf], running[:-1]]))
+    flags["n_non_monotonic"] = int(backwards.sum())
+    keep = finite & ~backwards
+    duplicate = keep & np.concatenate([[False], t[1:] == t[:-1]])
+    flags["n_duplicate_timestamps"] = int(duplicate.sum())
+    keep &= ~duplicate
+    rows = gaze[keep]
+    t = t[keep]
+    if len(t) == 0:
+        return GazeGrid.empty(float(nominal_rate_hz or math.nan), "no samples", flags)
+    if nominal_rate_hz is not None:
+        rate, source = float(nominal_rate_hz), "the simulated tracker's rate_hz"
+    elif len(t) > 1:
+        rate, source = 1.0 / float(np.median(np.diff(t))), "median interval between samples"
+    else:
+        return GazeGrid.empty(math.nan, "one sample: no rate", flags)
+    tick = np.rint((t - t[0]) * rate).astype(np.int64)
+    off = np.abs((t - t[0]) * rate - tick) > 0.25
+    same = np.concatenate([[False], tick[1:] == tick[:-1]])
+    flags["n_off_grid"] = int((off | same).sum())
+    on = ~(off | same)
+    tick, rows = tick[on], rows[on]
+    n = int(tick[-1]) + 1
+    grid_t = t[0] + np.arange(n) / rate
+    valid_col = rows["gaze_valid"].to_numpy(dtype=bool) if "gaze_valid" in rows else np.ones(len(rows), dtype=bool)
+
+    def place(az: np.ndarray, el: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        out_az, out_el = np.full(n, np.nan), np.full(n, np.nan)
+        out_az[tick[ok]], out_el[tick[ok]] = az[ok], el[ok]
+        return out_az, out_el
+
+    columns = [f"fixation_{a}_m" for a in "xyz"]
+    if all(c in rows for c in columns):
+        az, el = _angles(*(rows[c].to_numpy(dtype=np.float64) for c in columns))
+    else:
+        az = el = np.full(len(rows), np.nan)
+    ok = valid_col & np.isfinite(az) & np.isfinite(el)
+    grid_az, grid_el = place(az, el, ok)
+    eyes = {}
+    for eye in ("left", "right"):
+        names = [f"gaze_normal_{eye}_{a}" for a in "xyz"]
+        if all(c in rows for c in names):
+            e_az, e_el = _angles(*(rows[c].to_numpy(dtype=np.float64) for c in names))
+            e_ok = valid_col & np.isfinite(e_az)
+            if e_ok.any():
+                eyes[eye] = place(e_az, e_el, e_ok)
+    return GazeGrid(grid_t, grid_az, grid_el, np.isfinite(grid_az), rate, source, flags, eyes)

@@ -1,0 +1,64 @@
+"""The gaze quality of one finalised session directory (verified first, never changed)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from psyop import datacontract as dc
+from psyop.errors import UserError
+from psyop.finalised import verify_session
+from psyop.quality.measures import trial_measures
+from psyop.quality.samples import gaze_grid
+
+
+def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(per-trial measures, events) of the session in ``directory``, each with participant and session.
+
+    The nominal rate is the simulated tracker's ``rate_hz`` (protocol ``observer: eye:``, default 120 Hz)
+    for a simulated session, else the median interval between samples."""
+    from psyop.protocol import parse_protocol
+    from psyop.session.gaze.simulated import SimulatedTrackerConfig
+    from psyop.session.plan import compile_plan
+
+    directory = Path(directory)
+    meta_path = directory / dc.SESSION_METADATA_FILE
+    if not meta_path.is_file() or not (directory / dc.TRIALS_FILE).is_file():
+        raise UserError("not a finalised psyop session (no session.json and trials.parquet)", str(directory))
+    verify_session(directory)
+    meta = json.loads(meta_path.read_text())
+    protocol = parse_protocol(meta["protocol_text"], str(meta_path))
+    plan = compile_plan(protocol)
+    rate = None
+    if meta.get("tracker") == "sim":
+        eye = plan.observer.eye if plan.observer is not None else None
+        rate = (eye.rate_hz if eye is not None and eye.rate_hz is not None else SimulatedTrackerConfig().rate_hz)
+    gaze_path = directory / dc.GAZE_FILE
+    gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
+    trials = pd.read_parquet(directory / dc.TRIALS_FILE)
+    measures, events = trial_measures(gaze_grid(gaze, rate), trials, plan)
+    for table in (measures, events):
+        table.insert(0, "session", int(meta.get("session", 1)))
+        table.insert(0, "participant", str(meta.get("participant", "")))
+    return measures, events
+
+
+def summary_lines(measures: pd.DataFrame) -> list[str]:
+    """A methods-section summary of per-trial measures (medians over trials, per participant/session)."""
+    lines = []
+    for (participant, session), rows in measures.groupby(["participant", "session"], sort=True):
+        m = rows.median(numeric_only=True)
+        lines.append(
+            f"sub-{participant} ses-{session}: {len(rows)} trials; data loss {100 * rows['data_loss_share'].mean():.1f} % "
+            f"(longest gap {rows['longest_gap_s'].max():.3f} s); accuracy on the cross {m['accuracy_fixation_mean_deg']:.2f} deg "
+            f"({m['accuracy_fixation_corrected_mean_deg']:.2f} deg after drift correction); precision RMS-S2S "
+            f"{m['precision_rms_s2s_deg']:.3f} deg, SD {m['precision_sd_deg']:.3f} deg; pursuit gain {m['pursuit_gain']:.2f}, "
+            f"lag {1000 * m['pursuit_lag_s']:.0f} ms, {rows['catch_up_saccades_per_s'].mean():.2f} catch-up saccades/s "
+            "(medians over trials; nan: no such phase)")
+        flagged = {k: int(rows[k].iloc[0]) for k in ("n_non_finite_time", "n_duplicate_timestamps", "n_non_monotonic",
+                                                      "n_off_grid") if int(rows[k].iloc[0])}
+        if flagged:
+            lines.append(f"  raw stream faults: {flagged}")
+    return lines

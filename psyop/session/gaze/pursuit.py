@@ -1,0 +1,117 @@
+"""The simulated eye's smooth pursuit with catch-up saccades (a pure function of the plan and its seed).
+
+Model (stated, and what :mod:`psyop.quality` recovers):
+
+- The eye sees the target ``lag_s`` late: it follows ``T(t - lag_s)`` (Fick angles, degrees; the target
+  holds its start position before ``lag_s``).
+- Smooth pursuit with gain ``g``: between saccades the eye's velocity is ``g`` times the (late)
+  target's velocity, ``E(t) = E(s_n) + g * (T(t - lag) - T(s_n - lag))`` from the end ``s_n`` of the
+  last saccade; so its position error against the late target grows as ``(1 - g)`` times the
+  target's path since then.
+- A catch-up saccade starts when that error reaches a threshold (``threshold_deg`` times a factor
+  drawn uniformly from 0.8..1.2 per saccade). It lands on the late target at its end. Its amplitude
+  ``A`` and peak velocity follow the main sequence ``V_peak = vmax * (1 - exp(-A / c))``
+  (Baloh et al. 1975's form), with a raised-cosine velocity profile, so its duration is
+  ``2 A / V_peak``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+Positions = Callable[[np.ndarray], np.ndarray]  # t_rel_s (n,) -> Fick (az, el) degrees (n, 2)
+
+
+@dataclass(frozen=True)
+class PursuitParams:
+    gain: float
+    lag_s: float
+    threshold_deg: float
+    vmax_deg_s: float
+    c_deg: float
+
+
+@dataclass(frozen=True)
+class CatchUp:
+    """One catch-up saccade: onset (s after the plan's start), duration (s), start and landing (deg)."""
+
+    onset_s: float
+    duration_s: float
+    start_deg: tuple[float, float]
+    land_deg: tuple[float, float]
+
+    @property
+    def amplitude_deg(self) -> float:
+        return math.hypot(self.land_deg[0] - self.start_deg[0], self.land_deg[1] - self.start_deg[1])
+
+    @property
+    def peak_velocity_deg_s(self) -> float:
+        return 2.0 * self.amplitude_deg / self.duration_s
+
+
+def main_sequence_peak_deg_s(amplitude_deg: float, vmax_deg_s: float, c_deg: float) -> float:
+    """Peak velocity of a saccade of ``amplitude_deg`` (main sequence)."""
+    return vmax_deg_s * (1.0 - math.exp(-amplitude_deg / c_deg))
+
+
+def _late(target: Positions, t_rel_s: np.ndarray, lag_s: float) -> np.ndarray:
+    return target(np.maximum(0.0, np.asarray(t_rel_s, dtype=np.float64) - lag_s))
+
+
+def catch_up_schedule(target: Positions, p: PursuitParams, horizon_s: float, rng: np.random.Generator) -> list[CatchUp]:
+    """The catch-up saccades of a pursuit from its start to ``horizon_s`` (deterministic in ``rng``); onsets
+    and landings lie on a 0.5 ms grid (the target is evaluated on it once)."""
+    saccades: list[CatchUp] = []
+    if p.gain >= 1.0 or p.threshold_deg <= 0.0:
+        return saccades
+    step = 0.0005
+    grid = np.arange(int(math.ceil((horizon_s + 1.0) / step)) + 1) * step
+    late = _late(target, grid, p.lag_s)
+    last = len(grid) - 1
+    i_n, e_n = 0, late[0]  # grid index where the current smooth segment starts, and the eye there
+    while grid[i_n] < horizon_s:
+        threshold = p.threshold_deg * rng.uniform(0.8, 1.2)
+        error = (1.0 - p.gain) * np.hypot(*(late[i_n + 1:i_n + 4001] - late[i_n]).T)  # 2 s ahead
+        over = np.flatnonzero(error >= threshold)
+        if not len(over):
+            break
+        i_on = i_n + 1 + int(over[0])
+        start = e_n + p.gain * (late[i_on] - late[i_n])
+        i_land = min(last, i_on + 60)  # a first guess of 30 ms
+        for _ in range(3):  # the duration from the amplitude to where it lands at its end
+            amplitude = float(np.hypot(*(late[i_land] - start)))
+            duration = 2.0 * amplitude / max(main_sequence_peak_deg_s(amplitude, p.vmax_deg_s, p.c_deg), 1e-9)
+            i_land = min(last, i_on + max(1, int(round(duration / step))))
+        land = late[i_land]
+        saccades.append(CatchUp(float(grid[i_on]), float(grid[i_land] - grid[i_on]), (float(start[0]), float(start[1])),
+                                (float(land[0]), float(land[1]))))
+        i_n, e_n = i_land, land
+        if i_n >= last:
+            break
+    return saccades
+
+
+def eye_positions(target: Positions, p: PursuitParams, saccades: list[CatchUp], t_rel_s: np.ndarray) -> np.ndarray:
+    """Fick (az, el) of the pursuing eye at ``t_rel_s`` (s after the plan's start); shape (n, 2)."""
+    t = np.asarray(t_rel_s, dtype=np.float64)
+    late = _late(target, t, p.lag_s)
+    onsets = np.array([s.onset_s for s in saccades] + [math.inf])
+    ends = np.array([0.0] + [s.onset_s + s.duration_s for s in saccades])
+    n = np.searchsorted(ends, t, side="right") - 1  # the smooth segment begun last (index into ends)
+    n = np.clip(n, 0, len(ends) - 1)
+    seg_start = ends[n]
+    e_start = np.array([_late(target, np.array([0.0]), p.lag_s)[0]] + [np.array(s.land_deg) for s in saccades])
+    out = e_start[n] + p.gain * (late - _late(target, seg_start, p.lag_s))
+    in_saccade = t >= onsets[n]
+    if np.any(in_saccade):
+        k = n[in_saccade]
+        u = (t[in_saccade] - onsets[k]) / np.array([saccades[i].duration_s for i in k])
+        shape = (u - np.sin(2.0 * np.pi * u) / (2.0 * np.pi))[:, None]
+        start = np.array([saccades[i].start_deg for i in k])
+        land = np.array([saccades[i].land_deg for i in k])
+        out[in_saccade] = start + (land - start) * shape
+    return out
