@@ -4,7 +4,9 @@ work (parts 2-3), side by side in one run, on the same inputs, with their output
 "Before" is the tree of commit :data:`BEFORE_REV` (main before that work: one process per analysis
 script, ``sharey`` panels, power fits with the free-eta posterior and the deviance bootstrap),
 extracted with ``git archive`` and run with the same interpreter (``PYTHONPATH`` puts its psyop
-first); "after" is this tree. Both run with ``SOURCE_DATE_EPOCH=0`` so that their PDFs carry the
+first); "after" is the tree of :data:`AFTER_REV`, where that work landed, extracted alike: a later
+change that alters outputs on purpose (the summary's agreement criterion, the reach fallback's
+model, issue 29) leaves this comparison of issue 21's work as it was measured. Both run with ``SOURCE_DATE_EPOCH=0`` so that their PDFs carry the
 same date. The benchmark fails when an output differs: every figure (PNG and PDF) and results
 file of `make figures-build`, the supplementary figure's PNG, and `psyop power`'s power.csv must
 be byte-identical. Times are wall seconds and the CPU seconds of the child processes
@@ -26,6 +28,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 #: main before the one-process figures, the linear psychometric grid and the lean power fits
 BEFORE_REV = "2a9bf04"
+#: main with that work landed (issue 21's stop)
+AFTER_REV = "81b52e2"
 
 _GRID_SCRIPT = """
 import sys, time
@@ -41,9 +45,9 @@ print(time.perf_counter() - start)
 """
 
 
-def _before_tree(root: Path) -> Path | None:
-    """The tree of BEFORE_REV under ``root``; None when this clone does not hold it."""
-    archive = subprocess.run(["git", "-C", str(REPO), "archive", BEFORE_REV], capture_output=True)
+def _tree(rev: str, root: Path) -> Path | None:
+    """The tree of commit ``rev`` under ``root``; None when this clone does not hold it."""
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", rev], capture_output=True)
     if archive.returncode:
         return None
     with tarfile.open(fileobj=BytesIO(archive.stdout)) as tar:
@@ -148,21 +152,21 @@ def run(out_dir: Path, quick: bool) -> str:
     title = "## Figures and power without repeated work: before and after (bench_figures_power_speed)"
     with tempfile.TemporaryDirectory(prefix="psyop-bench-speed-") as tmp:
         scratch = Path(tmp)
-        before = _before_tree(scratch / "before-tree")
-        if before is None:
-            return f"{title}\n\nSkipped: commit {BEFORE_REV} (the before tree) is not in this clone."
-        trees = {"before": before, "after": REPO}
+        before, after = _tree(BEFORE_REV, scratch / "before-tree"), _tree(AFTER_REV, scratch / "after-tree")
+        if before is None or after is None:
+            return f"{title}\n\nSkipped: commit {BEFORE_REV} or {AFTER_REV} (the trees compared) is not in this clone."
+        trees = {"before": before, "after": after}
         subprocess.run([sys.executable, "-m", "psyop", "simulate", "--data", str(scratch / "data"), "--protocols",
-                        str(REPO / "protocols"), "--jobs", str(jobs),
+                        str(after / "protocols"), "--jobs", str(jobs),
                         *(["--participants", str(participants)] if participants else [])],
-                       check=True, capture_output=True, text=True)
+                       check=True, capture_output=True, text=True, env=_env(after), cwd=after)
         figures = _figures(trees, scratch, jobs)
         grid = _grid(trees, scratch, sizes)
         power = _power(trees, scratch, power_n, power_reps)
     size = "3 participants per study (quick)" if quick else "the paper's sizes (6/6/19/13/19 participants)"
     lines = [
         title, "",
-        f"Before: commit {BEFORE_REV}; after: this tree; same interpreter, inputs and seeds, run one after the other.",
+        f"Before: commit {BEFORE_REV}; after: commit {AFTER_REV}; same interpreter, inputs and seeds, run one after the other.",
         "Every output compared byte for byte (the benchmark fails otherwise): all figures (PNG, PDF) and results",
         "files of `make figures-build`, the psychometric grid PNG, `psyop power`'s power.csv.", "",
         "| what | before wall s | after wall s | wall ratio | before CPU s | after CPU s | CPU ratio |",
