@@ -59,15 +59,13 @@ class StageClock:
 
 @contextlib.contextmanager
 def _patched(clock: StageClock) -> Iterator[None]:
-    import psyop.power.study_tests as study_tests
-    import psyop.protocol as protocol
     import psyop.schedule.compile as schedule
-    import psyop.session.runner as runner
-    import psyop.statistics.dataset as dataset
-    import psyop.statistics.psychometric as psychometric
-    from psyop.power import effects, memory_log
+    from psyop import protocol
+    from psyop.power import effects, memory_log, study_tests
+    from psyop.session import runner
     from psyop.session.log.store import SessionStore
     from psyop.session.loop import TrialLoop
+    from psyop.statistics import dataset, psychometric
 
     targets = [(protocol, "parse_protocol", "compile"), (effects, "apply_effects", "compile"),
                (runner, "compile_plan", "compile"), (schedule, "compile_schedule", "compile"),
@@ -100,7 +98,11 @@ def measure(function: Callable, task) -> tuple[dict[str, float], object]:
 
 
 def run(out_dir: Path, quick: bool) -> str:
-    from psyop.power.replicate import ReplicationTask, run_replication, run_replication_durable
+    from psyop.power.replicate import (
+        ReplicationTask,
+        run_replication,
+        run_replication_durable,
+    )
 
     lines = [
         "## One power replication, CPU seconds per stage (bench_power_stages)",

@@ -16,11 +16,15 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from psyop.power.replicate import (ReplicationTask, replication_trials, replication_trials_durable,
-                                   run_replication_durable)
+from psyop.power.replicate import (
+    ReplicationResult,
+    ReplicationTask,
+    replication_trials,
+    replication_trials_durable,
+    run_replication_durable,
+)
 from psyop.power.run import PowerRun, run_power
 from psyop.power.study_tests import study_tests
-from psyop.power.replicate import ReplicationResult
 from psyop.power.summary import power_table
 
 ROOT = Path(__file__).resolve().parents[2]
