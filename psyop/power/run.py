@@ -68,7 +68,8 @@ def run_power(run: PowerRun, resumed: list[int] | None = None,
         fresh: list[ReplicationResult] = []
     elif run.scheduler:
         fresh = run_dask(replicate, remaining, run.scheduler, run.progress, on_result=keep,
-                         lost_after_s=run.lost_after_s)
+                         lost_after_s=run.lost_after_s,
+                         describe=lambda t: f"replication {t.replication} at {t.participants} participants")
     else:
         fresh = run_local(replicate, remaining, run.jobs, run.progress, on_result=keep)
     for i, result in zip(todo, fresh):
