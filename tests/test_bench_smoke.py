@@ -91,3 +91,11 @@ def test_bench_frame_cpu_quick_reports_every_protocol_before_and_after(tmp_path:
     assert "| detection rendered stereo | 2 |" in report and "| detection stereo + 60 discs | 2 | 64 |" in report
     assert "Cost per primitive per stereo frame" in report and "samples identical: True" in report
     assert "nan" not in report
+
+
+def test_bench_power_stages_quick_reports_both_paths_for_every_study(tmp_path: Path) -> None:
+    from benchmarks import bench_power_stages
+
+    report = bench_power_stages.run(tmp_path, quick=True)  # fails itself when the two paths' outcomes differ
+    for name in bench_power_stages.PAPER_N:
+        assert f"| {name} | 2 | full |" in report and f"| {name} | 2 | replication |" in report

@@ -80,12 +80,14 @@ def _stop_now(pool: ProcessPoolExecutor) -> None:
 
 def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, progress: bool = False,
              timeout_s: float = 30.0, on_result: Callable[[int, R], None] = _ignore,
-             lost_after_s: float = 60.0, poll_s: float = 1.0) -> list[R]:
+             lost_after_s: float = 60.0, poll_s: float = 1.0,
+             describe: Callable[[T], str] = lambda task: "a task") -> list[R]:
     """Run ``tasks`` on the Dask scheduler at ``scheduler``.
 
     No worker for ``lost_after_s`` (all killed, none started), a scheduler that is gone, or
-    tasks the cluster cancelled end in a UserError with exit code 3 naming the scheduler; every
-    result that arrived before was handed to ``on_result``."""
+    tasks the cluster cancelled end in a UserError with exit code 3 naming the scheduler; a task
+    whose workers kept dying (distributed's ``KilledWorker``) in one with exit code 3 naming it
+    (``describe``); every result that arrived before was handed to ``on_result``."""
     try:
         from distributed import Client
         from distributed import wait as dask_wait
@@ -136,6 +138,10 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
                             raise lost(f"the scheduler cancelled its tasks ({type(exc).__name__})") from None
                         if future.status != "error" and _connection_lost(exc):  # not the replication's own error
                             raise lost(f"the scheduler connection was lost ({type(exc).__name__})") from None
+                        if type(exc).__name__ == "KilledWorker":  # its workers died again and again
+                            raise UserError(f"{describe(tasks[index[future.key]])} killed every worker that ran it "
+                                            f"({exc}); the finished replications are kept, rerun the same command to "
+                                            "resume", "--scheduler", exit_code=CLUSTER_LOST_EXIT) from None
                         raise
                     on_result(index[future.key], results[index[future.key]])  # type: ignore[arg-type]
                     bar.update(1)

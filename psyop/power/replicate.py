@@ -10,12 +10,22 @@ the same on a local process pool, a Dask cluster, or in this process.
 from __future__ import annotations
 
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from psyop.power.study_tests import TestOutcome
+
+if TYPE_CHECKING:
+    import pandas as pd
+    import pyarrow as pa
+
+    from psyop.protocol.model import Protocol
+    from psyop.session.log.layout import SessionPaths
+    from psyop.session.runner import SessionOptions
 
 
 @dataclass(frozen=True)
@@ -41,27 +51,85 @@ def session_seed(seed: int, participants: int, replication: int, participant_ind
     return int(sequence.generate_state(1, dtype=np.uint32)[0])
 
 
-def run_replication(task: ReplicationTask) -> ReplicationResult:
+def _sessions(task: ReplicationTask) -> tuple[Protocol, Callable[[Path], list[SessionOptions]]]:
+    """The protocol of ``task`` and, per participant, the options of its session (seeded as the
+    module docstring says) into ``data_root``."""
     from psyop.power.effects import apply_effects
-    from psyop.power.study_tests import study_tests
     from psyop.protocol import parse_protocol
-    from psyop.schedule import compile_schedule
     from psyop.session.gaze.simulated import SimulatedTrackerConfig
-    from psyop.session.runner import SessionOptions, run_session
-    from psyop.statistics.dataset import load_dataset
+    from psyop.session.runner import SessionOptions
 
     protocol = apply_effects(parse_protocol(task.protocol_text, task.protocol_name), task.effects)
-    study = protocol.study.name
+
+    def options(data_root: Path) -> list[SessionOptions]:
+        return [SessionOptions(participant=f"S{j + 1:02d}",
+                               seed=session_seed(task.seed, task.participants, task.replication, j),
+                               data_root=data_root, progress=False, write_description=False,
+                               render="cameras", fsync=False,
+                               # power reads trials only: no 120 Hz raw gaze stream (issue 27)
+                               tracker_faults=SimulatedTrackerConfig(raw_stream="requested"))
+                for j in range(task.participants)]
+    return protocol, options
+
+
+#: where a replication's in-memory sessions say they are (nothing is written there: MemoryLog)
+_NOWHERE = Path("psyop-power-in-memory")
+
+
+def replication_trials(task: ReplicationTask) -> tuple[Protocol, pd.DataFrame]:
+    """The protocol of ``task`` and the trial table its analysis sees, as ``psyop power`` makes it:
+    each participant's session through the real ``run_session`` loop into an in-memory log
+    (psyop.power.memory_log: no files, no fsync, no parquet round trip, no frame or raw gaze
+    tables), handed over as load_dataset would have read it back. Equal, frame for frame, to
+    :func:`replication_trials_durable` (tests/power/test_memory_log.py)."""
+    from psyop.power.memory_log import MemoryLog, analysis_trials
+    from psyop.schedule import compile_schedule
+    from psyop.session.runner import run_session
+
+    protocol, options = _sessions(task)
+    logs: list[MemoryLog] = []
+
+    def memory_log(paths: SessionPaths, schema: pa.Schema) -> MemoryLog:
+        logs.append(MemoryLog(paths, schema))
+        return logs[-1]
+
+    for session in options(_NOWHERE):
+        run_session(protocol, compile_schedule, session, store_factory=memory_log)
+    return protocol, analysis_trials(logs)
+
+
+def replication_trials_durable(task: ReplicationTask) -> tuple[Protocol, pd.DataFrame]:
+    """The full path (before issue 30), kept for comparisons only (tests, benchmarks): every
+    session into a durable log in a temporary data directory, finalised to parquet and read back
+    by ``load_dataset``."""
+    import warnings
+
+    from psyop.schedule import compile_schedule
+    from psyop.session.runner import run_session
+    from psyop.statistics.dataset import LowGazeWarning, load_dataset
+
+    protocol, options = _sessions(task)
     with tempfile.TemporaryDirectory(prefix="psyop-power-") as tmp:
         data_root = Path(tmp)
-        for j in range(task.participants):
-            options = SessionOptions(participant=f"S{j + 1:02d}",
-                                     seed=session_seed(task.seed, task.participants, task.replication, j),
-                                     data_root=data_root, progress=False, write_description=False,
-                                     render="cameras", fsync=False,
-                                     # power reads trials only: no 120 Hz raw gaze stream (issue 27)
-                                     tracker_faults=SimulatedTrackerConfig(raw_stream="requested"))
-            run_session(protocol, compile_schedule, options)
-        trials = load_dataset(data_root, study).trials
-        outcomes = tuple(study_tests(protocol, trials))
-    return ReplicationResult(task.participants, task.replication, outcomes, len(trials))
+        for session in options(data_root):
+            run_session(protocol, compile_schedule, session)
+        with warnings.catch_warnings():  # the in-memory path counts no low-gaze trials either
+            warnings.simplefilter("ignore", LowGazeWarning)
+            trials = load_dataset(data_root, protocol.study.name).trials
+    return protocol, trials
+
+
+def run_replication(task: ReplicationTask) -> ReplicationResult:
+    """One replication as ``psyop power`` runs it (:func:`replication_trials`, then the study's tests)."""
+    from psyop.power.study_tests import study_tests
+
+    protocol, trials = replication_trials(task)
+    return ReplicationResult(task.participants, task.replication, tuple(study_tests(protocol, trials)), len(trials))
+
+
+def run_replication_durable(task: ReplicationTask) -> ReplicationResult:
+    """:func:`run_replication` on the full path (:func:`replication_trials_durable`), for comparisons."""
+    from psyop.power.study_tests import study_tests
+
+    protocol, trials = replication_trials_durable(task)
+    return ReplicationResult(task.participants, task.replication, tuple(study_tests(protocol, trials)), len(trials))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,8 +42,12 @@ def plan_tasks(run: PowerRun) -> list[ReplicationTask]:
             for n in run.participants for r in range(run.replications)]
 
 
-def run_power(run: PowerRun, resumed: list[int] | None = None) -> tuple[pd.DataFrame, list[ReplicationResult]]:
-    """The power table and every replication's result, in task order.
+def run_power(run: PowerRun, resumed: list[int] | None = None,
+              replicate: Callable[[ReplicationTask], ReplicationResult] = run_replication,
+              ) -> tuple[pd.DataFrame, list[ReplicationResult]]:
+    """The power table and every replication's result, in task order; ``replicate`` runs one
+    replication (tests and benchmarks pass psyop.power.replicate.run_replication_durable, the full
+    path, to compare).
 
     With ``run.checkpoint``, each finished replication is kept there as it arrives and the kept
     ones are not run again (their count is appended to ``resumed``); an interrupted or failed
@@ -62,10 +67,11 @@ def run_power(run: PowerRun, resumed: list[int] | None = None) -> tuple[pd.DataF
     if not remaining:
         fresh: list[ReplicationResult] = []
     elif run.scheduler:
-        fresh = run_dask(run_replication, remaining, run.scheduler, run.progress, on_result=keep,
-                         lost_after_s=run.lost_after_s)
+        fresh = run_dask(replicate, remaining, run.scheduler, run.progress, on_result=keep,
+                         lost_after_s=run.lost_after_s,
+                         describe=lambda t: f"replication {t.replication} at {t.participants} participants")
     else:
-        fresh = run_local(run_replication, remaining, run.jobs, run.progress, on_result=keep)
+        fresh = run_local(replicate, remaining, run.jobs, run.progress, on_result=keep)
     for i, result in zip(todo, fresh):
         kept[i] = result
     results = [r for r in kept if r is not None]

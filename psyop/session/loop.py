@@ -39,7 +39,7 @@ from psyop.session.gaze.plan import FixationPlan, circling_target
 from psyop.session.gaze.sample import GazeSample, GazeSource, TrackerLost
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.log.raw_gaze import raw_gaze_table
-from psyop.session.log.store import SessionStore
+from psyop.session.log.store import SessionLog
 from psyop.session.signals import interrupts_deferred
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.reach import horizontal_reach_m
@@ -114,7 +114,7 @@ class TrialLoop:
         responses: ResponseSource,
         renderer: FrameRenderer | None,
         display: Display,
-        store: SessionStore,
+        store: SessionLog,
         config: LoopConfig,
         pose: PoseSource | None = None,
         response: ResponsePlan | None = None,
@@ -170,8 +170,12 @@ class TrialLoop:
                     record = self.adaptive.complete(record)
                 self.state = TrialState.RECORD
                 with interrupts_deferred():  # Ctrl-C (or SIGTERM) never tears a record half-written
-                    self.store.append_trial(record, frames.table() if len(frames) else None,
-                                            self.raw_gaze(int(record["trial"])))
+                    if self.store.keeps_samples:
+                        self.store.append_trial(record, frames.table() if len(frames) else None,
+                                                self.raw_gaze(int(record["trial"])))
+                    else:  # a log of trial rows only (psyop.power's in-memory log): no frame or gaze tables built
+                        self.gaze.drain_raw()
+                        self.store.append_trial(record, None, None)
                     recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
                     n_done += 1
                 self.current_trial = -1

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import pyarrow as pa
 
 from psyop.atomic import io_error
 from psyop.errors import UserError
@@ -27,16 +28,16 @@ from psyop.session.backends import BackendContext, build, is_real_time
 from psyop.session.clock import RealClock, VirtualClock
 from psyop.session.frames import CameraRenderer, Display
 from psyop.session.gaze.simulated import SimulatedTrackerConfig, seed_for
-from psyop.session.log.layout import session_paths, write_dataset_description
+from psyop.session.log.layout import SessionPaths, session_paths, write_dataset_description
 from psyop.session.log.schema import trial_schema
 from psyop.adaptive.session import AdaptiveLevels, add_log_columns
-from psyop.session.log.store import SessionStore, recover_tables
+from psyop.session.log.store import SessionLog, SessionStore, recover_tables
 from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop, pursuit_fields
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.resume import accept_protocol_change, check_options, resolve_seed
 
-__all__ = ["DEFAULT_IPD_M", "SessionOptions", "print_outcome", "run_session"]
+__all__ = ["DEFAULT_IPD_M", "SessionOptions", "StoreFactory", "print_outcome", "run_session"]
 _PACKAGES = ("psyop", "numpy", "scipy", "pandas", "pyarrow", "pydantic", "pyzmq", "pyserial", "msgpack", "moderngl", "tqdm")
 
 
@@ -145,15 +146,22 @@ def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale:
             f"images at scale {scale:g}, {limit}")
 
 
+#: makes the log a session records into from its paths and trial schema (default: the durable
+#: :class:`~psyop.session.log.store.SessionStore`; psyop.power passes an in-memory log for throwaway replications)
+StoreFactory = Callable[[SessionPaths, pa.Schema], SessionLog]
+
+
 def run_session(
     protocol: Protocol,
     compile_schedule: Callable[[Protocol, int], pd.DataFrame],
     options: SessionOptions,
+    store_factory: StoreFactory | None = None,
 ) -> SessionOutcome:
     """Run (or resume) one session to the end of its schedule, or to a clean stop.
 
     The protocol is compiled into a :class:`~psyop.session.plan.SessionPlan` first; everything
-    below runs from the plan."""
+    below runs from the plan. ``store_factory``: where the trials are recorded (None: the durable
+    session log under ``options.data_root``, with ``options.fsync``)."""
     plan = compile_plan(protocol)
     study = plan.study
     paths = session_paths(options.data_root, study, options.participant, options.session)
@@ -180,7 +188,8 @@ def run_session(
     else:
         raise UserError(f"unknown clock {options.clock!r}; use virtual or real", "--clock")
 
-    store = SessionStore(paths, trial_schema(schedule), fsync=options.fsync)
+    store = (SessionStore(paths, trial_schema(schedule), fsync=options.fsync) if store_factory is None
+             else store_factory(paths, trial_schema(schedule)))
     metadata = {
         "study": study, "participant": options.participant, "session": options.session, "seed": seed,
         "simulated": options.simulated, "simulated_sources": list(options.simulated_sources),

@@ -9,7 +9,7 @@ import stat
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import pandas as pd
 import pyarrow as pa
@@ -35,6 +35,22 @@ class SessionComplete(UserError):
     """A run was asked to resume a complete session (`psyop simulate` counts it as done)."""
 
 
+class SessionLog(Protocol):
+    """What a session records into (psyop.session.loop and runner): :class:`SessionStore`, or a
+    log that keeps only what its caller reads (psyop.power.memory_log). ``keeps_samples`` false: the
+    loop builds no frame or raw gaze tables and passes None for them."""
+
+    keeps_samples: bool
+    run_index: int
+
+    def open(self, metadata: Mapping[str, Any]) -> set[int]: ...
+    def append_trial(self, row: Mapping[str, Any], frames: pa.Table | None, gaze: pa.Table | None = None) -> None: ...
+    def append_gaze(self, gaze: pa.Table, key: int = -1) -> None: ...
+    def update_metadata(self, **fields: Any) -> None: ...
+    def close(self) -> None: ...
+    def finalise(self, *, status: str, summary: Mapping[str, Any] | None = None) -> tuple[pd.DataFrame, pd.DataFrame]: ...
+
+
 class SessionStore:
     """The durable log of one session.
 
@@ -43,6 +59,8 @@ class SessionStore:
     clock, and starts a new pair of checksummed segments for this run. The lock is held
     until :meth:`finalise` (or :meth:`close`, or the process's death).
     """
+
+    keeps_samples = True  # every trial's frames and raw gaze samples are logged with it
 
     def __init__(self, paths: SessionPaths, trial_schema: pa.Schema, *, fsync: bool = True) -> None:
         self.paths = paths

@@ -1,0 +1,71 @@
+"""psyop power's replications record into memory (psyop.power.memory_log) instead of durable
+session logs: the analysis must see the same table and the power table must be the same bytes.
+
+For every shipped study and the adaptive example, on identical seeds, the trial table of the
+in-memory path equals load_dataset's table read back from the full path's finalised parquet files
+(every column, every dtype, every value), and power.csv's text is identical. The in-memory path
+writes nothing: no scratch folder, nothing in the working directory.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from psyop.power.replicate import (
+    ReplicationResult,
+    ReplicationTask,
+    replication_trials,
+    replication_trials_durable,
+    run_replication_durable,
+)
+from psyop.power.run import PowerRun, run_power
+from psyop.power.study_tests import study_tests
+from psyop.power.summary import power_table
+
+ROOT = Path(__file__).resolve().parents[2]
+PROTOCOLS = [ROOT / "protocols" / f"{name}.yaml" for name in
+             ("detection", "discrimination", "ordinal", "egocentric", "realism")]
+PROTOCOLS.append(ROOT / "protocols" / "examples" / "detection_quest_plus.yaml")
+
+
+def _task(path: Path, participants: int = 2, replication: int = 0, seed: int = 3) -> ReplicationTask:
+    return ReplicationTask(path.read_text(), str(path), (), participants, replication, seed)
+
+
+@pytest.mark.parametrize("path", PROTOCOLS, ids=lambda p: p.stem)
+def test_the_in_memory_path_hands_the_analysis_the_table_load_dataset_reads_and_power_csv_is_identical(
+        path: Path) -> None:
+    task = _task(path)
+    protocol, memory = replication_trials(task)
+    _, durable = replication_trials_durable(task)
+    assert len(memory) > 0
+    pd.testing.assert_frame_equal(memory, durable, check_exact=True)
+    assert list(memory.dtypes) == list(durable.dtypes)
+    results = [ReplicationResult(2, 0, tuple(study_tests(protocol, t)), len(t)) for t in (memory, durable)]
+    assert repr(results[0]) == repr(results[1])  # equal, NaN p values included (an untestable joint test)
+    memory_csv, durable_csv = (power_table([r]).to_csv(index=False) for r in results)
+    assert memory_csv == durable_csv
+
+
+def test_run_power_on_both_paths_writes_the_same_power_csv(tmp_path: Path) -> None:
+    text = (ROOT / "protocols" / "realism.yaml").read_text().replace("repetitions: 15 ", "repetitions: 3 ")
+    protocol = tmp_path / "realism_small.yaml"
+    protocol.write_text(text)
+    run = PowerRun(protocol_path=protocol, participants=(2, 3), replications=2, seed=8)
+    fast, _ = run_power(run)
+    full, _ = run_power(run, replicate=run_replication_durable)
+    assert fast.to_csv(index=False) == full.to_csv(index=False)
+
+
+def test_an_in_memory_replication_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    scratch = Path(tempfile.gettempdir())
+    before = set(scratch.glob("psyop-power-*"))
+    replication_trials(_task(ROOT / "protocols" / "discrimination.yaml"))
+    assert os.listdir(tmp_path) == []
+    assert set(scratch.glob("psyop-power-*")) <= before
