@@ -73,12 +73,12 @@ power: $(STAMP) $(SYSDEPS_STAMP)
 
 power-run:
 	@i=0; for spec in $(POWER_SIZES); do \
-	  i=$$((i + 1)); name=$${spec%%:*}; sizes=$${spec#*:}; mkdir -p $(POWER)/$$name; \
+	  i=$$((i + 1)); name=$${spec%%:*}; sizes=$${spec#*:}; mkdir -p "$(POWER)/$$name"; \
 	  echo "[psyop] power $$i/5: protocols/$$name.yaml, $$sizes participants, $(POWER_REPLICATIONS) replications each"; \
 	  $(PY) -m psyop power protocols/$$name.yaml --participants $$sizes --replications $(POWER_REPLICATIONS) \
-	    --seed 0 --jobs $(JOBS) --out $(POWER)/$$name | tee $(POWER)/$$name/.power.txt.tmp; \
-	  test $${PIPESTATUS[0]} -eq 0 -a $${PIPESTATUS[1]} -eq 0 || { rm -f $(POWER)/$$name/.power.txt.tmp; exit 1; }; \
-	  mv -f $(POWER)/$$name/.power.txt.tmp $(POWER)/$$name/power.txt; \
+	    --seed 0 --jobs $(JOBS) --out "$(POWER)/$$name" | tee "$(POWER)/$$name/.power.txt.tmp"; \
+	  test $${PIPESTATUS[0]} -eq 0 -a $${PIPESTATUS[1]} -eq 0 || { rm -f "$(POWER)/$$name/.power.txt.tmp"; exit 1; }; \
+	  mv -f "$(POWER)/$$name/.power.txt.tmp" "$(POWER)/$$name/power.txt"; \
 	done; echo "[psyop] power curves in $(POWER)/ (NAME/power.png, power.csv, power.txt)"
 
 include figures.mk

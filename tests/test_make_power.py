@@ -24,7 +24,14 @@ def test_make_power_covers_every_shipped_protocol(tmp_path: Path) -> None:
     for counts in sizes.values():
         assert len(counts.split(",")) >= 3  # a curve, not a point
     assert "-m psyop power protocols/$name.yaml --participants $sizes --replications 7" in recipe
-    assert f"--out {out}/$name" in recipe
+    assert f'--out "{out}/$name"' in recipe
+
+
+def test_a_power_folder_with_spaces_is_one_argument(tmp_path: Path) -> None:
+    """Every path variable is quoted where it is used (`POWER='a b'` split into two arguments)."""
+    out = tmp_path / "power out"
+    recipe = _dry("power-run", f"POWER={out}")
+    assert f'--out "{out}/$name"' in recipe and f'mkdir -p "{out}/$name"' in recipe
 
 
 def test_power_output_is_ignored_and_cleaned() -> None:
