@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from session_helpers import PROTOCOLS, small_protocol
+from tests.protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
 
 from psyop.errors import UserError
 from psyop.protocol import load_protocol, parse_protocol
@@ -250,8 +251,11 @@ def test_reach_levels_with_any_names_run(tmp_path: Path) -> None:
 def test_room_height_and_table_height_are_built(tmp_path: Path) -> None:
     from psyop.stimulus import build_scene
 
-    path = _variant(tmp_path, "egocentric", ("    height_m: 2.6 ", "    height_m: 3.1 "),
-                    ("table_height_m: 0.75", "table_height_m: 0.9"))
+    # egocentric's room is a mesh now; its former box room with another height and table height
+    room = EGOCENTRIC_BOX_ROOM.replace("    height_m: 2.6\n", "    height_m: 3.1\n").replace(
+        "table_height_m: 0.75", "table_height_m: 0.9")
+    mesh = EGOCENTRIC_MESH_ROOM.replace("../assets/", f"{(PROTOCOLS.parent / 'assets').resolve()}/")  # as copied
+    path = _variant(tmp_path, "egocentric", (mesh, room))
     protocol = load_protocol(path)
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
     scene = build_scene(protocol, row, 0.0, (0.03, 0.0, 0.0))
