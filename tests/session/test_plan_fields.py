@@ -15,7 +15,6 @@ import numpy as np
 import pandas as pd
 import pytest
 from session_helpers import PROTOCOLS, small_protocol
-from tests.protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
 
 from psyop.errors import UserError
 from psyop.protocol import load_protocol, parse_protocol
@@ -25,6 +24,7 @@ from psyop.session.frames import HeadlessDisplay
 from psyop.session.loop import LoopConfig, TrialLoop
 from psyop.session.plan import TIMEOUT_RESPONSE, compile_plan
 from psyop.session.runner import SessionOptions, run_session
+from tests.protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
 
 STRAIGHT_AHEAD_M = (0.0315, 0.0, -1.0)
 
