@@ -91,3 +91,12 @@ def test_bench_frame_cpu_quick_reports_every_protocol_before_and_after(tmp_path:
     assert "| detection rendered stereo | 2 |" in report and "| detection stereo + 60 discs | 2 | 64 |" in report
     assert "Cost per primitive per stereo frame" in report and "samples identical: True" in report
     assert "nan" not in report
+
+
+def test_bench_mesh_frame_quick_reports_every_triangle_count(tmp_path: Path) -> None:
+    from benchmarks import bench_mesh_frame
+
+    report = bench_mesh_frame.run(tmp_path, quick=True)
+    assert "| triangles | mesh frame ms (median) | analytic frame ms | ratio mesh / analytic |" in report
+    for n in bench_mesh_frame.TRIANGLES:
+        assert f"\n| {n} | " in report
