@@ -1,11 +1,11 @@
 """Mesh frame cost (issue 26): a frame with a mesh disc of 1k, 10k and 100k triangles as a ratio to the
 same frame with the analytic disc of the same geometry (the fan's vertices lie on the analytic disc's rim:
 its area is the disc's times (n / 2 pi) sin(2 pi / n): 0.0007 % less at 1k triangles), right eye, ocular mode, frames interleaved (mesh,
-analytic, mesh, ...), median of the per-pair ratios.
+analytic, mesh, ...), median of the per-pair ratios. And the CPU side of an egocentric frame with the
+dining-room mesh against the same frame with the former box room (bench_frame_cpu.measure).
 
-Not measured here (issue 26 item 6, open): 1M triangles and the slope, stereo, the CPU side of a
-dining-room frame against the box room's (the egocentric row of benchmarks/bench_frame_cpu.py now
-measures the dining room), and a GPU's 90 Hz budget. On llvmpipe the frame times are CPU times of the
+Not measured here (issue 26 item 6, open): 1M triangles and the slope, stereo mesh-disc frames, and a
+GPU's 90 Hz budget. On llvmpipe the frame times are CPU times of the
 software rasteriser: ratios only, absolute times are context.
 ``quick``: a 160 x 160 window around the disc and 3 frame pairs.
 """
@@ -26,6 +26,15 @@ from psyop.rendering.renderer import Renderer, RenderSettings, create_headless_c
 from psyop.rendering.scene import Primitive, Scene, Shape, Solid
 
 TRIANGLES = (1_000, 10_000, 100_000)
+#: protocols/egocentric.yaml's former analytic room (kind: room), the same size as the dining-room mesh
+BOX_ROOM = """  - id: room
+    kind: room
+    width_m: 4
+    depth_m: 5
+    height_m: 2.6
+    table_height_m: 0.75
+    eye_height_m: 1.2
+"""
 RADIUS_M = 0.05
 CENTRE_M = RIGHT_CENTRE_M + np.array([0.0, 0.0, -1.0])
 
@@ -48,6 +57,26 @@ def _time_frame(renderer: Renderer, camera) -> float:  # type: ignore[no-untyped
     renderer.render(camera)
     renderer.image()  # waits for the frame
     return time.perf_counter() - start
+
+
+def _room_rows(ctx, quick: bool) -> list[str]:  # type: ignore[no-untyped-def]
+    """CPU ms per stereo frame (benchmarks.bench_frame_cpu.measure, its 'after' path) of the egocentric
+    protocol with the dining-room mesh and with the box room."""
+    import re
+
+    from benchmarks.bench_frame_cpu import measure, protocol_text
+
+    mesh_text = protocol_text("egocentric", False)
+    box_text, n = re.subn(r"(?ms)^  - id: room\n    kind: mesh\n.*?(?=^  - id: pencil)", BOX_ROOM, mesh_text)
+    assert n == 1, "protocols/egocentric.yaml: no mesh room item to swap"
+    frames, block = (8, 4) if quick else (160, 8)
+    mesh = measure(mesh_text, ctx, 0.05 if quick else 0.1, frames, block)
+    box = measure(box_text, ctx, 0.05 if quick else 0.1, frames, block)
+    return ["", (f"CPU (thread) ms per frame, egocentric ({mesh['eyes']} eyes, {mesh['size']} px per eye, median of "
+                 f"{mesh['frames']} frames; benchmarks/bench_frame_cpu.measure, 'after' path):"), "",
+            "| room | CPU ms per frame | minus the box room, ms |", "|---|---|---|",
+            f"| box room (kind: room) | {box['after_ms']:.2f} | 0 |",
+            f"| dining room (assets/dining_room.glb) | {mesh['after_ms']:.2f} | {mesh['after_ms'] - box['after_ms']:+.2f} |"]
 
 
 def run(out: Path, quick: bool = False) -> str:
@@ -79,8 +108,9 @@ def run(out: Path, quick: bool = False) -> str:
                 ratio = statistics.median(x / y for x, y in zip(m, a))
                 lines.append(f"| {n} | {1e3 * statistics.median(m):.2f} | {1e3 * statistics.median(a):.2f} | "
                              f"{ratio:.2f} |")
+        lines += _room_rows(ctx, quick)
     finally:
         ctx.release()
-    lines += ["", ("Not measured: 1M triangles and the slope, stereo, the dining room's CPU side against the box room, "
+    lines += ["", ("Not measured: 1M triangles and the slope, stereo mesh-disc frames, "
                    "a GPU's 90 Hz budget (issue 26 item 6, open). llvmpipe: ratios only, absolute times are context.")]
     return "\n".join(lines) + "\n"

@@ -100,3 +100,4 @@ def test_bench_mesh_frame_quick_reports_every_triangle_count(tmp_path: Path) -> 
     assert "| triangles | mesh frame ms (median) | analytic frame ms | ratio mesh / analytic |" in report
     for n in bench_mesh_frame.TRIANGLES:
         assert f"\n| {n} | " in report
+    assert "| box room (kind: room) |" in report and "| dining room (assets/dining_room.glb) |" in report
