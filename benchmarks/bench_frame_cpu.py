@@ -112,6 +112,8 @@ def protocol_text(name: str, stereo: bool, extra_discs: int = 0) -> str:
     """A shipped protocol's text, optionally rendered stereo (``eyes: stereo``) and with ``extra_discs``
     more disc items before the fixation target (detection)."""
     text = (REPO / "protocols" / f"{name}.yaml").read_text()
+    # a model the protocol names relative to protocols/ (egocentric's room), found from wherever the text is written
+    text = text.replace("file: ../assets/", f"file: {(REPO / 'assets').resolve()}/")
     if stereo:
         text, n = re.subn(r"(?m)^eyes:\s*\w+", "eyes: stereo", text)
         assert n == 1

@@ -21,3 +21,19 @@ response:
   level_factor: level_D
   order: balanced
 """
+
+#: protocols/egocentric.yaml's mesh dining room, and the analytic box room it replaced (kind: room, the
+#: same size), for tests of the room primitive: ``text.replace(EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM)``
+EGOCENTRIC_MESH_ROOM = """  - id: room
+    kind: mesh
+    file: ../assets/dining_room.glb
+    position_m: [0, -1.2, 0]            # assumed: the floor 1.2 m below the eyes (seated)
+"""
+EGOCENTRIC_BOX_ROOM = """  - id: room
+    kind: room
+    width_m: 4
+    depth_m: 5
+    height_m: 2.6
+    table_height_m: 0.75
+    eye_height_m: 1.2
+"""

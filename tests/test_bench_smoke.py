@@ -99,3 +99,13 @@ def test_bench_power_stages_quick_reports_both_paths_for_every_study(tmp_path: P
     report = bench_power_stages.run(tmp_path, quick=True)  # fails itself when the two paths' outcomes differ
     for name in bench_power_stages.PAPER_N:
         assert f"| {name} | 2 | full |" in report and f"| {name} | 2 | replication |" in report
+
+
+def test_bench_mesh_frame_quick_reports_every_triangle_count(tmp_path: Path) -> None:
+    from benchmarks import bench_mesh_frame
+
+    report = bench_mesh_frame.run(tmp_path, quick=True)
+    assert "| triangles | mesh frame ms (median) | analytic frame ms | ratio mesh / analytic |" in report
+    for n in bench_mesh_frame.TRIANGLES:
+        assert f"\n| {n} | " in report
+    assert "| box room (kind: room) |" in report and "| dining room (assets/dining_room.glb) |" in report

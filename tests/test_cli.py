@@ -49,6 +49,8 @@ def test_show_prints_both_eyes_pixels_for_a_stereo_protocol_with_their_own_frust
     text = text.replace("  profile: vive_pro ", "  profile: {name: lopsided, width_px: 800, height_px: 800, refresh_hz: 90, "
                         "tan_left: -1.2, tan_right: 0.8, tan_bottom: -1.0, tan_top: 1.0, "
                         "left_tangents: [-0.6, 1.4, -1.0, 1.0]} ", 1)
+    assets = Path(__file__).parent.parent / "assets"
+    text = text.replace("file: ../assets/", f"file: {assets.resolve()}/")  # the room's model, from tmp_path
     protocol = tmp_path / "stereo.yaml"
     protocol.write_text(text)
     result = run_cli("show", str(protocol))

@@ -40,7 +40,7 @@ def dry_run(tmp: Path, data: str = "data") -> str:
 
 def _build_tree(tmp_path: Path, data: str = "data") -> Path:
     newest_source = max(p.stat().st_mtime for p in [*REPO.glob("psyop/**/*.py"), *REPO.glob("analysis/*.py"),
-                                                    *REPO.glob("protocols/*.yaml")])
+                                                     *REPO.glob("protocols/*.yaml")])  # make's prerequisites
     t = newest_source + 10
     for study, kind in STUDIES.items():
         f = tmp_path / data / study / "sub-S01" / "ses-1" / "trials.parquet"

@@ -56,6 +56,8 @@ def test_readme_examples_run_headless_as_written(tmp_path: Path) -> None:
     root = tmp_path / "clone"
     root.mkdir()
     (root / "protocols").symlink_to(REPO / "protocols")
+    (root / "assets").symlink_to(REPO / "assets")  # the models protocols/ name (../assets/...)
+    (tmp_path / "assets").symlink_to(REPO / "assets")  # ... from protocols_egocentric below
     env = dict(os.environ, PYTHONPATH=str(REPO), MPLBACKEND="Agg")
     env.pop("DISPLAY", None)  # headless means no X display
     # what `make figures` creates for the replay example: participant S01 of the simulated dataset

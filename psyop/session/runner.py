@@ -206,6 +206,10 @@ def run_session(
         "display_mode": options.display, "clock": options.clock,
     }
     metadata["pose"] = options.pose
+    from psyop.stimulus.meshes import protocol_mesh_records
+
+    source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
+    metadata["meshes"] = protocol_mesh_records(protocol.scene, source)
     renderer: Any = None
     loop: TrialLoop | None = None
     events: list[Any] = []

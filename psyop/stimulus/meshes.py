@@ -41,6 +41,17 @@ class MeshFiles:
         return [asset.record() for asset in self._assets.values()]
 
 
+def protocol_mesh_records(scene: tuple[Any, ...] | list[Any], base_dir: Path | None) -> list[dict[str, object]]:
+    """session.json's ``meshes``: the record (MeshAsset.record) of every (file, node) the protocol's mesh
+    items name, read when the session opens, whether or not the session renders images (``file`` and
+    ``node`` are plain strings, never factors, so this is every model the session can show)."""
+    files = MeshFiles(base_dir)
+    for item in scene:
+        if isinstance(item, ps.Mesh):
+            files.asset(item.file, item.node)
+    return files.records()
+
+
 def mesh_instance(item: ps.Mesh, values: Mapping[str, Any], origin_m: np.ndarray, files: MeshFiles) -> MeshInstance:
     """The placed model of a mesh item whose factor fields hold this trial's numbers."""
     asset = files.asset(item.file, item.node)

@@ -5,6 +5,7 @@ uses match what the stimulus builder builds."""
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,9 @@ from psyop.protocol.primitive_count import primitive_count
 from psyop.rendering import shaders
 from psyop.schedule import compile_schedule
 from psyop.stimulus import build_scene
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
 
 PROTOCOLS = Path(__file__).resolve().parents[2] / "protocols"
 REALISM = (PROTOCOLS / "realism.yaml").read_text()
@@ -65,7 +69,8 @@ VARIANTS = [  # (protocol, old, new): every kind and every branch of primitive_c
     ("detection", "    kind: disc\n    size_deg: 2   ", "    kind: quad\n    width_deg: 2\n    height_deg: 1\n    # size_deg: 2 "),
     ("egocentric", "object: pencil ", "object: sphere "),
     ("egocentric", "object: pencil ", "object: cube "),
-    ("egocentric", "    table_height_m: 0.75 ", "    # no table "),
+    ("egocentric", EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM),
+    ("egocentric", EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM.replace("    table_height_m: 0.75\n", "")),
 ]
 
 

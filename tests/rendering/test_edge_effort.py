@@ -5,13 +5,14 @@ the error of each choice is measured against exact polygon coverage."""
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from psyop.optics import VIVE_PRO, make_eye_camera
-from psyop.protocol import load_protocol
+from psyop.protocol import parse_protocol
 from psyop.rendering import Renderer, RenderSettings
 from psyop.rendering.builders import ROOM_EDGE_SAMPLES_PER_AXIS
 from psyop.rendering.camera_math import crop_camera, project_points_px
@@ -22,6 +23,8 @@ from psyop.schedule import compile_schedule
 from psyop.stimulus import build_scene
 
 REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "tests"))
+from protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +43,10 @@ def test_straight_edge_error_of_each_sample_count_against_exact_coverage(ctx) ->
 
 
 def test_room_edges_take_few_samples_and_the_stimulus_keeps_the_full_grid(ctx) -> None:
-    protocol = load_protocol(REPO / "protocols" / "egocentric.yaml")
+    text = (REPO / "protocols" / "egocentric.yaml").read_text()
+    assert EGOCENTRIC_MESH_ROOM in text  # the egocentric study's room is a mesh now: its former box room here
+    protocol = parse_protocol(text.replace(EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM), "egocentric.yaml",
+                              base_dir=REPO / "protocols")
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
     scene = build_scene(protocol, row, 0.0, np.array([0.032, 0.0, 0.0]), interval=1)
     room = [p for p in scene.primitives if p.edge_samples_per_axis is not None]

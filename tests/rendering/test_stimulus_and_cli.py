@@ -65,11 +65,13 @@ def test_ordinal_scene_puts_the_near_surface_on_the_scheduled_side():
 def test_every_study_scene_builds(name):
     protocol = load_protocol(PROTOCOLS / f"{name}.yaml")
     row = compile_schedule(protocol, 0).iloc[0].to_dict()
-    scene = build_scene(protocol, row, 0.5, CENTRE)
+    scene = build_scene(protocol, row, 0.5, CENTRE, base_dir=PROTOCOLS)
     assert len(scene.primitives) >= 2
     near, far = scene.depth_range_m(CENTRE)
-    # discrimination's back disc and fixation target are at 0 D: optical infinity
-    assert 0.0 < near < far < math.inf or (name == "discrimination" and far == math.inf)
+    # discrimination's back disc and fixation target are at 0 D: optical infinity; egocentric's mesh room
+    # surrounds the eye (its bounding sphere holds it: near 0)
+    assert 0.0 < near < far < math.inf or (name == "discrimination" and far == math.inf) or \
+        (name == "egocentric" and 0.0 == near < far < math.inf)
 
 
 def test_render_command_writes_png_and_sidecar(tmp_path):

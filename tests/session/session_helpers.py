@@ -13,6 +13,8 @@ def small_protocol(directory: Path, study: str, repetitions: int = 1) -> Path:
     text = (PROTOCOLS / f"{study}.yaml").read_text()
     text, n = re.subn(r"(?m)^(\s*repetitions:)\s*\d+", rf"\g<1> {repetitions}", text)
     assert n == 1, f"{study}.yaml: no repetitions line to shrink"
+    # files the protocol names relative to protocols/ (the egocentric room's model) from the copy's folder
+    text = re.sub(r"(?m)^(\s*file:\s*)(\.\./\S+)", lambda m: m.group(1) + str((PROTOCOLS / m.group(2)).resolve()), text)
     path = directory / f"{study}_small.yaml"
     path.write_text(text)
     return path

@@ -24,6 +24,7 @@ from psyop.session.frames import HeadlessDisplay
 from psyop.session.loop import LoopConfig, TrialLoop
 from psyop.session.plan import TIMEOUT_RESPONSE, compile_plan
 from psyop.session.runner import SessionOptions, run_session
+from tests.protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
 
 STRAIGHT_AHEAD_M = (0.0315, 0.0, -1.0)
 
@@ -250,8 +251,11 @@ def test_reach_levels_with_any_names_run(tmp_path: Path) -> None:
 def test_room_height_and_table_height_are_built(tmp_path: Path) -> None:
     from psyop.stimulus import build_scene
 
-    path = _variant(tmp_path, "egocentric", ("    height_m: 2.6 ", "    height_m: 3.1 "),
-                    ("table_height_m: 0.75", "table_height_m: 0.9"))
+    # egocentric's room is a mesh now; its former box room with another height and table height
+    room = EGOCENTRIC_BOX_ROOM.replace("    height_m: 2.6\n", "    height_m: 3.1\n").replace(
+        "table_height_m: 0.75", "table_height_m: 0.9")
+    mesh = EGOCENTRIC_MESH_ROOM.replace("../assets/", f"{(PROTOCOLS.parent / 'assets').resolve()}/")  # as copied
+    path = _variant(tmp_path, "egocentric", (mesh, room))
     protocol = load_protocol(path)
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
     scene = build_scene(protocol, row, 0.0, (0.03, 0.0, 0.0))

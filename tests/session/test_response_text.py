@@ -133,7 +133,8 @@ def test_stereo_response_phase_shows_the_prompt_to_both_eyes_with_disparity(gl_c
 def test_without_a_prompt_the_question_is_shown_and_display_off_shows_nothing() -> None:
     plan = _plan(REALISM.replace("      prompt: " + PROMPT, "", 1))
     assert plan.response.prompt is None and plan.response.participant_text == plan.response.question
-    egocentric = compile_plan(parse_protocol((REPO / "protocols" / "egocentric.yaml").read_text(), "egocentric.yaml"),
+    egocentric = compile_plan(parse_protocol((REPO / "protocols" / "egocentric.yaml").read_text(), "egocentric.yaml",
+                                              base_dir=REPO / "protocols"),
                               tracker_ipd_m=0.064)
     assert egocentric.response.display_off and egocentric.response.participant_text is None
 

@@ -1,0 +1,116 @@
+"""Mesh frame cost (issue 26): a frame with a mesh disc of 1k, 10k and 100k triangles as a ratio to the
+same frame with the analytic disc of the same geometry (the fan's vertices lie on the analytic disc's rim:
+its area is the disc's times (n / 2 pi) sin(2 pi / n): 0.0007 % less at 1k triangles), right eye, ocular mode, frames interleaved (mesh,
+analytic, mesh, ...), median of the per-pair ratios. And the CPU side of an egocentric frame with the
+dining-room mesh against the same frame with the former box room (bench_frame_cpu.measure).
+
+Not measured here (issue 26 item 6, open): 1M triangles and the slope, stereo mesh-disc frames, and a
+GPU's 90 Hz budget. On llvmpipe the frame times are CPU times of the
+software rasteriser: ratios only, absolute times are context.
+``quick``: a 160 x 160 window around the disc and 3 frame pairs.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from psyop.mesh.asset import AlphaMode, MeshAsset, MeshPart
+from psyop.rendering.camera_math import crop_camera, project_points_px
+from psyop.rendering.measure import RIGHT_CENTRE_M, right_eye_camera
+from psyop.rendering.mesh_scene import MeshInstance, model_matrix
+from psyop.rendering.renderer import Renderer, RenderSettings, create_headless_context
+from psyop.rendering.scene import Primitive, Scene, Shape, Solid
+
+TRIANGLES = (1_000, 10_000, 100_000)
+#: protocols/egocentric.yaml's former analytic room (kind: room), the same size as the dining-room mesh
+BOX_ROOM = """  - id: room
+    kind: room
+    width_m: 4
+    depth_m: 5
+    height_m: 2.6
+    table_height_m: 0.75
+    eye_height_m: 1.2
+"""
+RADIUS_M = 0.05
+CENTRE_M = RIGHT_CENTRE_M + np.array([0.0, 0.0, -1.0])
+
+
+def _disc_asset(segments: int) -> MeshAsset:
+    a = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
+    pos = np.concatenate([[(0.0, 0.0, 0.0)], np.stack([RADIUS_M * np.cos(a), RADIUS_M * np.sin(a), 0 * a], axis=-1)])
+    i = np.arange(segments, dtype=np.uint32)
+    idx = np.stack([np.zeros(segments, dtype=np.uint32), 1 + i, 1 + (i + 1) % segments], axis=-1)
+    part = MeshPart(node="disc", mesh_index=0, primitive_index=0, positions=pos, indices=idx, normals=None,
+                    texcoords=None, colours=None, base_colour=(1.0, 0.0, 0.0, 1.0), texture=None,
+                    alpha_mode=AlphaMode.OPAQUE, alpha_cutoff=0.5, double_sided=True,
+                    bbox_min=pos.min(axis=0), bbox_max=pos.max(axis=0))
+    return MeshAsset(path=Path(f"disc{segments}.glb"), sha256="0" * 64, node=None, parts=(part,),
+                     bbox_min=part.bbox_min, bbox_max=part.bbox_max)
+
+
+def _time_frame(renderer: Renderer, camera) -> float:  # type: ignore[no-untyped-def]
+    start = time.perf_counter()
+    renderer.render(camera)
+    renderer.image()  # waits for the frame
+    return time.perf_counter() - start
+
+
+def _room_rows(ctx, quick: bool) -> list[str]:  # type: ignore[no-untyped-def]
+    """CPU ms per stereo frame (benchmarks.bench_frame_cpu.measure, its 'after' path) of the egocentric
+    protocol with the dining-room mesh and with the box room."""
+    import re
+
+    from benchmarks.bench_frame_cpu import measure, protocol_text
+
+    mesh_text = protocol_text("egocentric", False)
+    box_text, n = re.subn(r"(?ms)^  - id: room\n    kind: mesh\n.*?(?=^  - id: pencil)", BOX_ROOM, mesh_text)
+    assert n == 1, "protocols/egocentric.yaml: no mesh room item to swap"
+    frames, block = (8, 4) if quick else (160, 8)
+    mesh = measure(mesh_text, ctx, 0.05 if quick else 0.1, frames, block)
+    box = measure(box_text, ctx, 0.05 if quick else 0.1, frames, block)
+    return ["", (f"CPU (thread) ms per frame, egocentric ({mesh['eyes']} eyes, {mesh['size']} px per eye, median of "
+                 f"{mesh['frames']} frames; benchmarks/bench_frame_cpu.measure, 'after' path):"), "",
+            "| room | CPU ms per frame | minus the box room, ms |", "|---|---|---|",
+            f"| box room (kind: room) | {box['after_ms']:.2f} | 0 |",
+            f"| dining room (assets/dining_room.glb) | {mesh['after_ms']:.2f} | {mesh['after_ms'] - box['after_ms']:+.2f} |"]
+
+
+def run(out: Path, quick: bool = False) -> str:
+    pairs = 3 if quick else 15
+    ctx = create_headless_context()
+    camera = right_eye_camera(5.0, 0.0, "ocular")
+    if quick:
+        x, y = project_points_px(camera, [CENTRE_M])[0]
+        camera = crop_camera(camera, int(x) - 80, int(y) - 80, 160, 160)
+    analytic = Scene((Primitive(Shape.DISC, tuple(CENTRE_M), (RADIUS_M, 0, 0), (0, RADIUS_M, 0), Solid((1, 0, 0)),
+                                name="disc"),), background=(0, 0, 0))
+    settings = RenderSettings(reuse_tolerance_px=None)
+    lines = ["## Mesh frame cost (benchmarks/bench_mesh_frame.py)", "",
+             (f"Right eye, ocular, {camera.width_px} x {camera.height_px} px, a disc {2 * RADIUS_M:g} m across at 1 m; "
+              f"{pairs} interleaved frame pairs, median of per-pair ratios (first frame of each discarded)."), "",
+             "| triangles | mesh frame ms (median) | analytic frame ms | ratio mesh / analytic |", "|---|---|---|---|"]
+    try:
+        with Renderer(analytic, settings, ctx=ctx) as flat:
+            _time_frame(flat, camera)
+            for n in TRIANGLES:
+                model = tuple(model_matrix(CENTRE_M, (0, 0, 0), 1.0).reshape(-1))
+                scene = Scene((), background=(0, 0, 0), meshes=(MeshInstance(_disc_asset(n), model, "disc"),))
+                with Renderer(scene, settings, ctx=ctx) as mesh:
+                    _time_frame(mesh, camera)
+                    m, a = [], []
+                    for _ in range(pairs):
+                        m.append(_time_frame(mesh, camera))
+                        a.append(_time_frame(flat, camera))
+                ratio = statistics.median(x / y for x, y in zip(m, a))
+                lines.append(f"| {n} | {1e3 * statistics.median(m):.2f} | {1e3 * statistics.median(a):.2f} | "
+                             f"{ratio:.2f} |")
+        lines += _room_rows(ctx, quick)
+    finally:
+        ctx.release()
+    lines += ["", ("Not measured: 1M triangles and the slope, stereo mesh-disc frames, "
+                   "a GPU's 90 Hz budget (issue 26 item 6, open). llvmpipe: ratios only, absolute times are context.")]
+    return "\n".join(lines) + "\n"
