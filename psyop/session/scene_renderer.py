@@ -75,9 +75,9 @@ class SceneRenderer:
         from psyop.rendering.textures import ImageFiles
 
         self._images = ImageFiles(self._base_dir)  # image surfaces decoded once per session
-        from psyop.stimulus.meshes import MeshFiles
+        from psyop.stimulus.meshes import SessionMeshes
 
-        self._meshes = MeshFiles(self._base_dir)  # glTF models loaded once per session (uploaded once)
+        self._meshes = SessionMeshes(self._base_dir)  # glTF models loaded once per session (uploaded once)
         from psyop.rendering.text import TextImages, em_px_for_display
         from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
 

@@ -250,12 +250,12 @@ def build_scene(
 
     ``images``: the session's decoded image files (decoded once, reused every frame); without
     it image surfaces are decoded from ``base_dir`` on every call. ``meshes``: the session's
-    :class:`psyop.stimulus.meshes.MeshFiles` (each model loaded once); without it models are read from
+    :class:`psyop.stimulus.meshes.SessionMeshes` (each model loaded once); without it models are read from
     ``base_dir`` on this call.
     """
-    from psyop.stimulus.meshes import MeshFiles, mesh_instance
+    from psyop.stimulus.meshes import SessionMeshes, mesh_instance
 
-    mesh_files = meshes if meshes is not None else MeshFiles(base_dir)
+    mesh_files = meshes if meshes is not None else SessionMeshes(base_dir)
     instances = []
     values = interval_values(row, interval)
     values = {**values, "trial_seed": row.get("trial_seed", 0)}

@@ -1,6 +1,6 @@
 """Mesh scene items (``kind: mesh``) -> placed :class:`psyop.rendering.mesh_scene.MeshInstance`.
 
-:class:`MeshFiles` loads each (file, node) once per session (psyop.mesh.load.load_mesh) and hands the
+:class:`SessionMeshes` loads each (file, node) once per session (psyop.mesh.MeshFiles) and hands the
 same :class:`psyop.mesh.MeshAsset` object to every frame, so the renderer uploads it once.
 """
 
@@ -21,19 +21,21 @@ from psyop.rendering.mesh_scene import MeshInstance, model_matrix
 from psyop.stimulus.placement import centre_angles_deg
 
 
-class MeshFiles:
-    """The session's loaded models, by (file, node), read once from ``base_dir``."""
+class SessionMeshes:
+    """The session's models by the protocol's (file, node), looked up without touching the files
+    again (a scene is built every frame); each is loaded once through :class:`psyop.mesh.MeshFiles`."""
 
     def __init__(self, base_dir: Path | None) -> None:
+        from psyop.mesh.load import MeshFiles
+
         self.base_dir = base_dir or Path.cwd()
+        self._files = MeshFiles(self.base_dir)
         self._assets: dict[tuple[str, str | None], MeshAsset] = {}
 
     def asset(self, file: str, node: str | None) -> MeshAsset:
         key = (file, node)
         if key not in self._assets:
-            from psyop.mesh.load import load_mesh
-
-            self._assets[key] = load_mesh(Path(file), node, base_dir=self.base_dir)
+            self._assets[key] = self._files.load(file, node)
         return self._assets[key]
 
     def records(self) -> list[dict[str, object]]:
@@ -45,14 +47,14 @@ def protocol_mesh_records(scene: tuple[Any, ...] | list[Any], base_dir: Path | N
     """session.json's ``meshes``: the record (MeshAsset.record) of every (file, node) the protocol's mesh
     items name, read when the session opens, whether or not the session renders images (``file`` and
     ``node`` are plain strings, never factors, so this is every model the session can show)."""
-    files = MeshFiles(base_dir)
+    files = SessionMeshes(base_dir)
     for item in scene:
         if isinstance(item, ps.Mesh):
             files.asset(item.file, item.node)
     return files.records()
 
 
-def mesh_instance(item: ps.Mesh, values: Mapping[str, Any], origin_m: np.ndarray, files: MeshFiles) -> MeshInstance:
+def mesh_instance(item: ps.Mesh, values: Mapping[str, Any], origin_m: np.ndarray, files: SessionMeshes) -> MeshInstance:
     """The placed model of a mesh item whose factor fields hold this trial's numbers."""
     asset = files.asset(item.file, item.node)
     extent = asset.largest_extent
