@@ -1,0 +1,83 @@
+"""A simulated session of each shipped protocol records the same tables as before the session refactor
+(issue 28, "Done when": byte-identical trials.parquet, timing columns aside, checked by a test).
+
+One participant (S01, ``psyop simulate``'s seed for base seed 2020) of each protocols/*.yaml is run headless
+on the virtual clock exactly as ``psyop simulate`` runs it (:func:`psyop.session.simulate.run_job`), and a
+SHA-256 of each table's *content* is compared with goldens recorded from the tree before the refactor
+(26cd3cb). Content, not file bytes: the parquet bytes carry the writer's pyarrow version.
+
+- trials.parquet: every column but ``trial_start_s`` and ``trial_end_s`` (timing columns; on the virtual
+  clock they are deterministic too, and are compared in their own digest so a change there is told apart).
+- frames.parquet and gaze.parquet: every column (the virtual clock makes them deterministic), compared only
+  where images were rendered and checked as when the goldens were recorded (``image_checked``/``image_ok``
+  depend on whether an OpenGL context can be created).
+- session.json: every field but the wall-clock and machine ones (``finalised``, ``runs``, ``host``,
+  ``python``, ``packages``, ``finalised_files`` (hashes of parquet bytes), ``rendering``).
+
+Recording (only on the unmodified tree): ``PSYOP_RECORD_GOLDENS=1 pytest tests/session/test_refactor_equality.py``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from psyop.session.simulate import plan_jobs, run_job
+
+ROOT = Path(__file__).resolve().parents[2]
+GOLDENS = Path(__file__).with_name("refactor_goldens.json")
+STUDIES = sorted(p.stem for p in (ROOT / "protocols").glob("*.yaml"))
+TIMING = ("trial_start_s", "trial_end_s")
+SESSION_JSON_EXCLUDED = ("finalised", "runs", "host", "python", "packages", "finalised_files", "rendering")
+
+
+def _table_digest(path: Path, include: tuple[str, ...] | None = None, exclude: tuple[str, ...] = ()) -> str:
+    table = pq.read_table(path)
+    names = sorted(n for n in table.column_names if n not in exclude and (include is None or n in include))
+    rows = table.select(names).to_pylist()
+    return hashlib.sha256(json.dumps(rows, sort_keys=True, default=repr).encode()).hexdigest()
+
+
+def _digests(session: Path) -> dict[str, str]:
+    meta = json.loads((session / "session.json").read_text())
+    kept = {k: v for k, v in meta.items() if k not in SESSION_JSON_EXCLUDED}
+    return {
+        "trials": _table_digest(session / "trials.parquet", exclude=TIMING),
+        "trials_timing": _table_digest(session / "trials.parquet", include=TIMING),
+        "frames": _table_digest(session / "frames.parquet"),
+        "gaze": _table_digest(session / "gaze.parquet"),
+        "session_json": hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest(),
+        "rendering": str(meta["rendering"]),
+    }
+
+
+def _simulate(study: str, data_root: Path) -> Path:
+    job = next(j for j in plan_jobs([ROOT / "protocols" / f"{study}.yaml"], 2020, {study: 1})
+               if j.participant == "S01")
+    run_job(job, data_root)
+    return data_root / study / "sub-S01" / "ses-1"
+
+
+def test_record_goldens(tmp_path: Path) -> None:
+    """Writes the goldens when asked to (PSYOP_RECORD_GOLDENS=1); otherwise checks they cover every study."""
+    if os.environ.get("PSYOP_RECORD_GOLDENS") == "1":
+        goldens = {study: _digests(_simulate(study, tmp_path)) for study in STUDIES}
+        GOLDENS.write_text(json.dumps(goldens, indent=1, sort_keys=True) + "\n")
+    assert sorted(json.loads(GOLDENS.read_text())) == STUDIES
+
+
+@pytest.mark.parametrize("study", STUDIES)
+def test_simulated_session_unchanged(tmp_path: Path, study: str) -> None:
+    golden = json.loads(GOLDENS.read_text())[study]
+    got = _digests(_simulate(study, tmp_path))
+    assert got["trials"] == golden["trials"], f"{study}: trials.parquet content changed"
+    assert got["trials_timing"] == golden["trials_timing"], f"{study}: trial start/end times changed"
+    assert got["session_json"] == golden["session_json"], f"{study}: session.json changed"
+    if got["rendering"] == golden["rendering"]:
+        assert got["frames"] == golden["frames"], f"{study}: frames.parquet changed"
+        assert got["gaze"] == golden["gaze"], f"{study}: gaze.parquet changed"
