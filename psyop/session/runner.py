@@ -7,8 +7,6 @@ model, display, tracker clock-sync, host.
 
 from __future__ import annotations
 
-import contextlib
-import dataclasses
 import functools
 import importlib.metadata
 import platform
@@ -24,8 +22,9 @@ import pyarrow as pa
 from psyop.atomic import io_error
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
-from psyop.session.backends import BackendContext, build, is_real_time
-from psyop.session.clock import RealClock, VirtualClock
+from psyop.session.assembly import Backends, assemble, open_markers
+from psyop.session.backends import BackendContext, is_real_time
+from psyop.session.clock import Clock, RealClock, VirtualClock
 from psyop.session.frames import CameraRenderer, Display
 from psyop.session.gaze.simulated import SimulatedTrackerConfig, seed_for
 from psyop.session.log.layout import SessionPaths, session_paths, write_dataset_description
@@ -151,6 +150,19 @@ def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale:
 StoreFactory = Callable[[SessionPaths, pa.Schema], SessionLog]
 
 
+@dataclass
+class _Opened:
+    """What :func:`_open` resolved for one run: the plan, paths, seed, schedule, clock, log and metadata."""
+
+    plan: SessionPlan
+    paths: SessionPaths
+    seed: int
+    schedule: pd.DataFrame
+    clock: Clock
+    store: SessionLog
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
 def run_session(
     protocol: Protocol,
     compile_schedule: Callable[[Protocol, int], pd.DataFrame],
@@ -161,16 +173,35 @@ def run_session(
 
     The protocol is compiled into a :class:`~psyop.session.plan.SessionPlan` first; everything
     below runs from the plan. ``store_factory``: where the trials are recorded (None: the durable
-    session log under ``options.data_root``, with ``options.fsync``)."""
+    session log under ``options.data_root``, with ``options.fsync``). Three steps: open (options,
+    seed, schedule, clock, log, metadata), run (the backends assembled by :mod:`psyop.session.assembly`,
+    closed by it whatever raises) and finalise (the summary, the finalised session.json)."""
+    opened = _open(protocol, compile_schedule, options, store_factory)
+    markers = open_markers(opened.metadata, opened.clock, options.lsl_wait_s) if options.lsl_markers else None
+    opened.metadata["lsl_markers"] = options.lsl_markers
+    context = BackendContext(clock=opened.clock, seed=opened.seed, plan=opened.plan, participant=options.participant,
+                             protocol_sha256=protocol.source_sha256, schedule=opened.schedule,
+                             tracker_faults=options.tracker_faults, window_scale=options.window_scale,
+                             session=options.session, xr_request_exit_at_frame=options.xr_request_exit_at_frame)
+    specs = {"display": options.display, "tracker": options.tracker, "pose": options.pose,
+             "responses": options.responses}
+    with assemble(specs, context, markers) as bundle:
+        outcome, loop = _run(opened, bundle, options)
+    _finalise(opened, bundle, loop, outcome, options)
+    return outcome
+
+
+def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], options: SessionOptions,
+          store_factory: StoreFactory | None) -> _Opened:
+    """Resolve the options against any earlier run of the session: plan, seed, schedule, clock, log, metadata."""
     plan = compile_plan(protocol)
-    study = plan.study
-    paths = session_paths(options.data_root, study, options.participant, options.session)
+    paths = session_paths(options.data_root, plan.study, options.participant, options.session)
     check_options(clock=options.clock, responses=options.responses, tracker=options.tracker, pose=options.pose,
                   display=options.display)
-    seed = resolve_seed(paths, options.seed, seed_for(study, options.participant, options.session))
+    seed = resolve_seed(paths, options.seed, seed_for(plan.study, options.participant, options.session))
     protocol_sha256 = accept_protocol_change(paths, protocol) if options.allow_protocol_change \
         else protocol.source_sha256
-    from psyop.schedule.counterbalance import block_sequence, resolve_participant_index
+    from psyop.schedule.counterbalance import resolve_participant_index
     from psyop.session.log.store import read_metadata
 
     recorded = (read_metadata(paths) or {}).get("participant_index")
@@ -179,144 +210,118 @@ def run_session(
     schedule = compile_schedule(protocol, seed, participant_index=participant_index)
     if plan.adaptive is not None:  # the adaptive level and the procedure's state are logged per trial
         schedule = add_log_columns(schedule, plan.adaptive)
-    display_profile = plan.display
-
     if options.clock == "virtual":
-        clock: Any = VirtualClock()
+        clock: Clock = VirtualClock()
     elif options.clock == "real":
         clock = RealClock()
     else:
         raise UserError(f"unknown clock {options.clock!r}; use virtual or real", "--clock")
-
     store = (SessionStore(paths, trial_schema(schedule), fsync=options.fsync) if store_factory is None
              else store_factory(paths, trial_schema(schedule)))
-    metadata = {
-        "study": study, "participant": options.participant, "session": options.session, "seed": seed,
-        "simulated": options.simulated, "simulated_sources": list(options.simulated_sources),
+    opened = _Opened(plan, paths, seed, schedule, clock, store)
+    opened.metadata = _metadata(protocol, opened, options, participant_index, protocol_sha256)
+    return opened
+
+
+def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, participant_index: int,
+              protocol_sha256: str) -> dict[str, Any]:
+    """session.json's fields known before the backends are built (in the order they are written)."""
+    from psyop.schedule.counterbalance import block_sequence
+    from psyop.stimulus.meshes import protocol_mesh_records
+
+    randomisation = protocol.design.randomisation
+    source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
+    return {
+        "study": opened.plan.study, "participant": options.participant, "session": options.session,
+        "seed": opened.seed, "simulated": options.simulated, "simulated_sources": list(options.simulated_sources),
         "protocol_sha256": protocol_sha256,
         "protocol_file_sha256": protocol.source_sha256,
         "protocol_text": protocol.source_text, "protocol_file": protocol.source_name,
-        "n_trials_scheduled": int(len(schedule)), **plan.metadata(), "packages": package_versions(),
+        "n_trials_scheduled": int(len(opened.schedule)), **opened.plan.metadata(), "packages": package_versions(),
         "participant_index": participant_index,
-        "block_order": {"kind": protocol.design.randomisation.block_order,
-                        "blocks": block_sequence(schedule, protocol.design.randomisation.by)}
-        if protocol.design.randomisation.kind == "blocked" else None,
+        "block_order": {"kind": randomisation.block_order, "blocks": block_sequence(opened.schedule, randomisation.by)}
+        if randomisation.kind == "blocked" else None,
         "python": platform.python_version(), "host": platform.node(),
         "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,
+        "pose": options.pose, "meshes": protocol_mesh_records(protocol.scene, source),
     }
-    metadata["pose"] = options.pose
-    from psyop.stimulus.meshes import protocol_mesh_records
 
-    source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
-    metadata["meshes"] = protocol_mesh_records(protocol.scene, source)
-    renderer: Any = None
-    loop: TrialLoop | None = None
-    events: list[Any] = []
-    if options.lsl_markers:
-        if clock.virtual:
-            raise UserError("--lsl-markers stamps events on the LSL clock in real time; on --clock virtual they would "
-                            "carry times that never happened: use --clock real", "--clock")
-        from psyop.session.lsl_markers import LslMarkerOutlet
 
-        markers = LslMarkerOutlet({**metadata, "seed": seed}, clock.now_s)
-        events.append(markers)
-        recorded = markers.wait_for_recorder(options.lsl_wait_s)
-        print(f"psyop run: LSL marker stream 'psyop_markers': "
-              + ("a recorder is connected" if recorded else f"no recorder connected within {options.lsl_wait_s:g} s; "
-                 "markers sent before one connects are recorded by nobody"), file=sys.stderr)
-        metadata["lsl_markers_recorder_at_start"] = recorded
-    metadata["lsl_markers"] = options.lsl_markers
-    # the display first: responses (a window's keys) and headset trackers are built on it
-    context = BackendContext(clock=clock, seed=seed, plan=plan, participant=options.participant,
-                             protocol_sha256=protocol.source_sha256, schedule=schedule,
-                             tracker_faults=options.tracker_faults, window_scale=options.window_scale,
-                             session=options.session, xr_request_exit_at_frame=options.xr_request_exit_at_frame)
-    with contextlib.ExitStack() as built:  # a backend that cannot be built closes those built before it
-        display = build("display", options.display, context)
-        built.callback(display.close)
-        context = dataclasses.replace(context, display=display)
-        gaze = build("tracker", options.tracker, context)
-        built.callback(gaze.close)
-        pose = build("pose", options.pose, context)
-        built.callback(pose.close)
-        responses = build("responses", options.responses, context)
-        built.pop_all()
-    events += context.event_sinks
-    announce = None
-    if is_real_time("responses", options.responses):  # a person answers: the experimenter reads the question and prompts
-        print(f"psyop run: question for the participant: {plan.response.question}", file=sys.stderr)
+def _announcer(plan: SessionPlan, responses_spec: str) -> Callable[[str], None] | None:
+    """Where prompts go when a person answers (the experimenter reads the question and prompts), else None."""
+    if not is_real_time("responses", responses_spec):
+        return None
+    print(f"psyop run: question for the participant: {plan.response.question}", file=sys.stderr)
 
-        def announce(text: str) -> None:
-            print(f"psyop run: prompt: {text}", file=sys.stderr)
+    def announce(text: str) -> None:
+        print(f"psyop run: prompt: {text}", file=sys.stderr)
+    return announce
+
+
+def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[SessionOutcome, TrialLoop]:
+    """Start the tracker, open the log, make the renderer (closed first by ``bundle``) and run the loop."""
+    plan, clock, store, gaze = opened.plan, opened.clock, opened.store, bundle.gaze
+    announce = _announcer(plan, options.responses)
+    current = [-1]  # the trial in progress when the loop stops (for the raw gaze no trial recorded)
+    bundle.after_tracker_closed = lambda: store.append_gaze(
+        raw_gaze_table(gaze.drain_raw(), run=store.run_index, trial=current[0]), key=current[0])
     try:
-        try:
-            gaze.start()
-        except (ConnectionError, OSError) as exc:
-            raise UserError(f"cannot start tracker {options.tracker}: {exc}", "--tracker") from exc
-        sync = gaze.clock_sync()
-        metadata["clock_sync"] = sync.as_dict() if sync is not None else None
-        metadata["tracker_at_start"] = gaze.stats()  # e.g. the tracker's own calibration result
-        completed = store.open(metadata)
-        logged = recover_tables(paths)[0] if completed else None
-        if isinstance(clock, VirtualClock) and logged is not None and len(logged):
-            clock.sleep_until(float(logged["trial_end_s"].max()))
-        # adaptive procedures are rebuilt from the logged trials: no state of their own to lose
-        adaptive = AdaptiveLevels.from_log(plan.adaptive, logged) if plan.adaptive is not None else None
-        path = plan.fixation
-        every_frame = (not (clock.virtual and not responses.needs_images)) if options.every_frame is None \
-            else options.every_frame
-        renderer, rendering = _make_renderer(options.render, plan, display, options.window_scale,
-                                             1.0 if every_frame else options.check_scale,
-                                             None if every_frame else options.check_images)
-        store.update_metadata(rendering=rendering)
-        config = LoopConfig(
-            refresh_hz=float(display_profile.refresh_hz),
-            every_frame=every_frame,
-            **pursuit_fields(path),  # the moving target's path (psyop.quality rebuilds the target the same way)
-            phase_delay_s=options.phase_delay_s,
-            progress=options.progress,
-            hand_last_n=plan.response.average_last_samples,
-            min_valid_gaze_share=plan.min_valid_gaze_share,
-        )
-        loop = TrialLoop(
-            identity={"study": study, "participant": options.participant, "session": options.session},
-            phases=plan.phases, clock=clock, gaze=gaze, responses=responses,
-            renderer=renderer, display=display, store=store, config=config, pose=pose,
-            response=plan.response, announce=announce, adaptive=adaptive, events=tuple(events),
-        )
-        outcome = loop.run(schedule, completed)
-    finally:
-        if renderer is not None:
-            renderer.close()
-        responses.close()
-        gaze.close()
-        # raw gaze samples not yet in a trial record (a discarded trial's, or after the last one)
-        store.append_gaze(raw_gaze_table(gaze.drain_raw(), run=store.run_index,
-                                         trial=loop.current_trial if loop is not None else -1),
-                          key=loop.current_trial if loop is not None else -1)
-        pose.close()
-        for sink in events:
-            if sink is not gaze:  # a tracker that takes events is closed as the tracker
-                sink.close()
-        display.close()
-    summary = {"outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
-               "tracker": gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held,
-                        "hand_trials_reused": pose.n_reused_hand_trials}}
-    display_summary = display.summary()
+        gaze.start()
+    except (ConnectionError, OSError) as exc:
+        raise UserError(f"cannot start tracker {options.tracker}: {exc}", "--tracker") from exc
+    sync = gaze.clock_sync()
+    opened.metadata["clock_sync"] = sync.as_dict() if sync is not None else None
+    opened.metadata["tracker_at_start"] = gaze.stats()  # e.g. the tracker's own calibration result
+    completed = store.open(opened.metadata)
+    logged = recover_tables(opened.paths)[0] if completed else None
+    if isinstance(clock, VirtualClock) and logged is not None and len(logged):
+        clock.sleep_until(float(logged["trial_end_s"].max()))
+    # adaptive procedures are rebuilt from the logged trials: no state of their own to lose
+    adaptive = AdaptiveLevels.from_log(plan.adaptive, logged) if plan.adaptive is not None else None
+    every_frame = (not (clock.virtual and not bundle.responses.needs_images)) if options.every_frame is None \
+        else options.every_frame
+    renderer, rendering = _make_renderer(options.render, plan, bundle.display, options.window_scale,
+                                         1.0 if every_frame else options.check_scale,
+                                         None if every_frame else options.check_images)
+    bundle.stack.callback(renderer.close)
+    store.update_metadata(rendering=rendering)
+    config = LoopConfig(refresh_hz=float(plan.display.refresh_hz), every_frame=every_frame,
+                        **pursuit_fields(plan.fixation),  # the moving target's path (psyop.quality rebuilds it)
+                        phase_delay_s=options.phase_delay_s, progress=options.progress,
+                        hand_last_n=plan.response.average_last_samples,
+                        min_valid_gaze_share=plan.min_valid_gaze_share)
+    loop = TrialLoop(
+        identity={"study": plan.study, "participant": options.participant, "session": options.session},
+        phases=plan.phases, clock=clock, gaze=gaze, responses=bundle.responses,
+        renderer=renderer, display=bundle.display, store=store, config=config, pose=bundle.pose,
+        response=plan.response, announce=announce, adaptive=adaptive, events=bundle.events,
+    )
+    bundle.after_tracker_closed = lambda: store.append_gaze(
+        raw_gaze_table(gaze.drain_raw(), run=store.run_index, trial=loop.current_trial), key=loop.current_trial)
+    return loop.run(opened.schedule, completed), loop
+
+
+def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: SessionOutcome,
+              options: SessionOptions) -> None:
+    """The summary of the run into the finalised session.json; the dataset description beside it."""
+    summary: dict[str, Any] = {
+        "outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
+        "tracker": bundle.gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held,
+                                                 "hand_trials_reused": bundle.pose.n_reused_hand_trials}}
+    display_summary = bundle.display.summary()
     if "display_flip_period_s" in display_summary:  # from the flip timestamps (least squares)
         summary["display_flip_period_s"] = display_summary["display_flip_period_s"]
     summary["display"] = display_summary
     if loop.display_interruptions:
         summary["display_interruptions"] = loop.display_interruptions
-    store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
+    opened.store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
     if options.write_description:
         try:
             write_dataset_description(options.data_root, simulated=options.simulated)
         except OSError as exc:
             raise io_error(exc, fix=f"the session itself is finalised ({outcome.message}); free space, then run "
                            f"`psyop recover {options.data_root}` to write the dataset description") from exc
-    return outcome
 
 
 def print_outcome(outcome: SessionOutcome, stream: Any = None) -> None:
