@@ -52,7 +52,7 @@ def _pupil_ages(duration_s: float) -> np.ndarray:
     sys.path.insert(0, str(_TESTS))
     from pupil_server import FakePupilCapture
 
-    from psyop.session.gaze.pupil import PupilClient
+    from psyop.devices.gaze.pupil import PupilClient
 
     server = FakePupilCapture(rate_hz=200.0)
     clock = RealClock()
@@ -69,7 +69,7 @@ def _lsl_ages(duration_s: float) -> np.ndarray:
     sys.path.insert(0, str(_TESTS))
     from lsl_outlets import PupilRelayOutlet
 
-    from psyop.session.gaze.lsl import LslGazeSource
+    from psyop.devices.gaze.lsl import LslGazeSource
 
     name = f"psyop_bench_{time.monotonic_ns()}"
     outlet = PupilRelayOutlet(name, rate_hz=200.0)
@@ -85,7 +85,7 @@ def _lsl_ages(duration_s: float) -> np.ndarray:
 
 def _pupil_handle_us(n: int) -> float:
     """The existing path's per-message work, without sockets (PupilClient._handle on one message)."""
-    from psyop.session.gaze.pupil import PupilClient
+    from psyop.devices.gaze.pupil import PupilClient
     from psyop.session.gaze.sync import ClockSync
 
     clock = RealClock()

@@ -38,7 +38,7 @@ def _child(n_frames: int, blocks: int) -> dict:
     from psyop.session.frames import HeadlessDisplay
     from psyop.session.plan import compile_plan
     from psyop.session.scene_renderer import SceneRenderer
-    from psyop.session.xr.display import OpenXRDisplay
+    from psyop.devices.xr.display import OpenXRDisplay
 
     plan = compile_plan(load_protocol(REPO / "protocols" / "detection.yaml"))
     clock = RealClock()

@@ -43,7 +43,7 @@ def _pupil_age_ms(seconds: float) -> np.ndarray:
     from pupil_server import FakePupilCapture
 
     from psyop.session.clock import RealClock
-    from psyop.session.gaze.pupil import PupilClient
+    from psyop.devices.gaze.pupil import PupilClient
 
     server = FakePupilCapture()
     clock = RealClock()

@@ -7,7 +7,7 @@ bottom negative and top positive): x from ``d * tan_left`` to ``d * tan_right``,
 ``d * tan_bottom`` to ``d * tan_top``. The tangents are stored for the right eye; the left
 eye is mirrored in x (left/right swap and change sign) unless ``left_tangents`` gives the left
 eye's own (left, right, bottom, top): a headset's two frusta are rarely mirror images (an
-OpenXR runtime reports each eye's field of view, psyop.session.xr). ``d_m = inf`` (the paper's
+OpenXR runtime reports each eye's field of view, psyop.devices.xr). ``d_m = inf`` (the paper's
 choice) means the image is at optical infinity: only directions matter.
 """
 

@@ -57,7 +57,7 @@ def open_markers(metadata: dict[str, Any], clock: Clock, wait_s: float) -> Event
     if clock.virtual:
         raise UserError("--lsl-markers stamps events on the LSL clock in real time; on --clock virtual they would "
                         "carry times that never happened: use --clock real", "--clock")
-    from psyop.session.lsl_markers import LslMarkerOutlet
+    from psyop.devices.lsl_markers import LslMarkerOutlet
 
     markers = LslMarkerOutlet(dict(metadata), clock.now_s)
     recorded = markers.wait_for_recorder(wait_s)

@@ -128,7 +128,7 @@ PUPIL_FLAGS = ("calibrate", "record", "annotate")
 
 
 def _pupil_tracker(arg: str, ctx: BackendContext) -> GazeSource:
-    from psyop.session.gaze.pupil import PupilClient
+    from psyop.devices.gaze.pupil import PupilClient
 
     address, *flags = arg.split(",")
     host, _, port = address.rpartition(":")
@@ -146,13 +146,13 @@ def _pupil_tracker(arg: str, ctx: BackendContext) -> GazeSource:
 
 
 def _serial_tracker(arg: str, ctx: BackendContext) -> GazeSource:
-    from psyop.session.gaze.serial_source import SerialGazeSource
+    from psyop.devices.gaze.serial_source import SerialGazeSource
 
     return SerialGazeSource(arg, clock=ctx.clock.now_s)
 
 
 def _lsl_tracker(arg: str, ctx: BackendContext) -> GazeSource:
-    from psyop.session.gaze.lsl import LslGazeSource, parse_spec
+    from psyop.devices.gaze.lsl import LslGazeSource, parse_spec
 
     name, channel_map = parse_spec(arg)
     return LslGazeSource(name, clock=ctx.clock.now_s, channel_map=channel_map)
@@ -197,7 +197,7 @@ def _no_responses(arg: str, ctx: BackendContext) -> ResponseSource:
 
 
 def _serial_responses(arg: str, ctx: BackendContext) -> ResponseSource:
-    from psyop.session.responses.serial_box import SerialResponseBox
+    from psyop.devices.responses.serial_box import SerialResponseBox
 
     try:
         return SerialResponseBox(arg, ctx.plan.kind, clock=ctx.clock.now_s)
@@ -206,8 +206,8 @@ def _serial_responses(arg: str, ctx: BackendContext) -> ResponseSource:
 
 
 def _keyboard_responses(arg: str, ctx: BackendContext) -> ResponseSource:
-    from psyop.session.responses.keyboard import KeyboardResponses
-    from psyop.session.window import GlfwWindow
+    from psyop.devices.responses.keyboard import KeyboardResponses
+    from psyop.devices.window import GlfwWindow
 
     if not isinstance(ctx.display, GlfwWindow):
         raise UserError("--responses keyboard needs --display window", "--responses")
@@ -215,19 +215,19 @@ def _keyboard_responses(arg: str, ctx: BackendContext) -> ResponseSource:
 
 
 def _openxr_tracker(arg: str, ctx: BackendContext) -> GazeSource:
-    from psyop.session.xr.tracking import OpenXRGaze
+    from psyop.devices.xr.tracking import OpenXRGaze
 
     return OpenXRGaze.on_display(ctx.display)
 
 
 def _openxr_pose(arg: str, ctx: BackendContext) -> PoseSource:
-    from psyop.session.xr.tracking import OpenXRPose
+    from psyop.devices.xr.tracking import OpenXRPose
 
     return OpenXRPose.on_display(ctx.display, arg)
 
 
 def _openxr_responses(arg: str, ctx: BackendContext) -> ResponseSource:
-    from psyop.session.xr.tracking import OpenXRResponses
+    from psyop.devices.xr.tracking import OpenXRResponses
 
     return OpenXRResponses.on_display(ctx.display, ctx.plan.kind)
 
@@ -239,9 +239,9 @@ def _headless_display(arg: str, ctx: BackendContext) -> Display:
 
 
 def _openxr_display(arg: str, ctx: BackendContext) -> Display:
-    from psyop.session.xr.display import open_openxr_display
+    from psyop.devices.xr.display import open_openxr_display
 
-    from psyop.session.xr.binding import GRAPHICS_APIS
+    from psyop.devices.xr.binding import GRAPHICS_APIS
 
     if arg not in ("", "auto", *GRAPHICS_APIS):
         raise UserError(f"--display openxr:{arg}: expected openxr, openxr:egl or openxr:xlib (the OpenGL binding)",
@@ -250,7 +250,7 @@ def _openxr_display(arg: str, ctx: BackendContext) -> Display:
 
 
 def _window_display(arg: str, ctx: BackendContext) -> Display:
-    from psyop.session.window import GlfwWindow
+    from psyop.devices.window import GlfwWindow
 
     return GlfwWindow(ctx.plan.display, ctx.clock, scale=ctx.window_scale, n_eyes=len(ctx.plan.rig.eyes))
 

@@ -26,7 +26,7 @@ class Clock(Protocol):
 
 class RealClock:
     """Monotonic wall clock (``perf_counter_ns``; on Linux that is ``CLOCK_MONOTONIC``, the clock an
-    OpenXR runtime converts its times from: psyop.session.xr)."""
+    OpenXR runtime converts its times from: psyop.devices.xr)."""
 
     virtual = False
 

@@ -65,7 +65,7 @@ class SessionOptions:
     allow_protocol_change: bool = False  # resume with a protocol edited only in comments (resume.py)
     pose: str = "sim"  # sim | replay:SESSION_DIR (head and hand pose; docs/sessions.md)
     xr_request_exit_at_frame: int | None = None  # testing aid: the OpenXR runtime is asked to stop at frame N
-    lsl_markers: bool = False  # publish trial events as an LSL marker stream (psyop.session.lsl_markers)
+    lsl_markers: bool = False  # publish trial events as an LSL marker stream (psyop.devices.lsl_markers)
     lsl_wait_s: float = 10.0  # --lsl-markers: wait this long for a recorder to connect before the first trial
     participant_index: int | None = None  # keys block_order: latin_square (None: the number the ID ends in)
 

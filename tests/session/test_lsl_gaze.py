@@ -17,9 +17,9 @@ from psyop.errors import UserError
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.clock import RealClock
-from psyop.session.gaze.lsl import LslGazeSource
-from psyop.session.gaze.lsl_channels import BUILT_IN, SceneCamera, detect_map, parse_map
-from psyop.session.gaze.pupil import world_mm_to_head_m, world_to_head_direction
+from psyop.devices.gaze.lsl import LslGazeSource
+from psyop.devices.gaze.lsl_channels import BUILT_IN, SceneCamera, detect_map, parse_map
+from psyop.devices.gaze.pupil import world_mm_to_head_m, world_to_head_direction
 from psyop.session.gaze.sample import TrackerLost
 from psyop.session.log.layout import session_paths
 from psyop.session.log.store import SessionStore

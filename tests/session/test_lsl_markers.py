@@ -17,7 +17,7 @@ from psyop.cli import main as cli_main
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.log.layout import session_paths
-from psyop.session.lsl_markers import CHANNELS, STREAM_NAME
+from psyop.devices.lsl_markers import CHANNELS, STREAM_NAME
 from psyop.session.plan import compile_plan
 from psyop.session.runner import SessionOptions, run_session
 

@@ -14,7 +14,7 @@ from session_helpers import fast_protocol, wait_until
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.clock import RealClock
-from psyop.session.gaze.pupil import PupilClient, fit_clock_sync, world_mm_to_head_m
+from psyop.devices.gaze.pupil import PupilClient, fit_clock_sync, world_mm_to_head_m
 from psyop.session.gaze.sample import TrackerLost
 from psyop.session.log.store import SessionStore
 from psyop.session.runner import SessionOptions, run_session

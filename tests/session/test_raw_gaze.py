@@ -15,7 +15,7 @@ from session_helpers import small_protocol
 
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
-from psyop.session.gaze.pupil import pupil_eyes
+from psyop.devices.gaze.pupil import pupil_eyes
 from psyop.session.gaze.sample import EyeSample, RawGazeSample, direction_to_angles_deg
 from psyop.session.log.layout import session_paths
 from psyop.session.log.raw_gaze import raw_gaze_table

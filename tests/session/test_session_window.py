@@ -20,7 +20,7 @@ SCRIPT = textwrap.dedent(
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
     from psyop.session.runner import SessionOptions, run_session
-    import psyop.session.window as window
+    import psyop.devices.window as window
 
     typed = window.GlfwWindow.poll
     def poll(self):  # a participant who always presses '2' once the prompt is up
@@ -72,7 +72,7 @@ STEREO_SCRIPT = textwrap.dedent(
     from psyop.session.phases import PhaseSpec
     from psyop.session.scene_renderer import SceneRenderer
     from psyop.session.plan import compile_plan
-    from psyop.session.window import GlfwWindow
+    from psyop.devices.window import GlfwWindow
 
     protocol = load_protocol(Path({repo!r}) / "protocols" / "egocentric.yaml")  # eyes: stereo
     plan = compile_plan(protocol, tracker_ipd_m=0.064)

@@ -20,9 +20,9 @@ from session_helpers import fast_protocol
 
 from psyop.errors import UserError
 from psyop.session.clock import RealClock
-from psyop.session.gaze.pupil import PupilClient
-from psyop.session.gaze.serial_source import SerialGazeSource
-from psyop.session.serial_lines import MAX_LINE_BYTES, SerialLineReader
+from psyop.devices.gaze.pupil import PupilClient
+from psyop.devices.gaze.serial_source import SerialGazeSource
+from psyop.devices.serial_lines import MAX_LINE_BYTES, SerialLineReader
 
 DEADLINE_S = 30.0
 

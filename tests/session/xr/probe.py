@@ -28,7 +28,7 @@ def main() -> None:
     from psyop.protocol import load_protocol
     from psyop.session.clock import RealClock
     from psyop.session.plan import compile_plan
-    from psyop.session.xr.display import OpenXRDisplay
+    from psyop.devices.xr.display import OpenXRDisplay
 
     plan = compile_plan(load_protocol(protocol_path))
     clock = RealClock()
@@ -53,7 +53,7 @@ def main() -> None:
 
 
 def _cameras(plan, display, n_frames: int) -> list[dict]:
-    from psyop.session.xr.tracking import OpenXRGaze, OpenXRPose, OpenXRResponses
+    from psyop.devices.xr.tracking import OpenXRGaze, OpenXRPose, OpenXRResponses
     from psyop.session.responses.base import ResponseKind
 
     gaze = OpenXRGaze.on_display(display) if display.runtime.gaze_space is not None else None

@@ -409,7 +409,7 @@ def test_ctrl_c_mid_frame_ends_the_headset_session_cleanly_and_it_resumes(tmp_pa
 
 
 #: psyop run with a shorter controller wait (the real code path; 30 s by default)
-_SHORT_CONTROLLER_WAIT = ("import sys; import psyop.session.xr.runtime as r; r.CONTROLLER_TIMEOUT_S = 2.0; "
+_SHORT_CONTROLLER_WAIT = ("import sys; import psyop.devices.xr.runtime as r; r.CONTROLLER_TIMEOUT_S = 2.0; "
                           "from psyop.cli import main; sys.exit(main(sys.argv[1:]))")
 
 

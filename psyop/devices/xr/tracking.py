@@ -22,8 +22,8 @@ from psyop.session.gaze.sync import ClockSync
 from psyop.session.pose import PoseSample
 from psyop.session.reach import horizontal_reach_m
 from psyop.session.responses.base import ResponseKind
-from psyop.session.responses.keyboard import KeyboardResponses
-from psyop.session.xr.runtime import HANDS, XR_EXIT_CODE, rotate
+from psyop.devices.responses.keyboard import KeyboardResponses
+from psyop.devices.xr.runtime import HANDS, XR_EXIT_CODE, rotate
 
 #: where the fixation is placed on the runtime's gaze ray (XR_EXT_eye_gaze_interaction gives a
 #: direction, not a vergence distance); recorded in session.json with the tracker's stats
@@ -31,7 +31,7 @@ DEFAULT_GAZE_DISTANCE_M = 1.0
 
 
 def _openxr_display(display: Any, option: str) -> Any:
-    from psyop.session.xr.display import OpenXRDisplay
+    from psyop.devices.xr.display import OpenXRDisplay
 
     if not isinstance(display, OpenXRDisplay):
         raise UserError(f"{option} openxr reads the headset's runtime: use it with --display openxr", option)

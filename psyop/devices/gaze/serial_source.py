@@ -15,7 +15,7 @@ from collections.abc import Callable
 from psyop.session.gaze.plan import FixationPlan
 from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample, TrackerLost, is_usable
 from psyop.session.gaze.sync import ClockSync
-from psyop.session.serial_lines import SerialLineReader
+from psyop.devices.serial_lines import SerialLineReader
 
 _SPLIT = re.compile(r"[,\s]+")
 

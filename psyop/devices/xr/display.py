@@ -13,7 +13,7 @@ C (what the runtime's IPD setting places); the eye rig's ipd rule (``place_views
 the protocol's fixed ipd, if it has one, about their mid-point. Swapchains are RGBA8 (linear:
 psyop's pixel values reach the display unchanged, as in its PNGs) at the runtime's recommended
 size per eye. The OpenGL context is psyop's own, bound to the session through EGL or GLX/Xlib
-(:mod:`psyop.session.xr.binding`).
+(:mod:`psyop.devices.xr.binding`).
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from typing import Any
 
 from psyop.optics.camera import ViewGeometry
 from psyop.session.frames import DisplayInterrupted, FrameRequest, RenderTarget
-from psyop.session.xr.binding import choose_binding, create_context
-from psyop.session.xr.runtime import (
+from psyop.devices.xr.binding import choose_binding, create_context
+from psyop.devices.xr.runtime import (
     FOCUS_TIMEOUT_S,
     XrPose,
     XrRuntime,
@@ -172,7 +172,7 @@ class OpenXRDisplay:
         frames, input synced) until the runtime binds a controller to either hand, else end with one
         line, exit 3 (the session finalised as incomplete: a rerun resumes). A runtime without controllers recorded every trial as a timeout and said
         'complete'."""
-        from psyop.session.xr import runtime as xr_runtime
+        from psyop.devices.xr import runtime as xr_runtime
 
         timeout_s = xr_runtime.CONTROLLER_TIMEOUT_S
         deadline = time.monotonic() + timeout_s
@@ -353,7 +353,7 @@ def _view_geometry(eye: str, view: Any) -> ViewGeometry:
 def open_openxr_display(plan: Any, clock: Any, request_exit_at_frame: int | None = None,
                         graphics: str = "auto") -> OpenXRDisplay:
     """The OpenXR display for a session of ``plan`` on ``clock`` (a RealClock); ``graphics``: the
-    OpenGL binding, ``auto``, ``egl`` or ``xlib`` (:mod:`psyop.session.xr.binding`)."""
+    OpenGL binding, ``auto``, ``egl`` or ``xlib`` (:mod:`psyop.devices.xr.binding`)."""
     return OpenXRDisplay(plan, clock, graphics=graphics, request_exit_at_frame=request_exit_at_frame)
 
 

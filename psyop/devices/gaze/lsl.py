@@ -1,7 +1,7 @@
 """Gaze from a Lab Streaming Layer stream (``--tracker lsl:NAME``; pip extra ``lsl`` brings pylsl).
 
 The stream is resolved by name, else by type (``lsl:Gaze`` takes the first stream of type Gaze).
-Its channels are read by label through a channel map (:mod:`psyop.session.gaze.lsl_channels`):
+Its channels are read by label through a channel map (:mod:`psyop.devices.gaze.lsl_channels`):
 detected from the labels (Pupil Capture's relay, Neon) or named (``lsl:NAME@neon``,
 ``lsl:NAME@MAP.json``).
 
@@ -36,9 +36,9 @@ from typing import Any
 import numpy as np
 
 from psyop.errors import UserError
-from psyop.session.gaze.lsl_channels import ChannelMap, detect_map, load_map
+from psyop.devices.gaze.lsl_channels import ChannelMap, detect_map, load_map
 from psyop.session.gaze.plan import FixationPlan
-from psyop.session.gaze.pupil import world_mm_to_head_m, world_to_head_direction
+from psyop.devices.gaze.pupil import world_mm_to_head_m, world_to_head_direction
 from psyop.session.gaze.sample import EyeSample, GazeSample, RawBuffer, RawGazeSample, TrackerLost, is_usable
 from psyop.session.gaze.sync import ClockSync
 

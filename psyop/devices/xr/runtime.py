@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from psyop.errors import UserError
-from psyop.session.xr.binding import BindingChoice, current_binding
+from psyop.devices.xr.binding import BindingChoice, current_binding
 
 T = TypeVar("T")
 

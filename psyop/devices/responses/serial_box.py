@@ -11,7 +11,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from psyop.session.responses.base import Response, ResponseKind, score
-from psyop.session.serial_lines import SerialLineReader
+from psyop.devices.serial_lines import SerialLineReader
 
 BUTTONS: dict[ResponseKind, dict[str, str]] = {
     ResponseKind.TWO_INTERVAL: {"1": "1", "2": "2", "L": "1", "R": "2"},
