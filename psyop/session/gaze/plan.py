@@ -7,8 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from psyop.session.gaze.sample import angles_to_direction
-from psyop.optics.angles import fick_angles_deg, offset_direction
+from psyop.optics.angles import fick_angles_deg, fick_direction, offset_direction
 from psyop.stimulus.placement import circle_position_deg
 
 
@@ -33,8 +32,10 @@ class FixationPlan:
     def target_direction(self, t_s: float) -> np.ndarray:
         """Intended gaze direction at session time ``t_s`` (cross/none: the centre)."""
         if self.kind == "pursuit" and self.target is not None:
-            return angles_to_direction(*self.target(t_s - self.start_s))
-        return angles_to_direction(*self.centre_deg)
+            az_deg, el_deg = self.target(t_s - self.start_s)
+        else:
+            az_deg, el_deg = self.centre_deg
+        return fick_direction(float(az_deg), float(el_deg))  # as gaze.sample.angles_to_direction (no import back)
 
 
 @dataclass(frozen=True)
