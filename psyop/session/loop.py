@@ -170,12 +170,7 @@ class TrialLoop:
                     record = self.adaptive.complete(record)
                 self.state = TrialState.RECORD
                 with interrupts_deferred():  # Ctrl-C (or SIGTERM) never tears a record half-written
-                    if self.store.keeps_samples:
-                        self.store.append_trial(record, frames.table() if len(frames) else None,
-                                                self.raw_gaze(int(record["trial"])))
-                    else:  # a log of trial rows only (psyop.power's in-memory log): no frame or gaze tables built
-                        self.gaze.drain_raw()
-                        self.store.append_trial(record, None, None)
+                    self._store_trial(record, frames)
                     recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
                     n_done += 1
                 self.current_trial = -1
@@ -210,6 +205,15 @@ class TrialLoop:
         latency = latency_summary(np.array(self._ages), self.frame_period_s)
         latency["n_frames_held"] = self._n_held
         return SessionOutcome(status, n_done, n_total, message, latency)
+
+    def _store_trial(self, record: dict[str, Any], frames: FrameRecorder) -> None:
+        """Append one trial to the log: its row, frames and raw gaze (a log of rows only: the row)."""
+        if self.store.keeps_samples:
+            self.store.append_trial(record, frames.table() if len(frames) else None,
+                                    self.raw_gaze(int(record["trial"])))
+        else:  # a log of trial rows only (psyop.power's in-memory log): no frame or gaze tables built
+            self.gaze.drain_raw()
+            self.store.append_trial(record, None, None)
 
     def _run_trial_on_display(self, row: dict[str, Any]) -> tuple[dict[str, Any], FrameRecorder]:
         """Run a trial once the display can show it. A trial the display interrupts (a headset

@@ -153,6 +153,22 @@ class SegmentRead:
 _KIND_NAMES = {KIND_SCHEMA: "schema", KIND_BATCH: "batch", KIND_END: "end"}
 
 
+def _segment_schema(schema_bytes: bytes | None, schema_crc: int | None, schema_hint: pa.Schema | None,
+                    raw: list[tuple[int, int, int, bytes]]) -> tuple[pa.Schema | None, int | None]:
+    """The segment's schema and its checksum: its own copy, else ``schema_hint`` if every batch names its checksum."""
+    schema: pa.Schema | None = None
+    if schema_bytes is not None:
+        try:
+            schema = pa.ipc.read_schema(pa.py_buffer(schema_bytes))
+        except (pa.ArrowException, ValueError):  # pragma: no cover - checksummed bytes we wrote
+            schema = None
+    if schema is None and schema_hint is not None:
+        hint_crc = zlib.crc32(schema_hint.serialize().to_pybytes())
+        if raw and all(crc == hint_crc for _, _, crc, _ in raw):
+            schema, schema_crc = schema_hint, hint_crc
+    return schema, schema_crc
+
+
 def read_segment(path: Path, schema_hint: pa.Schema | None = None) -> SegmentRead:
     """Salvage every intact record of a ``*.psylog`` segment; never raises on its content.
 
@@ -196,16 +212,7 @@ def read_segment(path: Path, schema_hint: pa.Schema | None = None) -> SegmentRea
         else:
             clean_end = True
         pos = end
-    schema: pa.Schema | None = None
-    if schema_bytes is not None:
-        try:
-            schema = pa.ipc.read_schema(pa.py_buffer(schema_bytes))
-        except (pa.ArrowException, ValueError):  # pragma: no cover - checksummed bytes we wrote
-            schema = None
-    if schema is None and schema_hint is not None:
-        hint_crc = zlib.crc32(schema_hint.serialize().to_pybytes())
-        if raw and all(crc == hint_crc for _, _, crc, _ in raw):
-            schema, schema_crc_seen = schema_hint, hint_crc
+    schema, schema_crc_seen = _segment_schema(schema_bytes, schema_crc_seen, schema_hint, raw)
     batches: list[pa.RecordBatch] = []
     keys: list[int] = []
     for offset, key, crc, payload in raw:
