@@ -31,7 +31,8 @@ from psyop.protocol.model import Protocol
 from psyop.session.backends import OPTION, Category, is_real_time, lookup
 from psyop.session.lock import SessionLock
 from psyop.session.log.layout import SessionPaths
-from psyop.session.log.store import log_identity, read_metadata
+from psyop.session.log.record import SessionRecord
+from psyop.session.log.store import log_identity
 
 def check_options(*, clock: str, responses: str, tracker: str, pose: str = "sim", display: str = "headless") -> None:
     """Refuse a live device on the virtual clock (exit code 2, naming the option).
@@ -48,25 +49,26 @@ def check_options(*, clock: str, responses: str, tracker: str, pose: str = "sim"
             raise UserError(f"{OPTION[category]} {name} is {what}: use --clock real with it", "--clock")
 
 
-def recorded_seed(paths: SessionPaths) -> int | None:
-    """The seed of an existing session: session.json's, else the one in its log, else None."""
-    meta = read_metadata(paths)
-    if meta is not None and meta.get("seed") is not None:
-        return _as_seed(meta["seed"], str(paths.metadata))
-    if meta is None and paths.segments("trials"):
+def check_free(paths: SessionPaths) -> None:
+    """Refuse a session another process is writing (naming it), as the store would, before reading it."""
+    SessionLock(paths.lock_file).check_free()
+
+
+def recorded_seed(paths: SessionPaths, record: SessionRecord | None) -> int | None:
+    """The seed of an existing session: session.json's (``record``), else the one in its log, else None."""
+    if record is not None and record.seed is not None:
+        return record.seed
+    if record is None and paths.segments("trials"):
         seed = log_identity(paths).get("seed")
         if seed is not None:
             return _as_seed(seed, str(paths.log_dir))
     return None
 
 
-def resolve_seed(paths: SessionPaths, requested: int | None, default: int) -> int:
-    """The seed this run must use (see the module docstring).
-
-    A session another process is writing is refused first (naming it), as the store would.
-    """
-    SessionLock(paths.lock_file).check_free()
-    recorded = recorded_seed(paths)
+def resolve_seed(paths: SessionPaths, record: SessionRecord | None, requested: int | None, default: int) -> int:
+    """The seed this run must use (see the module docstring); ``record``: the session's session.json as read
+    (after :func:`check_free`: a session another process is writing is refused first, naming it)."""
+    recorded = recorded_seed(paths, record)
     if recorded is None:
         return default if requested is None else requested
     if requested is not None and requested != recorded:
@@ -82,7 +84,7 @@ def _as_seed(value: object, location: str) -> int:
     return value
 
 
-def accept_protocol_change(paths: SessionPaths, protocol: Protocol) -> str:
+def accept_protocol_change(paths: SessionPaths, record: SessionRecord | None, protocol: Protocol) -> str:
     """The protocol hash the session keeps when ``protocol`` resumes it under
     ``--allow-protocol-change`` (see the module docstring).
 
@@ -93,18 +95,17 @@ def accept_protocol_change(paths: SessionPaths, protocol: Protocol) -> str:
     """
     from psyop.protocol.loader import parse_protocol
 
-    meta = read_metadata(paths)
-    if meta is None:
+    if record is None:
         if paths.segments("trials"):
             raise UserError("--allow-protocol-change needs session.json's copy of the protocol to compare with; "
                             "it is lost, so only the identical protocol file can resume this session",
                             str(paths.directory))
         return protocol.source_sha256
-    recorded_sha = meta.get("protocol_sha256")
+    recorded_sha = record.protocol_sha256
     if recorded_sha == protocol.source_sha256:
         return protocol.source_sha256
-    text = meta.get("protocol_text")
-    if not isinstance(text, str) or not text:
+    text = record.protocol_text
+    if not text:
         raise UserError("--allow-protocol-change: session.json holds no protocol_text to compare with",
                         str(paths.metadata))
     base_dir = Path(protocol.source_name).parent if protocol.source_name else None

@@ -27,6 +27,7 @@ from psyop.session.backends import BackendContext, is_real_time
 from psyop.session.clock import Clock, RealClock, VirtualClock
 from psyop.session.frames import CameraRenderer, Display
 from psyop.session.gaze.simulated import SimulatedTrackerConfig, seed_for
+from psyop.session.log.record import read_record
 from psyop.session.log.layout import SessionPaths, session_paths, write_dataset_description
 from psyop.session.log.schema import trial_schema
 from psyop.adaptive.session import AdaptiveLevels, add_log_columns
@@ -34,7 +35,7 @@ from psyop.session.log.store import SessionLog, SessionStore, recover_tables
 from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop, pursuit_fields
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
-from psyop.session.resume import accept_protocol_change, check_options, resolve_seed
+from psyop.session.resume import accept_protocol_change, check_free, check_options, resolve_seed
 
 __all__ = ["DEFAULT_IPD_M", "SessionOptions", "StoreFactory", "print_outcome", "run_session"]
 _PACKAGES = ("psyop", "numpy", "scipy", "pandas", "pyarrow", "pydantic", "pyzmq", "pyserial", "msgpack", "moderngl", "tqdm")
@@ -198,15 +199,15 @@ def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], opt
     paths = session_paths(options.data_root, plan.study, options.participant, options.session)
     check_options(clock=options.clock, responses=options.responses, tracker=options.tracker, pose=options.pose,
                   display=options.display)
-    seed = resolve_seed(paths, options.seed, seed_for(plan.study, options.participant, options.session))
-    protocol_sha256 = accept_protocol_change(paths, protocol) if options.allow_protocol_change \
+    check_free(paths)
+    record = read_record(paths)  # session.json of an earlier run, read once here (the store checks it under the lock)
+    seed = resolve_seed(paths, record, options.seed, seed_for(plan.study, options.participant, options.session))
+    protocol_sha256 = accept_protocol_change(paths, record, protocol) if options.allow_protocol_change \
         else protocol.source_sha256
     from psyop.schedule.counterbalance import resolve_participant_index
-    from psyop.session.log.store import read_metadata
 
-    recorded = (read_metadata(paths) or {}).get("participant_index")
     participant_index = resolve_participant_index(options.participant_index, options.participant,
-                                                  recorded if isinstance(recorded, int) else None)
+                                                  record.participant_index if record is not None else None)
     schedule = compile_schedule(protocol, seed, participant_index=participant_index)
     if plan.adaptive is not None:  # the adaptive level and the procedure's state are logged per trial
         schedule = add_log_columns(schedule, plan.adaptive)
