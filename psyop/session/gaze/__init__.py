@@ -1,8 +1,8 @@
 """Gaze sources: a common sample type and interchangeable backends.
 
-Backends: :mod:`.simulated` (synthetic eye movements), :mod:`.replay` (a logged
-session's frames), :mod:`.pupil` (Pupil Core Network API over ZMQ), :mod:`.serial_source`
-(line protocol over a serial port). :mod:`.filter` holds the last valid gaze and applies
+Sources here: :mod:`.simulated` (synthetic eye movements), :mod:`.replay` (a logged
+session's frames); the device adapters (Pupil Core, LSL, serial lines) are in
+:mod:`psyop.devices.gaze`. :mod:`.filter` holds the last valid gaze and applies
 the per-trial single-point drift recalibration.
 """
 

@@ -1,4 +1,5 @@
-"""Response sources: keyboard, serial response box, simulated observers.
+"""Response sources: simulated observers and ``none`` (the keyboard and the serial response box are
+in :mod:`psyop.devices.responses`).
 
 Every source turns one trial (its schedule row) into a :class:`Response`.
 """
