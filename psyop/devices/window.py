@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from psyop.session.rows import JsonObject
 from psyop.session.clock import FlipSync
 from psyop.session.frames import FrameRequest
 
@@ -104,7 +105,7 @@ class GlfwWindow:
         self.flips.add(t_s)
         return t_s
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         out: dict[str, Any] = {"display": self.name, "frames": self._index}
         if len(self.flips.times_s) >= 8:  # from the flip timestamps (least squares)
             out["display_flip_period_s"] = self.flips.estimate(self._period_s)[0]

@@ -15,8 +15,8 @@ import dataclasses
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
+from psyop.session.rows import JsonObject
 from psyop.errors import UserError
 from psyop.session.backends import BackendContext, build
 from psyop.session.clock import Clock
@@ -52,7 +52,7 @@ class Backends:
         return self.stack.__exit__(*exc)  # type: ignore[arg-type]  # the exception triple, passed on as given
 
 
-def open_markers(metadata: dict[str, Any], clock: Clock, wait_s: float) -> EventSink:
+def open_markers(metadata: JsonObject, clock: Clock, wait_s: float) -> EventSink:
     """The LSL marker outlet of ``--lsl-markers``; waits ``wait_s`` for a recorder, records whether one came."""
     if clock.virtual:
         raise UserError("--lsl-markers stamps events on the LSL clock in real time; on --clock virtual they would "

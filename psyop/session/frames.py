@@ -30,6 +30,7 @@ from typing import Any, Protocol
 import numpy as np
 import pyarrow as pa
 
+from psyop.session.rows import JsonObject, TrialRow
 from psyop.optics.camera import ViewGeometry
 from psyop.optics.display import DisplayProfile
 from psyop.optics.rig import EyeRig
@@ -104,7 +105,7 @@ class FrameRenderer(Protocol):
     at the frame's display time, ``frame`` the display's request (views and targets).
     """
 
-    def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
+    def render(self, row: TrialRow, phase: Any, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
                frame: FrameRequest | None = None) -> FrameCheck: ...
 
@@ -132,7 +133,7 @@ class Display(Protocol):
 
     def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float: ...
 
-    def summary(self) -> dict[str, Any]: ...
+    def summary(self) -> JsonObject: ...
 
     def close(self) -> None: ...
 
@@ -144,7 +145,7 @@ class CameraRenderer:
     def __init__(self, display: DisplayProfile, rig: EyeRig) -> None:
         self.display, self.rig = display, rig
 
-    def render(self, row: Mapping[str, Any], phase: Any, mode: str, t_in_phase_s: float,
+    def render(self, row: TrialRow, phase: Any, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
                frame: FrameRequest | None = None) -> FrameCheck:
         ok = True  # cameras are in head space: the head pose changes no camera
@@ -190,7 +191,7 @@ class HeadlessDisplay:
     def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float:
         return self._clock.now_s()
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         return {"display": self.name, "frames": self._index}
 
     def close(self) -> None:

@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from psyop.session.rows import JsonObject, TrialRecord, TrialRow
 from psyop.adaptive.session import AdaptiveLevels
 from psyop.session.clock import Clock
 from psyop.session.events import EventKind, EventSink, SessionEvent
@@ -155,7 +156,7 @@ class TrialLoop:
                                enabled=self.config.progress)
         status, message = "complete", f"all {n_total} trials recorded"
         n_stopped = self._record_stops(schedule, recorded, -1)
-        record: dict[str, Any] = {"trial": -1}
+        record: TrialRecord = {"trial": -1}
         try:
             for row in rows:
                 bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
@@ -206,7 +207,7 @@ class TrialLoop:
         latency["n_frames_held"] = self._n_held
         return SessionOutcome(status, n_done, n_total, message, latency)
 
-    def _store_trial(self, record: dict[str, Any], frames: FrameRecorder) -> None:
+    def _store_trial(self, record: TrialRecord, frames: FrameRecorder) -> None:
         """Append one trial to the log: its row, frames and raw gaze (a log of rows only: the row)."""
         if self.store.keeps_samples:
             self.store.append_trial(record, frames.table() if len(frames) else None,
@@ -287,7 +288,7 @@ class TrialLoop:
         record.update(hand_columns)
         return record, frames
 
-    def _track_reach(self, row: Mapping[str, Any], response: Response, end_s: float) -> tuple[Response, dict[str, Any]]:
+    def _track_reach(self, row: TrialRow, response: Response, end_s: float) -> tuple[Response, dict[str, Any]]:
         """A reach: take the pose source's last N hand samples (hold last valid), recompute
         the reach from their mean along the horizontal eye-to-target direction and log them
         with the trial (``hand_sample_*`` columns)."""
@@ -308,7 +309,7 @@ class TrialLoop:
                        hand_sample_valid=[h.valid for h in hands], hand_sample_held=[h.held for h in hands])
         return dataclasses.replace(response, response=f"{reach:.6f}", reach_m=reach, extras=tuple(extras.items())), columns
 
-    def _emit(self, kind: EventKind, row: Mapping[str, Any], t_s: float, value: str = "",
+    def _emit(self, kind: EventKind, row: TrialRow, t_s: float, value: str = "",
               duration_s: float = 0.0) -> None:
         if self.events:
             event = SessionEvent(kind, int(row["trial"]), str(row.get("condition", "")), t_s, value, duration_s)
@@ -320,7 +321,7 @@ class TrialLoop:
         tagged with this run and ``trial``."""
         return raw_gaze_table(self.gaze.drain_raw(), run=self.store.run_index, trial=trial)
 
-    def _set_plan(self, phase: PhaseSpec, row: Mapping[str, Any], start_s: float) -> None:
+    def _set_plan(self, phase: PhaseSpec, row: TrialRow, start_s: float) -> None:
         """Tell the gaze source where the observer is asked to look (a real tracker ignores it)."""
         self.gaze.set_plan(fixation_plan(self.config, phase, row, start_s))
 
@@ -330,7 +331,7 @@ class TrialLoop:
             return GazeSample(sample.timestamp_s, sample.fixation_m, sample.confidence, False)
         return sample
 
-    def _frame(self, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder, request: FrameRequest) -> tuple[int, int]:
+    def _frame(self, row: TrialRow, phase: PhaseSpec, frames: FrameRecorder, request: FrameRequest) -> tuple[int, int]:
         """The software path of one frame the display asked for: gaze in -> condition -> render
         (for the request's display time, views and targets) -> end the frame -> log."""
         sample = self._fresh(self.gaze.latest(self.clock.now_s()))
@@ -364,7 +365,7 @@ class TrialLoop:
             raise RuntimeError(f"trial {row['trial']}: rendered frame failed its check (non-finite or empty)")
         return int(gaze.valid), 1
 
-    def _frames_until(self, end_s: float, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
+    def _frames_until(self, end_s: float, row: TrialRow, phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
         """Frames until the phase ends: the display paces them (begin_frame) and says when each is
         shown; a frame is drawn while the next one would still be shown before ``end_s``."""
         valid = total = 0
@@ -377,10 +378,10 @@ class TrialLoop:
         self.clock.sleep_until(end_s)
         return valid, total
 
-    def _sampled_frame(self, at_s: float, row: Mapping[str, Any], phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
+    def _sampled_frame(self, at_s: float, row: TrialRow, phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
         return self._frame(row, phase, frames, self.display.begin_frame(at_s))
 
-    def _await_response(self, row: Mapping[str, Any], frames: FrameRecorder) -> Response:
+    def _await_response(self, row: TrialRow, frames: FrameRecorder) -> Response:
         plan = self.response_plan
         prompt = plan.phase if plan is not None else PhaseSpec("response", 0.0, "blank", "none")
         timeout_s = plan.timeout_s if plan is not None else None
@@ -405,7 +406,7 @@ class TrialLoop:
             self.clock.sleep_until(wake_s if timeout_s is None else min(wake_s, start_s + timeout_s))
 
 
-def _view_columns(request: FrameRequest) -> dict[str, Any]:
+def _view_columns(request: FrameRequest) -> JsonObject:
     """Frame-log columns of the views the display reported (psyop.session.log.schema.view_fields)."""
     columns: dict[str, Any] = {}
     for view in request.views:
@@ -416,7 +417,7 @@ def _view_columns(request: FrameRequest) -> dict[str, Any]:
     return columns
 
 
-def _pose_columns(prefix: str, pose: ConditionedPose) -> dict[str, Any]:
+def _pose_columns(prefix: str, pose: ConditionedPose) -> JsonObject:
     """Frame-log columns of one conditioned pose (see psyop.session.log.schema.pose_fields)."""
     (x, y, z), (qw, qx, qy, qz) = pose.position_m, pose.orientation_wxyz
     return {f"{prefix}_sample_t_s": pose.sample_t_s, f"{prefix}_x_m": x, f"{prefix}_y_m": y, f"{prefix}_z_m": z,
@@ -424,7 +425,7 @@ def _pose_columns(prefix: str, pose: ConditionedPose) -> dict[str, Any]:
             f"{prefix}_valid": pose.valid, f"{prefix}_held": pose.held}
 
 
-def pursuit_fields(path: FixationPath | None) -> dict[str, Any]:
+def pursuit_fields(path: FixationPath | None) -> JsonObject:
     """The :class:`LoopConfig` fields of the protocol's moving fixation target (``plan.fixation``)."""
     return dict(pursuit_eccentricity_deg=path.eccentricity_deg if path else 16.0,
                 pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
@@ -432,7 +433,7 @@ def pursuit_fields(path: FixationPath | None) -> dict[str, Any]:
                 pursuit_id=path.id if path else "fixation", pursuit_path=path)
 
 
-def fixation_plan(c: LoopConfig, phase: PhaseSpec, row: Mapping[str, Any], start_s: float) -> FixationPlan:
+def fixation_plan(c: LoopConfig, phase: PhaseSpec, row: TrialRow, start_s: float) -> FixationPlan:
     """Where the observer is asked to look in ``phase`` of trial ``row`` from ``start_s`` on: the pursuit
     target's path (the schedule fixes where it starts and which way it turns), free viewing, or the
     cross. The loop sets it on the gaze source; psyop.quality rebuilds the target from it."""

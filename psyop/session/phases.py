@@ -7,10 +7,9 @@ these; the loop runs them in order and then the response phase.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
+from psyop.session.rows import TrialRow
 from psyop.optics.nodal import RenderingMode
 from psyop.schedule.rows import interval_mode
 
@@ -61,7 +60,7 @@ class PhaseSpec:
         return self.show == "stimulus" or (self.show == "blank" and bool(self.primitives))
 
 
-def mode_for(phase: PhaseSpec, row: Mapping[str, Any]) -> str:
+def mode_for(phase: PhaseSpec, row: TrialRow) -> str:
     """The rendering mode of ``phase`` in this trial: the one interval-to-mode rule.
 
     An interval's mode is the schedule's ``mode_interval<k>`` column, which the schedule

@@ -17,12 +17,13 @@ quaternions (w, x, y, z).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
+from psyop.session.rows import TrialRow
 from psyop.session.gaze.simulated import seed_for
 
 #: Direction from the eyes' mid-point to the reach target: straight ahead, a little low.
@@ -92,7 +93,7 @@ class PoseSource(Protocol):
 
     def head(self, now_s: float) -> PoseSample | None: ...
 
-    def hand(self, row: Mapping[str, Any], end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]: ...
+    def hand(self, row: TrialRow, end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]: ...
 
     def close(self) -> None: ...
 
@@ -173,7 +174,7 @@ class SimulatedPose:
             valid = bool(u >= c.head_dropout_p)
         return PoseSample(float(now_s), position, quaternion_from_yaw_pitch_roll(*angles), valid)  # type: ignore[arg-type]
 
-    def hand(self, row: Mapping[str, Any], end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
+    def hand(self, row: TrialRow, end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
         if endpoint_m is None:
             return []
         c = self.config

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from psyop.session.rows import JsonObject, TrialRow
 from psyop.errors import UserError
 from psyop.input_files import read_logged_table, read_session_json
 from psyop.session.pose import IDENTITY_WXYZ, PoseSample
@@ -46,7 +47,7 @@ class ReplaySchedule:
     conditions: tuple[str, ...]  # condition of trial 0, 1, ...
 
 
-def pair_trials(source_meta: Mapping[str, Any], source_trials: pd.DataFrame, target: ReplaySchedule,
+def pair_trials(source_meta: JsonObject, source_trials: pd.DataFrame, target: ReplaySchedule,
                 by_condition: bool, where: str) -> dict[int, int]:
     """Map each trial of ``target`` to the source trial whose hand samples it replays.
 
@@ -149,7 +150,7 @@ class ReplayPose:
         t, x, y, z, qw, qx, qy, qz, valid = self._head[i]
         return PoseSample(float(t), (float(x), float(y), float(z)), (float(qw), float(qx), float(qy), float(qz)), _flag(valid))
 
-    def hand(self, row: Mapping[str, Any], end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
+    def hand(self, row: TrialRow, end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
         trial = int(row["trial"])
         source = trial if self._pairs is None else self._pairs.get(trial, -1)
         logged = self._hand.get(source)

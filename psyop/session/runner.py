@@ -19,6 +19,7 @@ from typing import Any
 import pandas as pd
 import pyarrow as pa
 
+from psyop.session.rows import JsonObject
 from psyop.atomic import io_error
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
@@ -161,7 +162,7 @@ class _Opened:
     schedule: pd.DataFrame
     clock: Clock
     store: SessionLog
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: JsonObject = field(default_factory=dict)
 
 
 def run_session(
@@ -224,8 +225,8 @@ def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], opt
     return opened
 
 
-def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, participant_index: int,
-              protocol_sha256: str) -> dict[str, Any]:
+def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, participant_index: int | None,
+              protocol_sha256: str) -> JsonObject:
     """session.json's fields known before the backends are built (in the order they are written)."""
     from psyop.schedule.counterbalance import block_sequence
     from psyop.stimulus.meshes import protocol_mesh_records
@@ -306,7 +307,7 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
 def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: SessionOutcome,
               options: SessionOptions) -> None:
     """The summary of the run into the finalised session.json; the dataset description beside it."""
-    summary: dict[str, Any] = {
+    summary: JsonObject = {
         "outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
         "tracker": bundle.gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held,
                                                  "hand_trials_reused": bundle.pose.n_reused_hand_trials}}

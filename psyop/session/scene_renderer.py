@@ -11,12 +11,12 @@ only a reduced summary read back (psyop.rendering.frame_check), never the whole 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from psyop.session.rows import JsonObject, TrialRow
 from psyop.session.frames import FrameCheck, FrameRequest, HeadPose
 from psyop.session.phases import PhaseSpec
 from psyop.session.plan import SessionPlan
@@ -63,7 +63,7 @@ class SceneRenderer:
         self.last_eye: str | None = None
         self._renderer: Any = None
         self._checker: Any = None
-        self._summaries: dict[str, Any] = {}  # per eye: the check summary of its current image (None: unchecked)
+        self._summaries: JsonObject = {}  # per eye: the check summary of its current image (None: unchecked)
         self._rendered: dict[str, int] = {}  # per eye: images rendered (not reused) in the current phase
         self._shown: dict[str, Any] = {}  # per eye: (trial, phase) of the current image
         # 1: every rendered image is checked; n: each eye's first image of every phase and then
@@ -97,7 +97,7 @@ class SceneRenderer:
         self._parts_row: dict[str, Any] | None = None
         self._parts: dict[tuple[Any, ...], Any] = {}
 
-    def _scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str,
+    def _scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str,
                head_pose: HeadPose | None) -> Any:
         """The scene this eye sees in this phase, or None when nothing is drawn (cameras only)."""
         from psyop.rendering.transform import scene_in_head_per_primitive as scene_in_head  # the former path
@@ -120,7 +120,7 @@ class SceneRenderer:
                             base_dir=self._base_dir, show=phase.primitives, images=self._images, meshes=self._meshes)
         return scene_in_head(scene, *head_pose) if head_pose is not None else scene
 
-    def _frame_scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str,
+    def _frame_scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str,
                      head_pose: HeadPose | None, frame_scenes: dict[tuple[float, ...], Any]) -> Any:
         """:meth:`_scene` for this frame, each scene built once for the eyes that share it and only its moving
         items rebuilt (see the class docstring); ``frame_scenes``: this frame's scenes so far, by eye centre or
@@ -146,7 +146,7 @@ class SceneRenderer:
         text = phase == self.plan.response.phase and self.plan.response.participant_text is not None
         return phase.show == "cross" or text or (phase.show == "blank" and not phase.primitives)
 
-    def _world_scene(self, row: Mapping[str, Any], phase: PhaseSpec, t_in_phase_s: float, eye: str) -> Any:
+    def _world_scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str) -> Any:
         """:meth:`_scene` without a head pose, from the trial's cached time-independent parts."""
         from psyop.rendering.scene import Scene
         from psyop.stimulus import build_scene
@@ -172,7 +172,7 @@ class SceneRenderer:
             aperture = part.aperture if part.aperture is not None else aperture
         return Scene(tuple(prims), aperture=aperture, meshes=tuple(meshes))
 
-    def _static_parts(self, row: Mapping[str, Any], phase: PhaseSpec, eye: str) -> Any:
+    def _static_parts(self, row: TrialRow, phase: PhaseSpec, eye: str) -> Any:
         """What of this phase's scene does not depend on time: ``(scene,)`` when nothing in it moves (the
         whole scene, or None), else ``[(id, its one-item scene, or None for an item that moves)]`` for
         every shown item in the protocol's order (the order is the layer order; the last aperture wins)."""
@@ -197,7 +197,7 @@ class SceneRenderer:
                 for item in shown]
 
     def _camera(self, eye: str, fixation_m: tuple[float, float, float], mode: str, frame: FrameRequest | None,
-                row: Mapping[str, Any] | None = None) -> Any:
+                row: TrialRow | None = None) -> Any:
         """This eye's camera: from the display's view and at its target's size where the display
         gives them (a headset runtime), else from the protocol's display profile and the rig; ``row``
         (the trial) sets a rendered NC that is a factor (display.rendering_nc)."""
@@ -212,7 +212,7 @@ class SceneRenderer:
                                                                                          self.display.height_px)
         return self.rig.view_camera(view, width, height, fixation_m, mode, row=row)
 
-    def render(self, row: Mapping[str, Any], phase: PhaseSpec, mode: str, t_in_phase_s: float,
+    def render(self, row: TrialRow, phase: PhaseSpec, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
                frame: FrameRequest | None = None) -> FrameCheck:
         """Render this frame for the plan's eye(s) in ``mode`` (the plan's mode of this phase).

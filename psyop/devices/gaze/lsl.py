@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from psyop.session.rows import JsonObject
 from psyop.errors import UserError
 from psyop.devices.gaze.lsl_channels import ChannelMap, detect_map, load_map
 from psyop.session.gaze.plan import FixationPlan
@@ -333,7 +334,7 @@ class LslGazeSource:
         """Every sample received since the last call, valid or not."""
         return self._raw.drain()
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self) -> JsonObject:
         with self._lock:
             sync = self._sync
             return {**self._counts, "gap_s": self._gap_s,

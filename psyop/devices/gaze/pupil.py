@@ -26,6 +26,7 @@ import msgpack
 import numpy as np
 import zmq
 
+from psyop.session.rows import JsonObject
 from psyop.errors import UserError
 from psyop.session.events import SessionEvent
 from psyop.session.gaze.plan import FixationPlan
@@ -131,7 +132,7 @@ class PupilClient:
         self.calibration_timeout_s = calibration_timeout_s
         self.record_name = record_name
         self.annotate = annotate
-        self.calibration: dict[str, Any] | None = None  # what Capture's calibration said (session.json)
+        self.calibration: JsonObject | None = None  # what Capture's calibration said (session.json)
         self._recording = False
         self._annotations: queue.Queue[dict[str, Any]] = queue.Queue()
         self._annotations_sent = self._annotations_confirmed = 0
@@ -471,7 +472,7 @@ class PupilClient:
         """Every gaze datum received since the last call (malformed messages excepted: counted)."""
         return self._raw.drain()
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self) -> JsonObject:
         with self._lock:
             return {"samples_received": self._received, "raw_samples_dropped": self._raw.dropped, "gaps": self._gaps,
                     "low_confidence": self._low_confidence, "malformed": self._malformed,

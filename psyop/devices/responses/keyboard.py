@@ -8,9 +8,10 @@ second stimulus; reach: 'space' confirms and the reach is read from the hand pos
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from typing import Any, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
+from psyop.session.rows import TrialRow
 from psyop.session.responses.base import Response, ResponseKind, score
 
 KEYMAPS: dict[ResponseKind, dict[str, str]] = {
@@ -41,7 +42,7 @@ class KeyboardResponses:
         self._prompt_s: float | None = None
         self.early_presses = 0  # answer keys pressed before the response phase (ignored, never a negative time)
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None:
+    def collect(self, row: TrialRow, now_s: float) -> Response | None:
         if self._prompt_s is None:
             self._prompt_s = now_s
         for key, t_s in self.events.poll():

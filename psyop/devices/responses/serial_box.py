@@ -7,9 +7,9 @@ keyboard's keys. Garbage bytes and unknown lines are counted and skipped.
 from __future__ import annotations
 
 import queue
-from collections.abc import Callable, Mapping
-from typing import Any
+from collections.abc import Callable
 
+from psyop.session.rows import TrialRow
 from psyop.session.responses.base import Response, ResponseKind, score
 from psyop.devices.serial_lines import SerialLineReader
 
@@ -40,7 +40,7 @@ class SerialResponseBox:
         self._presses.put((text[1], arrival_s))
         return True
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None:
+    def collect(self, row: TrialRow, now_s: float) -> Response | None:
         if self._prompt_s is None:
             self._prompt_s = now_s
             while not self._presses.empty():  # presses before the prompt do not count

@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from psyop.session.rows import JsonObject
 from psyop.optics.camera import ViewGeometry
 from psyop.session.frames import DisplayInterrupted, FrameRequest, RenderTarget
 from psyop.devices.xr.binding import choose_binding, create_context
@@ -290,7 +291,7 @@ class OpenXRDisplay:
         self._frame = None
         return self._clock.now_s()
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonObject:
         facts = self.runtime.facts
         return {"display": self.name, "runtime": facts.runtime, "system": facts.system, "extensions": facts.extensions,
                 "eye_gaze_supported": facts.eye_gaze_supported, "swapchain_sizes_px": facts.recommended_sizes_px,

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
+from psyop.session.rows import JsonObject, TrialRow
 from psyop.errors import UserError
 from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample
 from psyop.session.gaze.sync import ClockSync
@@ -100,7 +101,7 @@ class OpenXRGaze:
                                            if int(sample_time.time) > 0 else math.nan, received_s=now_s))
         return sample
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self) -> JsonObject:
         return {"source": "openxr eye gaze (XR_EXT_eye_gaze_interaction)", "samples": self._n,
                 "invalid": self._invalid, "without_sample_time": self._untimed,
                 "fixation_distance_m": self.distance_m}
@@ -149,7 +150,7 @@ class OpenXRPose:
                                           hand.valid))
         return PoseSample(self.display.head_pose_time_s, pose.position_m, pose.orientation_wxyz, pose.valid)
 
-    def hand(self, row: Mapping[str, Any], end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
+    def hand(self, row: TrialRow, end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
         samples = [s for s in self._hands if s.timestamp_s <= end_s]
         return samples[-n:]
 

@@ -8,8 +8,8 @@ import re
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
+from psyop.session.rows import JsonObject
 from psyop import datacontract as dc
 from psyop.atomic import TEMP_SUFFIX, exclusive_temp, stale_temp_files, write_atomic  # noqa: F401 - re-exported
 from psyop.errors import UserError
@@ -122,7 +122,7 @@ def _short(text: str, limit: int = 40) -> str:
     return repr(text) if len(text) <= limit else f"{text[:limit]!r}... ({len(text)} characters)"
 
 
-def write_json_atomic(path: Path, content: dict[str, Any]) -> None:
+def write_json_atomic(path: Path, content: JsonObject) -> None:
     """Write JSON to ``path`` atomically (:func:`psyop.atomic.write_atomic`): never half-written."""
     write_atomic(path, json.dumps(content, indent=2, sort_keys=True, default=str) + "\n")
 

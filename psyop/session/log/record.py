@@ -15,6 +15,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, field_validator
 
+from psyop.session.rows import JsonObject
 from psyop.errors import UserError
 from psyop.session.log.layout import SessionPaths
 
@@ -33,7 +34,7 @@ class SessionRecord(BaseModel):
     #: the protocol text the session ran (``--allow-protocol-change`` compares with it); not a string: none
     protocol_text: str | None = None
     status: str | None = None
-    runs: list[dict[str, Any]] = Field(default_factory=list)  # Any: each run's JSON fields (store.py writes them)
+    runs: list[JsonObject] = Field(default_factory=list)  # Any: each run's JSON fields (store.py writes them)
     #: the whole file as read (the store merges and writes it back as it was)
     raw: Mapping[str, Any] = Field(default_factory=dict, exclude=True)  # Any: JSON values of every field
 

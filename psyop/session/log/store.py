@@ -15,6 +15,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from psyop.session.rows import JsonObject, TrialRecord, TrialRow
 from psyop.datacontract import MIN_VALID_GAZE_SHARE, low_gaze_mask
 from psyop.errors import UserError
 from psyop.finalised import record_finalised
@@ -43,8 +44,8 @@ class SessionLog(Protocol):
     keeps_samples: bool
     run_index: int
 
-    def open(self, metadata: Mapping[str, Any]) -> set[int]: ...
-    def append_trial(self, row: Mapping[str, Any], frames: pa.Table | None, gaze: pa.Table | None = None) -> None: ...
+    def open(self, metadata: JsonObject) -> set[int]: ...
+    def append_trial(self, row: TrialRow, frames: pa.Table | None, gaze: pa.Table | None = None) -> None: ...
     def append_gaze(self, gaze: pa.Table, key: int = -1) -> None: ...
     def update_metadata(self, **fields: Any) -> None: ...
     def close(self) -> None: ...
@@ -70,11 +71,11 @@ class SessionStore:
         self._frames: DurableStreamWriter | None = None
         self._gaze: DurableStreamWriter | None = None
         self.run_index = 0
-        self.metadata: dict[str, Any] = {}
+        self.metadata: JsonObject = {}
         self.lock = SessionLock(paths.lock_file)
 
     # -- lifecycle -------------------------------------------------------------------
-    def open(self, metadata: Mapping[str, Any]) -> set[int]:
+    def open(self, metadata: JsonObject) -> set[int]:
         """Create or resume; return the set of trial numbers already completed."""
         self.lock.acquire("run")
         try:
@@ -83,7 +84,7 @@ class SessionStore:
             self.close()
             raise
 
-    def _open_locked(self, metadata: Mapping[str, Any]) -> set[int]:
+    def _open_locked(self, metadata: JsonObject) -> set[int]:
         meta_path = self.paths.metadata
         completed: set[int] = set()
         existing = read_metadata(self.paths)
@@ -130,7 +131,7 @@ class SessionStore:
                            "rerun the same command") from exc
         return completed
 
-    def append_trial(self, row: Mapping[str, Any], frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
+    def append_trial(self, row: TrialRow, frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
         """Make one finished trial durable: its raw gaze samples and frames first, then its trial row.
 
         A crash between them leaves frames without a trial; finalisation drops them (raw gaze
@@ -232,7 +233,7 @@ class SessionStore:
 MAX_METADATA_BYTES = 64 << 20
 
 
-def read_metadata(paths: SessionPaths) -> dict[str, Any] | None:
+def read_metadata(paths: SessionPaths) -> JsonObject | None:
     """session.json as a dict, None if absent; a damaged file is a located UserError.
 
     It must be a regular file of at most :data:`MAX_METADATA_BYTES` (never a FIFO or device)."""
@@ -263,7 +264,7 @@ def read_metadata(paths: SessionPaths) -> dict[str, Any] | None:
     return meta
 
 
-def log_identity(paths: SessionPaths) -> dict[str, Any]:
+def log_identity(paths: SessionPaths) -> JsonObject:
     """Seed, protocol hash etc. written into the trial segments' schema (first readable one)."""
     for segment in paths.segments("trials"):
         if is_legacy_ipc(segment):
@@ -271,7 +272,7 @@ def log_identity(paths: SessionPaths) -> dict[str, Any]:
         schema = read_segment(segment).schema
         if schema is None or not schema.metadata:
             continue
-        identity: dict[str, Any] = {}
+        identity: JsonObject = {}
         for raw_key, raw_value in schema.metadata.items():
             key = raw_key.decode(errors="replace")
             if key.startswith("psyop."):
@@ -349,7 +350,7 @@ def salvage(paths: SessionPaths) -> Salvage:
         pa.concat_tables(frame_tables, promote_options="permissive").to_pandas()
         if frame_tables else FRAME_SCHEMA.empty_table().to_pandas()
     )
-    report: dict[str, Any] = {"damaged_records": damaged, "torn_segments": sorted(set(torn))}
+    report: TrialRecord = {"damaged_records": damaged, "torn_segments": sorted(set(torn))}
     if not trial_tables:  # no segment even holds a schema yet (killed while opening)
         report.update(lost_trials=sorted(damaged_keys["trials"]), frames_lost_for_trials=[])
         return Salvage(None, frames.iloc[0:0], report, gaze)
@@ -372,7 +373,7 @@ def recover_tables(paths: SessionPaths) -> tuple[pd.DataFrame | None, pd.DataFra
     return found.trials, found.frames
 
 
-def low_gaze_report(trials: pd.DataFrame, threshold: float = MIN_VALID_GAZE_SHARE) -> dict[str, Any]:
+def low_gaze_report(trials: pd.DataFrame, threshold: float = MIN_VALID_GAZE_SHARE) -> JsonObject:
     """Trials marked low-gaze (``gaze_ok`` false; older logs: ``gaze_valid_fraction`` below
     ``threshold``), as session.json's ``integrity`` records them. ``threshold``: the protocol's
     ``trial.min_valid_gaze_share`` (recorded in session.json)."""
@@ -382,7 +383,7 @@ def low_gaze_report(trials: pd.DataFrame, threshold: float = MIN_VALID_GAZE_SHAR
     return {"low_gaze_trials": [int(t) for t in low.tolist()], "min_valid_gaze_share": threshold}
 
 
-def expected_trial_count(meta: Mapping[str, Any]) -> int | None:
+def expected_trial_count(meta: JsonObject) -> int | None:
     """The trials a complete session records: the scheduled ones less those its adaptive stop
     rule left out (session.json ``adaptive_stop.n_trials_not_run``, psyop.adaptive.session)."""
     scheduled = meta.get("n_trials_scheduled")

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from psyop.session.rows import TrialRow
+
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any, Protocol
+from typing import Protocol
 
 
 class ResponseKind(str, Enum):
@@ -49,7 +50,7 @@ class Response:
     extras: tuple[tuple[str, float], ...] = ()  # extra trial-log values, e.g. hand position
 
 
-def score(kind: ResponseKind, row: Mapping[str, Any], answer: str, reach_m: float | None = None) -> Response:
+def score(kind: ResponseKind, row: TrialRow, answer: str, reach_m: float | None = None) -> Response:
     """Fill ``correct`` / ``chosen_mode`` / ``reach_m`` from a raw answer."""
     if kind is ResponseKind.TWO_INTERVAL:
         return Response(answer, correct=answer == str(int(row["correct_interval"])))
@@ -71,7 +72,7 @@ class ResponseSource(Protocol):
 
     needs_images: bool
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None: ...
+    def collect(self, row: TrialRow, now_s: float) -> Response | None: ...
 
     def timed_out(self) -> None:
         """The response phase ended without an answer (the plan's ``timeout_s``): forget this

@@ -6,16 +6,15 @@ analysed; a protocol without ``timeout_s`` is refused (the session would wait fo
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
 
+from psyop.session.rows import TrialRow
 from psyop.session.responses.base import Response
 
 
 class NoResponses:
     needs_images = False
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response | None:
+    def collect(self, row: TrialRow, now_s: float) -> Response | None:
         return None
 
     def timed_out(self) -> None:

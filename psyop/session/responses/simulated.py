@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from psyop.session.rows import TrialRow
 from psyop.errors import UserError
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.reach import HAND_HEIGHT_M
@@ -44,7 +45,7 @@ class SimulatedObserver:
         self.participant = participant
         self._participant_rng = np.random.default_rng([seed_for("participant", participant), self.seed & 0xFFFFFFFF])
 
-    def trial_rng(self, row: Mapping[str, Any]) -> np.random.Generator:
+    def trial_rng(self, row: TrialRow) -> np.random.Generator:
         return np.random.default_rng([self.seed & 0xFFFFFFFF, seed_for(self.participant), int(row["trial_seed"]) & 0xFFFFFFFF, 11])
 
     def timed_out(self) -> None:
@@ -78,15 +79,15 @@ class Psychometric2AFC(SimulatedObserver):
         if self.width_D <= 0 or not 0 <= self.lapse < 0.5:
             raise UserError("observer: width_D must be > 0 and lapse in [0, 0.5)", "protocol observer")
 
-    def threshold_for(self, row: Mapping[str, Any]) -> float:
+    def threshold_for(self, row: TrialRow) -> float:
         offset = float(row[self.offset_column]) if self.offset_column else 0.0
         return self.threshold_D + self.participant_shift_D + self.slope * offset
 
-    def p_correct(self, row: Mapping[str, Any]) -> float:
+    def p_correct(self, row: TrialRow) -> float:
         x = float(row[self.level_column])
         return 0.5 + (0.5 - self.lapse) * _phi((x - self.threshold_for(row)) / self.width_D)
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+    def collect(self, row: TrialRow, now_s: float) -> Response:
         rng = self.trial_rng(row)
         correct = bool(rng.uniform() < self.p_correct(row))
         right = int(row["correct_interval"])
@@ -120,13 +121,13 @@ class OrdinalAccuracy(SimulatedObserver):
         # the response's separation factor (the session plan passes its name)
         self.separation_column = str(_get(params, "separation_column", "separation_D"))
 
-    def p_correct(self, row: Mapping[str, Any]) -> float:
+    def p_correct(self, row: TrialRow) -> float:
         key = (str(row["mode"]), round(float(row[self.separation_column]), 6))
         if key not in self.table:
             raise UserError(f"observer: no p_correct for mode={key[0]!r}, separation_D={key[1]}", "protocol observer")
         return float(np.clip(self.table[key] + self.participant_shift, 0.0, 1.0))
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+    def collect(self, row: TrialRow, now_s: float) -> Response:
         correct = bool(self.trial_rng(row).uniform() < self.p_correct(row))
         near = str(row["near_side"])
         other = "left" if near == "right" else "right"
@@ -145,14 +146,14 @@ class PairwisePreference(SimulatedObserver):
         if any(not (v > 0 and math.isfinite(v)) for v in self.strengths.values()):
             raise UserError("observer: Bradley-Terry strengths must be positive", "protocol observer")
 
-    def p_a(self, row: Mapping[str, Any]) -> float:
+    def p_a(self, row: TrialRow) -> float:
         a, b = str(row["mode_a"]), str(row["mode_b"])
         for mode in (a, b):
             if mode not in self.strengths:
                 raise UserError(f"observer: no strength for mode {mode!r}", "protocol observer")
         return self.strengths[a] / (self.strengths[a] + self.strengths[b])
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+    def collect(self, row: TrialRow, now_s: float) -> Response:
         return score(self.kind, row, "a" if self.trial_rng(row).uniform() < self.p_a(row) else "b")
 
 
@@ -190,7 +191,7 @@ class Reach(SimulatedObserver):
                 raise UserError(f"observer: reach condition {rendering!r} lacks {key!r}", "protocol observer")
         return cond
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+    def collect(self, row: TrialRow, now_s: float) -> Response:
         """Where the hand really ends (the observer's motor output, ``reach_m`` = its horizontal
         distance). A hand tracker (the session's pose source) then measures it with its own error."""
         cond = self._condition(str(row.get("rendering", "")))
@@ -237,18 +238,18 @@ class NcNulling(SimulatedObserver):
         if self.width_mm <= 0 or not 0 <= self.lapse < 0.5:
             raise UserError("observer: width_mm must be > 0 and lapse in [0, 0.5)", "protocol observer")
 
-    def rendered_nc_mm(self, row: Mapping[str, Any]) -> float:
+    def rendered_nc_mm(self, row: TrialRow) -> float:
         """The signed NC this trial is rendered with (mm): the mode's sign times the camera's NC."""
         mode = str(row["mode_interval1"])
         if mode not in MODE_NC_SIGN:
             raise UserError(f"observer: trial {row.get('trial')} has no rendering mode ({mode!r})", "protocol observer")
         return MODE_NC_SIGN[mode] * self.rule.nc_m_for(self.eye_model_nc_m, row) * 1000.0
 
-    def p_against(self, row: Mapping[str, Any]) -> float:
+    def p_against(self, row: TrialRow) -> float:
         z = (self.rendered_nc_mm(row) - self.own_nc_mm) / self.width_mm
         return self.lapse + (1.0 - 2.0 * self.lapse) * _phi(z)
 
-    def collect(self, row: Mapping[str, Any], now_s: float) -> Response:
+    def collect(self, row: TrialRow, now_s: float) -> Response:
         return score(self.kind, row, "against" if self.trial_rng(row).uniform() < self.p_against(row) else "with")
 
 
