@@ -12,11 +12,17 @@ which estimates the display's refresh period for session.json.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from psyop.session.rows import JsonObject
 from psyop.session.clock import FlipSync
 from psyop.session.frames import FrameRequest
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from psyop.optics.display import DisplayProfile
+    from psyop.session.clock import Clock
 
 
 class GlfwWindow:
@@ -25,7 +31,7 @@ class GlfwWindow:
     name = "window"
     paced = False
 
-    def __init__(self, display_profile: Any, clock: Any, *, scale: float = 0.25, n_eyes: int = 1) -> None:
+    def __init__(self, display_profile: DisplayProfile, clock: Clock, *, scale: float = 0.25, n_eyes: int = 1) -> None:
         from psyop.errors import UserError
         from psyop.rendering.window import Window, WindowUnavailable
 
@@ -51,11 +57,11 @@ class GlfwWindow:
         self._index = 0
 
     @property
-    def gl_context(self) -> Any:
+    def gl_context(self) -> moderngl.Context | None:
         return self._window.ctx
 
     @property
-    def ctx(self) -> Any:
+    def ctx(self) -> moderngl.Context:
         return self._window.ctx
 
     def _on_key(self, window: Any, key: int, scancode: int, action: int, mods: int) -> None:
@@ -92,7 +98,7 @@ class GlfwWindow:
             shown_s = max(shown_s, self.flips.next_flip_s(self._clock.now_s(), self._period_s))
         return FrameRequest(self._index - 1, shown_s, self._period_s)
 
-    def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float:
+    def end_frame(self, frame: FrameRequest, images: Sequence[moderngl.Texture]) -> float:
         """Present every eye's newest image side by side (flat grey before any) and flip; the flip time."""
         ctx = self._window.ctx
         if images and sum(t.size[0] for t in images) <= self._window.width_px:

@@ -25,7 +25,7 @@ import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Generic, Literal, TypeVar
+from typing import TYPE_CHECKING, Generic, Literal, TypeVar, overload
 
 from psyop.errors import UserError
 
@@ -107,6 +107,11 @@ class Backend(Generic[T]):
         if self.takes_arg is False and arg:
             raise UserError(f"{self.name} takes no ':' argument; expected {self.usage}, got {spec!r}",
                             OPTION[self.category])
+
+
+if TYPE_CHECKING:
+    #: one registered backend: each kind's factory returns that kind's seam (see :func:`build`)
+    AnyBackend = Backend[GazeSource] | Backend[PoseSource] | Backend[ResponseSource] | Backend[Display]
 
 
 # -- factories (each imports its backend's module only when used) ----------------------------------
@@ -246,6 +251,10 @@ def _openxr_display(arg: str, ctx: BackendContext) -> Display:
     if arg not in ("", "auto", *GRAPHICS_APIS):
         raise UserError(f"--display openxr:{arg}: expected openxr, openxr:egl or openxr:xlib (the OpenGL binding)",
                         "--display")
+    from psyop.session.clock import RealClock
+
+    if not isinstance(ctx.clock, RealClock):  # resume.check_options refuses this first (openxr is real time)
+        raise UserError("--display openxr runs on the runtime's clock: use --clock real", "--clock")
     return open_openxr_display(ctx.plan, ctx.clock, ctx.xr_request_exit_at_frame, graphics=arg or "auto")
 
 
@@ -256,7 +265,7 @@ def _window_display(arg: str, ctx: BackendContext) -> Display:
 
 
 #: Every backend, in the order ``--help`` lists them.
-BACKENDS: tuple[Backend[Any], ...] = (
+BACKENDS: tuple[AnyBackend, ...] = (
     Backend("tracker", "sim", "sim", "simulated binocular tracker (120 Hz, blinks, drift; from the seed)",
             False, _sim_tracker),
     Backend("tracker", "replay", "replay:FILE", "the gaze of a logged session (frames.parquet or its session "
@@ -299,7 +308,7 @@ BACKENDS: tuple[Backend[Any], ...] = (
 )
 
 
-def backends(category: Category, registry: tuple[Backend[Any], ...] = BACKENDS) -> tuple[Backend[Any], ...]:
+def backends(category: Category, registry: tuple[AnyBackend, ...] = BACKENDS) -> tuple[AnyBackend, ...]:
     """The registered backends of ``category``, in registry order.
 
     Examples
@@ -310,7 +319,7 @@ def backends(category: Category, registry: tuple[Backend[Any], ...] = BACKENDS) 
     return tuple(b for b in registry if b.category == category)
 
 
-def lookup(category: Category, spec: str, registry: tuple[Backend[Any], ...] = BACKENDS) -> tuple[Backend[Any], str]:
+def lookup(category: Category, spec: str, registry: tuple[AnyBackend, ...] = BACKENDS) -> tuple[AnyBackend, str]:
     """The backend ``spec`` (``NAME`` or ``NAME:ARG``) names, and its ``ARG``.
 
     An unknown name is one UserError (exit code 2) listing the registered ones.
@@ -329,20 +338,35 @@ def lookup(category: Category, spec: str, registry: tuple[Backend[Any], ...] = B
     raise UserError(f"unknown {category} {spec!r}; registered: {known}", OPTION[category])
 
 
-def build(category: Category, spec: str, ctx: BackendContext, registry: tuple[Backend[Any], ...] = BACKENDS) -> Any:
-    """Look ``spec`` up, check its argument and optional dependency, and construct it."""
+@overload
+def build(category: Literal["tracker"], spec: str, ctx: BackendContext,
+          registry: tuple[AnyBackend, ...] = ...) -> GazeSource: ...
+@overload
+def build(category: Literal["pose"], spec: str, ctx: BackendContext,
+          registry: tuple[AnyBackend, ...] = ...) -> PoseSource: ...
+@overload
+def build(category: Literal["responses"], spec: str, ctx: BackendContext,
+          registry: tuple[AnyBackend, ...] = ...) -> ResponseSource: ...
+@overload
+def build(category: Literal["display"], spec: str, ctx: BackendContext,
+          registry: tuple[AnyBackend, ...] = ...) -> Display: ...
+def build(category: Category, spec: str, ctx: BackendContext,
+          registry: tuple[AnyBackend, ...] = BACKENDS) -> GazeSource | PoseSource | ResponseSource | Display:
+    """Look ``spec`` up, check its argument and optional dependency, and construct it: a tracker is a
+    :class:`GazeSource`, a pose source a :class:`PoseSource`, responses a :class:`ResponseSource`, a display
+    a :class:`Display` (the registry's entries of each kind make that type)."""
     backend, arg = lookup(category, spec, registry)
     backend.check_arg(spec, arg)
     backend.check_installed()
     return backend.make(arg, ctx)
 
 
-def is_real_time(category: Category, spec: str, registry: tuple[Backend[Any], ...] = BACKENDS) -> bool:
+def is_real_time(category: Category, spec: str, registry: tuple[AnyBackend, ...] = BACKENDS) -> bool:
     """Whether ``spec`` names a live device (its samples or presses are timed in real time)."""
     return lookup(category, spec, registry)[0].real_time
 
 
-def help_text(category: Category, registry: tuple[Backend[Any], ...] = BACKENDS) -> str:
+def help_text(category: Category, registry: tuple[AnyBackend, ...] = BACKENDS) -> str:
     """The ``--help`` text of ``category``'s option: every registered backend, its usage and summary.
 
     Examples

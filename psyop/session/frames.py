@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TYPE_CHECKING
 
 import numpy as np
 import pyarrow as pa
@@ -35,6 +35,12 @@ from psyop.optics.camera import ViewGeometry
 from psyop.optics.display import DisplayProfile
 from psyop.optics.rig import EyeRig
 from psyop.session.log.schema import FRAME_SCHEMA
+
+if TYPE_CHECKING:
+    import moderngl
+    
+    from psyop.session.clock import Clock
+    from psyop.session.phases import PhaseSpec
 
 
 #: A head pose: position (m) and unit quaternion (w, x, y, z), head -> world (session start).
@@ -105,11 +111,11 @@ class FrameRenderer(Protocol):
     at the frame's display time, ``frame`` the display's request (views and targets).
     """
 
-    def render(self, row: TrialRow, phase: Any, mode: str, t_in_phase_s: float,
+    def render(self, row: TrialRow, phase: PhaseSpec, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
                frame: FrameRequest | None = None) -> FrameCheck: ...
 
-    def eye_textures(self) -> list[Any]: ...
+    def eye_textures(self) -> list[moderngl.Texture]: ...
 
     def close(self) -> None: ...
 
@@ -125,13 +131,13 @@ class Display(Protocol):
     paced: bool
 
     @property
-    def gl_context(self) -> Any: ...
+    def gl_context(self) -> moderngl.Context | None: ...
 
     def wait_until_ready(self) -> None: ...
 
     def begin_frame(self, not_before_s: float) -> FrameRequest: ...
 
-    def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float: ...
+    def end_frame(self, frame: FrameRequest, images: Sequence[moderngl.Texture]) -> float: ...
 
     def summary(self) -> JsonObject: ...
 
@@ -145,7 +151,7 @@ class CameraRenderer:
     def __init__(self, display: DisplayProfile, rig: EyeRig) -> None:
         self.display, self.rig = display, rig
 
-    def render(self, row: TrialRow, phase: Any, mode: str, t_in_phase_s: float,
+    def render(self, row: TrialRow, phase: PhaseSpec, mode: str, t_in_phase_s: float,
                fixation_m: tuple[float, float, float], head_pose: HeadPose | None = None,
                frame: FrameRequest | None = None) -> FrameCheck:
         ok = True  # cameras are in head space: the head pose changes no camera
@@ -157,7 +163,7 @@ class CameraRenderer:
             ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
         return FrameCheck(False, ok)  # no image was made
 
-    def eye_textures(self) -> list[Any]:
+    def eye_textures(self) -> list[moderngl.Texture]:
         return []
 
     def close(self) -> None:
@@ -171,13 +177,13 @@ class HeadlessDisplay:
     name = "headless"
     paced = False
 
-    def __init__(self, clock: Any, refresh_hz: float) -> None:
+    def __init__(self, clock: Clock, refresh_hz: float) -> None:
         self._clock = clock
         self._period_s = 1.0 / float(refresh_hz)
         self._index = 0
 
     @property
-    def gl_context(self) -> Any:
+    def gl_context(self) -> moderngl.Context | None:
         return None
 
     def wait_until_ready(self) -> None:
@@ -188,7 +194,7 @@ class HeadlessDisplay:
         self._index += 1
         return FrameRequest(self._index - 1, float(not_before_s), self._period_s)
 
-    def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float:
+    def end_frame(self, frame: FrameRequest, images: Sequence[moderngl.Texture]) -> float:
         return self._clock.now_s()
 
     def summary(self) -> JsonObject:

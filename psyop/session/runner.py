@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TextIO
 
 import pandas as pd
 import pyarrow as pa
@@ -26,7 +26,7 @@ from psyop.protocol.model import Protocol
 from psyop.session.assembly import Backends, assemble, open_markers
 from psyop.session.backends import BackendContext, is_real_time
 from psyop.session.clock import Clock, RealClock, VirtualClock
-from psyop.session.frames import CameraRenderer, Display
+from psyop.session.frames import CameraRenderer, Display, FrameRenderer
 from psyop.session.gaze.simulated import SimulatedTrackerConfig, seed_for
 from psyop.session.log.record import read_record
 from psyop.session.log.layout import SessionPaths, session_paths, write_dataset_description
@@ -111,7 +111,7 @@ def _package_versions() -> tuple[tuple[str, str], ...]:
 
 
 def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale: float, scale: float,
-                   max_images: int | None) -> tuple[Any, str]:
+                   max_images: int | None) -> tuple[FrameRenderer, str]:
     """The frame renderer and a description of it for session.json.
 
     'images': the protocol's stimulus ray-cast by psyop.rendering (needs OpenGL/EGL);
@@ -326,7 +326,7 @@ def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: Sessi
                            f"`psyop recover {options.data_root}` to write the dataset description") from exc
 
 
-def print_outcome(outcome: SessionOutcome, stream: Any = None) -> None:
+def print_outcome(outcome: SessionOutcome, stream: TextIO | None = None) -> None:
     stream = sys.stderr if stream is None else stream  # the stderr of now (not of import time)
     lat = outcome.latency
     print(f"psyop run: {outcome.status}: {outcome.message}", file=stream)

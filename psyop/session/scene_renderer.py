@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,6 +20,10 @@ from psyop.session.rows import JsonObject, TrialRow
 from psyop.session.frames import FrameCheck, FrameRequest, HeadPose
 from psyop.session.phases import PhaseSpec
 from psyop.session.plan import SessionPlan
+
+
+if TYPE_CHECKING:
+    import moderngl
 
 
 #: A real session (every frame rendered) checks each eye's first image of every phase and then
@@ -47,7 +51,7 @@ class SceneRenderer:
     the equality tests (tests/session/test_frame_cpu_equality.py: same scenes, same images).
     """
 
-    def __init__(self, plan: SessionPlan, *, scale: float = 1.0, ctx: Any = None, max_images: int | None = None,
+    def __init__(self, plan: SessionPlan, *, scale: float = 1.0, ctx: moderngl.Context | None = None, max_images: int | None = None,
                  owns_ctx: bool = True, check_every: int | None = None, frame_cache: bool = True) -> None:
         self.plan = plan
         self.protocol = plan.protocol

@@ -24,7 +24,7 @@ import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from psyop.session.rows import JsonObject
 from psyop.optics.camera import ViewGeometry
@@ -42,6 +42,13 @@ from psyop.devices.xr.runtime import (
     tangents_from_fov,
     xr_error,
 )
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from psyop.session.clock import RealClock
+    from psyop.session.plan import SessionPlan
+
 
 GL_RGBA8 = 0x8058
 #: a target is cleared to this grey before each frame (what a phase that draws nothing shows)
@@ -73,7 +80,7 @@ class OpenXRDisplay:
     name = "openxr"
     paced = True
 
-    def __init__(self, plan: Any, clock: Any, *, reference_space: str = "local", graphics: str = "auto",
+    def __init__(self, plan: SessionPlan, clock: RealClock, *, reference_space: str = "local", graphics: str = "auto",
                  request_exit_at_frame: int | None = None) -> None:
         #: a testing aid (``psyop run --xr-request-exit-at-frame N``, hidden): ask the runtime to end the
         #: session at frame N, so the tests see the real runtime take the session out of focus and stop it
@@ -144,7 +151,7 @@ class OpenXRDisplay:
         return out
 
     @property
-    def gl_context(self) -> Any:
+    def gl_context(self) -> moderngl.Context | None:
         return self._ctx
 
     # -- the frame seam -------------------------------------------------------------------------------
@@ -268,7 +275,7 @@ class OpenXRDisplay:
                             views=tuple(v for v in views if v.eye in self._eyes), targets=targets, missed_frames=missed)
 
     @signals_held
-    def end_frame(self, frame: FrameRequest, images: Sequence[Any]) -> float:
+    def end_frame(self, frame: FrameRequest, images: Sequence[moderngl.Texture]) -> float:
         xr, rt = self.xr, self.runtime
         pending = self._frame  # cleared only once xrEndFrame returns: close() ends a frame left open
         layers = []
@@ -351,7 +358,7 @@ def _view_geometry(eye: str, view: Any) -> ViewGeometry:
                         tangents_from_fov(view.fov))
 
 
-def open_openxr_display(plan: Any, clock: Any, request_exit_at_frame: int | None = None,
+def open_openxr_display(plan: SessionPlan, clock: RealClock, request_exit_at_frame: int | None = None,
                         graphics: str = "auto") -> OpenXRDisplay:
     """The OpenXR display for a session of ``plan`` on ``clock`` (a RealClock); ``graphics``: the
     OpenGL binding, ``auto``, ``egl`` or ``xlib`` (:mod:`psyop.devices.xr.binding`)."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject, TrialRow
 from psyop.errors import UserError
@@ -26,12 +26,18 @@ from psyop.session.responses.base import ResponseKind
 from psyop.devices.responses.keyboard import KeyboardResponses
 from psyop.devices.xr.runtime import HANDS, XR_EXIT_CODE, rotate
 
+if TYPE_CHECKING:
+    from psyop.devices.xr.display import OpenXRDisplay
+    from psyop.session.frames import Display
+    from psyop.session.gaze.plan import FixationPlan
+
+
 #: where the fixation is placed on the runtime's gaze ray (XR_EXT_eye_gaze_interaction gives a
 #: direction, not a vergence distance); recorded in session.json with the tracker's stats
 DEFAULT_GAZE_DISTANCE_M = 1.0
 
 
-def _openxr_display(display: Any, option: str) -> Any:
+def _openxr_display(display: Display | None, option: str) -> OpenXRDisplay:
     from psyop.devices.xr.display import OpenXRDisplay
 
     if not isinstance(display, OpenXRDisplay):
@@ -44,7 +50,7 @@ class OpenXRGaze:
     runtime's own sample time (``XrEyeGazeSampleTimeEXT``) on the session clock. The fixation is
     the point ``distance_m`` along the gaze ray (the extension gives no vergence)."""
 
-    def __init__(self, display: Any, distance_m: float = DEFAULT_GAZE_DISTANCE_M) -> None:
+    def __init__(self, display: OpenXRDisplay, distance_m: float = DEFAULT_GAZE_DISTANCE_M) -> None:
         self.display = display
         self.runtime = display.runtime
         if self.runtime.gaze_space is None:
@@ -57,13 +63,13 @@ class OpenXRGaze:
         self._last_raw_t_s = -math.inf
 
     @classmethod
-    def on_display(cls, display: Any) -> "OpenXRGaze":
+    def on_display(cls, display: Display | None) -> "OpenXRGaze":
         return cls(_openxr_display(display, "--tracker"))
 
     def start(self) -> None:
         return None
 
-    def set_plan(self, plan: Any) -> None:
+    def set_plan(self, plan: FixationPlan) -> None:
         return None  # a person's eyes follow the stimulus, not a plan
 
     def clock_sync(self) -> ClockSync | None:
@@ -116,7 +122,7 @@ class OpenXRPose:
 
     n_reused_hand_trials = 0  # live: every trial's own hand samples
 
-    def __init__(self, display: Any, hand: str = "") -> None:
+    def __init__(self, display: OpenXRDisplay, hand: str = "") -> None:
         self.display = display
         self.runtime = display.runtime
         self.hand_name = hand
@@ -135,7 +141,7 @@ class OpenXRPose:
         self._last_frame_ns: int | None = None
 
     @classmethod
-    def on_display(cls, display: Any, hand: str = "") -> "OpenXRPose":
+    def on_display(cls, display: Display | None, hand: str = "") -> "OpenXRPose":
         return cls(_openxr_display(display, "--pose"), hand)
 
     def head(self, now_s: float) -> PoseSample | None:
@@ -169,7 +175,7 @@ class XrButtons:
     'left', the right hand's 'right' (for a reach, either is 'space': confirm), each at the time
     the runtime saw the press."""
 
-    def __init__(self, display: Any, kind: ResponseKind) -> None:
+    def __init__(self, display: OpenXRDisplay, kind: ResponseKind) -> None:
         self.display, self.runtime, self.kind = display, display.runtime, kind
         self._seen_sync = -1
 
@@ -190,8 +196,8 @@ class OpenXRResponses(KeyboardResponses):
     either, its distance from the right controller's grip)."""
 
     @classmethod
-    def on_display(cls, display: Any, kind: ResponseKind) -> "OpenXRResponses":
-        display = _openxr_display(display, "--responses")
+    def on_display(cls, built: Display | None, kind: ResponseKind) -> "OpenXRResponses":
+        display = _openxr_display(built, "--responses")
         display.needs_controller = True  # the first trial waits for one (OpenXRDisplay._wait_for_controller)
 
         def right_hand_reach_m() -> float:
