@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any
 
+from psyop.session.rows import JsonMapping
 from psyop.errors import UserError
 from psyop.session.events import SessionEvent
 
@@ -37,7 +38,7 @@ def _pylsl() -> Any:
 class LslMarkerOutlet:
     """An :class:`~psyop.session.events.EventSink` publishing markers (module docstring)."""
 
-    def __init__(self, identity: Mapping[str, Any], clock: Callable[[], float]) -> None:
+    def __init__(self, identity: JsonMapping, clock: Callable[[], float]) -> None:
         pylsl = _pylsl()
         self._local_clock = pylsl.local_clock
         self._clock = clock

@@ -112,7 +112,7 @@ class GlfwWindow:
         return t_s
 
     def summary(self) -> JsonObject:
-        out: dict[str, Any] = {"display": self.name, "frames": self._index}
+        out: JsonObject = {"display": self.name, "frames": self._index}
         if len(self.flips.times_s) >= 8:  # from the flip timestamps (least squares)
             out["display_flip_period_s"] = self.flips.estimate(self._period_s)[0]
         return out

@@ -20,16 +20,14 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from psyop.session.rows import JsonObject, TrialRecord, TrialRow
+from psyop.session.rows import JsonMapping, JsonObject, TrialRecord, TrialRow
 from psyop.adaptive.session import AdaptiveLevels
 from psyop.session.clock import Clock
 from psyop.session.events import EventKind, EventSink, SessionEvent
@@ -108,7 +106,7 @@ class TrialLoop:
     def __init__(
         self,
         *,
-        identity: Mapping[str, Any],
+        identity: JsonMapping,
         phases: tuple[PhaseSpec, ...],
         clock: Clock,
         gaze: GazeSource,
@@ -143,7 +141,7 @@ class TrialLoop:
         self._phase_start_s = 0.0
         self.state = TrialState.DONE
         #: trials the display interrupted (discarded; re-run when ``rerun``), as session.json records them
-        self.display_interruptions: list[dict[str, Any]] = []
+        self.display_interruptions: list[JsonObject] = []
         self.current_trial = -1  # the trial in progress (-1: none); tags the raw gaze samples
 
     # session -------------------------------------------------------------------------
@@ -216,7 +214,7 @@ class TrialLoop:
             self.gaze.drain_raw()
             self.store.append_trial(record, None, None)
 
-    def _run_trial_on_display(self, row: dict[str, Any]) -> tuple[dict[str, Any], FrameRecorder]:
+    def _run_trial_on_display(self, row: TrialRecord) -> tuple[TrialRecord, FrameRecorder]:
         """Run a trial once the display can show it. A trial the display interrupts (a headset
         session that lost focus) is discarded like a crashed one, the reason recorded in
         session.json (``display_interruptions``), and run again once the display is ready; an
@@ -244,7 +242,7 @@ class TrialLoop:
         return len(summary["conditions"])
 
     # trial ---------------------------------------------------------------------------
-    def run_trial(self, row: dict[str, Any]) -> tuple[dict[str, Any], FrameRecorder]:
+    def run_trial(self, row: TrialRecord) -> tuple[TrialRecord, FrameRecorder]:
         frames = FrameRecorder()
         trial = int(row["trial"])
         sampled = (trial in self.config.sampled_trials) or (trial % max(1, self.config.sample_every_n_trials) == 0)
@@ -288,7 +286,7 @@ class TrialLoop:
         record.update(hand_columns)
         return record, frames
 
-    def _track_reach(self, row: TrialRow, response: Response, end_s: float) -> tuple[Response, dict[str, Any]]:
+    def _track_reach(self, row: TrialRow, response: Response, end_s: float) -> tuple[Response, TrialRecord]:
         """A reach: take the pose source's last N hand samples (hold last valid), recompute
         the reach from their mean along the horizontal eye-to-target direction and log them
         with the trial (``hand_sample_*`` columns)."""
@@ -408,7 +406,7 @@ class TrialLoop:
 
 def _view_columns(request: FrameRequest) -> JsonObject:
     """Frame-log columns of the views the display reported (psyop.session.log.schema.view_fields)."""
-    columns: dict[str, Any] = {}
+    columns: TrialRecord = {}
     for view in request.views:
         e = view.eye
         columns.update({f"view_{e}_{a}_m": float(x) for a, x in zip("xyz", view.centre_m)})

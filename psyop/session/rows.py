@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["JsonObject", "TrialRecord", "TrialRow"]
+__all__ = ["JsonMapping", "JsonObject", "TrialRecord", "TrialRow"]
 
 #: one schedule row (read only): column -> value (protocol-dependent columns, numpy/pandas scalars)
 TrialRow = Mapping[str, Any]
@@ -19,3 +19,5 @@ TrialRow = Mapping[str, Any]
 TrialRecord = dict[str, Any]
 #: a JSON object: session.json, a source's stats/summary, an event's fields
 JsonObject = dict[str, Any]
+#: a JSON-like mapping read, not written: observer parameters, a summary handed to the log, a stream's identity
+JsonMapping = Mapping[str, Any]

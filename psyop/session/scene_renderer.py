@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from psyop.session.rows import JsonObject, TrialRow
+from psyop.session.rows import JsonObject, TrialRecord, TrialRow
 from psyop.session.frames import FrameCheck, FrameRequest, HeadPose
 from psyop.session.phases import PhaseSpec
 from psyop.session.plan import SessionPlan
@@ -69,7 +69,7 @@ class SceneRenderer:
         self._checker: Any = None
         self._summaries: JsonObject = {}  # per eye: the check summary of its current image (None: unchecked)
         self._rendered: dict[str, int] = {}  # per eye: images rendered (not reused) in the current phase
-        self._shown: dict[str, Any] = {}  # per eye: (trial, phase) of the current image
+        self._shown: JsonObject = {}  # per eye: (trial, phase) of the current image
         # 1: every rendered image is checked; n: each eye's first image of every phase and then
         # every n-th rendered one (a real session uses WATCHED_CHECK_EVERY; checked frames are logged)
         self.check_every = int(check_every) if check_every is not None else 1
@@ -98,7 +98,7 @@ class SceneRenderer:
             self.settings = dataclasses.replace(self.settings, frame_caches=False)
         # the time-independent parts of the current trial's scenes: per (phase, eye centre) either the whole
         # scene (nothing in it moves) or each shown item's primitives (None: the item moves, built per frame)
-        self._parts_row: dict[str, Any] | None = None
+        self._parts_row: TrialRecord | None = None
         self._parts: dict[tuple[Any, ...], Any] = {}
 
     def _scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str,

@@ -54,7 +54,7 @@ def _triple(value: Any) -> tuple[float, float, float] | None:
     return None
 
 
-def _per_eye(payload: dict[str, Any], plural: str, singular: str, eye_id: int) -> tuple[float, float, float] | None:
+def _per_eye(payload: JsonObject, plural: str, singular: str, eye_id: int) -> tuple[float, float, float] | None:
     """``eye_centers_3d[eye_id]`` (binocular datum) or ``eye_center_3d`` (monocular datum of that eye)."""
     both = payload.get(plural)
     if isinstance(both, dict):
@@ -65,7 +65,7 @@ def _per_eye(payload: dict[str, Any], plural: str, singular: str, eye_id: int) -
     return None
 
 
-def pupil_eyes(payload: dict[str, Any]) -> tuple[EyeSample | None, EyeSample | None]:
+def pupil_eyes(payload: JsonObject) -> tuple[EyeSample | None, EyeSample | None]:
     """(left, right) eye parts of a Pupil ``gaze.3d`` datum (Pupil's eye 0 is the right eye,
     eye 1 the left): eyeball centre and gaze normal (world camera -> head space) and the pupil
     diameters of its ``base_data`` pupil data (``diameter_3d`` mm, ``diameter`` px)."""
@@ -134,7 +134,7 @@ class PupilClient:
         self.annotate = annotate
         self.calibration: JsonObject | None = None  # what Capture's calibration said (session.json)
         self._recording = False
-        self._annotations: queue.Queue[dict[str, Any]] = queue.Queue()
+        self._annotations: queue.Queue[JsonObject] = queue.Queue()
         self._annotations_sent = self._annotations_confirmed = 0
         self._clock = clock
         self.confidence_threshold = confidence_threshold
@@ -225,7 +225,7 @@ class PupilClient:
         for thread in self._threads:
             thread.start()
 
-    def _forward(self, message: dict[str, Any]) -> bool:
+    def _forward(self, message: JsonObject) -> bool:
         """Send a multipart message (a ``notify.*`` notification, an annotation) through Pupil Remote,
         which forwards it to the IPC backbone; True when it said so ('Message forwarded.')."""
         assert self._req is not None
@@ -253,7 +253,7 @@ class PupilClient:
             reply = self._request("C")
             if reply != "OK":
                 raise self._unreachable(f"answered 'C' (start calibration) with {str(reply)[:40]!r}, not 'OK'")
-            outcome: dict[str, Any] | None = None
+            outcome: JsonObject | None = None
             while outcome is None and self._clock() - started_s < self.calibration_timeout_s:
                 if not sub.poll(100):
                     continue

@@ -6,7 +6,7 @@ import datetime as dt
 import json
 import os
 import stat
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -15,7 +15,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from psyop.session.rows import JsonObject, TrialRecord, TrialRow
+from psyop.session.rows import JsonMapping, JsonObject, TrialRecord, TrialRow
 from psyop.datacontract import MIN_VALID_GAZE_SHARE, low_gaze_mask
 from psyop.errors import UserError
 from psyop.finalised import record_finalised
@@ -49,7 +49,7 @@ class SessionLog(Protocol):
     def append_gaze(self, gaze: pa.Table, key: int = -1) -> None: ...
     def update_metadata(self, **fields: Any) -> None: ...
     def close(self) -> None: ...
-    def finalise(self, *, status: str, summary: Mapping[str, Any] | None = None) -> tuple[pd.DataFrame, pd.DataFrame]: ...
+    def finalise(self, *, status: str, summary: JsonMapping | None = None) -> tuple[pd.DataFrame, pd.DataFrame]: ...
 
 
 class SessionStore:
@@ -202,7 +202,7 @@ class SessionStore:
         finally:
             self.lock.release()
 
-    def finalise(self, *, status: str, summary: Mapping[str, Any] | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    def finalise(self, *, status: str, summary: JsonMapping | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
         """Close the streams and write parquet + session.json (see :func:`finalise_session`).
 
         A write error (the end record of a segment, session.json) is a UserError: the log
@@ -297,7 +297,7 @@ class Salvage:
 
     trials: pd.DataFrame | None
     frames: pd.DataFrame
-    report: dict[str, Any]
+    report: JsonObject
     gaze: pd.DataFrame | None = None  # the raw gaze stream, every intact sample (GAZE_SCHEMA)
 
     @property
@@ -314,7 +314,7 @@ def salvage(paths: SessionPaths) -> Salvage:
     intact elsewhere, or missing below the last recorded trial: resume re-runs them),
     ``frames_lost_for_trials`` (trial row intact, its frame record damaged) and torn tails.
     """
-    damaged: list[dict[str, Any]] = []
+    damaged: list[JsonObject] = []
     torn: list[str] = []
     damaged_keys: dict[str, set[int]] = {"trials": set(), "frames": set(), "gaze": set()}
 
@@ -397,10 +397,10 @@ def finalise_session(
     paths: SessionPaths,
     *,
     status: str,
-    summary: Mapping[str, Any] | None = None,
+    summary: JsonMapping | None = None,
     expected_trials: int | None = None,
     lock: SessionLock | None = None,
-    adaptive_stop: Mapping[str, Any] | None = None,
+    adaptive_stop: JsonMapping | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Write trials.parquet / frames.parquet / gaze.parquet atomically from the streams; update session.json.
 
@@ -424,8 +424,8 @@ def finalise_session(
 
 
 def _finalise_locked(
-    paths: SessionPaths, *, status: str, summary: Mapping[str, Any] | None, expected_trials: int | None,
-    adaptive_stop: Mapping[str, Any] | None = None,
+    paths: SessionPaths, *, status: str, summary: JsonMapping | None, expected_trials: int | None,
+    adaptive_stop: JsonMapping | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     meta = read_metadata(paths)
     if meta is None:
@@ -489,7 +489,7 @@ def find_sessions(root: Path) -> Sequence[SessionPaths]:
     return list(found.values())
 
 
-def _write_parquet_atomic(frame: pd.DataFrame, path: Path, identity: Mapping[str, Any] | None = None) -> None:
+def _write_parquet_atomic(frame: pd.DataFrame, path: Path, identity: JsonMapping | None = None) -> None:
     """``frame`` as parquet at ``path`` (psyop.atomic.write_atomic); ``identity`` (e.g. ``simulated``)
     goes into the file's schema metadata as ``psyop.KEY`` (JSON), readable without session.json."""
     table = pa.Table.from_pandas(frame, preserve_index=False)

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from psyop.session.rows import TrialRow
+from psyop.session.rows import JsonMapping, TrialRow
 from psyop.errors import UserError
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.reach import HAND_HEIGHT_M
@@ -26,7 +26,7 @@ def _phi(z: float) -> float:
     return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
 
 
-def _get(params: Mapping[str, Any], key: str, default: Any = None, *, required: bool = False) -> Any:
+def _get(params: JsonMapping, key: str, default: Any = None, *, required: bool = False) -> Any:
     if key in params and params[key] is not None:
         return params[key]
     if required:
@@ -39,7 +39,7 @@ class SimulatedObserver:
 
     needs_images = False
 
-    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         self.params = dict(params)
         self.seed = int(seed)
         self.participant = participant
@@ -66,7 +66,7 @@ class Psychometric2AFC(SimulatedObserver):
 
     kind = ResponseKind.TWO_INTERVAL
 
-    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         super().__init__(params, seed=seed, participant=participant)
         self.level_column = str(_get(params, "level_column", "level_D"))
         self.threshold_D = float(_get(params, "threshold_D", required=True))
@@ -104,7 +104,7 @@ class OrdinalAccuracy(SimulatedObserver):
 
     kind = ResponseKind.NEAR_SIDE
 
-    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         super().__init__(params, seed=seed, participant=participant)
         table = _get(params, "p_correct", required=True)
         self.table: dict[tuple[str, float], float] = {}
@@ -139,7 +139,7 @@ class PairwisePreference(SimulatedObserver):
 
     kind = ResponseKind.PREFERENCE
 
-    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         super().__init__(params, seed=seed, participant=participant)
         strengths = _get(params, "strengths", None) or _get(params, "strength", required=True)
         self.strengths = {str(k): float(v) for k, v in dict(strengths).items()}
@@ -172,7 +172,7 @@ class Reach(SimulatedObserver):
 
     kind = ResponseKind.REACH
 
-    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         super().__init__(params, seed=seed, participant=participant)
         arm_mean = float(_get(params, "arm_reach_m", 0.7))
         arm_sd = float(_get(params, "arm_reach_sd_m", 0.0))
@@ -184,7 +184,7 @@ class Reach(SimulatedObserver):
         self.max_reach_m = float(_get(params, "max_reach_fraction", 1.0)) * self.arm_reach_m
         self.conditions = {str(k): dict(v) for k, v in dict(_get(params, "by_condition", None) or _get(params, "conditions", {}) or {}).items()}
 
-    def _condition(self, rendering: str) -> Mapping[str, Any]:
+    def _condition(self, rendering: str) -> JsonMapping:
         cond = self.conditions.get(rendering, self.params)
         for key in ("slope", "intercept_m", "noise_sd_m"):
             if key not in cond:
@@ -223,7 +223,7 @@ class NcNulling(SimulatedObserver):
 
     kind = ResponseKind.WITH_AGAINST
 
-    def __init__(self, params: Mapping[str, Any], *, seed: int, participant: str) -> None:
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         from psyop.optics.rig import NcRule
 
         super().__init__(params, seed=seed, participant=participant)
@@ -262,7 +262,7 @@ OBSERVERS: dict[str, type[SimulatedObserver]] = {
 }
 
 
-def make_observer(params: Mapping[str, Any], *, seed: int, participant: str) -> SimulatedObserver:
+def make_observer(params: JsonMapping, *, seed: int, participant: str) -> SimulatedObserver:
     """Build the observer named by ``params['kind']`` (or ``type``/``model``)."""
     name = params.get("kind") or params.get("type") or params.get("model")
     if name not in OBSERVERS:
