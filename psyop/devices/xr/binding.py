@@ -22,9 +22,16 @@ from __future__ import annotations
 import ctypes
 import os
 from dataclasses import dataclass
-from typing import Any, Literal
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:
+    import moderngl
 
 GraphicsApi = Literal["egl", "xlib"]
+#: a pyopenxr struct, handle or enum: pyopenxr ships no type stubs, so its ctypes objects are untyped
+XrObject = Any
+
 GRAPHICS_APIS: tuple[GraphicsApi, ...] = ("egl", "xlib")
 
 EGL_EXTENSION = "XR_MNDX_egl_enable"
@@ -75,7 +82,7 @@ def choose_binding(available: set[str] | frozenset[str], requested: str = "auto"
             "run on the X display the headset runtime uses")
 
 
-def create_context(api: GraphicsApi) -> Any:
+def create_context(api: GraphicsApi) -> moderngl.Context:
     """A standalone moderngl context of the kind ``api`` binds (made current on this thread)."""
     import moderngl
 
@@ -88,19 +95,19 @@ class GraphicsBinding:
     alive with it: the runtime keeps the pointers)."""
 
     api: GraphicsApi
-    struct: Any
-    libraries: tuple[Any, ...]
+    struct: XrObject
+    libraries: tuple[XrObject, ...]
 
     def pointer(self) -> ctypes.c_void_p:
         return ctypes.cast(ctypes.pointer(self.struct), ctypes.c_void_p)
 
 
-def current_binding(xr: Any, api: GraphicsApi) -> GraphicsBinding | str:
+def current_binding(xr: ModuleType, api: GraphicsApi) -> GraphicsBinding | str:
     """The ``api`` binding of the OpenGL context current on this thread, or why it cannot be made."""
     return _egl_binding(xr) if api == "egl" else _xlib_binding(xr)
 
 
-def _egl_binding(xr: Any) -> GraphicsBinding | str:
+def _egl_binding(xr: ModuleType) -> GraphicsBinding | str:
     egl = ctypes.CDLL("libEGL.so.1")
     egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
     egl.eglGetCurrentContext.restype = ctypes.c_void_p
@@ -136,7 +143,7 @@ _GLX_SCREEN = 0x800C
 _GLX_FBCONFIG_ID = 0x8013
 
 
-def _xlib_binding(xr: Any) -> GraphicsBinding | str:
+def _xlib_binding(xr: ModuleType) -> GraphicsBinding | str:
     gl = ctypes.CDLL("libGL.so.1")
     x11 = ctypes.CDLL("libX11.so.6")
     gl.glXGetCurrentDisplay.restype = ctypes.c_void_p

@@ -24,12 +24,12 @@ import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject
 from psyop.optics.camera import ViewGeometry
 from psyop.session.frames import DisplayInterrupted, FrameRequest, RenderTarget
-from psyop.devices.xr.binding import choose_binding, create_context
+from psyop.devices.xr.binding import XrObject, choose_binding, create_context
 from psyop.devices.xr.runtime import (
     FOCUS_TIMEOUT_S,
     XrPose,
@@ -57,10 +57,10 @@ CLEAR_GREY = 0.5
 
 @dataclass
 class _EyeSwapchain:
-    handle: Any
+    handle: XrObject
     width_px: int
     height_px: int
-    framebuffers: list[Any]
+    framebuffers: list[XrObject]
     acquired: bool = False
 
 
@@ -71,7 +71,7 @@ class XrFrame:
     predicted_display_time_ns: int
     predicted_period_ns: int
     should_render: bool
-    layer_views: tuple[Any, ...]  # XrView in the reference space, per eye (pose + fov for the layer)
+    layer_views: tuple[XrObject, ...]  # XrView in the reference space, per eye (pose + fov for the layer)
 
 
 class OpenXRDisplay:
@@ -205,7 +205,7 @@ class OpenXRDisplay:
             self._empty_frame()
 
     @signals_held
-    def _wait_and_begin(self) -> Any:
+    def _wait_and_begin(self) -> XrObject:
         """xrWaitFrame then xrBeginFrame, with the frame marked open from the moment the wait
         returns: a Ctrl-C (or an error) between the two calls, or before xrEndFrame, leaves a frame
         that :meth:`close` begins and ends, for a second xrWaitFrame would block for ever."""
@@ -250,7 +250,7 @@ class OpenXRDisplay:
         self.head_pose_time_s = self.to_session_s(t_ns)
         should_render = bool(state.should_render)
         views: tuple[ViewGeometry, ...] = ()
-        layer_views: tuple[Any, ...] = ()
+        layer_views: tuple[XrObject, ...] = ()
         targets: dict[str, RenderTarget] = {}
         if should_render:
             _, in_head = xr.locate_views(rt.session, xr.ViewLocateInfo(
@@ -349,10 +349,10 @@ class OpenXRDisplay:
         rt.close()
         if self._ctx is not None:
             self._ctx.release()
-            self._ctx = None
+            self._ctx = None  # type: ignore[assignment]  # released on close; nothing renders in it again
 
 
-def _view_geometry(eye: str, view: Any) -> ViewGeometry:
+def _view_geometry(eye: str, view: XrObject) -> ViewGeometry:
     p, q = view.pose.position, view.pose.orientation
     return ViewGeometry(eye, (float(p.x), float(p.y), float(p.z)), (float(q.w), float(q.x), float(q.y), float(q.z)),
                         tangents_from_fov(view.fov))

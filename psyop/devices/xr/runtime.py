@@ -29,10 +29,14 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from psyop.errors import UserError
-from psyop.devices.xr.binding import BindingChoice, current_binding
+from psyop.devices.xr.binding import BindingChoice, XrObject, current_binding
+
+if TYPE_CHECKING:
+    import moderngl
 
 T = TypeVar("T")
 
@@ -59,7 +63,7 @@ def xr_error(what: str, exc: BaseException | str, runtime: str = "the OpenXR run
                      "XR_RUNTIME_JSON selects the runtime (docs/headset.md)", "--display openxr", XR_EXIT_CODE)
 
 
-def import_xr() -> Any:
+def import_xr() -> XrObject:
     """pyopenxr, or one line naming the extra that brings it."""
     try:
         import xr  # noqa: PLC0415 - optional dependency
@@ -95,7 +99,7 @@ class RuntimeFacts:
     states: list[str] = field(default_factory=list)
 
 
-def _pose(xr: Any, location: Any, valid_bits: int) -> XrPose:
+def _pose(xr: ModuleType, location: XrObject, valid_bits: int) -> XrPose:
     p, q = location.pose.position, location.pose.orientation
     flags = int(location.location_flags)
     return XrPose((float(p.x), float(p.y), float(p.z)), (float(q.w), float(q.x), float(q.y), float(q.z)),
@@ -160,7 +164,7 @@ def signals_held(method: Callable[..., T]) -> Callable[..., T]:
     return held
 
 
-def runtime_extensions(xr: Any) -> set[str]:
+def runtime_extensions(xr: ModuleType) -> set[str]:
     """The instance extensions the active runtime offers; no runtime is a one-line error (exit 3)."""
     try:
         return {_text(e.extension_name) for e in xr.enumerate_instance_extension_properties()}
@@ -171,11 +175,11 @@ def runtime_extensions(xr: Any) -> set[str]:
 class XrRuntime:
     """Instance, system and session of the runtime, bound to ``ctx`` (a moderngl EGL context)."""
 
-    def __init__(self, ctx: Any, binding: BindingChoice, *, reference_space: str = "local",
+    def __init__(self, ctx: moderngl.Context, binding: BindingChoice, *, reference_space: str = "local",
                  app_name: str = "psyop") -> None:
         self.xr = import_xr()
         self.instance = self.system = self.session = None
-        self._spaces: list[Any] = []
+        self._spaces: list[XrObject] = []
         try:
             with runtime_threads_without_signals():
                 self._open(ctx, binding, reference_space, app_name)
@@ -185,13 +189,13 @@ class XrRuntime:
             self.close()
             raise
 
-    def _open(self, ctx: Any, binding: BindingChoice, reference_space: str, app_name: str) -> None:
+    def _open(self, ctx: moderngl.Context, binding: BindingChoice, reference_space: str, app_name: str) -> None:
         xr = self.xr
         self.ctx = ctx
         self.graphics = binding
         self.facts = RuntimeFacts(reference_space=reference_space, graphics=binding.api)
         self.instance = self.system = self.session = None
-        self._spaces: list[Any] = []
+        self._spaces: list[XrObject] = []
         self.state = xr.SessionState.UNKNOWN
         self.running = False
         self._lost = ""
@@ -248,14 +252,14 @@ class XrRuntime:
         self.head = self._reference_space(xr.ReferenceSpaceType.VIEW)
         self._create_actions()
 
-    def _reference_space(self, kind: Any) -> Any:
+    def _reference_space(self, kind: XrObject) -> XrObject:
         xr = self.xr
         space = xr.create_reference_space(self.session, xr.ReferenceSpaceCreateInfo(
             reference_space_type=kind, pose_in_reference_space=xr.Posef()))
         self._spaces.append(space)
         return space
 
-    def _path(self, text: str) -> Any:
+    def _path(self, text: str) -> XrObject:
         return self.xr.string_to_path(self.instance, text)
 
     def _create_actions(self) -> None:
@@ -293,7 +297,7 @@ class XrRuntime:
                 suggested_bindings=[xr.ActionSuggestedBinding(self.gaze_action,
                                                               self._path("/user/eyes_ext/input/gaze_ext/pose"))]))
         self.tracker_action = None
-        self.tracker_roles: dict[str, Any] = {}
+        self.tracker_roles: dict[str, XrObject] = {}
         if self.facts.vive_trackers:  # XR_HTCX_vive_tracker_interaction: grip poses by role
             roles = ["handheld_object", "left_foot", "right_foot", "left_shoulder", "right_shoulder", "left_elbow",
                      "right_elbow", "left_knee", "right_knee", "waist", "chest", "camera", "keyboard"]
@@ -314,7 +318,7 @@ class XrRuntime:
         self.aim_spaces = {h: self._action_space(self.aim, self.hand_paths[h]) for h in HANDS}
         self.gaze_space = self._action_space(self.gaze_action, xr.NULL_PATH) if self.gaze_action is not None else None
 
-    def _action_space(self, action: Any, subaction: Any) -> Any:
+    def _action_space(self, action: XrObject, subaction: XrObject) -> XrObject:
         xr = self.xr
         space = xr.create_action_space(self.session, xr.ActionSpaceCreateInfo(
             action=action, subaction_path=subaction, pose_in_action_space=xr.Posef()))
@@ -322,7 +326,7 @@ class XrRuntime:
         return space
 
     @signals_held
-    def tracker_space(self, role: str) -> Any:
+    def tracker_space(self, role: str) -> XrObject:
         """The grip space of the Vive tracker with this role (XR_HTCX_vive_tracker_interaction)."""
         if self.tracker_action is None:
             raise xr_error("no Vive tracker poses", "the runtime does not offer XR_HTCX_vive_tracker_interaction",
@@ -390,7 +394,7 @@ class XrRuntime:
 
     # -- locating -------------------------------------------------------------------------------------
     @signals_held
-    def locate(self, space: Any, base: Any, xr_time_ns: int, next_struct: Any = None) -> XrPose:
+    def locate(self, space: XrObject, base: XrObject, xr_time_ns: int, next_struct: XrObject = None) -> XrPose:
         xr = self.xr
         location = xr.SpaceLocation(next=next_struct)
         xr.raw_functions.xrLocateSpace(space, base, xr_time_ns, ctypes.byref(location))
@@ -440,7 +444,7 @@ class XrRuntime:
 
     # -- teardown -------------------------------------------------------------------------------------
     @signals_held
-    def request_exit(self, pump_frame: Any, timeout_s: float = 5.0) -> None:
+    def request_exit(self, pump_frame: XrObject, timeout_s: float = 5.0) -> None:
         """``xrRequestExitSession`` and follow the states to the end (the runtime only moves on while
         frames are submitted: ``pump_frame()`` submits an empty one)."""
         xr = self.xr
@@ -483,7 +487,7 @@ class XrRuntime:
             self.instance = None
 
 
-def _text(value: Any) -> str:
+def _text(value: XrObject) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
 
 
@@ -502,6 +506,6 @@ def rotate(q: tuple[float, ...], v: tuple[float, float, float]) -> tuple[float, 
     return (p[1], p[2], p[3])
 
 
-def tangents_from_fov(fov: Any) -> tuple[float, float, float, float]:
+def tangents_from_fov(fov: XrObject) -> tuple[float, float, float, float]:
     """OpenXR's XrFovf angles (radians; left and down negative) as (left, right, bottom, top) tangents."""
     return (math.tan(fov.angle_left), math.tan(fov.angle_right), math.tan(fov.angle_down), math.tan(fov.angle_up))
