@@ -34,7 +34,7 @@ from psyop import __version__
 from psyop import datacontract as dc
 from psyop.atomic import write_atomic
 from psyop.errors import UserError
-from psyop.export.gaze import (FRAME_LOG, RAW_STREAM, display_from_metadata, gaze_on_image_px, image_geometry,
+from psyop.export.gaze import (FRAME_LOG, display_from_metadata, gaze_on_image_px, image_geometry,
                                session_gaze)
 from psyop.finalised import FINALISED_KEY, read_session_meta, verify_session
 

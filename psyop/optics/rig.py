@@ -60,7 +60,7 @@ class NcRule:
         return 0.0 if value == 0.0 else float(math.copysign(NC_M.check(abs(value), "the rendered NC"), value))
 
     def _level(self, row: Mapping[str, Any] | None) -> float:
-        if row is None or self.column not in row:
+        if row is None or self.column is None or self.column not in row:
             raise ValueError(f"the rendered NC is the trial's {self.column!r}; this frame has no trial row")
         return float(row[self.column])
 
@@ -158,10 +158,16 @@ class EyeRig:
             raise ValueError("the runtime reported both eyes at the same position; cannot place a fixed ipd")
         half = 0.5 * self.ipd_m * axis / norm
         placed = {"left": mid - half, "right": mid + half}
-        return tuple(dataclasses.replace(v, centre_m=tuple(float(x) for x in placed[v.eye])) for v in views)
+        return tuple(dataclasses.replace(v, centre_m=_xyz(placed[v.eye])) for v in views)
 
     def as_dict(self) -> dict[str, object]:
         """What session.json records."""
         return {"eyes": list(self.eyes), "ipd_m": self.ipd_m, "ipd_source": self.ipd_source,
                 "eye_model": self.eye_model.name, "nc_m": self.nc_m,
                 "rendering_nc": None if self.rendering_nc is None else self.rendering_nc.as_dict()}
+
+
+def _xyz(point_m: np.ndarray) -> tuple[float, float, float]:
+    """A 3-vector as a tuple of three floats (a ViewGeometry centre)."""
+    x, y, z = (float(v) for v in point_m)
+    return (x, y, z)

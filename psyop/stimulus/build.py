@@ -36,7 +36,6 @@ from psyop.rendering.textures import ImageFiles
 from psyop.rendering.scene import (
     Aperture,
     GridMaterial,
-    ImageTexture,
     Material,
     NoiseKind,
     NoiseTexture,
