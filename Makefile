@@ -12,13 +12,14 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 export MPLBACKEND := Agg
 export PYTHONHASHSEED := 0
 
-.PHONY: figures test bench power power-run clean venv sysdeps help
+.PHONY: figures test lint bench power power-run clean venv sysdeps help
 
 help:
 	@echo "make figures  - simulate sessions if data/ is empty, say which sessions are used, rebuild every figure and table"
 	@echo "                (MIX=1: allow a study to pool simulated and real sessions)"
 	@echo "make resimulate - delete the simulated sessions in data/ (refused if any is real), then make figures"
-	@echo "make test     - run the whole test suite"
+	@echo "make test     - run make lint, then the whole test suite"
+	@echo "make lint     - ruff and mypy over psyop/ (and lint-imports once pyproject.toml has a contract)"
 	@echo "make bench    - run the benchmarks; results in bench/"
 	@echo "make power    - power curves of the five shipped studies by simulation; results in power/"
 	@echo "                (POWER_REPLICATIONS=N simulated studies per sample size, default $(POWER_REPLICATIONS))"
@@ -52,7 +53,15 @@ $(SYSDEPS_STAMP): | $(STAMP)
 	fi
 	@touch $@
 
-test: $(STAMP) $(SYSDEPS_STAMP)
+# ruff, mypy (cache in .mypy_cache, so a rerun checks only what changed) and the import-layering
+# contract when pyproject.toml declares one; any finding fails make test (docs/architecture.md,
+# "Types and lint").
+lint: $(STAMP)
+	$(VENV)/bin/ruff check psyop
+	$(VENV)/bin/mypy
+	@if grep -q '^\[tool.importlinter\]' pyproject.toml; then $(VENV)/bin/lint-imports; fi
+
+test: lint $(STAMP) $(SYSDEPS_STAMP)
 	$(PY) -m pytest -n $(JOBS) -q
 
 bench: $(STAMP) $(SYSDEPS_STAMP)
@@ -84,4 +93,4 @@ power-run:
 include figures.mk
 
 clean:
-	rm -rf figures results bench power demo .psyop-power $(VENV) build *.egg-info .pytest_cache .hypothesis
+	rm -rf figures results bench power demo .psyop-power $(VENV) build *.egg-info .pytest_cache .hypothesis .mypy_cache .ruff_cache

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from psyop.protocol.trial import MIN_VALID_GAZE_SHARE
+from psyop.records import JsonObject
 
 # ---- layout: data/<study>/sub-<ID>/ses-<N>/ (psyop's own; no standard claimed) ----------------------------------
 DATASET_DESCRIPTION_FILE = "dataset_description.json"
@@ -104,7 +104,7 @@ def low_gaze_mask(trials: pd.DataFrame, legacy_threshold: float = MIN_VALID_GAZE
 SIMULATED_KEY = "simulated"
 
 
-def dataset_description(*, simulated: bool, studies: list[str], n_simulated: int = 0, n_real: int = 0) -> dict[str, Any]:
+def dataset_description(*, simulated: bool, studies: list[str], n_simulated: int = 0, n_real: int = 0) -> JsonObject:
     """The content of ``dataset_description.json``; ``simulated`` is what figures and the loader read.
 
     It names no data standard (no ``schemaVersion``): the layout is psyop's own and no standard's

@@ -25,9 +25,9 @@ import stat
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from psyop.errors import UserError
+from psyop.records import JsonMapping, JsonObject
 
 #: session.json key: ``{file name: {"sha256": hex, "size_bytes": int}}`` of every finalised file.
 FINALISED_KEY = "finalised_files"
@@ -57,12 +57,12 @@ def sha256_file(path: Path) -> str:
     return digest.hexdigest()
 
 
-def file_record(path: Path) -> dict[str, Any]:
+def file_record(path: Path) -> JsonObject:
     """``{"sha256": ..., "size_bytes": ...}`` of one file."""
     return {"sha256": sha256_file(path), "size_bytes": int(os.stat(path).st_size)}
 
 
-def record_finalised(meta: dict[str, Any], directory: Path, files: Iterable[Path]) -> dict[str, Any]:
+def record_finalised(meta: JsonObject, directory: Path, files: Iterable[Path]) -> JsonObject:
     """Record the SHA-256 of each finalised file of ``directory`` into ``meta`` (session.json).
 
     ``files`` are the files finalisation just wrote (paths inside ``directory``); earlier
@@ -79,7 +79,7 @@ def record_finalised(meta: dict[str, Any], directory: Path, files: Iterable[Path
     """
     directory = Path(directory)
     previous = meta.get(FINALISED_KEY) if isinstance(meta.get(FINALISED_KEY), dict) else {}
-    record: dict[str, Any] = {name: value for name, value in previous.items() if (directory / name).is_file()}
+    record: JsonObject = {name: value for name, value in previous.items() if (directory / name).is_file()}
     for path in files:
         record[Path(path).relative_to(directory).as_posix()] = file_record(Path(path))
     meta[FINALISED_KEY] = dict(sorted(record.items()))
@@ -115,12 +115,12 @@ def finalised_candidates(directory: Path) -> list[str]:
                   if p.suffix in FINALISED_SUFFIXES and not p.name.startswith(".") and p.is_file())
 
 
-def check_finalised(meta: Mapping[str, Any], directory: Path) -> list[FileProblem]:
+def check_finalised(meta: JsonMapping, directory: Path) -> list[FileProblem]:
     """Every finalised file of ``directory`` that fails: hash differs, recorded file missing, or a
     data file present without a record. Empty when the session proves it is intact."""
     directory = Path(directory)
     raw = meta.get(FINALISED_KEY)
-    recorded: Mapping[str, Any] = raw if isinstance(raw, Mapping) else {}
+    recorded: JsonMapping = raw if isinstance(raw, Mapping) else {}
     problems: list[FileProblem] = []
     for name, entry in sorted(recorded.items()):
         want = entry.get("sha256") if isinstance(entry, Mapping) else None
@@ -140,7 +140,7 @@ def check_finalised(meta: Mapping[str, Any], directory: Path) -> list[FileProble
     return problems
 
 
-def unfinished_finalisation(meta: Mapping[str, Any]) -> bool:
+def unfinished_finalisation(meta: JsonMapping) -> bool:
     """True when session.json says the last run ended but its finalisation never finished (the
     process was killed while the parquet files were being written): ``runs[-1].ended`` is set and
     ``finalised`` is missing or older. ``psyop recover`` finishes such a session from its log.
@@ -167,7 +167,7 @@ def unfinished_finalisation(meta: Mapping[str, Any]) -> bool:
         return False
 
 
-def read_session_meta(directory: Path) -> dict[str, Any] | None:
+def read_session_meta(directory: Path) -> JsonObject | None:
     """A session directory's session.json as a dict (None when absent); unreadable: UserError."""
     path = Path(directory) / SESSION_METADATA_FILE
     try:
@@ -230,7 +230,7 @@ def verify_session(directory: Path) -> None:
         f"record it with `psyop reseal {directory} --reason TEXT`", str(directory))
 
 
-def reseal(meta: dict[str, Any], directory: Path, reason: str) -> dict[str, Any]:
+def reseal(meta: JsonObject, directory: Path, reason: str) -> JsonObject:
     """Record a deliberate edit in ``meta`` (session.json's content): new hashes for every finalised
     file, and the reason, time and each changed file's old and new hash appended to ``reseals``.
     Returns the appended record; the caller writes ``meta`` back (atomically) under the session lock
@@ -257,7 +257,7 @@ def reseal(meta: dict[str, Any], directory: Path, reason: str) -> dict[str, Any]
     problems = check_finalised(meta, directory)
     if not problems:
         raise UserError("every finalised file matches its recorded SHA-256: nothing to reseal", str(directory))
-    changes: dict[str, Any] = {}
+    changes: JsonObject = {}
     for problem in problems:
         found = None if problem.kind == "missing" else sha256_file(directory / problem.name)
         changes[problem.name] = {"change": problem.kind, "old_sha256": problem.recorded_sha256, "new_sha256": found}

@@ -12,8 +12,12 @@ import os
 import stat
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from psyop.errors import UserError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 def _kind(mode: int) -> str:
@@ -77,7 +81,7 @@ MAX_LOG_TABLE_BYTES = 512 << 20
 MAX_SESSION_JSON_BYTES = 16 << 20
 
 
-def read_logged_table(path: Path, context: str) -> "pd.DataFrame":  # noqa: F821 - pandas imported lazily
+def read_logged_table(path: Path, context: str) -> pd.DataFrame:  # pandas imported lazily inside
     """A session's ``frames.parquet``/``trials.parquet`` named for a replay (``context``, e.g.
     "--tracker replay"): a regular parquet file within :data:`MAX_LOG_TABLE_BYTES`, else a UserError."""
     import io

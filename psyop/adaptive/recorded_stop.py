@@ -8,16 +8,15 @@ record is rebuilt here exactly as the session would have written it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
 
 import pandas as pd
 
 from psyop.adaptive.session import AdaptiveLevels, adaptive_plan
 from psyop.errors import UserError
+from psyop.records import JsonMapping, JsonObject
 
 
-def rebuilt_stop_record(meta: Mapping[str, Any], trials: pd.DataFrame | None) -> dict[str, Any] | None:
+def rebuilt_stop_record(meta: JsonMapping, trials: pd.DataFrame | None) -> JsonObject | None:
     """``adaptive_stop`` for a session's metadata and logged trials; None when the session has no
     adaptive levels, or its metadata lacks the protocol text or seed, or that text no longer
     validates here (then the recorded one stands)."""

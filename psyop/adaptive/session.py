@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -43,6 +43,7 @@ from psyop.adaptive.quest_plus import QuestPlusSpec
 from psyop.adaptive.staircase import StaircaseSpec, exact_decimal
 from psyop.adaptive.state import ProcedureState
 from psyop.adaptive.stopping import StopRule
+from psyop.records import JsonObject, TrialRow
 
 if TYPE_CHECKING:
     from psyop.protocol.model import Protocol
@@ -63,7 +64,7 @@ class AdaptivePlan:
     def unit(self) -> str:
         return self.factor.rsplit("_", 1)[-1]
 
-    def log_columns(self) -> dict[str, Any]:
+    def log_columns(self) -> JsonObject:
         """The per-trial log columns and their empty schedule values (they fix the log's types)."""
         u = self.unit
         return {"adaptive_procedure": "", "adaptive_trials": np.int64(-1), f"adaptive_step_{u}": math.nan,
@@ -105,7 +106,7 @@ def adaptive_plan(protocol: "Protocol") -> AdaptivePlan | None:
     return None
 
 
-def row_at_level(plan: AdaptivePlan, row: Mapping[str, Any], level: float) -> dict[str, Any]:
+def row_at_level(plan: AdaptivePlan, row: TrialRow, level: float) -> JsonObject:
     """``row`` with the adaptive factor at ``level``: its column and each interval's copy of it (an
     interval whose ``set:`` fixes the factor keeps that value). The session fills each trial this
     way; ``psyop render --level`` and ``psyop audit`` preview levels with it."""
@@ -148,7 +149,7 @@ def preview_levels(protocol: "Protocol", given: tuple[float, ...] = ()) -> tuple
     return tuple(sorted({float(a.min), float(a.start), float(a.max)}))
 
 
-def _maybe_float(value: Any) -> float | None:
+def _maybe_float(value: float | None) -> float | None:
     return None if value is None else float(value)
 
 
@@ -160,7 +161,7 @@ def add_log_columns(schedule: pd.DataFrame, plan: AdaptivePlan) -> pd.DataFrame:
     return out
 
 
-def _counts(row: Mapping[str, Any], factor: str) -> bool:
+def _counts(row: TrialRow, factor: str) -> bool:
     """A trial the procedure learns from: not practice, answered, with a finite level."""
     correct = row.get("correct")
     if bool(row.get("practice", False)) or correct is None or (isinstance(correct, float) and math.isnan(correct)):
@@ -193,14 +194,14 @@ class AdaptiveLevels:
             self._states[key] = self.procedure.state(history)
         return self._states[key]
 
-    def fill(self, row: Mapping[str, Any]) -> dict[str, Any]:
+    def fill(self, row: TrialRow) -> JsonObject:
         """``row`` with the level the condition's procedure chooses now."""
         state = self.state(str(row["condition"]))
         out = row_at_level(self.plan, row, float(state.next_level))
         out.update(adaptive_procedure=state.procedure, adaptive_trials=np.int64(state.trials))
         return out
 
-    def complete(self, record: Mapping[str, Any]) -> dict[str, Any]:
+    def complete(self, record: TrialRow) -> JsonObject:
         """``record`` with the running estimate after this trial (before it is made durable)."""
         out = dict(record)
         history = list(self.history.get(str(record["condition"]), []))
@@ -214,24 +215,24 @@ class AdaptiveLevels:
         out[f"adaptive_step_{self.plan.unit}"] = float(state.step)
         return out
 
-    def commit(self, record: Mapping[str, Any]) -> None:
+    def commit(self, record: TrialRow) -> None:
         """Add a durable trial to its condition's history."""
         if _counts(record, self.plan.factor):
             self.history.setdefault(str(record["condition"]), []).append(
                 Observation(float(record[self.plan.factor]), bool(record["correct"])))
 
-    def stopped(self, row: Mapping[str, Any]) -> bool:
+    def stopped(self, row: TrialRow) -> bool:
         """Whether ``row``'s condition has met its stop rule, so the (non-practice) trial is not run."""
         if bool(row.get("practice", False)):
             return False
         return self.state(str(row["condition"])).finished
 
-    def stop_summary(self, schedule: pd.DataFrame, recorded: set[int]) -> dict[str, Any]:
+    def stop_summary(self, schedule: pd.DataFrame, recorded: set[int]) -> JsonObject:
         """Per condition that has stopped: why, after how many counted trials, its estimate, and
         which of its scheduled trials are not run; plus their count (session.json's
         ``adaptive_stop``)."""
         u = self.plan.unit
-        conditions: dict[str, Any] = {}
+        conditions: JsonObject = {}
         not_run = 0
         for condition, rows in schedule.groupby(schedule["condition"].astype(str), sort=True):
             state = self.state(str(condition))

@@ -10,14 +10,19 @@ grid (straight ahead, then a ring at :data:`GRID_ECCENTRICITY_DEG`).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from psyop.rendering.builders import direction_from_angles
 from psyop.stimulus.placement import polar_centre_deg
+from psyop.records import JsonObject, TrialRow
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from psyop.rendering.scene import Scene
 
 GRID_ECCENTRICITY_DEG = 10.0
 GRID_FIXATION_DISTANCE_M = 1.0
@@ -32,7 +37,7 @@ class AuditFrame:
 
     condition: str
     trial: int
-    row: Mapping[str, Any]
+    row: TrialRow
     phase: str
     phase_index: int
     interval: int
@@ -51,9 +56,9 @@ class AuditFrame:
                 f"{self.eye} eye, gaze {self.gaze_index} (t = {self.time_s:.3g} s)")
 
 
-def representative_rows(schedule: Any) -> list[dict[str, Any]]:
+def representative_rows(schedule: pd.DataFrame) -> list[JsonObject]:
     """The first trial of each condition, non-practice trials preferred, in schedule order."""
-    rows: dict[str, dict[str, Any]] = {}
+    rows: dict[str, JsonObject] = {}
     for row in schedule.to_dict("records"):
         key = str(row["condition"])
         if key not in rows or (rows[key].get("practice") and not row.get("practice")):
@@ -70,7 +75,7 @@ def grid_gaze_deg(index: int, count: int) -> tuple[float, float]:
     return polar_centre_deg(GRID_ECCENTRICITY_DEG, meridian_deg)
 
 
-def fixation_point(scene: Any, fixation_prefix: str | None, origin_m: np.ndarray, gaze_index: int,
+def fixation_point(scene: Scene, fixation_prefix: str | None, origin_m: np.ndarray, gaze_index: int,
                    gaze_count: int) -> np.ndarray:
     """Where the eyes fixate in this frame, head space: the fixation target's centre ((4,) with
     w = 0 when it is at optical infinity), else a grid point ``GRID_FIXATION_DISTANCE_M`` from

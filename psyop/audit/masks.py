@@ -29,10 +29,11 @@ projected areas to 2 %.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
+import moderngl
 import numpy as np
 
+from psyop.optics.camera import EyeCamera
 from psyop.rendering import Renderer, RenderSettings, Scene, Solid
 from psyop.rendering.camera_math import crop_camera
 from psyop.rendering.scene import Aperture
@@ -91,7 +92,7 @@ def decode(channel: np.ndarray, samples_per_axis: int, per: int) -> list[np.ndar
     return [n1 / s2, n0 / s2]
 
 
-def zoom_camera(camera: Any, x0_px: int, y0_px: int, width_px: int, height_px: int, magnification: int) -> Any:
+def zoom_camera(camera: EyeCamera, x0_px: int, y0_px: int, width_px: int, height_px: int, magnification: int) -> EyeCamera:
     """The pixel window ``x0 .. x0 + width``, ``y0 .. y0 + height`` of ``camera`` rendered with
     ``magnification`` x ``magnification`` pixels per pixel: the same rays and projection as the
     full frame (:func:`psyop.rendering.camera_math.crop_camera`), a finer pixel grid."""
@@ -99,7 +100,7 @@ def zoom_camera(camera: Any, x0_px: int, y0_px: int, width_px: int, height_px: i
     return dataclasses.replace(crop, width_px=int(width_px * magnification), height_px=int(height_px * magnification))
 
 
-def screen_boxes_px(scene: Scene, camera: Any) -> np.ndarray:
+def screen_boxes_px(scene: Scene, camera: EyeCamera) -> np.ndarray:
     """(n, 4) conservative boxes (x_min, y_min, x_max, y_max) of the primitives in ``camera``'s pixels."""
     if not scene.primitives:
         return np.zeros((0, 4))
@@ -145,19 +146,19 @@ class FrameMeasurer:
     """Renders one frame's colour image and its per-primitive visible areas (two renderers on
     one context: colour scenes keep their textures, mask scenes have none)."""
 
-    def __init__(self, ctx: Any, settings: RenderSettings | None = None) -> None:
+    def __init__(self, ctx: moderngl.Context | None, settings: RenderSettings | None = None) -> None:
         self.settings = settings or RenderSettings(reuse_tolerance_px=None)
         self._colour = Renderer(Scene(()), self.settings, ctx=ctx)
         self._masks = Renderer(Scene(()), self.settings, ctx=ctx)
         self._zoom = Renderer(Scene(()), self.settings, ctx=ctx)
 
-    def colour(self, scene: Scene, camera: Any) -> np.ndarray:
+    def colour(self, scene: Scene, camera: EyeCamera) -> np.ndarray:
         """The participant's frame, (H, W, 3) float32."""
         self._colour.set_scene(scene)
         self._colour.render(camera)
         return self._colour.image(_eye(camera))
 
-    def visible_areas_px(self, scene: Scene, camera: Any, zoom: bool = True) -> np.ndarray:
+    def visible_areas_px(self, scene: Scene, camera: EyeCamera, zoom: bool = True) -> np.ndarray:
         """(n,) visible area of every primitive in this frame, in pixels of ``camera``; with
         ``zoom``, primitives narrower than :data:`MIN_SAMPLES_ACROSS` samples are measured in a
         magnified window (:func:`zoom_window`)."""
@@ -181,7 +182,7 @@ class FrameMeasurer:
                     areas[i] = self._zoomed_area_px(scene, camera, i, window)
         return areas
 
-    def _zoomed_area_px(self, scene: Scene, camera: Any, index: int, window: tuple[int, int, int, int, int]) -> float:
+    def _zoomed_area_px(self, scene: Scene, camera: EyeCamera, index: int, window: tuple[int, int, int, int, int]) -> float:
         x0, y0, w, h, magnification = window
         masks = mask_scene(scene, index, int(self.settings.samples_per_axis))
         if masks.aperture is not None:  # the renderer keeps a screen-fixed aperture mask per eye and
@@ -200,6 +201,6 @@ class FrameMeasurer:
         self._zoom.release()
 
 
-def _eye(camera: Any) -> str:
+def _eye(camera: EyeCamera) -> str:
     eye = getattr(camera, "eye", "right")
     return str(getattr(eye, "value", eye))

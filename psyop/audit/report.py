@@ -10,11 +10,10 @@ a few px^2 in ocular frames at non-zero levels.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from psyop.audit.run import AuditReport
+from psyop.audit.run import AuditReport, FrameRecord
 
 MODES = ("conventional", "ocular", "reversed")
 
@@ -50,7 +49,7 @@ def format_table(report: AuditReport) -> str:
     return "\n".join(lines)
 
 
-def _column_of(rec: Any) -> tuple[str, int]:
+def _column_of(rec: FrameRecord) -> tuple[str, int]:
     return (rec.frame.phase, rec.frame.gaze_index)
 
 

@@ -21,7 +21,7 @@ import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +30,16 @@ from psyop.audit.masks import FrameMeasurer
 from psyop.audit.occlusion import hidden_by
 from psyop.errors import UserError
 from psyop.session.plan import DEFAULT_IPD_M
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from psyop.optics.camera import EyeCamera
+    from psyop.optics.display import DisplayProfile
+    from psyop.protocol.model import Protocol
+    from psyop.rendering.scene import Scene
+    from psyop.session.phases import PhaseSpec
+    from psyop.session.plan import SessionPlan
 
 # Visible means covering at least half of one of the S x S samples of an edge pixel; exact
 # occlusion leaves a hidden primitive's mask at exactly 0.
@@ -98,7 +108,7 @@ def item_of(name: str, item_ids: list[str]) -> str:
     return max(matches, key=len) if matches else name
 
 
-def _fixation_prefix(protocol: Any) -> str | None:
+def _fixation_prefix(protocol: Protocol) -> str | None:
     from psyop.protocol import scene as ps
 
     for item in protocol.scene:
@@ -107,7 +117,7 @@ def _fixation_prefix(protocol: Any) -> str | None:
     return None
 
 
-def iter_frames(plan: Any, settings: AuditSettings) -> Iterator[tuple[AuditFrame, Any]]:
+def iter_frames(plan: SessionPlan, settings: AuditSettings) -> Iterator[tuple[AuditFrame, PhaseSpec]]:
     """Every audited frame and its plan phase, in order: condition, phase, eye, gaze."""
     from psyop.schedule import compile_schedule
 
@@ -134,7 +144,7 @@ def iter_frames(plan: Any, settings: AuditSettings) -> Iterator[tuple[AuditFrame
                                      float(phase.duration_s) * k / settings.gazes), phase
 
 
-def run_audit(protocol: Any, settings: AuditSettings, ctx: Any = None, base_dir: Path | None = None,
+def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context | None = None, base_dir: Path | None = None,
               progress: Callable[[int, int], None] | None = None) -> AuditReport:
     """Render and check every audited frame of ``protocol`` (see the module docstring).
 
@@ -222,7 +232,7 @@ def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float,
     return failures + identical, notes + same_centre
 
 
-def _px_per_m_shift(scene: Any, camera: Any, display: Any) -> float:
+def _px_per_m_shift(scene: Scene, camera: EyeCamera, display: DisplayProfile) -> float:
     """Image pixels per metre of centre-of-projection shift at the nearest finite primitive
     (its nearest point bounded by its centre distance minus its extent); 0 without finite ones."""
     cop = np.asarray(camera.centre_of_projection_m, dtype=np.float64)

@@ -70,7 +70,6 @@ def main(args: argparse.Namespace) -> int:
 def _describe_dataset(path: Path) -> None:
     """Rewrite the data root's dataset_description.json (a run whose disk filled after finalising
     could not): ``path`` is a data root, or a session directory ``ROOT/<study>/sub-*/ses-*``."""
-    from psyop import datacontract as dc
     from psyop.session.log.layout import write_dataset_description
 
     root = path.parents[2] if path.name.startswith("ses-") and len(path.parents) > 2 else path

@@ -25,7 +25,7 @@ import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import BinaryIO
 
 import numpy as np
 import pandas as pd
@@ -34,9 +34,11 @@ from psyop import __version__
 from psyop import datacontract as dc
 from psyop.atomic import write_atomic
 from psyop.errors import UserError
-from psyop.export.gaze import (FRAME_LOG, RAW_STREAM, display_from_metadata, gaze_on_image_px, image_geometry,
+from psyop.export.gaze import (FRAME_LOG, display_from_metadata, gaze_on_image_px, image_geometry,
                                session_gaze)
 from psyop.finalised import FINALISED_KEY, read_session_meta, verify_session
+from psyop.optics.display import DisplayProfile
+from psyop.records import JsonMapping, JsonObject
 
 #: The BIDS version the export follows (the schema bundled with bids-validator-deno 3.0.2).
 BIDS_VERSION = "1.11.1"
@@ -160,7 +162,7 @@ def _run_samples(samples: pd.DataFrame, run_trials: pd.DataFrame, source: str) -
 
 
 # ---- events ------------------------------------------------------------------------------------------------
-def _stimulus_presentation(display: Any, eye: str) -> dict[str, Any]:
+def _stimulus_presentation(display: DisplayProfile, eye: str) -> JsonObject:
     geometry = image_geometry(display, eye)
     return {
         "ScreenDistance": geometry.distance_m,
@@ -173,7 +175,7 @@ def _stimulus_presentation(display: Any, eye: str) -> dict[str, Any]:
     }
 
 
-def _screen_note(display: Any) -> str:
+def _screen_note(display: DisplayProfile) -> str:
     if np.isfinite(display.d_m):
         return (f"Each eye sees the head-mounted display {display.name!r}: a virtual image {display.d_m} m in front "
                 "of the eye's centre of rotation; ScreenDistance and ScreenSize are that image's.")
@@ -182,7 +184,7 @@ def _screen_note(display: Any) -> str:
             "that subtends the same angles (the same visual angle for every pixel), not a physical screen.")
 
 
-def _write_events(stem: Path, trials: pd.DataFrame, display: Any, eyes: Sequence[str], meta: Mapping[str, Any],
+def _write_events(stem: Path, trials: pd.DataFrame, display: DisplayProfile, eyes: Sequence[str], meta: JsonMapping,
                   study: str) -> None:
     events = pd.DataFrame({
         "onset": trials["trial_start_s"].astype(float).to_numpy(),
@@ -215,7 +217,7 @@ def _write_events(stem: Path, trials: pd.DataFrame, display: Any, eyes: Sequence
                     "Levels": {"1": "correct", "0": "wrong"}},
         "response_time": {"Description": "response time from the start of the response phase", "Units": "s"},
     }
-    sidecar: dict[str, Any] = {
+    sidecar: JsonObject = {
         "TaskName": study,
         "TaskDescription": str((meta.get("response") or {}).get("question") or study),
         "StimulusPresentation": _stimulus_presentation(display, eyes[0]),
@@ -232,22 +234,22 @@ def _is_list_column(values: pd.Series) -> bool:
     return bool(len(sample)) and isinstance(sample.iloc[0], (list, tuple, np.ndarray))
 
 
-def _flag(value: Any) -> Any:
+def _flag(value: object) -> int | str:
     if value is None or (isinstance(value, float) and np.isnan(value)) or value is pd.NA:
         return "n/a"
     return int(bool(value))
 
 
 # ---- physio ----------------------------------------------------------------------------------------------
-def _write_physio(stem: Path, samples: pd.DataFrame, display: Any, eye: str, ipd_m: float, source: str,
-                  source_file: str, meta: Mapping[str, Any]) -> None:
+def _write_physio(stem: Path, samples: pd.DataFrame, display: DisplayProfile, eye: str, ipd_m: float, source: str,
+                  source_file: str, meta: JsonMapping) -> None:
     fixation = samples[["fixation_x_m", "fixation_y_m", "fixation_z_m"]].to_numpy(dtype=np.float64)
     valid = samples["gaze_valid"].fillna(False).astype(bool).to_numpy()
     px = gaze_on_image_px(fixation, display, eye, ipd_m)
     px[~valid] = np.nan
     table = pd.DataFrame({"timestamp": samples["gaze_sample_t_s"].astype(float).to_numpy(),
                           "x_coordinate": px[:, 0], "y_coordinate": px[:, 1]})
-    columns: dict[str, Any] = {
+    columns: JsonObject = {
         "timestamp": {"Description": "time of the tracker sample on the session clock of this run", "Units": "s"},
         "x_coordinate": {"Description": f"where the {eye} eye's line of sight (from its centre of rotation through "
                          "the tracked fixation point) meets its display image, from the left edge", "Units": "pixel"},
@@ -308,14 +310,14 @@ def _median_rate_hz(timestamps_s: np.ndarray) -> float:
     return float(1.0 / np.median(steps)) if len(steps) else 0.0
 
 
-def _tracker_manufacturer(tracker: Any) -> str:
+def _tracker_manufacturer(tracker: object) -> str:
     """The tracker kind of psyop's ``--tracker`` (never its host or file argument)."""
     kind = str(tracker or "").split(":", 1)[0]
     return {"sim": "none (psyop simulated tracker)", "pupil": "Pupil Labs", "replay": "replayed gaze log",
             "serial": "serial-line tracker", "lsl": "Lab Streaming Layer stream"}.get(kind, "unknown")
 
 
-def _write_physioevents(stem: Path, trials: pd.DataFrame, phases: Sequence[Mapping[str, Any]], study: str) -> None:
+def _write_physioevents(stem: Path, trials: pd.DataFrame, phases: Sequence[JsonMapping], study: str) -> None:
     rows: list[tuple[float, float, str, str]] = []
     for trial in trials.itertuples(index=False):
         start, end = float(trial.trial_start_s), float(trial.trial_end_s)
@@ -345,7 +347,7 @@ def _write_physioevents(stem: Path, trials: pd.DataFrame, phases: Sequence[Mappi
 
 
 # ---- dataset files -----------------------------------------------------------------------------------------
-def _copy_sourcedata(directory: Path, target: Path, meta: Mapping[str, Any]) -> None:
+def _copy_sourcedata(directory: Path, target: Path, meta: JsonMapping) -> None:
     target.mkdir(parents=True, exist_ok=True)
     shutil.copy2(directory / dc.SESSION_METADATA_FILE, target / dc.SESSION_METADATA_FILE)
     for name in (meta.get(FINALISED_KEY) or {}):
@@ -378,7 +380,7 @@ def _write_participants(out: Path, exported: Sequence[ExportedSession], data_roo
     })
 
 
-def _description(exported: Sequence[ExportedSession]) -> dict[str, Any]:
+def _description(exported: Sequence[ExportedSession]) -> JsonObject:
     studies = sorted({s.study for s in exported})
     return {
         "Name": f"psyop sessions: {', '.join(studies)}",
@@ -421,18 +423,18 @@ def _write_tsv(path: Path, table: pd.DataFrame) -> None:
 
 def _write_tsv_gz(path: Path, table: pd.DataFrame) -> None:
     """Headerless (BIDS continuous recordings), gzip with no name or time in its header (reproducible)."""
-    def write(raw: Any) -> None:
+    def write(raw: BinaryIO) -> None:
         with gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as handle:
             handle.write(_tsv_text(table, header=False).encode())
 
     write_atomic(path, write)
 
 
-def _write_json(path: Path, content: Mapping[str, Any]) -> None:
+def _write_json(path: Path, content: JsonMapping) -> None:
     write_atomic(path, json.dumps(content, indent=2, default=_json_default) + "\n")
 
 
-def _json_default(value: Any) -> Any:
+def _json_default(value: object) -> int | float | bool:
     if isinstance(value, np.integer):
         return int(value)
     if isinstance(value, np.floating):

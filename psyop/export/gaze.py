@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Mapping
 
 import numpy as np
 import pandas as pd
@@ -26,6 +26,7 @@ import pandas as pd
 from psyop import datacontract as dc
 from psyop.errors import UserError
 from psyop.optics.display import DisplayProfile
+from psyop.records import JsonMapping
 
 #: The raw gaze stream of a session (every tracker sample), finalised beside trials.parquet.
 RAW_GAZE_FILE = "gaze.parquet"
@@ -94,7 +95,7 @@ def session_gaze(directory: Path) -> SessionGaze:
     return SessionGaze(source, name, table[[c for c in keep if c in table]])
 
 
-def display_from_metadata(meta: Mapping[str, Any], where: str) -> DisplayProfile:
+def display_from_metadata(meta: JsonMapping, where: str) -> DisplayProfile:
     """The session's display profile as session.json records it (``display``)."""
     raw = meta.get("display")
     if not isinstance(raw, Mapping):

@@ -92,7 +92,7 @@ def _check_clip(near_m: ArrayLike, far_m: ArrayLike) -> None:
 
 def off_axis_tangents(tangents: ArrayLike, offset_m: ArrayLike, d_m: float) -> np.ndarray:
     """(n, 4) tangents (L, R, B, T) of the fixed image rectangle seen from C + offset."""
-    l, r, b, t = (float(x) for x in tangents)
+    l, r, b, t = (float(x) for x in np.asarray(tangents, dtype=np.float64))
     off = np.atleast_2d(np.asarray(offset_m, dtype=np.float64))
     inv_d = 0.0 if math.isinf(d_m) else 1.0 / float(d_m)
     scale = 1.0 / (1.0 + off[:, 2] * inv_d)

@@ -16,7 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Mapping
+from psyop.records import JsonMapping
 
 #: Smallest allowed virtual-image distance. The centre of projection moves up to NC (< 1 cm)
 #: from C, so the image must stay well in front of it for the frustum to be defined.
@@ -145,7 +146,7 @@ _ALLOWED_KEYS = {"name", "width_px", "height_px", "refresh_hz", "d_m", "horizont
                  "left_tangents", *_TANGENT_KEYS}
 
 
-def _parse_distance(value: Any) -> float:
+def _parse_distance(value: object) -> float:
     if value is None:
         return math.inf
     if isinstance(value, str) and value.strip().lower() in ("inf", "infinity", ".inf"):
@@ -155,7 +156,7 @@ def _parse_distance(value: Any) -> float:
     return float(value)
 
 
-def display_profile_from_mapping(mapping: Mapping[str, Any]) -> DisplayProfile:
+def display_profile_from_mapping(mapping: JsonMapping) -> DisplayProfile:
     """Validate a user-defined profile (e.g. read from protocol YAML) and build it.
 
     Required: ``name``, ``width_px``, ``height_px``, ``refresh_hz``, and either all four of
@@ -192,7 +193,7 @@ def display_profile_from_mapping(mapping: Mapping[str, Any]) -> DisplayProfile:
         raise ValueError(f"display profile: left_tangents must be a list of 4 numbers [left, right, bottom, top], got {left!r}")
     if has_tangents:
         return DisplayProfile(name, mapping["width_px"], mapping["height_px"], mapping["refresh_hz"],
-                              *(mapping[k] for k in _TANGENT_KEYS), d_m=d_m,
+                              **{k: mapping[k] for k in _TANGENT_KEYS}, d_m=d_m,
                               left_tangents=None if left is None else tuple(left))
     for k in ("width_px", "height_px"):
         if isinstance(mapping[k], bool) or not isinstance(mapping[k], int) or mapping[k] <= 0:

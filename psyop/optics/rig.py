@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -21,6 +19,7 @@ from psyop.optics.camera import EyeCamera, ViewGeometry, make_eye_camera, make_v
 from psyop.optics.display import DisplayProfile
 from psyop.optics.eye_models import EyeModel
 from psyop.optics.ranges import IPD_M, NC_M
+from psyop.records import TrialRow
 
 EYE_NAMES: tuple[str, ...] = ("left", "right")
 
@@ -51,7 +50,7 @@ class NcRule:
     column_unit: str = "mm"
     signed: bool = False
 
-    def signed_nc_m_for(self, eye_model_nc_m: float, row: Mapping[str, Any] | None) -> float:
+    def signed_nc_m_for(self, eye_model_nc_m: float, row: TrialRow | None) -> float:
         """The signed NC of a ``signed`` rule's trial (its level in metres); for other rules :meth:`nc_m_for`."""
         if not self.signed:
             return self.nc_m_for(eye_model_nc_m, row)
@@ -59,12 +58,12 @@ class NcRule:
         value = level / 1000.0 if self.column_unit == "mm" else level * eye_model_nc_m
         return 0.0 if value == 0.0 else float(math.copysign(NC_M.check(abs(value), "the rendered NC"), value))
 
-    def _level(self, row: Mapping[str, Any] | None) -> float:
-        if row is None or self.column not in row:
+    def _level(self, row: TrialRow | None) -> float:
+        if row is None or self.column is None or self.column not in row:
             raise ValueError(f"the rendered NC is the trial's {self.column!r}; this frame has no trial row")
         return float(row[self.column])
 
-    def nc_m_for(self, eye_model_nc_m: float, row: Mapping[str, Any] | None) -> float:
+    def nc_m_for(self, eye_model_nc_m: float, row: TrialRow | None) -> float:
         if self.nc_m is not None:
             value = self.nc_m
         elif self.scale is not None:
@@ -104,7 +103,7 @@ class EyeRig:
         """``eyes``: the protocol's ``eyes:`` value (``right``, ``left`` or ``stereo``)."""
         return cls(eye_model, float(ipd_m), EYE_NAMES if eyes == "stereo" else (eyes,), ipd_source, rendering_nc)
 
-    def rendered_nc_m(self, row: Mapping[str, Any] | None = None) -> float:
+    def rendered_nc_m(self, row: TrialRow | None = None) -> float:
         """The NC this trial is rendered with: the eye model's, or the protocol's ``rendering_nc``."""
         if self.rendering_nc is None:
             return self.nc_m
@@ -125,13 +124,13 @@ class EyeRig:
         return np.array([(-0.5 if eye == "left" else 0.5) * self.ipd_m, 0.0, 0.0])
 
     def camera(self, display: DisplayProfile, eye: str, fixation_m: ArrayLike, mode: str,
-               row: Mapping[str, Any] | None = None, **kwargs: float) -> EyeCamera:
+               row: TrialRow | None = None, **kwargs: float) -> EyeCamera:
         """The camera of ``eye`` for this frame (``psyop.optics.camera.make_eye_camera``); ``row``: the
         trial's row, for a rendered NC that is a factor (:class:`NcRule`)."""
         return make_eye_camera(display, eye, fixation_m, self.ipd_m, self.rendered_nc_m(row), mode, **kwargs)
 
     def view_camera(self, view: ViewGeometry, width_px: int, height_px: int, fixation_m: ArrayLike,
-                    mode: str, row: Mapping[str, Any] | None = None, **kwargs: float) -> EyeCamera:
+                    mode: str, row: TrialRow | None = None, **kwargs: float) -> EyeCamera:
         """The camera of a view a headset runtime reported (``psyop.optics.camera.make_view_camera``),
         with this rig's rendered NC (``row``: the trial's row, as :meth:`camera`). Place the views with
         :meth:`place_views` first."""
@@ -158,10 +157,16 @@ class EyeRig:
             raise ValueError("the runtime reported both eyes at the same position; cannot place a fixed ipd")
         half = 0.5 * self.ipd_m * axis / norm
         placed = {"left": mid - half, "right": mid + half}
-        return tuple(dataclasses.replace(v, centre_m=tuple(float(x) for x in placed[v.eye])) for v in views)
+        return tuple(dataclasses.replace(v, centre_m=_xyz(placed[v.eye])) for v in views)
 
     def as_dict(self) -> dict[str, object]:
         """What session.json records."""
         return {"eyes": list(self.eyes), "ipd_m": self.ipd_m, "ipd_source": self.ipd_source,
                 "eye_model": self.eye_model.name, "nc_m": self.nc_m,
                 "rendering_nc": None if self.rendering_nc is None else self.rendering_nc.as_dict()}
+
+
+def _xyz(point_m: np.ndarray) -> tuple[float, float, float]:
+    """A 3-vector as a tuple of three floats (a ViewGeometry centre)."""
+    x, y, z = (float(v) for v in point_m)
+    return (x, y, z)

@@ -124,7 +124,7 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
                     pending = set(pending)
                 except TimeoutError:
                     done = set()
-                except Exception as exc:  # noqa: BLE001 - the futures of a dead scheduler are cancelled
+                except Exception as exc:  # the futures of a dead scheduler are cancelled (re-raised below)
                     if "Cancelled" in type(exc).__name__ or _connection_lost(exc):
                         raise lost(f"the scheduler connection was lost ({type(exc).__name__})") from None
                     raise
@@ -133,7 +133,7 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
                         raise lost("the scheduler cancelled its tasks (it was stopped or restarted)")
                     try:
                         results[index[future.key]] = future.result()
-                    except Exception as exc:  # noqa: BLE001 - a cancelled future of a dead scheduler
+                    except Exception as exc:  # a cancelled future of a dead scheduler (re-raised below)
                         if type(exc).__name__ in ("CancelledError", "FutureCancelledError"):
                             raise lost(f"the scheduler cancelled its tasks ({type(exc).__name__})") from None
                         if future.status != "error" and _connection_lost(exc):  # not the replication's own error

@@ -14,7 +14,7 @@ whole power table byte for byte, for every shipped study.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import pandas as pd
@@ -22,6 +22,7 @@ import pyarrow as pa
 
 from psyop import datacontract as dc
 from psyop.session.log.layout import SessionPaths
+from psyop.records import JsonMapping, JsonObject
 
 
 class MemoryLog:
@@ -33,27 +34,27 @@ class MemoryLog:
         self.paths = paths
         self.trial_schema = trial_schema
         self.run_index = 0
-        self.metadata: dict[str, Any] = {}
-        self._rows: list[dict[str, Any]] = []
+        self.metadata: JsonObject = {}
+        self._rows: list[JsonObject] = []
         self.trials: pd.DataFrame | None = None
 
-    def open(self, metadata: Mapping[str, Any]) -> set[int]:
+    def open(self, metadata: JsonMapping) -> set[int]:
         self.metadata = dict(metadata)
         return set()  # a fresh session: nothing to resume
 
-    def append_trial(self, row: Mapping[str, Any], frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
+    def append_trial(self, row: JsonMapping, frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
         self._rows.append({name: row.get(name) for name in self.trial_schema.names})
 
     def append_gaze(self, gaze: pa.Table, key: int = -1) -> None:
         return None  # raw gaze samples: no analysis of a replication reads them
 
-    def update_metadata(self, **fields: Any) -> None:
+    def update_metadata(self, **fields: Any) -> None:  # Any: session.json values (JSON)
         self.metadata.update(fields)
 
     def close(self) -> None:
         return None
 
-    def finalise(self, *, status: str, summary: Mapping[str, Any] | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    def finalise(self, *, status: str, summary: JsonMapping | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
         """The trial table as the durable log's salvage gives it (one row per trial, by trial)."""
         columns = {name: [r[name] for r in self._rows] for name in self.trial_schema.names}
         trials = pa.Table.from_pydict(columns, schema=self.trial_schema).to_pandas()

@@ -18,7 +18,7 @@ class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=False)
 
 
-def _no_bool(value: Any) -> Any:
+def _no_bool(value: Any) -> Any:  # Any: pydantic validator input
     # YAML `yes`/`true` would otherwise silently become 1.0.
     if isinstance(value, bool):
         raise ValueError("expected a number, got a boolean (true/false); write a number such as 1 or 0.5")

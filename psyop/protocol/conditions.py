@@ -7,10 +7,10 @@ nested inside its parent's level. Adaptive factors are not crossed (their value 
 from __future__ import annotations
 
 import math
-from typing import Any
 
 from psyop.protocol.base import format_level
 from psyop.protocol.design import Design, Level
+from psyop.records import JsonObject
 
 
 def factor_order(design: Design) -> list[str]:
@@ -51,7 +51,7 @@ def expand_conditions(design: Design) -> list[dict[str, Level]]:
     return [{name: c[name] for name in written} for c in conditions]
 
 
-def condition_label(condition: dict[str, Any], design: Design) -> str:
+def condition_label(condition: JsonObject, design: Design) -> str:
     """``back_D=1|level_D=0.25``: crossed (non-adaptive) factors in written order."""
     return "|".join(f"{name}={format_level(condition[name])}" for name, factor in design.factors.items()
                     if factor.adaptive is None)

@@ -139,12 +139,12 @@ class DisplaySpec(StrictModel):
 
     @field_validator("profile", mode="after")
     @classmethod
-    def _profile_name(cls, value: Any) -> Any:
+    def _profile_name(cls, value: Any) -> Any:  # Any: pydantic validator input
         return _known("display profile", DISPLAY_PROFILE_NAMES)(value) if isinstance(value, str) else value
 
     @field_validator("eye_model", mode="after")
     @classmethod
-    def _eye_name(cls, value: Any) -> Any:
+    def _eye_name(cls, value: Any) -> Any:  # Any: pydantic validator input
         return _known("eye model", EYE_MODEL_NAMES)(value) if isinstance(value, str) else value
 
 

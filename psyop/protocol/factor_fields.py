@@ -9,15 +9,16 @@ condition and re-validates it, so a level outside a field's range is refused at 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from typing import Any
 
 from pydantic import BaseModel
 
 from psyop.protocol.scene import Depth, FactorRef
+from psyop.records import JsonMapping, Loc
 
 
-def factor_fields(value: Any, path: tuple[Any, ...] = ()) -> Iterator[tuple[tuple[Any, ...], FactorRef]]:
+def factor_fields(value: object, path: Loc = ()) -> Iterator[tuple[Loc, FactorRef]]:
     """Every ``{factor: NAME}`` inside ``value`` (a scene item), with its key path below it.
 
     Examples
@@ -40,7 +41,7 @@ def factor_fields(value: Any, path: tuple[Any, ...] = ()) -> Iterator[tuple[tupl
             yield from factor_fields(item, path + (index,))
 
 
-def resolve_factor_fields(value: Any, values: Mapping[str, Any]) -> Any:
+def resolve_factor_fields(value: Any, values: JsonMapping) -> Any:  # Any: a scene item or any field value in it
     """``value`` with every ``{factor: NAME}`` replaced by ``float(values[NAME])`` (unchanged, the same
     object, when it has none). A missing or non-finite value is a ValueError naming the factor.
 

@@ -16,6 +16,7 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from psyop.protocol.source import Path, YamlDocument, format_path
+from psyop.records import JsonObject, Loc
 
 MAX_REPORTED = 8
 _BOUNDS = {"greater_than": "greater than", "greater_than_equal": "at least", "less_than": "less than",
@@ -23,13 +24,13 @@ _BOUNDS = {"greater_than": "greater than", "greater_than_equal": "at least", "le
 _BOUND_KEYS = {"greater_than": "gt", "greater_than_equal": "ge", "less_than": "lt", "less_than_equal": "le"}
 
 
-def _candidates(tp: Any) -> list[Any]:
+def _candidates(tp: Any) -> list[Any]:  # Any: typing annotations (unions, Annotated, models)
     """Flatten Annotated / Union / Optional into the member types."""
     origin = typing.get_origin(tp)
     if origin is typing.Annotated:
         return _candidates(typing.get_args(tp)[0])
     if origin in (typing.Union, types.UnionType):
-        out: list[Any] = []
+        out: list[Any] = []  # Any: typing annotations
         for arg in typing.get_args(tp):
             out += _candidates(arg)
         return out
@@ -44,11 +45,11 @@ def _kind_tag(model: type[BaseModel]) -> str | None:
     return args[0] if args else None
 
 
-def models_at(root: type[BaseModel], loc: tuple[Any, ...]) -> list[type[BaseModel]]:
+def models_at(root: type[BaseModel], loc: Loc) -> list[type[BaseModel]]:
     """The model classes that could be validating the mapping at ``loc``."""
-    current: list[Any] = [root]
+    current: list[Any] = [root]  # Any: models or typing annotations along the path
     for element in loc:
-        nxt: list[Any] = []
+        nxt: list[Any] = []  # Any: the same, one level deeper
         for tp in current:
             for candidate in _candidates(tp):
                 origin = typing.get_origin(candidate)
@@ -69,19 +70,19 @@ def models_at(root: type[BaseModel], loc: tuple[Any, ...]) -> list[type[BaseMode
     return [c for tp in current for c in _candidates(tp) if isinstance(c, type) and issubclass(c, BaseModel)]
 
 
-def _allowed_keys(root: type[BaseModel], loc: tuple[Any, ...]) -> list[str]:
+def _allowed_keys(root: type[BaseModel], loc: Loc) -> list[str]:
     keys: list[str] = []
     for model in models_at(root, loc):
         keys += [k for k in model.model_fields if k not in keys]
     return keys
 
 
-def _short(value: Any) -> str:
+def _short(value: object) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _describe(root: type[BaseModel], error: dict[str, Any]) -> tuple[str, bool]:
+def _describe(root: type[BaseModel], error: JsonObject) -> tuple[str, bool]:
     """(message with a hint, whether it points at a key rather than a value)."""
     kind = error["type"]
     loc = tuple(error["loc"])

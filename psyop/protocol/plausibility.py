@@ -8,12 +8,12 @@ and still exits 0 (a deliberate near stimulus stays possible).
 from __future__ import annotations
 
 import math
-from typing import Any
 
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.scene import Depth
 from psyop.protocol.source import read_yaml
+from psyop.records import JsonObject, Loc
 
 #: The nearest depth a participant can see sharp and fuse: 10 D (0.1 m) is about the near point of a
 #: young adult eye (accommodation amplitude ~10 D at 20 years) and about the nearest a headset's
@@ -23,7 +23,7 @@ NEAREST_SEEN_D = 10.0
 DEPTH_FIELDS = ("depth", "near", "far", "near_depth", "far_depth")
 
 
-def _nearest_D(depth: Depth, conditions: list[dict[str, Any]]) -> float:
+def _nearest_D(depth: Depth, conditions: list[JsonObject]) -> float:
     values = []
     for condition in conditions or [{}]:
         try:
@@ -35,7 +35,7 @@ def _nearest_D(depth: Depth, conditions: list[dict[str, Any]]) -> float:
     return max(values, default=0.0)
 
 
-def plausibility_warnings(protocol: Protocol) -> list[tuple[tuple[Any, ...], str]]:
+def plausibility_warnings(protocol: Protocol) -> list[tuple[Loc, str]]:
     """(key path, message) for every depth nearer than :data:`NEAREST_SEEN_D` in some condition.
 
     Examples
@@ -45,7 +45,7 @@ def plausibility_warnings(protocol: Protocol) -> list[tuple[tuple[Any, ...], str
     50.0
     """
     conditions = expand_conditions(protocol.design)
-    found = []
+    found: list[tuple[Loc, str]] = []
     for index, item in enumerate(protocol.scene):
         for name in DEPTH_FIELDS:
             depth = getattr(item, name, None)

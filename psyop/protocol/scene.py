@@ -37,7 +37,7 @@ class Depth(StrictModel):
 
     @model_validator(mode="before")
     @classmethod
-    def _a_unit_is_given(cls, value: Any) -> Any:
+    def _a_unit_is_given(cls, value: Any) -> Any:  # Any: pydantic validator input
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             raise ValueError(f"a depth needs its unit: write {{D: {value:g}}} (dioptres) or {{m: {value:g}}} (metres)")
         return value

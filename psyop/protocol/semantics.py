@@ -27,6 +27,7 @@ from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, PinkNoiseSurface,
                                   Mesh, ReachTarget, Room, SinusoidalBorder, TargetField, centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
+from psyop.records import JsonObject, Loc
 
 #: Random sequential placement of equal discs jams at about 54.7 % area coverage. Measured for
 #: 2.6 deg targets in a 60 deg field (centres within field/2 - size/2): 40 % coverage needs about
@@ -44,7 +45,7 @@ ADAPTIVE_PROCEDURES: frozenset[str] = frozenset({"quest_plus", "staircase"})
 class Issue:
     """One problem: where (key path) and what to do."""
 
-    path: tuple[Any, ...]
+    path: Loc
     message: str
 
 
@@ -61,11 +62,11 @@ class _Checker:
         self.factors = protocol.design.factors
         self.mesh_triangles: dict[str, int] = {}  # mesh item id -> triangles of its model (read by check_mesh)
 
-    def add(self, path: tuple[Any, ...], message: str) -> None:
+    def add(self, path: Loc, message: str) -> None:
         self.issues.append(Issue(path, message))
 
     # -- factors ------------------------------------------------------------------------------
-    def factor_exists(self, name: str, path: tuple[Any, ...], *, numeric: bool | None = None) -> bool:
+    def factor_exists(self, name: str, path: Loc, *, numeric: bool | None = None) -> bool:
         if name not in self.factors:
             self.add(path, f"'{name}' is not a factor of design.factors.{_suggest(name, list(self.factors))} "
                            f"Factors: {', '.join(self.factors)}")
@@ -121,7 +122,7 @@ class _Checker:
             self.factor_exists(name, ("design", "randomisation", "by", index))
 
     # -- scene -------------------------------------------------------------------------------
-    def depth_refs(self, depth: Depth, path: tuple[Any, ...]) -> bool:
+    def depth_refs(self, depth: Depth, path: Loc) -> bool:
         ok = True
         names = depth.factor_names
         for name in names:
@@ -135,7 +136,7 @@ class _Checker:
                 ok = False
         return ok
 
-    def check_adaptive(self, name: str, path: tuple[Any, ...]) -> None:
+    def check_adaptive(self, name: str, path: Loc) -> None:
         """The procedures model a 2AFC psychometric function of the response's level."""
         response = self.p.response
         if response.kind != "two_interval" or response.level_factor != name:
@@ -145,7 +146,7 @@ class _Checker:
         if len(adaptive) > 1 and name == adaptive[1]:
             self.add(path + ("adaptive",), f"only one adaptive factor per protocol (found {', '.join(adaptive)})")
 
-    def check_scene(self, conditions: list[dict[str, Any]]) -> None:
+    def check_scene(self, conditions: list[JsonObject]) -> None:
         ids: dict[str, int] = {}
         for index, item in enumerate(self.p.scene):
             path = ("scene", index)
@@ -192,8 +193,8 @@ class _Checker:
                         self.add(("trial", "phases", index, "show", j),
                                  f"no scene primitive has id '{name}'.{_suggest(name, list(ids))} Ids: {', '.join(ids)}")
 
-    def check_fixation_field(self, item: FixationTarget, path: tuple[Any, ...],
-                             conditions: list[dict[str, Any]]) -> None:
+    def check_fixation_field(self, item: FixationTarget, path: Loc,
+                             conditions: list[JsonObject]) -> None:
         """The circling target stays in the forward field for every level of a centre or path factor."""
         from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
 
@@ -211,7 +212,7 @@ class _Checker:
                          "make centre_deg plus eccentricity_deg less than 90")
                 return
 
-    def _value_sets(self, conditions: list[dict[str, Any]]) -> Iterator[dict[str, Any]]:
+    def _value_sets(self, conditions: list[JsonObject]) -> Iterator[JsonObject]:
         """Every set of factor values a scene is built from: each condition, each interval's ``set:``
         overrides of it, and an adaptive factor at both ends of its range."""
         adaptive = {n: f.adaptive for n, f in self.factors.items() if f.adaptive is not None}
@@ -227,7 +228,7 @@ class _Checker:
                 for override in overrides:
                     yield {**condition, **end, **override}
 
-    def check_factor_fields(self, item: Any, path: tuple[Any, ...], conditions: list[dict[str, Any]]) -> None:
+    def check_factor_fields(self, item: BaseModel, path: Loc, conditions: list[JsonObject]) -> None:
         """Each ``{factor: NAME}`` of a size or contrast names a numeric factor, and every level it can take
         fits the field's range (the item is re-validated with each trial's values)."""
         from pydantic import ValidationError
@@ -250,7 +251,7 @@ class _Checker:
             except ValueError:  # an adaptive level, known at run time: its range's ends are checked next
                 continue
 
-    def check_mesh(self, item: Mesh, path: tuple[Any, ...]) -> None:
+    def check_mesh(self, item: Mesh, path: Loc) -> None:
         """The model is read now (psyop.mesh.load: every file-level problem is one line at the item's ``file``),
         and a mesh at optical infinity is refused (a model has a place, not only directions)."""
         from psyop.mesh.load import load_mesh
@@ -301,7 +302,7 @@ class _Checker:
                             "(its show: list)")
             return
 
-    def check_depth_values(self, depth: Depth, path: tuple[Any, ...], conditions: list[dict[str, Any]]) -> None:
+    def check_depth_values(self, depth: Depth, path: Loc, conditions: list[JsonObject]) -> None:
         for condition in conditions:
             try:
                 value = depth.resolve_D(condition)
@@ -314,7 +315,7 @@ class _Checker:
                                f"{DEPTH_D.describe()} (0 D = optical infinity)")
                 return
 
-    def check_order(self, near: Depth, far: Depth, path: tuple[Any, ...], conditions: list[dict[str, Any]],
+    def check_order(self, near: Depth, far: Depth, path: Loc, conditions: list[JsonObject],
                     message: str) -> None:
         for condition in conditions:
             try:
@@ -325,7 +326,7 @@ class _Checker:
                 self.add(path, f"{message} (here near = {near_D:g} D, far = {far_D:g} D); swap them")
                 return
 
-    def check_target_field(self, item: TargetField, path: tuple[Any, ...], conditions: list[dict[str, Any]]) -> None:
+    def check_target_field(self, item: TargetField, path: Loc, conditions: list[JsonObject]) -> None:
         self.check_order(item.near, item.far, path + ("near",), conditions,
                          "the depth range is in the wrong order: near must be more dioptres than far")
         if item.size_deg >= item.field_deg:
@@ -342,7 +343,7 @@ class _Checker:
                                         f"(they would cover {coverage:.0%} of it; random placement becomes slow above 40 % and jams near 55 %). "
                                         f"Use at most {fit} targets, smaller targets or a wider field.")
 
-    def check_image(self, surface: ImageSurface, path: tuple[Any, ...]) -> None:
+    def check_image(self, surface: ImageSurface, path: Loc) -> None:
         base = self.base_dir or FsPath.cwd()
         target = (base / surface.path)
         if not target.is_file():
@@ -409,7 +410,7 @@ class _Checker:
             self.add(("display", "rendering_nc", "signed"), "a signed rendering NC sets each trial's mode from its "
                                                            "sign: only a with_against response reads it; remove signed")
 
-    def check_with_against(self, response: Any, path: tuple[Any, ...]) -> None:
+    def check_with_against(self, response: Any, path: Loc) -> None:  # Any: narrowed by kind (item 4's dispatch)
         """NC nulling: the response's ``nc_factor`` is the signed factor ``display.rendering_nc`` reads."""
         if not self.factor_exists(response.nc_factor, path + ("nc_factor",), numeric=True):
             return
@@ -479,7 +480,7 @@ class _Checker:
                 used.add(value.factor)
         return used
 
-    def check_rendering_nc(self, conditions: list[dict[str, Any]]) -> None:
+    def check_rendering_nc(self, conditions: list[JsonObject]) -> None:
         """``display.rendering_nc``: a numeric factor (``mm`` ones named ``..._mm``), not a ``set:`` override,
         and every value giving an NC in psyop.optics.ranges.NC_M."""
         from psyop.optics.ranges import NC_M
@@ -541,7 +542,7 @@ class _Checker:
                          "to it, so its conditions would look the same on screen. Refer to it (e.g. depth: "
                          f"{{factor: {name}}}, or a size/contrast field {{factor: {name}}}) or remove it")
 
-    def mode_factor(self, name: str, path: tuple[Any, ...]) -> None:
+    def mode_factor(self, name: str, path: Loc) -> None:
         if self.factor_exists(name, path, numeric=False):
             for level in self.factors[name].all_levels():
                 if level not in RENDERING_MODES:
@@ -586,7 +587,7 @@ class _Checker:
                         self.add(path + ("by_condition",), f"no reach model for rendering '{level}'; add it")
 
 
-    def check_ordinal_observer(self, observer: Any, path: tuple[Any, ...]) -> None:
+    def check_ordinal_observer(self, observer: Any, path: Loc) -> None:  # Any: narrowed by kind
         """p_correct must give a probability for every (mode, separation) a trial can have."""
         response = self.p.response
         if isinstance(response.mode, ModeFromFactor):
@@ -609,13 +610,13 @@ class _Checker:
                                                          f"{separation} in mode '{mode}'; add '{separation}: p'")
 
 
-def _in_order(sub: tuple[Any, ...], loc: tuple[Any, ...]) -> bool:
+def _in_order(sub: Loc, loc: Loc) -> bool:
     """``sub``'s keys appear in ``loc`` in order (pydantic's loc adds union tags such as 'white_noise')."""
     it = iter(loc)
     return all(any(key == x for x in it) for key in sub)
 
 
-def _factor_refs(value: Any) -> set[str]:
+def _factor_refs(value: object) -> set[str]:
     """Every factor name a scene item refers to (``FactorRef``, ``Depth.factor``), at any depth."""
     if isinstance(value, FactorRef):
         return {value.factor}
@@ -630,7 +631,7 @@ def _factor_refs(value: Any) -> set[str]:
     return set()
 
 
-def _same(a: Any, b: Any) -> bool:
+def _same(a: float | str, b: float | str) -> bool:
     if isinstance(a, str) or isinstance(b, str):
         return str(a) == str(b)
     return abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(a)))

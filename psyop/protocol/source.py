@@ -15,7 +15,7 @@ import yaml
 
 from psyop.errors import UserError
 
-Path = tuple[Any, ...]
+Path = tuple[Any, ...]  # Any: YAML mapping keys may be any scalar (str, int, float, bool)
 
 #: libyaml's parser when available (about 30x faster, same node tree and marks).
 _Loader: type = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
@@ -33,7 +33,7 @@ class Mark:
 class YamlDocument:
     """Constructed data and the marks of every value (``value_marks``) and key (``key_marks``)."""
 
-    data: Any
+    data: Any  # Any: the parsed YAML document, validated by the pydantic models
     source_name: str
     value_marks: dict[Path, Mark] = field(default_factory=dict)
     key_marks: dict[Path, Mark] = field(default_factory=dict)
@@ -74,7 +74,7 @@ def format_path(path: Path) -> str:
     return text or "(top level)"
 
 
-def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDocument, seen: set[int], depth: int) -> None:
+def _walk(loader: yaml.SafeLoader, node: yaml.Node, path: Path, doc: YamlDocument, seen: set[int], depth: int) -> None:
     if depth > 200:
         raise UserError("the protocol is nested more than 200 levels deep; flatten it", doc.location(_mark(node)))
     doc.value_marks.setdefault(path, _mark(node))
@@ -85,7 +85,7 @@ def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDocument, seen: set
     if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
         doc.containers.add(path)
     if isinstance(node, yaml.MappingNode):
-        keys: dict[Any, Mark] = {}
+        keys: dict[Any, Mark] = {}  # Any: a YAML key of any scalar type
         for key_node, value_node in node.value:
             if key_node.tag == "tag:yaml.org,2002:merge":
                 continue  # `<<: *anchor`: merged keys may be overridden; their marks stay at the anchor
@@ -120,7 +120,7 @@ def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDocument, seen: set
 _PLAIN_TAGS = frozenset(f"tag:yaml.org,2002:{name}" for name in ("str", "int", "float", "bool", "null", "seq", "map"))
 
 
-def _check_tag(loader: Any, node: yaml.Node, doc: YamlDocument) -> None:
+def _check_tag(loader: yaml.SafeLoader, node: yaml.Node, doc: YamlDocument) -> None:
     if node.tag in _PLAIN_TAGS:
         return
     value = node.value if isinstance(node, yaml.ScalarNode) else None
@@ -137,7 +137,7 @@ def _check_tag(loader: Any, node: yaml.Node, doc: YamlDocument) -> None:
 _CONSTRUCT_ERRORS = (ValueError, KeyError, TypeError, OverflowError, ArithmeticError, AttributeError, yaml.YAMLError)
 
 
-def _check_scalar(loader: Any, node: yaml.Node, doc: YamlDocument) -> None:
+def _check_scalar(loader: yaml.SafeLoader, node: yaml.Node, doc: YamlDocument) -> None:
     try:
         loader.construct_object(node)
     except _CONSTRUCT_ERRORS as error:
@@ -157,7 +157,7 @@ def _value_error(node: yaml.Node, error: BaseException, location: str) -> UserEr
                      location)
 
 
-def _codepoint(character: Any) -> int:
+def _codepoint(character: int | str) -> int:
     return character if isinstance(character, int) else ord(str(character)[:1] or "\0")
 
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from psyop.optics.angles import angle_between_deg, fick_direction, local_axes, polar_to_fick_deg
 from psyop.rendering.scene import (
@@ -50,7 +50,7 @@ def direction_from_angles(azimuth_deg: float, elevation_deg: float) -> np.ndarra
 FACINGS = ("frontoparallel", "eye")
 
 
-def place_centre_m(direction: Sequence[float], distance_m: float, origin_m: Sequence[float] = ORIGIN,
+def place_centre_m(direction: ArrayLike, distance_m: float, origin_m: ArrayLike = ORIGIN,
                    facing: str = "frontoparallel") -> np.ndarray:
     """Where a primitive's centre lies: along ``direction`` from ``origin_m``, on the plane
     ``distance_m`` ahead of the origin (frontoparallel: its depth is the plane's) or at
@@ -83,7 +83,7 @@ def placed_primitive(
     material: Material,
     azimuth_deg: float = 0.0,
     elevation_deg: float = 0.0,
-    origin_m: Sequence[float] = ORIGIN,
+    origin_m: ArrayLike = ORIGIN,
     facing: str = "frontoparallel",
     border: SineBorder | None = None,
     name: str = "",
@@ -144,7 +144,7 @@ def frontoparallel_disc(
     material: Material,
     azimuth_deg: float = 0.0,
     elevation_deg: float = 0.0,
-    origin_m: Sequence[float] = ORIGIN,
+    origin_m: ArrayLike = ORIGIN,
     name: str = "",
 ) -> Primitive:
     """A frontoparallel disc on the plane ``distance_m`` ahead of ``origin_m``, centred on the
@@ -160,7 +160,7 @@ def eye_facing_disc(
     material: Material,
     azimuth_deg: float = 0.0,
     elevation_deg: float = 0.0,
-    origin_m: Sequence[float] = ORIGIN,
+    origin_m: ArrayLike = ORIGIN,
     name: str = "",
 ) -> Primitive:
     """A disc facing ``origin_m``, its centre ``distance_m`` away in the direction of Fick
@@ -176,7 +176,7 @@ def frontoparallel_rect(
     material: Material,
     azimuth_deg: float = 0.0,
     elevation_deg: float = 0.0,
-    origin_m: Sequence[float] = ORIGIN,
+    origin_m: ArrayLike = ORIGIN,
     border: SineBorder | None = None,
     name: str = "",
 ) -> Primitive:
@@ -191,7 +191,7 @@ def frontoparallel_rect(
 def detection_stimulus(
     back_D: float,
     relative_D: float,
-    origin_m: Sequence[float] = ORIGIN,
+    origin_m: ArrayLike = ORIGIN,
     diameter_deg: float = 2.0,
     back_colour: Colour = (1.0, 0.0, 0.0),
     noise_seed: int = 0,
@@ -212,7 +212,7 @@ def ordinal_stimulus(
     rear_D: float,
     front_D: float,
     near_side: str,
-    origin_m: Sequence[float] = ORIGIN,
+    origin_m: ArrayLike = ORIGIN,
     field_deg: float = 24.0,
     amplitude_deg: float = 1.0,
     cycles: float = 3.0,
@@ -240,7 +240,7 @@ def fixation_target(
     distance_m: float,
     azimuth_deg: float,
     elevation_deg: float,
-    origin_m: Sequence[float] = ORIGIN,
+    origin_m: ArrayLike = ORIGIN,
     diameter_deg: float = 0.5,
 ) -> tuple[Primitive, Primitive]:
     """A small red-and-white fixation target: a white disc with a coplanar red centre listed after it."""
@@ -278,7 +278,7 @@ def target_field(
     far_D: float = 0.5,
     diameter_deg: float = 2.6,
     field_deg: float = 60.0,
-    origin_m: Sequence[float] = ORIGIN,
+    origin_m: ArrayLike = ORIGIN,
     max_tries: int = 10_000,
     material: Material | None = None,
     min_gap_deg: float = 0.0,

@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from psyop.optics.camera import EyeCamera
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def camera_is_usable(camera: Any) -> bool:
+def camera_is_usable(camera: EyeCamera) -> bool:
     """True when the camera is flagged valid and all its numbers are finite and non-degenerate."""
     try:
         cop = np.asarray(camera.centre_of_projection_m, dtype=np.float64)
@@ -28,7 +29,7 @@ def camera_is_usable(camera: Any) -> bool:
     return math.isfinite(det) and abs(det) > 1e-300
 
 
-def near_far_m(camera: Any) -> tuple[float, float]:
+def near_far_m(camera: EyeCamera) -> tuple[float, float]:
     """Clip distances recovered from an OpenGL projection; (0, inf) when it is missing or odd."""
     try:
         p = np.asarray(camera.projection, dtype=np.float64)
@@ -41,7 +42,7 @@ def near_far_m(camera: Any) -> tuple[float, float]:
     return (float(near), float(far))
 
 
-def project_points_px(camera: Any, points_head_m: np.ndarray) -> np.ndarray:
+def project_points_px(camera: EyeCamera, points_head_m: ArrayLike) -> np.ndarray:
     """(n, 3) head-space points -> (n, 2) pixel positions (x right, y down) by inverting
     ``pixel_to_ray``: exact ray geometry, no projection matrix. NaN behind the centre."""
     pts = np.atleast_2d(np.asarray(points_head_m, dtype=np.float64))
@@ -55,14 +56,14 @@ def project_points_px(camera: Any, points_head_m: np.ndarray) -> np.ndarray:
     return out
 
 
-def project_directions_px(camera: Any, directions_head: np.ndarray) -> np.ndarray:
+def project_directions_px(camera: EyeCamera, directions_head: np.ndarray) -> np.ndarray:
     """(n, 3) head-space directions (points at infinity, w = 0) -> (n, 2) pixel positions; the
     centre of projection does not enter (zero parallax). NaN for directions pointing backwards."""
     d = np.atleast_2d(np.asarray(directions_head, dtype=np.float64))
     return project_points_px(camera, d + np.asarray(camera.centre_of_projection_m, dtype=np.float64))
 
 
-def pixel_rays(camera: Any, xy_px: np.ndarray) -> np.ndarray:
+def pixel_rays(camera: EyeCamera, xy_px: np.ndarray) -> np.ndarray:
     """(n, 2) pixel positions -> (n, 3) unit ray directions in head space."""
     xy = np.atleast_2d(np.asarray(xy_px, dtype=np.float64))
     uv1 = np.stack([xy[:, 0] / camera.width_px, xy[:, 1] / camera.height_px, np.ones(len(xy))], axis=-1)
@@ -70,7 +71,7 @@ def pixel_rays(camera: Any, xy_px: np.ndarray) -> np.ndarray:
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
-def max_px_per_rad(camera: Any) -> float:
+def max_px_per_rad(camera: EyeCamera) -> float:
     """An upper bound on pixels per radian anywhere in the image (largest at the image corners
     of a planar image): (1 + t^2) / (tangent per pixel), t the largest corner tangent."""
     m = np.asarray(camera.pixel_to_ray, dtype=np.float64)
@@ -83,7 +84,7 @@ def max_px_per_rad(camera: Any) -> float:
     return (1.0 + t2) / per_px
 
 
-def crop_camera(camera: Any, x0_px: int, y0_px: int, width_px: int, height_px: int) -> Any:
+def crop_camera(camera: EyeCamera, x0_px: int, y0_px: int, width_px: int, height_px: int) -> EyeCamera:
     """The same camera restricted to a pixel window: rays and projection are those of the
     full image, so a crop renders exactly the corresponding pixels of the full frame."""
     if width_px <= 0 or height_px <= 0:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from psyop.optics.camera import EyeCamera
 
 import numpy as np
 
@@ -25,7 +25,7 @@ class ImageEllipse:
     radii_px: tuple[float, float]
 
 
-def projected_disc(camera: Any, disc: Primitive) -> ImageEllipse:
+def projected_disc(camera: EyeCamera, disc: Primitive) -> ImageEllipse:
     """The image of a frontoparallel disc (shape DISC, axes along x and y) in pixels; a disc at
     optical infinity is projected as directions (the centre of projection does not enter)."""
     if disc.shape is not Shape.DISC:
@@ -51,7 +51,7 @@ def circle_overlap_area(r1: float, r2: float, distance: float) -> float:
     return a1 + a2 - k
 
 
-def visible_back_area_px(camera: Any, back: Primitive, front: Primitive) -> float:
+def visible_back_area_px(camera: EyeCamera, back: Primitive, front: Primitive) -> float:
     """Area (px^2) of the back disc's image not covered by the nearer front disc's image.
 
     Pixels may be non-square: both ellipses share the same aspect (same similarity), so the
@@ -66,7 +66,7 @@ def visible_back_area_px(camera: Any, back: Primitive, front: Primitive) -> floa
     return (math.pi * rb * rb - overlap) * aspect
 
 
-def border_x_px(camera: Any, surface: Primitive, y_px: np.ndarray, iterations: int = 6) -> np.ndarray:
+def border_x_px(camera: EyeCamera, surface: Primitive, y_px: np.ndarray, iterations: int = 6) -> np.ndarray:
     """Image x (px) of a frontoparallel surface's sinusoidal border at image rows ``y_px``.
 
     Solves, per y, for the local border point whose image has that y (Newton on the

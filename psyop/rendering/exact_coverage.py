@@ -9,7 +9,7 @@ anti-aliasing effort spent on straight background edges (benchmarks/bench_frame_
 
 from __future__ import annotations
 
-from typing import Any
+from psyop.optics.camera import EyeCamera
 
 import numpy as np
 
@@ -17,7 +17,7 @@ from psyop.rendering.camera_math import project_points_px
 from psyop.rendering.scene import Primitive, Shape
 
 
-def projected_corners_px(camera: Any, rect: Primitive) -> np.ndarray:
+def projected_corners_px(camera: EyeCamera, rect: Primitive) -> np.ndarray:
     """(4, 2) image corners (x right, y down) of a RECT primitive, in order around it."""
     if rect.shape is not Shape.RECT:
         raise ValueError("exact coverage is for RECT primitives (straight edges)")
@@ -66,7 +66,7 @@ def coverage_px(corners_px: np.ndarray, width_px: int, height_px: int) -> np.nda
     return cov
 
 
-def projected_area_px(camera: Any, primitive: Primitive, boundary_points: int = 4096) -> float:
+def projected_area_px(camera: EyeCamera, primitive: Primitive, boundary_points: int = 4096) -> float:
     """Exact image area (px^2) of a disc or rect wholly in front of the centre of projection and
     inside the image: the shoelace area of its projected outline (a rect's four corners; a disc's
     outline at ``boundary_points`` points, relative error ~ (2 pi / n)^2 / 6, 4e-7 at 4096). A

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import cast
 
 import moderngl
 import numpy as np
@@ -84,15 +84,15 @@ class FrameChecker:
         self.ctx, self.block_px = ctx, int(block_px)
         self._prog = ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=REDUCE_SHADER)
         self._vao = ctx.vertex_array(self._prog, [])
-        self._targets: dict[tuple[int, int], tuple[Any, Any]] = {}
+        self._targets: dict[tuple[int, int], tuple[moderngl.Texture, moderngl.Framebuffer]] = {}
 
-    def _target(self, size: tuple[int, int]) -> tuple[Any, Any]:
+    def _target(self, size: tuple[int, int]) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
         if size not in self._targets:
             tex = self.ctx.texture(size, 4, dtype="f4")
             self._targets[size] = (tex, self.ctx.framebuffer(color_attachments=[tex]))
         return self._targets[size]
 
-    def summarise(self, colour: Any) -> FrameSummary:
+    def summarise(self, colour: moderngl.Texture) -> FrameSummary:
         """Summary of a float colour texture (e.g. ``Renderer.colour_texture(eye)``)."""
         width, height = colour.size
         size = (-(-width // self.block_px), -(-height // self.block_px))
@@ -102,8 +102,8 @@ class FrameChecker:
         self.ctx.viewport = (0, 0, *size)
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
         colour.use(0)
-        self._prog["u_image"].value = 0
-        self._prog["u_block"].value = self.block_px
+        cast(moderngl.Uniform, self._prog["u_image"]).value = 0
+        cast(moderngl.Uniform, self._prog["u_block"]).value = self.block_px
         self._vao.render(moderngl.TRIANGLES, vertices=3)
         raw = fbo.read(components=4, dtype="f4")
         if previous is not None:

@@ -12,11 +12,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
 
+import moderngl
 import numpy as np
 
-from psyop.optics.camera import make_eye_camera
+from psyop.optics.camera import EyeCamera, make_eye_camera
 from psyop.optics.display import VIVE_PRO, DisplayProfile
 from psyop.rendering.builders import detection_stimulus, direction_from_angles, ordinal_stimulus
 from psyop.rendering.camera_math import crop_camera, project_points_px
@@ -31,7 +31,7 @@ GAZE_DEG = (16.0 * math.cos(0.7), 16.0 * math.sin(0.7))
 
 
 def right_eye_camera(az_deg: float, el_deg: float, mode: str, display: DisplayProfile = VIVE_PRO,
-                     eye: str = "right", near_m: float = 0.01, far_m: float = 100.0) -> Any:
+                     eye: str = "right", near_m: float = 0.01, far_m: float = 100.0) -> EyeCamera:
     """Camera of ``eye`` fixating 0.5 m away in direction (az, el) from the *right* eye's centre
     (64 mm IPD, Gullstrand-Emsley NC)."""
     fixation = RIGHT_CENTRE_M + direction_from_angles(az_deg, el_deg) * 0.5
@@ -48,8 +48,8 @@ def _red_area(img: np.ndarray) -> float:
     return float(np.sum(img[..., 0].astype(np.float64) - img[..., 1]))
 
 
-def detection_area_errors(settings: RenderSettings, ctx: Any, backs_D=(1.0, 2.0, 3.0),
-                          rels_D=(0.25, 0.5, 1.0), half_px: int = 24) -> AreaErrors:
+def detection_area_errors(settings: RenderSettings, ctx: moderngl.Context | None, backs_D: tuple[float, ...] = (1.0, 2.0, 3.0),
+                          rels_D: tuple[float, ...] = (0.25, 0.5, 1.0), half_px: int = 24) -> AreaErrors:
     worst, leak = 0.0, 0.0
     for back_D in backs_D:
         for rel_D in rels_D:
@@ -69,7 +69,7 @@ def detection_area_errors(settings: RenderSettings, ctx: Any, backs_D=(1.0, 2.0,
     return AreaErrors(worst, leak)
 
 
-def border_position_errors(settings: RenderSettings, ctx: Any, mode: str = "ocular") -> np.ndarray:
+def border_position_errors(settings: RenderSettings, ctx: moderngl.Context | None, mode: str = "ocular") -> np.ndarray:
     """|measured - exact| mean border x per image row (px) for the ordinal stimulus."""
     rear, front = ordinal_stimulus(0.5, 2.5, "left", origin_m=RIGHT_CENTRE_M, amplitude_deg=1.0, cycles=3.0,
                                    phase_rad=0.4)
@@ -88,7 +88,7 @@ def border_position_errors(settings: RenderSettings, ctx: Any, mode: str = "ocul
     return np.abs(measured - exact)
 
 
-def straight_edge_errors(ctx: Any, samples: tuple[int, ...] = (1, 2, 4, 8, 16, 32)) -> dict[int, tuple[float, float]]:
+def straight_edge_errors(ctx: moderngl.Context | None, samples: tuple[int, ...] = (1, 2, 4, 8, 16, 32)) -> dict[int, tuple[float, float]]:
     """Max and mean |rendered - exact| / contrast over the edge pixels of a slanted, receding
     solid rect (a room-like straight edge), per samples per axis (1 = one ray per pixel)."""
     from psyop.rendering.exact_coverage import coverage_px, projected_corners_px

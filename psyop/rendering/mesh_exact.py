@@ -9,7 +9,7 @@ bounding boxes, so a ray meets only the triangles that can reach its tile.
 
 from __future__ import annotations
 
-from typing import Any
+from psyop.optics.camera import EyeCamera
 
 import numpy as np
 
@@ -73,7 +73,7 @@ def ray_primitive(origin: np.ndarray, dirs: np.ndarray, prim: Primitive) -> np.n
     return np.where(inside & (t > 0), t, np.inf)
 
 
-def sample_rays(camera: Any, x0_px: int, y0_px: int, width_px: int, height_px: int,
+def sample_rays(camera: EyeCamera, x0_px: int, y0_px: int, width_px: int, height_px: int,
                 samples_per_axis: int) -> np.ndarray:
     """(height, width, s*s, 3) unit head-space rays through an s x s grid in each pixel of the window."""
     s = int(samples_per_axis)
@@ -88,7 +88,7 @@ def sample_rays(camera: Any, x0_px: int, y0_px: int, width_px: int, height_px: i
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
-def _tiled_mesh_distance(camera: Any, origin: np.ndarray, rays: np.ndarray, x0: int, y0: int,
+def _tiled_mesh_distance(camera: EyeCamera, origin: np.ndarray, rays: np.ndarray, x0: int, y0: int,
                          tris: np.ndarray) -> np.ndarray:
     """Nearest distance to ``tris`` for every ray of the window, testing per screen tile only the triangles
     whose projected box reaches it (a triangle with a corner behind the centre of projection reaches all)."""
@@ -113,7 +113,7 @@ def _tiled_mesh_distance(camera: Any, origin: np.ndarray, rays: np.ndarray, x0: 
     return out
 
 
-def exact_coverage(camera: Any, scene: Scene, x0_px: int = 0, y0_px: int = 0, width_px: int | None = None,
+def exact_coverage(camera: EyeCamera, scene: Scene, x0_px: int = 0, y0_px: int = 0, width_px: int | None = None,
                    height_px: int | None = None, samples_per_axis: int = 4) -> dict[str, np.ndarray]:
     """Per item name (mesh instances' and primitives' ``name``), the (h, w) fraction of each pixel's sample
     rays whose nearest hit is that item: exact silhouettes with occlusion between meshes and primitives."""

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+
+from psyop.optics.camera import EyeCamera
 
 import moderngl
 import numpy as np
@@ -110,7 +111,7 @@ _MIN_FILTER = {Filter.NEAREST: moderngl.NEAREST, Filter.LINEAR: moderngl.LINEAR,
 _MAG_FILTER = {Filter.NEAREST: moderngl.NEAREST, Filter.LINEAR: moderngl.LINEAR, Filter.LINEAR_MIPMAP: moderngl.LINEAR}
 
 
-def mesh_projection(camera: Any, far_m: float) -> np.ndarray:
+def mesh_projection(camera: EyeCamera, far_m: float) -> np.ndarray:
     """The camera's projection with its depth row spanning [the camera's near, ``far_m``] (x, y and w rows
     untouched: the same off-axis frustum as the ray-caster's pixel rays)."""
     near, cam_far = near_far_m(camera)
@@ -133,9 +134,9 @@ def instance_far_m(instances: tuple[MeshInstance, ...], cop: np.ndarray) -> floa
 @dataclass
 class _GpuBatch:
     batch: MeshBatch
-    vao: Any
-    buffers: list[Any]
-    texture: Any | None
+    vao: moderngl.VertexArray
+    buffers: list[moderngl.Buffer]
+    texture: moderngl.Texture | None
 
 
 @dataclass
@@ -149,10 +150,10 @@ class MeshTarget:
     """One eye's multisampled mesh target: colour and reciprocal distance textures, depth, framebuffer."""
 
     size: tuple[int, int]
-    colour: Any
-    inv_distance: Any
-    depth: Any
-    fbo: Any
+    colour: moderngl.Texture
+    inv_distance: moderngl.Texture
+    depth: moderngl.Renderbuffer
+    fbo: moderngl.Framebuffer
 
     def release(self) -> None:
         for obj in (self.fbo, self.colour, self.inv_distance, self.depth):
@@ -165,9 +166,9 @@ class MeshPass:
     keyed by the asset object) and the textures (one upload per content key)."""
 
     ctx: moderngl.Context
-    program: Any = None
+    program: moderngl.Program = field(init=False)
     meshes: dict[int, tuple[MeshAsset, _GpuMesh]] = field(default_factory=dict)
-    textures: dict[str, Any] = field(default_factory=dict)
+    textures: dict[str, moderngl.Texture] = field(default_factory=dict)
     draws: int = 0  # draw calls issued (tests and benchmarks)
 
     def __post_init__(self) -> None:
@@ -186,7 +187,7 @@ class MeshPass:
         fbo = self.ctx.framebuffer(color_attachments=[colour, inv], depth_attachment=depth)
         return MeshTarget(size, colour, inv, depth, fbo)
 
-    def _texture(self, tex: MeshTexture) -> Any:
+    def _texture(self, tex: MeshTexture) -> moderngl.Texture:
         gl = self.textures.get(tex.key)
         if gl is None:
             pixels = np.ascontiguousarray(tex.rgba_linear, dtype=np.float32)
@@ -217,7 +218,7 @@ class MeshPass:
         self.meshes[id(asset)] = (asset, gpu)  # the asset is kept alive with its buffers: ids stay unique
         return gpu
 
-    def draw(self, target: MeshTarget, camera: Any, instances: tuple[MeshInstance, ...]) -> int:
+    def draw(self, target: MeshTarget, camera: EyeCamera, instances: tuple[MeshInstance, ...]) -> int:
         """Rasterise ``instances`` into ``target`` with ``camera``; returns how many parts were drawn."""
         ctx = self.ctx
         target.fbo.use()

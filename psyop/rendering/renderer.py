@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import moderngl
 import numpy as np
@@ -32,6 +32,14 @@ from psyop.rendering.shaders import (
 )
 from psyop.rendering.screen_bounds import screen_bounds_px, screen_bounds_px_former
 from psyop.rendering.textures import pack_layers, texture_pixels
+
+if TYPE_CHECKING:
+    from psyop.optics.camera import EyeCamera
+    from psyop.rendering.mesh_pass import MeshPass, MeshTarget
+    from psyop.rendering.scene import Primitive
+
+    # the ray-cast and edge programs and their vertex arrays (edge ones absent without the two-pass edge)
+    _Variant = tuple[moderngl.Program, moderngl.Program | None, moderngl.VertexArray, moderngl.VertexArray | None]
 
 
 @dataclass(frozen=True)
@@ -69,7 +77,7 @@ class FrameResult:
     eye: str
     rendered: bool
     camera_usable: bool
-    camera_used: Any
+    camera_used: EyeCamera | None
     reuse: ReuseDecision | None
 
 
@@ -88,21 +96,21 @@ class RenderStats:
 class _EyeState:
     width_px: int
     height_px: int
-    fbo: Any
-    colour: Any
-    msaa_fbo: Any | None
-    aperture: Any
-    depth: Any | None = None
-    mesh_target: Any | None = None  # the mesh pass's multisampled target (psyop.rendering.mesh_pass), when drawn
-    last_valid_camera: Any = None
-    last_rendered_camera: Any = None
+    fbo: moderngl.Framebuffer
+    colour: moderngl.Texture
+    msaa_fbo: moderngl.Framebuffer | None
+    aperture: moderngl.Texture | None
+    depth: moderngl.Renderbuffer | None = None
+    mesh_target: MeshTarget | None = None  # the mesh pass's multisampled target (psyop.rendering.mesh_pass), when drawn
+    last_valid_camera: EyeCamera | None = None
+    last_rendered_camera: EyeCamera | None = None
     depth_range_m: tuple[float, float] | None = (0.0, math.inf)  # None: not computed yet (see depth_centre_m)
     depth_centre_m: np.ndarray | None = None  # the centre of projection of the last image, for depth_range_m
     rendered_scene: Scene | None = None  # the scene of this eye's last image (reuse needs the same)
-    released: list[Any] = field(default_factory=list)
+    released: list[Any] = field(default_factory=list)  # Any: moderngl objects of any kind, released together
 
 
-def _eye_key(camera: Any) -> str:
+def _eye_key(camera: EyeCamera) -> str:
     eye = getattr(camera, "eye", "right")
     return str(getattr(eye, "value", eye))
 
@@ -149,17 +157,17 @@ class Renderer:
             self._bounds = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
         self._prims_tex = None
         self._layers_tex = None
-        self._packed: dict[int, tuple[Any, int | None, np.ndarray]] = {}  # id(primitive) -> (it, layer, row)
+        self._packed: dict[int, tuple[Primitive, int | None, np.ndarray]] = {}  # id(primitive) -> (it, layer, row)
         self._texture_keys: tuple = ()
         self._texture_sizes: list[tuple[int, int]] = []
         self._scene: Scene | None = None
-        self._uniform_values: dict[str, Any] = {}  # the last value written to each scene uniform
+        self._uniform_values: dict[str, Any] = {}  # Any: GL uniform value; last written per uniform
         self._member_names: dict[int, frozenset[str]] = {}
         # the ray-cast programs without and (compiled on first use) with the mesh layer, and the mesh pass
-        self._variants: dict[bool, tuple[Any, Any, Any, Any]] = {
+        self._variants: dict[bool, _Variant] = {
             False: (self._prog, self._edge_prog, self._vao, self._edge_vao)}
         self._with_meshes = False
-        self._mesh_pass: Any = None
+        self._mesh_pass: MeshPass | None = None
         if self.settings.frame_caches:  # uniforms no frame changes: written once
             self._set_constant_uniforms()
         self.set_scene(scene)
@@ -192,7 +200,7 @@ class Renderer:
         if len(scene.primitives) > MAX_PRIMITIVES:
             raise ValueError(f"at most {MAX_PRIMITIVES} primitives, got {len(scene.primitives)}")
         textures: list[NoiseTexture | ImageTexture] = []
-        layer_of: dict[Any, int] = {}
+        layer_of: dict[NoiseTexture | tuple[str, str], int] = {}
         for p in scene.primitives:
             if isinstance(p.material, (NoiseTexture, ImageTexture)):
                 key = p.material if isinstance(p.material, NoiseTexture) else ("image", p.material.key)
@@ -218,7 +226,7 @@ class Renderer:
         # w of each centre: 1 = a point (made camera-relative), 0 = a direction (optical infinity)
         self._centre_w = np.array([0.0 if p.at_infinity else 1.0 for p in scene.primitives])
         self._scene_far_m = _finite_extent_m(scene)
-        packed: dict[int, tuple[Any, int | None, list[float]]] = {}
+        packed: dict[int, tuple[Primitive, int | None, list[float]]] = {}
         rows = []
         for p in scene.primitives:
             m = p.material
@@ -277,7 +285,7 @@ class Renderer:
                 prog["u_mesh_colour"].value = 3
                 prog["u_mesh_inv_distance"].value = 4
 
-    def _draw_meshes(self, state: _EyeState, camera: Any) -> None:
+    def _draw_meshes(self, state: _EyeState, camera: EyeCamera) -> None:
         """The mesh pass for this eye (before the ray-cast, which composites its target per ray sample)."""
         assert self._mesh_pass is not None
         if state.mesh_target is None:
@@ -288,7 +296,7 @@ class Renderer:
         for prog in self._programs():
             prog["u_mesh_samples"].value = self._mesh_pass.samples
 
-    def _pack(self, p: Any, layer: int | None, sizes: list[tuple[int, int]]) -> list[float]:
+    def _pack(self, p: Primitive, layer: int | None, sizes: list[tuple[int, int]]) -> list[float]:
         """One primitive's rows of the primitive table, flat (TEXELS_PER_PRIMITIVE x 4: axes and shape,
         material, border, edge effort), as Python numbers: a head-tracked frame packs every primitive."""
         m = p.material
@@ -312,10 +320,10 @@ class Renderer:
         assert self._scene is not None
         return self._scene
 
-    def _programs(self) -> list[Any]:
+    def _programs(self) -> list[moderngl.Program]:
         return [p for p in (self._prog, self._edge_prog) if p is not None]
 
-    def _set_if_present(self, name: str, value: Any) -> None:
+    def _set_if_present(self, name: str, value: Any) -> None:  # Any: a GL uniform value
         if self.settings.frame_caches:  # a uniform is written when its value changes
             if self._uniform_values.get(name) == value:
                 return
@@ -324,7 +332,7 @@ class Renderer:
             if name in self._members(prog):
                 prog[name].value = value
 
-    def _members(self, prog: Any) -> Any:
+    def _members(self, prog: moderngl.Program) -> moderngl.Program | frozenset[str]:
         """The names a program declares (``name in prog`` walks them all: looked up once per program)."""
         if not self.settings.frame_caches:
             return prog
@@ -364,7 +372,7 @@ class Renderer:
             if obj is not None:
                 obj.release()
 
-    def _aperture_mask(self, camera: Any) -> np.ndarray:
+    def _aperture_mask(self, camera: EyeCamera) -> np.ndarray:
         """Screen-fixed aperture coverage per pixel (rows bottom-up, as OpenGL stores them).
 
         Computed once per eye from the first valid camera's pixel rays: for an image at
@@ -387,7 +395,7 @@ class Renderer:
         return cov.reshape(h, w)[::-1].astype(np.float32)
 
     # -- rendering ------------------------------------------------------------------------------
-    def render(self, camera: Any) -> FrameResult:
+    def render(self, camera: EyeCamera) -> FrameResult:
         """Render (or reuse) the frame for ``camera``'s eye."""
         eye = _eye_key(camera)
         self.stats.frames_requested += 1
@@ -428,7 +436,7 @@ class Renderer:
             state.depth_range_m = state.rendered_scene.depth_range_m(state.depth_centre_m)
         return state.depth_range_m
 
-    def _draw(self, state: _EyeState, camera: Any) -> None:
+    def _draw(self, state: _EyeState, camera: EyeCamera) -> None:
         if state.aperture is None and camera is not None:
             mask = self._aperture_mask(camera)
             state.aperture = self.ctx.texture((state.width_px, state.height_px), 1, mask.tobytes(), dtype="f4")
@@ -482,7 +490,7 @@ class Renderer:
         if state.msaa_fbo is not None:
             self.ctx.copy_framebuffer(state.fbo, state.msaa_fbo)
 
-    def _draw_two_pass(self, state: _EyeState, camera: Any, rel_m: np.ndarray) -> None:
+    def _draw_two_pass(self, state: _EyeState, camera: EyeCamera, rel_m: np.ndarray) -> None:
         """Adaptive sampling in two passes: one ray everywhere (edge pixels get depth 0), then
         the SxS grid only where the depth test (GREATER than 0) lets a fragment through."""
         bounds = np.zeros((MAX_PRIMITIVES, 4), dtype=np.float32)
@@ -510,11 +518,11 @@ class Renderer:
         """Wait for the GPU (for timing)."""
         self.ctx.finish()
 
-    def framebuffer(self, eye: str) -> Any:
+    def framebuffer(self, eye: str) -> moderngl.Framebuffer:
         """The eye's resolved framebuffer (for presenting in a window)."""
         return self._eyes[eye].fbo
 
-    def copy_to(self, eye: str, framebuffer: Any) -> None:
+    def copy_to(self, eye: str, framebuffer: moderngl.Framebuffer) -> None:
         """Copy the eye's last frame into another framebuffer of the same size (a display's image,
         e.g. an OpenXR swapchain image): a blit that converts the float image to the target's
         format (8-bit unsigned normalised for RGBA8: values pass unchanged, no sRGB encoding)."""
@@ -524,7 +532,7 @@ class Renderer:
                              f"{(state.width_px, state.height_px)}")
         self.ctx.copy_framebuffer(framebuffer, state.fbo)
 
-    def colour_texture(self, eye: str) -> Any:
+    def colour_texture(self, eye: str) -> moderngl.Texture:
         """The eye's resolved float colour texture (for a GPU-side check: psyop.rendering.frame_check)."""
         return self._eyes[eye].colour
 

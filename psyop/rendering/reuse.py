@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from psyop.optics.camera import EyeCamera
 
 import numpy as np
 
@@ -52,8 +52,8 @@ def shift_bound_px(
 
 
 def decide_reuse(
-    last_camera: Any,
-    new_camera: Any,
+    last_camera: EyeCamera,
+    new_camera: EyeCamera,
     depth_range_m: tuple[float, float] | Callable[[], tuple[float, float]],
     tolerance_px: float = 0.01,
 ) -> ReuseDecision:

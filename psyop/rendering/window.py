@@ -10,7 +10,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import moderngl
 import numpy as np
@@ -75,13 +74,13 @@ class Window:
         self.ctx = moderngl.create_context()
         self.width_px, self.height_px = width_px, height_px
 
-    def present(self, framebuffer: Any) -> None:
+    def present(self, framebuffer: moderngl.Framebuffer) -> None:
         """Copy a framebuffer of the window's size to the screen and swap."""
         self.ctx.copy_framebuffer(self.ctx.screen, framebuffer)
         self._glfw.swap_buffers(self._window)
         self._glfw.poll_events()
 
-    def present_side_by_side(self, textures: list[Any]) -> None:
+    def present_side_by_side(self, textures: list[moderngl.Texture]) -> None:
         """Show colour textures left to right (e.g. the left and right eye, each at full
         render resolution: texel = screen pixel), then swap. The window must be wide enough."""
         from psyop.rendering.shaders import VERTEX_SHADER

@@ -18,7 +18,7 @@ __all__ = ["check_seed", "compile_schedule", "expected_duration_s", "interval_va
            "trial_count", "write_schedule"]
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> Any:  # Any: whichever attribute of the lazily imported module is asked for
     if name in _HOME:
         return getattr(importlib.import_module(f"psyop.schedule.{_HOME[name]}"), name)
     raise AttributeError(f"module 'psyop.schedule' has no attribute {name!r}")

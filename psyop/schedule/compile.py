@@ -9,7 +9,6 @@ Columns are described in docs/architecture.md ("the trial table") and docs/proto
 
 from __future__ import annotations
 
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -19,9 +18,10 @@ from psyop.protocol.conditions import condition_label, expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.response import (LeftRightNearerResponse, ModeFromFactor, PairwisePreferenceResponse,
                                      ReachResponse, TwoIntervalResponse, WithAgainstResponse)
-from psyop.protocol.scene import FixationTarget, SinusoidalBorder
+from psyop.protocol.scene import FixationTarget, RenderingMode, SinusoidalBorder
 from psyop.schedule.counterbalance import latin_square_order
 from psyop.schedule.counts import expected_duration_s, trial_count  # noqa: F401 - re-exported
+from psyop.records import JsonObject
 
 #: Independent random streams derived from the user's seed (adding a stream never changes others).
 _STREAM_ORDER, _STREAM_SEEDS, _STREAM_COUNTERBALANCE, _STREAM_STIMULUS, _STREAM_PRACTICE = range(5)
@@ -31,7 +31,7 @@ def _rng(seed: int, stream: int) -> np.random.Generator:
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, stream])))
 
 
-def check_seed(seed: Any) -> int:
+def check_seed(seed: object) -> int:
     """A schedule seed must be a non-negative integer."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise UserError(f"the seed must be a non-negative integer, got {seed!r}")
@@ -61,7 +61,7 @@ def _counterbalance(protocol: Protocol) -> str:
     return "balanced"  # reach, with_against: unused
 
 
-def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.ndarray, rep_index: np.ndarray,
+def _order(protocol: Protocol, conditions: list[JsonObject], cond_index: np.ndarray, rep_index: np.ndarray,
            rng: np.random.Generator, participant_index: int | None) -> tuple[np.ndarray, np.ndarray]:
     """(permutation of the main trials, block number of each trial in the new order)."""
     randomisation = protocol.design.randomisation
@@ -71,7 +71,7 @@ def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.
     if randomisation.kind == "sequential":
         order = np.lexsort((cond_index, rep_index))  # all conditions once, then again
         return order, np.zeros(n, dtype=np.int64)
-    keys: dict[tuple[Any, ...], int] = {}
+    keys: dict[tuple[object, ...], int] = {}
     block_of_condition = np.empty(len(conditions), dtype=np.int64)
     for index, condition in enumerate(conditions):
         key = tuple(condition[name] for name in randomisation.by)
@@ -91,13 +91,13 @@ def _order(protocol: Protocol, conditions: list[dict[str, Any]], cond_index: np.
     return order, block[order]
 
 
-def _column(values: list[Any]) -> np.ndarray:
+def _column(values: list[float | str]) -> np.ndarray:
     if all(isinstance(v, str) for v in values):
         return np.array(values, dtype=object)
     return np.array([float(v) for v in values], dtype=np.float64)
 
 
-def _mode_values(mode: Any, columns: dict[str, np.ndarray], n: int) -> np.ndarray:
+def _mode_values(mode: RenderingMode | ModeFromFactor, columns: dict[str, np.ndarray], n: int) -> np.ndarray:
     if isinstance(mode, ModeFromFactor):
         return columns[mode.factor].astype(object)
     return np.full(n, mode, dtype=object)

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+from psyop.records import JsonObject, TrialRow
 
 
-def interval_values(row: Mapping[str, Any], interval: int) -> dict[str, Any]:
+def interval_values(row: TrialRow, interval: int) -> JsonObject:
     """The row as seen during interval ``interval`` (1-based).
 
     ``<name>_interval<k>`` columns (factor overrides of a two-interval response, e.g. the
@@ -35,7 +34,7 @@ def mode_column(interval: int) -> str:
     return f"mode_interval{interval}"
 
 
-def interval_mode(row: Mapping[str, Any], interval: int) -> str:
+def interval_mode(row: TrialRow, interval: int) -> str:
     """The rendering mode of interval ``interval`` (1-based) of a trial row: the one
     interval-to-mode rule (the schedule compiler has already applied a reach study's ``modes:``)."""
     column = mode_column(interval)

@@ -45,7 +45,7 @@ def pairwise_preferences(
             (trials["mode_a"] == second) & (trials["mode_b"] == first))
         chose_first = (sub["chosen_mode"] == first)
         per_subject = chose_first.groupby(sub[subject]).mean()
-        row = {"first": first, "second": second, "pair": f"{first}|{second}"}
+        row: dict[str, object] = {"first": first, "second": second, "pair": f"{first}|{second}"}
         row.update(binomial_test(int(chose_first.sum()), len(sub), 0.5, alternative))
         row["se_subjects"] = float(per_subject.std(ddof=1) / np.sqrt(len(per_subject))) if len(per_subject) > 1 else float("nan")
         row["n_subjects"] = int(per_subject.size)

@@ -29,7 +29,7 @@ def _participants(n: int) -> list[str]:
     return [f"{i + 1:02d}" for i in range(n)]
 
 
-def pc_2afc(level_D: np.ndarray, threshold_D: float, sigma_D: float, lapse: float) -> np.ndarray:
+def pc_2afc(level_D: np.ndarray | float, threshold_D: float, sigma_D: float, lapse: float) -> np.ndarray:
     """2AFC proportion correct of a cumulative normal whose 75 % point (without lapse) is ``threshold_D``."""
     return 0.5 + (0.5 - lapse) * norm.cdf((np.asarray(level_D, float) - threshold_D) / sigma_D)
 

@@ -116,11 +116,11 @@ def _kind_from_columns(path: Path) -> str:
 
     try:
         columns = pq.read_schema(path).names
-    except Exception as exc:  # noqa: BLE001 - any unreadable parquet is bad input here
+    except Exception as exc:  # any unreadable parquet is bad input here (re-raised as UserError)
         raise UserError(f"unreadable trial log ({exc})", str(path)) from exc
     try:
         return response_kind(columns).value
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:  # re-raised as UserError below
         # tables without the schedule's columns (psyop.statistics.simulate): a 2AFC level, or a mode, and correct
         if "correct" in columns and "level_D" in columns:
             return TWO_INTERVAL

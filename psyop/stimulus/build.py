@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import math
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,7 +36,6 @@ from psyop.rendering.textures import ImageFiles
 from psyop.rendering.scene import (
     Aperture,
     GridMaterial,
-    ImageTexture,
     Material,
     NoiseKind,
     NoiseTexture,
@@ -49,23 +48,31 @@ from psyop.rendering.scene import (
 from psyop.protocol.factor_fields import resolve_factor_fields
 from psyop.schedule import interval_values
 from psyop.stimulus.placement import centre_angles_deg, circle_position_deg
+from psyop.records import TrialRow
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from psyop.protocol.model import Protocol
+    from psyop.protocol.trial import Interval
+    from psyop.stimulus.meshes import SessionMeshes
 
 INFINITY_M = math.inf  # the distance of 0 D: optical infinity, rendered as directions
 DEFAULT_ARM_REACH_M = 0.70
 
 
-def _distance_m(depth: ps.Depth, values: Mapping[str, Any]) -> float:
+def _distance_m(depth: ps.Depth, values: TrialRow) -> float:
     depth_D = depth.resolve_D(values)
     if not math.isfinite(depth_D) or depth_D < 0:
         raise UserError(f"depth resolves to {depth_D} D for this trial")
     return INFINITY_M if depth_D == 0.0 else 1.0 / depth_D
 
 
-def _trial_seed(values: Mapping[str, Any]) -> int:
+def _trial_seed(values: TrialRow) -> int:
     return int(values.get("trial_seed", 0)) % (2**31)
 
 
-def _material(surface: Any, values: Mapping[str, Any], size_deg: float, base_dir: Path | None,
+def _material(surface: ps.Surface, values: TrialRow, size_deg: float, base_dir: Path | None,
               images: ImageFiles | None = None) -> Material:
     """A rendering material for a protocol surface (noise seeded from the trial seed)."""
     if isinstance(surface, ps.SolidSurface):
@@ -94,7 +101,7 @@ def _rotate_axes(prim: Primitive, angle_deg: float) -> Primitive:
                                half_v_m=tuple(rot @ np.array(prim.half_v_m)))  # keeps at_infinity
 
 
-def _sinusoidal_border(item: ps.SinusoidalBorder, values: Mapping[str, Any], origin: np.ndarray,
+def _sinusoidal_border(item: ps.SinusoidalBorder, values: TrialRow, origin: np.ndarray,
                        base_dir: Path | None, images: ImageFiles | None = None) -> list[Primitive]:
     near_side = item.near_side if item.near_side != "schedule" else str(values.get("near_side", "left"))
     if near_side not in ("left", "right"):
@@ -138,7 +145,7 @@ def _grid_planes(item: ps.GridPlanes) -> list[Primitive]:
     return out
 
 
-def _fixation(item: ps.FixationTarget, values: Mapping[str, Any], time_s: float, origin: np.ndarray) -> list[Primitive]:
+def _fixation(item: ps.FixationTarget, values: TrialRow, time_s: float, origin: np.ndarray) -> list[Primitive]:
     az, el = centre_angles_deg(item.centre_deg)
     if item.path is not None:
         start = float(values.get(f"{item.id}_start_deg", 0.0 if item.path.start == "random" else item.path.start))
@@ -156,7 +163,7 @@ def _fixation(item: ps.FixationTarget, values: Mapping[str, Any], time_s: float,
     return [outer, inner]
 
 
-def depends_on_time(item: Any) -> bool:
+def depends_on_time(item: ps.Primitive) -> bool:
     """Whether a scene item's primitives change with the time into the interval: only a fixation target
     on a path moves (:func:`_fixation` is the one use of ``time_s`` in :func:`build_scene`). A session
     builds every other item once per trial and phase (``psyop.session.scene_renderer``); an item kind
@@ -179,7 +186,7 @@ def _room(item: ps.Room) -> list[Primitive]:
     return [dataclasses.replace(p, name=f"{item.id}_{p.name}") for p in prims if not p.name.startswith("pencil")]
 
 
-def _reach_target(item: ps.ReachTarget, values: Mapping[str, Any], arm_reach_m: float) -> list[Primitive]:
+def _reach_target(item: ps.ReachTarget, values: TrialRow, arm_reach_m: float) -> list[Primitive]:
     if isinstance(item.distance_fraction, ps.FactorRef):
         fraction = float(values[item.distance_fraction.factor])
     else:
@@ -198,7 +205,7 @@ def _reach_target(item: ps.ReachTarget, values: Mapping[str, Any], arm_reach_m: 
                       name=item.id)]
 
 
-def scene_origin_m(protocol: Any, eye_centre_m: Any) -> np.ndarray:
+def scene_origin_m(protocol: Protocol, eye_centre_m: ArrayLike) -> np.ndarray:
     """Where a protocol's angular sizes and positions are measured from, in head space.
 
     Monocular (``eyes: left`` / ``right``): the viewing eye's centre of rotation
@@ -210,12 +217,12 @@ def scene_origin_m(protocol: Any, eye_centre_m: Any) -> np.ndarray:
     return np.asarray(eye_centre_m, dtype=np.float64).reshape(3)
 
 
-def interval_phases(protocol: Any) -> list[Any]:
+def interval_phases(protocol: Protocol) -> list[Interval]:
     """The protocol's ``interval`` phases in order (interval K is element K - 1)."""
     return [phase for phase in protocol.trial.phases if getattr(phase, "kind", None) == "interval"]
 
 
-def interval_mode(protocol: Any, row: Mapping[str, Any], interval: int) -> str:
+def interval_mode(protocol: Protocol, row: TrialRow, interval: int) -> str:
     """The rendering mode of interval ``interval`` (1-based) of a trial row
     (:func:`psyop.schedule.rows.interval_mode`, the one interval-to-mode rule)."""
     from psyop.schedule.rows import interval_mode as rule
@@ -227,17 +234,17 @@ def interval_mode(protocol: Any, row: Mapping[str, Any], interval: int) -> str:
 
 
 def build_scene(
-    protocol: Any,
-    row: Mapping[str, Any],
+    protocol: Protocol,
+    row: TrialRow,
     time_s: float,
-    eye_centre_m: Any,
+    eye_centre_m: ArrayLike,
     interval: int = 1,
     base_dir: Path | None = None,
     arm_reach_m: float = DEFAULT_ARM_REACH_M,
     background: tuple[float, float, float] = (0.5, 0.5, 0.5),
     show: Sequence[str] | None = None,
     images: ImageFiles | None = None,
-    meshes: Any = None,
+    meshes: SessionMeshes | None = None,
 ) -> Scene:
     """The rendering scene of one trial during interval ``interval`` at ``time_s`` into it.
 
@@ -313,7 +320,7 @@ def build_scene(
 
 
 def recalibration_cross_scene(
-    eye_centre_m: Any,
+    eye_centre_m: ArrayLike,
     distance_m: float = 1.0,
     arm_deg: float = 1.0,
     thickness_deg: float = 0.12,
@@ -341,7 +348,7 @@ TEXT_PRIMITIVE_NAME = "response_text"
 
 def text_scene(
     text: TextImage,
-    origin_m: Any,
+    origin_m: ArrayLike,
     distance_m: float = TEXT_DISTANCE_M,
     letter_height_deg: float = TEXT_LETTER_HEIGHT_DEG,
     background: tuple[float, float, float] = (0.5, 0.5, 0.5),

@@ -7,9 +7,8 @@ same :class:`psyop.mesh.MeshAsset` object to every frame, so the renderer upload
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -19,6 +18,7 @@ from psyop.protocol import scene as ps
 from psyop.rendering.builders import direction_from_angles, place_centre_m
 from psyop.rendering.mesh_scene import MeshInstance, model_matrix
 from psyop.stimulus.placement import centre_angles_deg
+from psyop.records import JsonMapping
 
 
 class SessionMeshes:
@@ -43,7 +43,7 @@ class SessionMeshes:
         return [asset.record() for asset in self._assets.values()]
 
 
-def protocol_mesh_records(scene: tuple[Any, ...] | list[Any], base_dir: Path | None) -> list[dict[str, object]]:
+def protocol_mesh_records(scene: Sequence[ps.Primitive], base_dir: Path | None) -> list[dict[str, object]]:
     """session.json's ``meshes``: the record (MeshAsset.record) of every (file, node) the protocol's mesh
     items name, read when the session opens, whether or not the session renders images (``file`` and
     ``node`` are plain strings, never factors, so this is every model the session can show)."""
@@ -54,7 +54,7 @@ def protocol_mesh_records(scene: tuple[Any, ...] | list[Any], base_dir: Path | N
     return files.records()
 
 
-def mesh_instance(item: ps.Mesh, values: Mapping[str, Any], origin_m: np.ndarray, files: SessionMeshes) -> MeshInstance:
+def mesh_instance(item: ps.Mesh, values: JsonMapping, origin_m: np.ndarray, files: SessionMeshes) -> MeshInstance:
     """The placed model of a mesh item whose factor fields hold this trial's numbers."""
     asset = files.asset(item.file, item.node)
     extent = asset.largest_extent
