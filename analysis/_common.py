@@ -141,23 +141,22 @@ def write_csv(table: pd.DataFrame, path: Path) -> Path:
 
 
 def read_fits(path: Path, *, data: Path | None = None, study: str | None = None,
-              fit_args: tuple[str, ...] = ()) -> pd.DataFrame:
+              fit_args: tuple[str, ...] = (), rebuild: Callable[[list[str]], int] | None = None) -> pd.DataFrame:
     """Read a psychometric fit cache (results/<study>_fits.csv): ``flags`` '' when none, ``status`` required.
 
     A cache that cannot be read (empty, truncated, not CSV, an older layout) is only a cache: with
-    ``data`` and ``study`` it is rebuilt by analysis/fit_psychometric.py (one line on stderr says so;
-    ``fit_args``: more of its arguments), otherwise it is a UserError naming it."""
+    ``data``, ``study`` and ``rebuild`` (the caller passes analysis/fit_psychometric.py's ``main``, so this
+    module does not import its sibling script) it is rebuilt (one line on stderr says so; ``fit_args``: more
+    of its arguments), otherwise it is a UserError naming it."""
     from psyop.errors import UserError
 
     try:
         return _parse_fits(path)
     except UserError as problem:
-        if data is None or study is None:
+        if data is None or study is None or rebuild is None:
             raise
         print(f"{Path(sys.argv[0]).name}: {problem}; rebuilding it", file=sys.stderr)
-    import fit_psychometric  # noqa: PLC0415 - the fit script, beside this module
-
-    status = fit_psychometric.main(["--study", study, "--data", str(data), "--out", str(path), *fit_args])
+    status = rebuild(["--study", study, "--data", str(data), "--out", str(path), *fit_args])
     if status:
         raise UserError(f"could not rebuild the fit cache (exit {status})", str(path))
     return _parse_fits(path)

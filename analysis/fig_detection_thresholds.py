@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from _common import out_path, parser, provenance, read_fits, require_columns, results_file, run, write_json
+import fit_psychometric
 from _twoafc import check_two_interval, condition_column, level_column
 
 from psyop.figures.output import save_figure
@@ -37,7 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     check_two_interval(facts, "fig_detection_thresholds.py")
     fits_path = args.fits or results_file(args.results, args.study, "fits", "csv")
     # a cache given by --fits is the user's: never rebuilt; the default one is rebuilt if unreadable
-    fits = read_fits(fits_path) if args.fits else read_fits(fits_path, data=args.data, study=args.study)
+    fits = read_fits(fits_path) if args.fits else read_fits(fits_path, data=args.data, study=args.study,
+                                                                  rebuild=fit_psychometric.main)
     cached = fits["condition_column"].iloc[0] if "condition_column" in fits and len(fits) else None
     cond = condition_column(facts, args.condition_column or cached)
     require_columns(fits, [cond, "threshold_D", "participant"], str(fits_path),

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from _common import out_path, parser, read_fits, require_columns, results_file, run
+import fit_psychometric
 from _twoafc import check_two_interval, condition_column, level_column
 
 from psyop.figures.output import save_figure
@@ -31,7 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     check_two_interval(facts, "supp_psychometric_functions.py")
     fits_path = args.fits or results_file(args.results, args.study, "fits", "csv")
     # a cache given by --fits is the user's: never rebuilt; the default one is rebuilt if unreadable
-    fits = read_fits(fits_path) if args.fits else read_fits(fits_path, data=args.data, study=args.study)
+    fits = read_fits(fits_path) if args.fits else read_fits(fits_path, data=args.data, study=args.study,
+                                                                  rebuild=fit_psychometric.main)
     first = fits.iloc[0] if len(fits) else {}
     cond = condition_column(facts, args.condition_column or (first.get("condition_column") if len(fits) else None))
     level = level_column(facts, args.level_column or (first.get("level_column") if len(fits) else None))

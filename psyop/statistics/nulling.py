@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
-from psyop.statistics.psychometric import aggregate_blocks, validate_blocks
+from psyop.statistics.psychometric import WIDTH_PER_SIGMA, aggregate_blocks, validate_blocks
 
 CI_LEVEL = 0.95
 STATUSES = ("no_fit", "censored_below", "censored_above", "ok")
@@ -87,7 +87,7 @@ def fit_nulling(data: np.ndarray, source: str = "nulling data") -> NullingFit:
     low, high = (float(v) for v in result.confidence_intervals["threshold"][str(CI_LEVEL)])
     pss = float(estimate["threshold"])
     # psignifit's 'norm' width spans the 5 %-95 % points of the unscaled sigmoid: 2 * 1.645 sd
-    sigma = float(estimate["width"]) / (2.0 * 1.6448536269514722)
+    sigma = float(estimate["width"]) / WIDTH_PER_SIGMA
     conditions = []
     if pss < lo:
         conditions.append("censored_below")

@@ -178,7 +178,7 @@ class PsychometricFit:
     #: censored fits: the tested level the threshold lies beyond (NaN otherwise)
     threshold_bound_D: float
     width_D: float  # psignifit width: distance between the 5 % and 95 % points of the unscaled sigmoid
-    sigma_D: float  # sd of the cumulative normal (width / 3.29)
+    sigma_D: float  # sd of the cumulative normal (width / WIDTH_PER_SIGMA)
     location_D: float  # psignifit 'threshold' parameter: 50 % point of the unscaled sigmoid
     lapse: float
     eta: float
@@ -420,6 +420,9 @@ def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict
 
 
 _NORM_SPAN = float(norm.ppf(0.95) - norm.ppf(0.05))  # psignifit 'norm' width: 5 %-95 % of the unscaled sigmoid
+WIDTH_PER_SIGMA = 2.0 * float(norm.ppf(0.95))  # width (5 %-95 % of the cumulative normal) over its sigma, 3.2897...
+# _NORM_SPAN is the same quantity written ppf(0.95) - ppf(0.05); it is 1 ulp larger than WIDTH_PER_SIGMA and
+# kept as it is so the fits stay bit-identical.
 
 
 def log_posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray]) -> np.ndarray:
@@ -606,7 +609,7 @@ def _t75(params: dict[str, float]) -> float:
     scaled = (TARGET_PC - params["gamma"]) / (1.0 - params["lambda"] - params["gamma"])
     if not 0.0 < scaled < 1.0:
         return float("inf")
-    return float(params["threshold"] + norm.ppf(scaled) * params["width"] / (2.0 * norm.ppf(0.95)))
+    return float(params["threshold"] + norm.ppf(scaled) * params["width"] / WIDTH_PER_SIGMA)
 
 
 def separated_peaks(post: np.ndarray, min_ratio: float = 0.1, max_dip: float = 0.75) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -783,7 +786,7 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), sourc
     elif status in ("censored_above", "lapse_at_bound"):
         threshold, bound = float("nan"), hi_level
     # psignifit's 'norm' width spans the 5 %-95 % points of the unscaled sigmoid: 2 * 1.645 sd
-    sigma = width / (2.0 * float(norm.ppf(0.95)))
+    sigma = width / WIDTH_PER_SIGMA
     return PsychometricFit(
         status=status, threshold_D=threshold, threshold_ci_low_D=float(low), threshold_ci_high_D=float(high),
         threshold_bound_D=bound, width_D=width, sigma_D=float(sigma), location_D=location, lapse=lapse, eta=eta,

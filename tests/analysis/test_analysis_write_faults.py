@@ -68,7 +68,8 @@ def test_an_unreadable_fit_cache_is_rebuilt(tmp_path: Path, data: Path, capsys: 
     common = _script("_common")
     fit_args = ("--n-jobs", "1", "--n-bootstrap", "50")
     fresh = tmp_path / "fresh_fits.csv"
-    assert _script("fit_psychometric").main(["--study", "detection", "--data", str(data), "--out", str(fresh),
+    fit = _script("fit_psychometric").main
+    assert fit(["--study", "detection", "--data", str(data), "--out", str(fresh),
                                              *fit_args]) == 0
     cache = tmp_path / "results" / "detection_fits.csv"
     cache.parent.mkdir()
@@ -76,7 +77,7 @@ def test_an_unreadable_fit_cache_is_rebuilt(tmp_path: Path, data: Path, capsys: 
     cache.write_bytes({"empty": b"", "half-written": text[: len(text) // 3].split("\n")[0].encode() + b"\n1,2",
                        "binary": b"\x00\xff\xfe" * 100}[damage])
     capsys.readouterr()
-    fits = common.read_fits(cache, data=data, study="detection", fit_args=fit_args)
+    fits = common.read_fits(cache, data=data, study="detection", fit_args=fit_args, rebuild=fit)
     assert "rebuilding it" in capsys.readouterr().err
     pd.testing.assert_frame_equal(fits, common.read_fits(fresh))
     with pytest.raises(Exception) as caught:  # without the data to rebuild from: one located error
