@@ -182,7 +182,8 @@ def _result(future, scheduler: str, describe: Callable[[], str]):
         if future.status != "error" and _connection_lost(exc):  # not the replication's own error
             raise _lost(scheduler, f"the scheduler connection was lost ({type(exc).__name__})") from None
         if type(exc).__name__ == "KilledWorker":  # its workers died again and again
-            raise UserError(f"{describe()} killed every worker that ran it ({exc}); the finished replications "
+            why = " ".join(str(exc).split())  # distributed's message has line breaks: one line
+            raise UserError(f"{describe()} killed every worker that ran it ({why}); the finished replications "
                             "are kept, rerun the same command to resume", "--scheduler",
                             exit_code=CLUSTER_LOST_EXIT) from None
         raise
