@@ -141,16 +141,20 @@ def _gather(client, futures: list, tasks: Sequence[T], scheduler: str, bar, on_r
     index = {f.key: i for i, f in enumerate(futures)}
     results: list[R | None] = [None] * len(tasks)
     pending = set(futures)
-    no_workers_since: float | None = None
+    no_workers_since: list[float | None] = [None]
+
+    def check() -> None:
+        no_workers_since[0] = _check_cluster(client, scheduler, timeout_s, lost_after_s, no_workers_since[0])
+
     while pending:
         done, pending = _wait_some(pending, poll_s, scheduler)
         for future in done:
             i = index[future.key]
-            results[i] = _result(future, scheduler, lambda: describe(tasks[i]))
+            results[i] = _result(future, scheduler, lambda: describe(tasks[i]), poll_s, check)
             on_result(i, results[i])  # type: ignore[arg-type]
             bar.update(1)
         if not done:
-            no_workers_since = _check_cluster(client, scheduler, timeout_s, lost_after_s, no_workers_since)
+            check()
     return results  # type: ignore[return-value]
 
 
@@ -169,13 +173,21 @@ def _wait_some(pending: set, poll_s: float, scheduler: str) -> tuple[set, set]:
         raise
 
 
-def _result(future, scheduler: str, describe: Callable[[], str]):
+def _result(future, scheduler: str, describe: Callable[[], str], poll_s: float, check: Callable[[], None]):
     """A done future's result; a cancelled task or a lost connection is a lost cluster (exit 3), a task
-    whose workers kept dying one line naming it (exit 3), and a replication's own error is raised."""
+    whose workers kept dying one line naming it (exit 3), and a replication's own error is raised.
+
+    The result is fetched in waits of ``poll_s`` with ``check`` (the cluster's health) between them:
+    a result held by a worker that dies before the client fetched it is computed again, and with every
+    worker gone ``future.result()`` would wait for ever (seen under load: no exit within 180 s)."""
     if future.status in ("cancelled", "lost") or future.cancelled():
         raise _lost(scheduler, "the scheduler cancelled its tasks (it was stopped or restarted)")
     try:
-        return future.result()
+        while True:
+            try:
+                return future.result(timeout=poll_s)
+            except TimeoutError:
+                check()
     except Exception as exc:  # noqa: BLE001 - a cancelled future of a dead scheduler
         if type(exc).__name__ in ("CancelledError", "FutureCancelledError"):
             raise _lost(scheduler, f"the scheduler cancelled its tasks ({type(exc).__name__})") from None
