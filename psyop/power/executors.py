@@ -92,9 +92,11 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
 
     client = _connect(scheduler, timeout_s)
     # a lost scheduler makes the client log reconnect tracebacks: the UserError says it in one line
-    quiet = logging.getLogger("distributed.client")
-    level = quiet.level
-    quiet.setLevel(logging.CRITICAL)
+    # and a result fetch given up on (_result) leaves a task whose AllExit asyncio logs when collected
+    quiet = [logging.getLogger("distributed.client"), logging.getLogger("asyncio")]
+    levels = [logger.level for logger in quiet]
+    for logger in quiet:
+        logger.setLevel(logging.CRITICAL)
     futures: list = []
     try:
         futures = [client.submit(function, task, pure=False) for task in tasks]
@@ -111,7 +113,11 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
         except Exception:  # noqa: BLE001 - a dead scheduler: nothing left to close
             pass
         finally:
-            quiet.setLevel(level)
+            import gc
+
+            gc.collect()  # collect those tasks while asyncio is quiet
+            for logger, level in zip(quiet, levels):
+                logger.setLevel(level)
 
 
 def _connect(scheduler: str, timeout_s: float):
