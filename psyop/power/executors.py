@@ -88,80 +88,24 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
     tasks the cluster cancelled end in a UserError with exit code 3 naming the scheduler; a task
     whose workers kept dying (distributed's ``KilledWorker``) in one with exit code 3 naming it
     (``describe``); every result that arrived before was handed to ``on_result``."""
-    try:
-        from distributed import Client
-        from distributed import wait as dask_wait
-    except ImportError:
-        raise UserError("--scheduler needs dask.distributed: pip install 'dask[distributed]'", "--scheduler") from None
-    try:
-        client = Client(scheduler, timeout=timeout_s)
-    except (OSError, TimeoutError) as exc:
-        raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {exc}. Start one with "
-                        "`dask scheduler` and workers with `dask worker tcp://HOST:8786` (docs/adaptive.md)",
-                        "--scheduler") from None
-
-    def lost(why: str) -> UserError:
-        return UserError(f"lost the Dask cluster at {scheduler}: {why}; the finished replications are kept, "
-                         "restart the cluster and rerun the same command to resume", "--scheduler",
-                         exit_code=CLUSTER_LOST_EXIT)
-
     import logging
 
-    # a lost scheduler makes the client log reconnect tracebacks: the UserError below says it in one line
-    quiet = logging.getLogger("distributed.client")
-    level = quiet.level
-    quiet.setLevel(logging.CRITICAL)
+    client = _connect(scheduler, timeout_s)
+    # a lost scheduler makes the client log reconnect tracebacks: the UserError says it in one line
+    # and a result fetch given up on (_result) leaves a task whose AllExit asyncio logs when collected
+    quiet = [logging.getLogger("distributed.client"), logging.getLogger("asyncio")]
+    levels = [logger.level for logger in quiet]
+    for logger in quiet:
+        logger.setLevel(logging.CRITICAL)
+    futures: list = []
     try:
         futures = [client.submit(function, task, pure=False) for task in tasks]
-        index = {f.key: i for i, f in enumerate(futures)}
-        results: list[R | None] = [None] * len(tasks)
-        pending = set(futures)
-        no_workers_since: float | None = None
         with _bar(len(tasks), progress, f"psyop power ({scheduler})") as bar:
-            while pending:
-                try:
-                    done, pending = dask_wait(list(pending), timeout=poll_s, return_when="FIRST_COMPLETED")
-                    pending = set(pending)
-                except TimeoutError:
-                    done = set()
-                except Exception as exc:  # the futures of a dead scheduler are cancelled (re-raised below)
-                    if "Cancelled" in type(exc).__name__ or _connection_lost(exc):
-                        raise lost(f"the scheduler connection was lost ({type(exc).__name__})") from None
-                    raise
-                for future in done:
-                    if future.status in ("cancelled", "lost") or future.cancelled():
-                        raise lost("the scheduler cancelled its tasks (it was stopped or restarted)")
-                    try:
-                        results[index[future.key]] = future.result()
-                    except Exception as exc:  # a cancelled future of a dead scheduler (re-raised below)
-                        if type(exc).__name__ in ("CancelledError", "FutureCancelledError"):
-                            raise lost(f"the scheduler cancelled its tasks ({type(exc).__name__})") from None
-                        if future.status != "error" and _connection_lost(exc):  # not the replication's own error
-                            raise lost(f"the scheduler connection was lost ({type(exc).__name__})") from None
-                        if type(exc).__name__ == "KilledWorker":  # its workers died again and again
-                            raise UserError(f"{describe(tasks[index[future.key]])} killed every worker that ran it "
-                                            f"({exc}); the finished replications are kept, rerun the same command to "
-                                            "resume", "--scheduler", exit_code=CLUSTER_LOST_EXIT) from None
-                        raise
-                    on_result(index[future.key], results[index[future.key]])  # type: ignore[arg-type]
-                    bar.update(1)
-                if done:
-                    continue
-                if client.status not in ("running", "connecting", "newly-created"):
-                    raise lost(f"the client is {client.status}")
-                n_workers = _n_workers(client, timeout_s)
-                if n_workers is None:
-                    raise lost("the scheduler does not answer")
-                now = time.monotonic()
-                if n_workers:
-                    no_workers_since = None
-                elif no_workers_since is None:
-                    no_workers_since = now
-                elif now - no_workers_since > lost_after_s:
-                    raise lost(f"no worker for {lost_after_s:g} s")
-        return results  # type: ignore[return-value]
+            return _gather(client, futures, tasks, scheduler, bar, on_result, describe,
+                           timeout_s=timeout_s, lost_after_s=lost_after_s, poll_s=poll_s)
     except KeyboardInterrupt:
-        client.cancel(list(pending), force=True) if client.status == "running" else None
+        if client.status == "running":
+            client.cancel([f for f in futures if not f.done()], force=True)
         raise
     finally:
         try:
@@ -169,7 +113,117 @@ def run_dask(function: Callable[[T], R], tasks: Sequence[T], scheduler: str, pro
         except Exception:  # noqa: BLE001 - a dead scheduler: nothing left to close
             pass
         finally:
-            quiet.setLevel(level)
+            import gc
+
+            gc.collect()  # collect those tasks while asyncio is quiet
+            for logger, level in zip(quiet, levels):
+                logger.setLevel(level)
+
+
+def _connect(scheduler: str, timeout_s: float):
+    """A ``distributed.Client`` on ``scheduler``, or a UserError (exit 2) saying how to start one."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise UserError("--scheduler needs dask.distributed: pip install 'dask[distributed]'", "--scheduler") from None
+    try:
+        return Client(scheduler, timeout=timeout_s)
+    except (OSError, TimeoutError) as exc:
+        raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {exc}. Start one with "
+                        "`dask scheduler` and workers with `dask worker tcp://HOST:8786` (docs/adaptive.md)",
+                        "--scheduler") from None
+
+
+def _lost(scheduler: str, why: str) -> UserError:
+    return UserError(f"lost the Dask cluster at {scheduler}: {why}; the finished replications are kept, "
+                     "restart the cluster and rerun the same command to resume", "--scheduler",
+                     exit_code=CLUSTER_LOST_EXIT)
+
+
+def _gather(client, futures: list, tasks: Sequence[T], scheduler: str, bar, on_result: Callable[[int, R], None],
+            describe: Callable[[T], str], timeout_s: float, lost_after_s: float, poll_s: float) -> list[R]:
+    """Wait for ``futures`` (in ``tasks`` order), handing each result to ``on_result`` as it arrives,
+    and check the cluster between waits that returned nothing."""
+    index = {f.key: i for i, f in enumerate(futures)}
+    results: list[R | None] = [None] * len(tasks)
+    pending = set(futures)
+    no_workers_since: list[float | None] = [None]
+
+    def check() -> None:
+        no_workers_since[0] = _check_cluster(client, scheduler, timeout_s, lost_after_s, no_workers_since[0])
+
+    while pending:
+        done, pending = _wait_some(pending, poll_s, scheduler)
+        for future in done:
+            i = index[future.key]
+            results[i] = _result(future, scheduler, lambda: describe(tasks[i]), poll_s, check)
+            on_result(i, results[i])  # type: ignore[arg-type]
+            bar.update(1)
+        if not done:
+            check()
+    return results  # type: ignore[return-value]
+
+
+def _wait_some(pending: set, poll_s: float, scheduler: str) -> tuple[set, set]:
+    """The futures of ``pending`` done within ``poll_s`` and those still pending."""
+    from distributed import wait as dask_wait
+
+    try:
+        done, still = dask_wait(list(pending), timeout=poll_s, return_when="FIRST_COMPLETED")
+        return set(done), set(still)
+    except TimeoutError:
+        return set(), pending
+    except Exception as exc:  # noqa: BLE001 - the futures of a dead scheduler are cancelled
+        if "Cancelled" in type(exc).__name__ or _connection_lost(exc):
+            raise _lost(scheduler, f"the scheduler connection was lost ({type(exc).__name__})") from None
+        raise
+
+
+def _result(future, scheduler: str, describe: Callable[[], str], poll_s: float, check: Callable[[], None]):
+    """A done future's result; a cancelled task or a lost connection is a lost cluster (exit 3), a task
+    whose workers kept dying one line naming it (exit 3), and a replication's own error is raised.
+
+    The result is fetched in waits of ``poll_s`` with ``check`` (the cluster's health) between them:
+    a result held by a worker that dies before the client fetched it is computed again, and with every
+    worker gone ``future.result()`` would wait for ever (seen under load: no exit within 180 s)."""
+    if future.status in ("cancelled", "lost") or future.cancelled():
+        raise _lost(scheduler, "the scheduler cancelled its tasks (it was stopped or restarted)")
+    try:
+        while True:
+            try:
+                return future.result(timeout=poll_s)
+            except TimeoutError:
+                check()
+    except Exception as exc:  # noqa: BLE001 - a cancelled future of a dead scheduler
+        if type(exc).__name__ in ("CancelledError", "FutureCancelledError"):
+            raise _lost(scheduler, f"the scheduler cancelled its tasks ({type(exc).__name__})") from None
+        if future.status != "error" and _connection_lost(exc):  # not the replication's own error
+            raise _lost(scheduler, f"the scheduler connection was lost ({type(exc).__name__})") from None
+        if type(exc).__name__ == "KilledWorker":  # its workers died again and again
+            why = " ".join(str(exc).split())  # distributed's message has line breaks: one line
+            raise UserError(f"{describe()} killed every worker that ran it ({why}); the finished replications "
+                            "are kept, rerun the same command to resume", "--scheduler",
+                            exit_code=CLUSTER_LOST_EXIT) from None
+        raise
+
+
+def _check_cluster(client, scheduler: str, timeout_s: float, lost_after_s: float,
+                   no_workers_since: float | None) -> float | None:
+    """Raise a lost cluster (exit 3) when the client is closed, the scheduler does not answer or no
+    worker was there for ``lost_after_s``; return since when there has been no worker (None: there is one)."""
+    if client.status not in ("running", "connecting", "newly-created"):
+        raise _lost(scheduler, f"the client is {client.status}")
+    n_workers = _n_workers(client, timeout_s)
+    if n_workers is None:
+        raise _lost(scheduler, "the scheduler does not answer")
+    now = time.monotonic()
+    if n_workers:
+        return None
+    if no_workers_since is None:
+        return now
+    if now - no_workers_since > lost_after_s:
+        raise _lost(scheduler, f"no worker for {lost_after_s:g} s")
+    return no_workers_since
 
 
 def _connection_lost(exc: BaseException) -> bool:

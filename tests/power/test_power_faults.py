@@ -122,3 +122,38 @@ def test_a_lost_cluster_ends_in_one_line_and_exit_3(small_realism: Path, tmp_pat
             if p.poll() is None:
                 p.kill()
                 p.wait(timeout=30)
+
+
+def test_a_replication_whose_workers_keep_dying_ends_in_one_line_naming_it_and_exit_3() -> None:
+    """A real LocalCluster with nannies: the last task kills the worker process that runs it, the
+    nanny restarts the worker, the task kills it again until distributed gives up (KilledWorker).
+    run_dask must turn that into one UserError (exit 3) naming the task, after handing every
+    task that finished to ``on_result`` (the CLI's checkpoint)."""
+    pytest.importorskip("distributed")
+    import dask
+    from distributed import LocalCluster
+
+    from psyop.errors import UserError
+    from psyop.power.executors import CLUSTER_LOST_EXIT, run_dask
+
+    def square_or_die(task: int) -> int:
+        import os
+
+        if task == 3:
+            os._exit(1)  # the worker process dies, as an out-of-memory kill would
+        return task * task
+
+    kept: dict[int, int] = {}
+    # one task on the worker at a time: distributed also blames the tasks queued on a dying worker
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0}):
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                          host="127.0.0.1") as cluster:
+            with pytest.raises(UserError) as caught:
+                run_dask(square_or_die, [0, 1, 2, 3], cluster.scheduler_address, on_result=kept.__setitem__,
+                         lost_after_s=120, describe=lambda task: f"replication {task}")
+    error = caught.value
+    assert error.exit_code == CLUSTER_LOST_EXIT
+    message = error.message
+    assert "\n" not in message and message.startswith("replication 3 killed every worker"), message
+    assert "rerun the same command" in message
+    assert kept == {0: 0, 1: 1, 2: 4}  # the finished ones were handed on before the error
