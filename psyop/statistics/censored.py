@@ -153,5 +153,45 @@ def format_tobit(fit: TobitFit, name: str, unit: str = "") -> str:
     return f"{est:.3f}{u} [95 % CI {lo:.3f}, {hi:.3f}; df = {fit.df_resid}]; {fit.model}{warn}"
 
 
-__all__ = ["CENSORED_ABOVE", "CENSORED_BELOW", "TobitFit", "censoring_of", "format_tobit", "substituted",
+def censored_condition_means(rows: pd.DataFrame, cond: str) -> TobitFit:
+    """One Tobit mean per level of ``cond`` (cell-means design, a common sigma)."""
+    levels = sorted(rows[cond].unique())
+    X = np.column_stack([(rows[cond] == lv).to_numpy(float) for lv in levels])
+    return tobit_fit(rows["y"].to_numpy(), X, rows["side"].to_numpy(), tuple(str(lv) for lv in levels))
+
+
+def censored_line(rows: pd.DataFrame, x: str) -> TobitFit:
+    """Tobit regression of the threshold on a numeric ``x`` (intercept, slope)."""
+    xs = rows[x].to_numpy(float)
+    X = np.column_stack([np.ones_like(xs), xs])
+    return tobit_fit(rows["y"].to_numpy(), X, rows["side"].to_numpy(), ("intercept", "slope"))
+
+
+def censored_report(fits: pd.DataFrame, cond: str, unit: str, numeric: bool = False) -> dict:
+    """The censored-data analysis of a fit table, for a results JSON: how many fits were censored,
+    what was done with them, and the Tobit estimates (or why none could be made)."""
+    rows, left = censoring_of(fits)
+    n_b, n_a = int((rows["side"] < 0).sum()), int((rows["side"] > 0).sum())
+    out: dict = {"n_censored_below": n_b, "n_censored_above": n_a, "still_left_out_by_status": left,
+                 "rule": ("censored thresholds enter a censored-normal (Tobit) likelihood at their bound "
+                          "(the lowest / highest tested level); bimodal, grid-edge and no-fit fits stay out")}
+    try:
+        mean = tobit_mean(rows["y"].to_numpy(), rows["side"].to_numpy())
+        out["mean"] = mean.__dict__
+        out["text_mean"] = format_tobit(mean, "mean", unit)
+        if numeric:
+            line = censored_line(rows, cond)
+            out["line"] = line.__dict__
+            out["text_slope"] = format_tobit(line, "slope", "")
+        else:
+            out["condition_means"] = censored_condition_means(rows, cond).__dict__
+    except ValueError as exc:
+        out["text_mean"] = f"not computed: {exc}"
+    out["headline"] = (f"{n_b + n_a} of {len(fits)} fits censored ({n_b} below, {n_a} above the tested levels): "
+                       f"entered as censored (Tobit) at their bounds, not dropped; "
+                       f"{sum(left.values())} ambiguous fits left out: {left or 'none'}")
+    return out
+
+
+__all__ = ["censored_condition_means", "censored_line", "censored_report", "CENSORED_ABOVE", "CENSORED_BELOW", "TobitFit", "censoring_of", "format_tobit", "substituted",
            "tobit_fit", "tobit_mean"]

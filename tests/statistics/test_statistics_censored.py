@@ -65,3 +65,15 @@ def test_censoring_of_enters_censored_fits_at_their_bound_and_leaves_ambiguous_o
 def test_too_few_uncensored_values_is_refused_with_a_message():
     with pytest.raises(ValueError, match="uncensored"):
         tobit_mean(np.array([0.1, 0.1, 0.4]), np.array([-1, -1, 0]))
+
+
+def test_a_linear_fit_with_few_residual_df_is_flagged_low_df_and_states_its_df():
+    from psyop.statistics.formatting import format_linear_fit
+    from psyop.statistics.regression import linear_fit
+
+    few = pd.DataFrame({"x": [0.0, 0.5, 1.0, 1.5, 2.0], "y": [0.30, 0.36, 0.41, 0.52, 0.55]})
+    text = format_linear_fit(linear_fit(few, "x", "y"), "D")
+    assert "df = 3" in text and "LOW DF: 3 residual df < 4" in text
+    many = pd.concat([few] * 3, ignore_index=True)
+    text = format_linear_fit(linear_fit(many, "x", "y"), "D")
+    assert "df = 13" in text and "LOW DF" not in text
