@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     key_mean = ("detection threshold (mean over subjects and back distances)" if cond == "back_D"
                 else f"{args.study} threshold (mean over subjects and {cond_label})")
     payload = {
-        **provenance(facts, "thresholds"), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
+        **provenance(facts, "thresholds", args.pool_protocols), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
         "condition_column": cond, "level_column": level.name, "level_unit": level.unit,
         "n_fits": len(fits), "n_left_out": int(sum(left_out.values())), "left_out_by_status": left_out,
         "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", cond, "status"]].to_dict("records"),

@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
            else f"{args.study} threshold vs {label} (linear fit)")
     censored = censored_report(fits, cond, unit, numeric=True)
     write_json(results_file(args.results, args.study, "fit"), {
-        **provenance(facts, "linear_fit"), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
+        **provenance(facts, "linear_fit", args.pool_protocols), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
         "condition_column": cond, "level_column": level.name, "level_unit": level.unit,
         "n_fits": len(fits), "n_left_out": int(sum(left_out.values())), "left_out_by_status": left_out,
         "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", cond, "status"]].to_dict("records"),
