@@ -135,6 +135,30 @@ def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, titl
     return fig
 
 
+def _psychometric_panel(ax, b: pd.DataFrame, r, level_column: str, n_max: float) -> None:
+    """One participant x condition panel: proportion correct per level (marker area proportional to
+    the trials at that level when they differ, as adaptive runs place them), the fitted curve, the
+    threshold with its CI and a non-ok status."""
+    pc = b["n_correct"] / b["n_total"]
+    if len(b) and (b["n_total"] != n_max).any():
+        ax.scatter(b[level_column], pc, s=16.0 * b["n_total"] / n_max, color="k", zorder=2)
+    else:
+        ax.plot(b[level_column], pc, "o", ms=4, color="k")
+    if r is None:
+        return
+    if np.isfinite(r["location_D"]):
+        xs = np.linspace(r["level_min_D"], r["level_max_D"], 100)
+        ax.plot(xs, predicted_pc(xs, r["location_D"], r["width_D"], r["lapse"]), color="#1f77b4", lw=1.2)
+    if np.isfinite(r["threshold_D"]):
+        hi = r["threshold_ci_high_D"] if np.isfinite(r["threshold_ci_high_D"]) else r["level_max_D"]
+        ax.plot([r["threshold_D"]] * 2, [0.5, 0.75], color="#d62728", lw=1)
+        ax.plot([max(r["threshold_ci_low_D"], r["level_min_D"]), hi], [0.75, 0.75], color="#d62728", lw=1)
+    status = r.get("status", "ok")
+    if status != "ok":
+        ax.text(0.03, 0.05, status.replace("_", " "), transform=ax.transAxes, fontsize=9,
+                va="bottom", color="#b00020")
+
+
 def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_column: str,
                            title: str, simulated: bool = False, level_column: str = "level_D",
                            level_label: str = "level (D)") -> plt.Figure:
@@ -149,6 +173,8 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
     block_of = {key: b for key, b in blocks.groupby(keys, sort=False)}
     fit_of = {key: f.iloc[0] for key, f in fits.groupby(keys, sort=False)}
     no_blocks = blocks.iloc[:0]
+    n_max = float(blocks["n_total"].max()) if len(blocks) else 1.0
+    varying = bool(len(blocks)) and bool((blocks["n_total"] != n_max).any())
     with plt.rc_context(STYLE):
         # Not sharey: shared axes make every limit change and every draw visit all the others
         # (quadratic in panels: 7.8 s for set_ylim alone at 180). Every panel gets the same
@@ -158,21 +184,7 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
         for i, s in enumerate(subjects):
             for j, c in enumerate(conds):
                 ax = axes[i, j]
-                b = block_of.get((s, c), no_blocks)
-                ax.plot(b[level_column], b["n_correct"] / b["n_total"], "o", ms=4, color="k")
-                r = fit_of.get((s, c))
-                if r is not None:
-                    if np.isfinite(r["location_D"]):
-                        xs = np.linspace(r["level_min_D"], r["level_max_D"], 100)
-                        ax.plot(xs, predicted_pc(xs, r["location_D"], r["width_D"], r["lapse"]), color="#1f77b4", lw=1.2)
-                    if np.isfinite(r["threshold_D"]):
-                        hi = r["threshold_ci_high_D"] if np.isfinite(r["threshold_ci_high_D"]) else r["level_max_D"]
-                        ax.plot([r["threshold_D"]] * 2, [0.5, 0.75], color="#d62728", lw=1)
-                        ax.plot([max(r["threshold_ci_low_D"], r["level_min_D"]), hi], [0.75, 0.75], color="#d62728", lw=1)
-                    status = r.get("status", "ok")
-                    if status != "ok":
-                        ax.text(0.03, 0.05, status.replace("_", " "), transform=ax.transAxes, fontsize=9,
-                                va="bottom", color="#b00020")
+                _psychometric_panel(ax, block_of.get((s, c), no_blocks), fit_of.get((s, c)), level_column, n_max)
                 ax.set_ylim(0.0, 1.02)  # below-chance points must stay visible
                 if j > 0:
                     ax.yaxis.set_tick_params(which="both", labelleft=False)
@@ -183,7 +195,8 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
                     ax.set_ylabel(f"{participant_label(s)}\nP(correct)")
                 if i == len(subjects) - 1:
                     ax.set_xlabel(level_label)
-        handles = [Line2D([], [], color="k", marker="o", ls="", label="proportion correct"),
+        points = f"proportion correct (marker area: trials, largest {n_max:g})" if varying else "proportion correct"
+        handles = [Line2D([], [], color="k", marker="o", ls="", label=points),
                    Line2D([], [], color="#1f77b4", label="fitted function (MAP)"),
                    Line2D([], [], color="#d62728", label="75 % threshold and 95 % CI")]
         fig.suptitle(title)
