@@ -59,3 +59,13 @@ def test_one_protocol_version_is_not_pooled(tmp_path):
                             "--out", str(tmp_path / "r.png")]) == 0
     (payload,) = [json.loads(p.read_text()) for p in (tmp_path / "res").glob("realism.json")]
     assert payload["protocols_pooled"] is False
+
+
+def test_make_figures_pool_1_pools_through_the_environment(two_versions, monkeypatch):
+    """figures.mk exports PSYOP_POOL_PROTOCOLS=1 for POOL=1; the scripts take it as --pool-protocols."""
+    data, results = two_versions
+    monkeypatch.setenv("PSYOP_POOL_PROTOCOLS", "1")
+    assert _realism().main(["--data", str(data), "--results", str(results), "--out", str(results / "r.png")]) == 0
+    assert json.loads((results / "realism.json").read_text())["protocols_pooled"] is True
+    mk = (ANALYSIS.parent / "figures.mk").read_text()
+    assert "ifeq ($(POOL),1)\nexport PSYOP_POOL_PROTOCOLS := 1" in mk
