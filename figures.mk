@@ -22,6 +22,10 @@ FIGDIR ?= figures
 ifneq ($(words $(RESULTS)) $(words $(FIGDIR)),1 1)
 $(error RESULTS='$(RESULTS)' / FIGDIR='$(FIGDIR)': these folders are make targets and may not contain spaces; choose paths without spaces (DATA may have them))
 endif
+# POOL=1: analyse a study whose sessions ran different protocol versions (hashes) together, on purpose
+ifeq ($(POOL),1)
+export PSYOP_POOL_PROTOCOLS := 1
+endif
 # what runs an analysis script: the venv's python (analysis/batch.py sets it to its own marker)
 ANALYSE ?= $(PY)
 # `make -n`: show the real graph (the analysis commands), run nothing

@@ -39,6 +39,9 @@ def parser(description: str, default_out: str | None, study: str | None = None) 
     p.add_argument("--out", type=Path, default=None,
                    help=f"output file (default {default_out})" if default_out else "output file")
     p.set_defaults(default_out=default_out)
+    p.add_argument("--pool-protocols", action="store_true", default=os.environ.get("PSYOP_POOL_PROTOCOLS") == "1",
+                   help="analyse sessions of a study that ran different protocol versions (hashes) together, on "
+                        "purpose (default: refused; `make figures POOL=1` sets PSYOP_POOL_PROTOCOLS=1)")
     p.add_argument("--results", type=Path, default=Path("results"), help="directory for CSV/JSON statistics")
     if study is not None:
         p.add_argument("--study", default=study, help=f"study name (the protocol's study.name; default {study})")
@@ -64,11 +67,22 @@ def results_file(results: Path, study: str, what: str = "", ext: str = "json") -
     return results / (f"{study}_{what}.{ext}" if what else f"{study}.{ext}")
 
 
-def provenance(facts, analysis: str) -> dict:
+def provenance(facts, analysis: str, pool_protocols: bool = False) -> dict:
     """The keys every results JSON starts with: which study, its response kind, which analysis
-    wrote it and the protocol hashes its sessions ran (psyop.statistics.studies.StudyFacts)."""
-    return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind,
-            "protocol_sha256": list(facts.protocol_sha256)}
+    wrote it and the protocol hashes its sessions ran (psyop.statistics.studies.StudyFacts).
+
+    Sessions under more than one protocol hash are refused (a UserError naming the hashes) unless
+    ``pool_protocols`` (``--pool-protocols``, ``make figures POOL=1``); pooled, the JSON says so."""
+    hashes = list(facts.protocol_sha256)
+    if len(hashes) > 1 and not pool_protocols:
+        from psyop.errors import UserError
+
+        raise UserError(f"study {facts.name!r}: its sessions ran {len(hashes)} protocol versions (sha256 "
+                        f"{', '.join(h[:12] for h in hashes)}); analyse each version apart (keep each version's sessions "
+                        "under its own study.name or data root) or pool them on purpose with --pool-protocols "
+                        "(`make figures POOL=1`)", facts.name)
+    return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind, "protocol_sha256": hashes,
+            "protocols_pooled": len(hashes) > 1}
 
 
 def require_kind(facts, kind: str, script: str) -> None:

@@ -3,9 +3,11 @@ figure, and the thresholds figure of any two-interval study.
 
 Reads the fit cache (results/<study>_fits.csv); writes results/<study>_thresholds.json with the
 grand mean threshold (and its 95 % t-interval over participants) and a one-way rm-ANOVA of
-thresholds over the condition. Fits whose status is not usable (censored, lapse at bound, bimodal,
-grid edge, no fit) are left out by the documented rule
-(psyop.statistics.psychometric.usable_for_analysis) and counted by status. Axis labels come from
+thresholds over the condition. Censored thresholds (below the lowest / above the highest level, lapse
+at bound) are not dropped from the group estimate: a censored-normal (Tobit) mean enters them at their
+bounds (psyop.statistics.censored), and the rm-ANOVA is repeated with them substituted by their bounds
+(the sensitivity). The plain mean and rm-ANOVA use the usable fits only
+(psyop.statistics.psychometric.usable_for_analysis); every fit left out is counted by status. Axis labels come from
 the protocol's factor names, descriptions and units.
 """
 
@@ -21,6 +23,7 @@ from _twoafc import check_two_interval, condition_column, level_column
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_thresholds
 from psyop.statistics.anova import rm_anova
+from psyop.statistics.censored import censored_report, censoring_of, substituted
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_anova
 from psyop.statistics.psychometric import usable_for_analysis
@@ -58,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     key_mean = ("detection threshold (mean over subjects and back distances)" if cond == "back_D"
                 else f"{args.study} threshold (mean over subjects and {cond_label})")
     payload = {
-        **provenance(facts, "thresholds"), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
+        **provenance(facts, "thresholds", args.pool_protocols), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
         "condition_column": cond, "level_column": level.name, "level_unit": level.unit,
         "n_fits": len(fits), "n_left_out": int(sum(left_out.values())), "left_out_by_status": left_out,
         "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", cond, "status"]].to_dict("records"),
@@ -78,11 +81,32 @@ def main(argv: list[str] | None = None) -> int:
         payload[f"anova_{cond}"] = aov.table.to_dict("records")
         payload["anova_dropped"] = aov.dropped.to_dict("records")
         payload["summary"][effect_key] = format_anova(aov.table.iloc[0])
+    _add_censored(payload, fits, cond, unit, effect_key)
     write_json(results_file(args.results, args.study, "thresholds"), payload)
     title = "Detection thresholds" if args.study == "detection" else f"Thresholds: {args.study}"
     fig = plot_thresholds(fits, cond, cond_label, title, simulated=simulated, level_unit=unit or "level units")
     save_figure(fig, out_path(args))
     return 0
+
+
+def _add_censored(payload: dict, fits, cond: str, unit: str, effect_key: str) -> None:
+    """The censored-data mean and the bound-substitution rm-ANOVA, beside the usable-only ones."""
+    report = censored_report(fits, cond, unit)
+    payload["censored"] = report
+    payload["summary"]["censored thresholds"] = report["headline"]
+    payload["summary"]["mean threshold, censored-data model (Tobit)"] = report["text_mean"]
+    key = f"{effect_key}, censored fits at their bounds (sensitivity)"
+    if not (report["n_censored_below"] + report["n_censored_above"]):
+        payload["summary"][key] = "same as above: no censored fits"
+        return
+    rows, _ = censoring_of(fits)
+    try:
+        aov = rm_anova(substituted(rows), "threshold_D", cond)
+    except ValueError as exc:
+        payload["summary"][key] = f"not computed: {exc}"
+    else:
+        payload["anova_censored_at_bounds"] = aov.table.to_dict("records")
+        payload["summary"][key] = format_anova(aov.table.iloc[0])
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 """Thresholds against a numeric condition, with the linear fit (the paper's discrimination figure:
 0.11 x + 0.38 D); any two-interval study with a numeric condition factor.
 
-Reads results/<study>_fits.csv; writes results/<study>_fit.json. Fits whose status is not usable
-are left out (psyop.statistics.psychometric.usable_for_analysis) and counted. Axis labels come from
+Reads results/<study>_fits.csv; writes results/<study>_fit.json. The OLS line uses the usable fits
+(psyop.statistics.psychometric.usable_for_analysis); beside it a censored-normal (Tobit) line enters
+censored thresholds at their bounds (psyop.statistics.censored), so none is silently dropped. Axis labels come from
 the protocol's factor names, descriptions and units.
 """
 
@@ -19,6 +20,7 @@ from _twoafc import check_two_interval, condition_column, level_column
 from psyop.errors import UserError
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_thresholds
+from psyop.statistics.censored import censored_report
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_linear_fit
 from psyop.statistics.psychometric import usable_for_analysis
@@ -54,14 +56,18 @@ def main(argv: list[str] | None = None) -> int:
     label = facts.factor(cond).label
     key = ("discrimination threshold vs offset (linear fit)" if cond == "offset_D"
            else f"{args.study} threshold vs {label} (linear fit)")
+    censored = censored_report(fits, cond, unit, numeric=True)
     write_json(results_file(args.results, args.study, "fit"), {
-        **provenance(facts, "linear_fit"), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
+        **provenance(facts, "linear_fit", args.pool_protocols), "simulated": simulated, "n_subjects": int(fits["participant"].nunique()),
         "condition_column": cond, "level_column": level.name, "level_unit": level.unit,
         "n_fits": len(fits), "n_left_out": int(sum(left_out.values())), "left_out_by_status": left_out,
         "left_out": fits.loc[~fits.index.isin(clean.index), ["participant", cond, "status"]].to_dict("records"),
         "linear_fit": fit.__dict__,
         "summary": {key: format_linear_fit(fit, unit)
-                    + f"; {sum(left_out.values())} of {len(fits)} fits left out: {left_out or 'none'}"},
+                    + f"; {sum(left_out.values())} of {len(fits)} fits left out: {left_out or 'none'}",
+                    "censored thresholds": censored["headline"],
+                    f"{key}, censored-data model (Tobit) slope": censored.get("text_slope", censored["text_mean"])},
+        "censored": censored,
     })
     title = "Discrimination thresholds" if args.study == "discrimination" else f"Thresholds: {args.study}"
     fig = plot_thresholds(fits, cond, label, title, line=(fit.slope, fit.intercept), simulated=simulated,

@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     summary["reach: condition difference, pooled multiple regression (trials as independent; the paper's)"] = \
         format_condition_comparison(comparison)
     write_json(results_file(args.results, args.study), {
-        **provenance(facts, "reach"), "simulated": ds.simulated, "n_subjects": int(t["participant"].nunique()),
+        **provenance(facts, "reach", args.pool_protocols), "simulated": ds.simulated, "n_subjects": int(t["participant"].nunique()),
         "rendering_column": rendering, "target_column": target,
         "fits": fits.to_dict("records"), "comparison": comparison.__dict__, "mixed": mixed.__dict__, "summary": summary,
     })

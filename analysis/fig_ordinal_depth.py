@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     for (mode, s), m in means.items():
         summary[f"{args.study} proportion correct: {mode}, {s:g} {unit}".rstrip()] = f"{100 * m:.1f}%"
     write_json(results_file(args.results, args.study), {
-        **provenance(facts, "ordinal"), "simulated": ds.simulated, "n_subjects": aov.n_subjects,
+        **provenance(facts, "ordinal", args.pool_protocols), "simulated": ds.simulated, "n_subjects": aov.n_subjects,
         "separation_column": sep,
         "dropped": aov.dropped.to_dict("records"), "anova": aov.table.to_dict("records"),
         "posthoc": posthoc.to_dict("records"), "bonferroni_family": args.bonferroni_family,

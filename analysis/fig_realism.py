@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     args.results.mkdir(parents=True, exist_ok=True)
     write_csv(prefs, results_file(args.results, args.study, "preferences", "csv"))
     write_json(results_file(args.results, args.study), {
-        **provenance(facts, "preferences"), "simulated": ds.simulated,
+        **provenance(facts, "preferences", args.pool_protocols), "simulated": ds.simulated,
         "n_subjects": int(ds.trials["participant"].nunique()), "preferences": prefs.to_dict("records"),
         "summary": {f"{args.study}: {r['first']} over {r['second']}": format_binomial(r) for _, r in prefs.iterrows()},
     })

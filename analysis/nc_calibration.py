@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     n_ok = int((table["status"] == "ok").sum())
     summary[f"{args.study} participants with a PSS"] = f"{n_ok} of {len(table)}"
     write_json(results_file(args.results, args.study), {
-        **provenance(facts, "nc_calibration"), "simulated": ds.simulated, "level_column": args.level_column,
+        **provenance(facts, "nc_calibration", args.pool_protocols), "simulated": ds.simulated, "level_column": args.level_column,
         "ci_level": 0.95, "participants": table.to_dict("records"), "calibrated_rendering_nc": calibrated,
         "summary": summary,
     })

@@ -78,6 +78,8 @@ def write_study_summaries(others: list[tuple[Path, dict]], results: Path) -> lis
         lines = [f"# Statistics of study {study}", "",
                  f"Protocol hash(es): {', '.join(h[:12] for h in hashes) or 'not recorded'} (not one of the paper's "
                  "protocols: these numbers are not compared with the paper).", ""]
+        if len(hashes) > 1:
+            lines += [f"**{len(hashes)} protocol versions pooled on purpose** (--pool-protocols / POOL=1).", ""]
         if any(p.get("simulated") for p in payloads):
             lines += ["**Simulated data**.", ""]
         for payload in payloads:
@@ -100,8 +102,9 @@ def _methods(studies: dict) -> list[str]:
         if s is not None:
             left = s.get("left_out_by_status") or {}
             lines.append(f"- {s['study']}: {s.get('n_left_out', 0)} of {s.get('n_fits', '?')} fits left out of the "
-                         f"statistics by status ({left or 'none'}): censored thresholds are bounds, not numbers "
-                         "(docs/statistics.md, 'Fit status').")
+                         f"plain mean and tests by status ({left or 'none'}); censored ones enter the censored-data (Tobit) "
+                         "estimates at their bounds and a bound-substitution sensitivity test (docs/statistics.md, "
+                         "'Censored thresholds').")
     o = studies.get("ordinal")
     if o is not None:
         lines.append(f"- Ordinal post-hoc: paired t-tests, Bonferroni over {o.get('bonferroni_family_text', '?')}; "

@@ -68,6 +68,44 @@ DESCRIBED_COLUMNS: tuple[str, ...] = SCHEDULE_COLUMNS + IDENTITY_COLUMNS + MEASU
 TIMEOUT_RESPONSE = "timeout"
 
 
+#: The typed form of ``response``: ``response_value`` is the response as a number where it is one
+#: (the interval chosen, 1 or 2; a reach in metres), else null; ``outcome`` is what happened to the
+#: trial's response phase (:data:`OUTCOMES`).
+RESPONSE_VALUE = "response_value"
+OUTCOME = "outcome"
+OUTCOMES: tuple[str, ...] = ("answered", TIMEOUT_RESPONSE)
+
+
+def typed_response(response: object) -> dict[str, object]:
+    """``{"response_value": float | None, "outcome": "answered" | "timeout"}`` of one logged response.
+
+    Examples
+    --------
+    >>> typed_response("2"), typed_response("timeout")["outcome"], typed_response("left")["response_value"]
+    ({'response_value': 2.0, 'outcome': 'answered'}, 'timeout', None)
+    """
+    text = "" if response is None else str(response)
+    if text == TIMEOUT_RESPONSE:
+        return {RESPONSE_VALUE: None, OUTCOME: TIMEOUT_RESPONSE}
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    return {RESPONSE_VALUE: value if value is not None and np.isfinite(value) else None, OUTCOME: "answered"}
+
+
+def with_typed_response(trials: pd.DataFrame) -> pd.DataFrame:
+    """``trials`` with ``response_value`` and ``outcome`` derived from ``response`` where a session
+    logged before those columns existed lacks them (older sessions read as new ones)."""
+    if RESPONSE not in trials or (RESPONSE_VALUE in trials and OUTCOME in trials):
+        return trials
+    typed = [typed_response(r) for r in trials[RESPONSE]]
+    out = trials.copy()
+    out[RESPONSE_VALUE] = pd.Series([t[RESPONSE_VALUE] for t in typed], index=trials.index, dtype="float64")
+    out[OUTCOME] = pd.Series([t[OUTCOME] for t in typed], index=trials.index, dtype="object")
+    return out
+
+
 def drop_timeouts(trials: pd.DataFrame) -> pd.DataFrame:
     """The answered trials: rows whose response is :data:`TIMEOUT_RESPONSE` are left out and
     counted in ``attrs["n_timeout_dropped"]`` (documented in docs/protocols.md)."""

@@ -50,6 +50,52 @@ def _usable(fits: pd.DataFrame) -> pd.Series:
     return fits["flags"].fillna("") == ""
 
 
+def _draw_participant_thresholds(ax, fits: pd.DataFrame, usable: pd.Series, condition_column: str,
+                                 jitter: dict, ymax: float) -> tuple[int, int, int]:
+    """Each participant's threshold and CI (or censored bound); returns the counts of clipped CIs,
+    open CIs and censored fits for the legend."""
+    n_clipped = n_open = n_censored = 0
+    for (_, r), ok in zip(fits.iterrows(), usable):
+        x = r[condition_column] + jitter[r["participant"]]
+        status = r.get("status", "ok")
+        if status in ("censored_below", "censored_above", "lapse_at_bound"):
+            below = status == "censored_below"
+            ax.plot(x, r["threshold_bound_D"], "v" if below else "^", ms=6, mfc="white", mec="#b00020", zorder=2,
+                    clip_on=False)
+            n_censored += 1
+            continue
+        if not np.isfinite(r["threshold_D"]):
+            continue
+        lo, hi = r["threshold_ci_low_D"], r["threshold_ci_high_D"]
+        lo_c = max(lo, 0.0)
+        hi_c = hi if np.isfinite(hi) else ymax
+        ax.plot([x, x], [lo_c, hi_c], color=SUBJECT_GREY, lw=0.9, zorder=1)
+        ax.plot(x, r["threshold_D"], "o", ms=3.5, color=SUBJECT_GREY, mfc=SUBJECT_GREY if ok else "white", zorder=1)
+        if lo < 0.0:
+            ax.plot(x, 0.0, "v", ms=5, color=SUBJECT_GREY, zorder=1, clip_on=False)
+            n_clipped += 1
+        if not np.isfinite(hi):
+            ax.annotate("", (x, ymax), (x, ymax * 0.93), arrowprops=dict(arrowstyle="->", color=SUBJECT_GREY, lw=0.9))
+            n_open += 1
+    return n_clipped, n_open, n_censored
+
+
+def _threshold_handles(n_clipped: int, n_open: int, n_censored: int, level_unit: str) -> list:
+    """The legend entries of :func:`plot_thresholds` (markers that were drawn only)."""
+    handles = [
+        Line2D([], [], color=SUBJECT_GREY, marker="o", ms=4, lw=0.9, label="participant: threshold ± 95 % CI"),
+        Line2D([], [], color="k", marker="s", ms=6, lw=1.5, label="mean ± SE across participants"),
+    ]
+    if n_clipped:
+        handles.append(Line2D([], [], color=SUBJECT_GREY, marker="v", ls="", ms=5, label=f"CI clipped at 0 {level_unit}"))
+    if n_open:
+        handles.append(Line2D([], [], color=SUBJECT_GREY, marker="$\\uparrow$", ls="", ms=7, label="CI without upper bound"))
+    if n_censored:
+        handles.append(Line2D([], [], color="#b00020", marker="v", mfc="white", ls="", ms=6,
+                              label="censored: beyond tested levels (left out)"))
+    return handles
+
+
 def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, title: str,
                     line: tuple[float, float] | None = None, simulated: bool = False,
                     level_unit: str = "D") -> plt.Figure:
@@ -70,43 +116,11 @@ def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, titl
         top = max([0.0] + [float(v) for v in fits["threshold_ci_high_D"] if np.isfinite(v)]
                   + [float(v) for v in fits.get("threshold_bound_D", pd.Series(dtype=float)) if np.isfinite(v)])
         ymax = max(1.0, top * 1.1)
-        n_clipped = n_open = n_censored = 0
-        for (_, r), ok in zip(fits.iterrows(), usable):
-            x = r[condition_column] + jitter[r["participant"]]
-            status = r.get("status", "ok")
-            if status in ("censored_below", "censored_above", "lapse_at_bound"):
-                below = status == "censored_below"
-                ax.plot(x, r["threshold_bound_D"], "v" if below else "^", ms=6, mfc="white", mec="#b00020", zorder=2,
-                        clip_on=False)
-                n_censored += 1
-                continue
-            if not np.isfinite(r["threshold_D"]):
-                continue
-            lo, hi = r["threshold_ci_low_D"], r["threshold_ci_high_D"]
-            lo_c = max(lo, 0.0)
-            hi_c = hi if np.isfinite(hi) else ymax
-            ax.plot([x, x], [lo_c, hi_c], color=SUBJECT_GREY, lw=0.9, zorder=1)
-            ax.plot(x, r["threshold_D"], "o", ms=3.5, color=SUBJECT_GREY, mfc=SUBJECT_GREY if ok else "white", zorder=1)
-            if lo < 0.0:
-                ax.plot(x, 0.0, "v", ms=5, color=SUBJECT_GREY, zorder=1, clip_on=False)
-                n_clipped += 1
-            if not np.isfinite(hi):
-                ax.annotate("", (x, ymax), (x, ymax * 0.93), arrowprops=dict(arrowstyle="->", color=SUBJECT_GREY, lw=0.9))
-                n_open += 1
+        n_clipped, n_open, n_censored = _draw_participant_thresholds(ax, fits, usable, condition_column, jitter, ymax)
         ok = fits[usable]
         means = ok.groupby(condition_column)["threshold_D"].agg(["mean", _sem]).reindex(conds)
         ax.errorbar(conds, means["mean"], yerr=means["_sem"], fmt="s-", color="k", ms=6, capsize=4, lw=1.5, zorder=3)
-        handles = [
-            Line2D([], [], color=SUBJECT_GREY, marker="o", ms=4, lw=0.9, label="participant: threshold ± 95 % CI"),
-            Line2D([], [], color="k", marker="s", ms=6, lw=1.5, label="mean ± SE across participants"),
-        ]
-        if n_clipped:
-            handles.append(Line2D([], [], color=SUBJECT_GREY, marker="v", ls="", ms=5, label=f"CI clipped at 0 {level_unit}"))
-        if n_open:
-            handles.append(Line2D([], [], color=SUBJECT_GREY, marker="$\\uparrow$", ls="", ms=7, label="CI without upper bound"))
-        if n_censored:
-            handles.append(Line2D([], [], color="#b00020", marker="v", mfc="white", ls="", ms=6,
-                                  label="censored: beyond tested levels (left out)"))
+        handles = _threshold_handles(n_clipped, n_open, n_censored, level_unit)
         if line is not None:
             xs = np.linspace(min(conds) - 0.2, max(conds) + 0.2, 50)
             ax.plot(xs, line[1] + line[0] * xs, "--", color="#1f77b4", lw=1.2, zorder=2)
@@ -119,6 +133,30 @@ def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, titl
         ax.set_title(title)
         mark_simulated(fig, simulated)
     return fig
+
+
+def _psychometric_panel(ax, b: pd.DataFrame, r, level_column: str, n_max: float) -> None:
+    """One participant x condition panel: proportion correct per level (marker area proportional to
+    the trials at that level when they differ, as adaptive runs place them), the fitted curve, the
+    threshold with its CI and a non-ok status."""
+    pc = b["n_correct"] / b["n_total"]
+    if len(b) and (b["n_total"] != n_max).any():
+        ax.scatter(b[level_column], pc, s=16.0 * b["n_total"] / n_max, color="k", zorder=2)
+    else:
+        ax.plot(b[level_column], pc, "o", ms=4, color="k")
+    if r is None:
+        return
+    if np.isfinite(r["location_D"]):
+        xs = np.linspace(r["level_min_D"], r["level_max_D"], 100)
+        ax.plot(xs, predicted_pc(xs, r["location_D"], r["width_D"], r["lapse"]), color="#1f77b4", lw=1.2)
+    if np.isfinite(r["threshold_D"]):
+        hi = r["threshold_ci_high_D"] if np.isfinite(r["threshold_ci_high_D"]) else r["level_max_D"]
+        ax.plot([r["threshold_D"]] * 2, [0.5, 0.75], color="#d62728", lw=1)
+        ax.plot([max(r["threshold_ci_low_D"], r["level_min_D"]), hi], [0.75, 0.75], color="#d62728", lw=1)
+    status = r.get("status", "ok")
+    if status != "ok":
+        ax.text(0.03, 0.05, status.replace("_", " "), transform=ax.transAxes, fontsize=9,
+                va="bottom", color="#b00020")
 
 
 def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_column: str,
@@ -135,6 +173,8 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
     block_of = {key: b for key, b in blocks.groupby(keys, sort=False)}
     fit_of = {key: f.iloc[0] for key, f in fits.groupby(keys, sort=False)}
     no_blocks = blocks.iloc[:0]
+    n_max = float(blocks["n_total"].max()) if len(blocks) else 1.0
+    varying = bool(len(blocks)) and bool((blocks["n_total"] != n_max).any())
     with plt.rc_context(STYLE):
         # Not sharey: shared axes make every limit change and every draw visit all the others
         # (quadratic in panels: 7.8 s for set_ylim alone at 180). Every panel gets the same
@@ -144,21 +184,7 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
         for i, s in enumerate(subjects):
             for j, c in enumerate(conds):
                 ax = axes[i, j]
-                b = block_of.get((s, c), no_blocks)
-                ax.plot(b[level_column], b["n_correct"] / b["n_total"], "o", ms=4, color="k")
-                r = fit_of.get((s, c))
-                if r is not None:
-                    if np.isfinite(r["location_D"]):
-                        xs = np.linspace(r["level_min_D"], r["level_max_D"], 100)
-                        ax.plot(xs, predicted_pc(xs, r["location_D"], r["width_D"], r["lapse"]), color="#1f77b4", lw=1.2)
-                    if np.isfinite(r["threshold_D"]):
-                        hi = r["threshold_ci_high_D"] if np.isfinite(r["threshold_ci_high_D"]) else r["level_max_D"]
-                        ax.plot([r["threshold_D"]] * 2, [0.5, 0.75], color="#d62728", lw=1)
-                        ax.plot([max(r["threshold_ci_low_D"], r["level_min_D"]), hi], [0.75, 0.75], color="#d62728", lw=1)
-                    status = r.get("status", "ok")
-                    if status != "ok":
-                        ax.text(0.03, 0.05, status.replace("_", " "), transform=ax.transAxes, fontsize=9,
-                                va="bottom", color="#b00020")
+                _psychometric_panel(ax, block_of.get((s, c), no_blocks), fit_of.get((s, c)), level_column, n_max)
                 ax.set_ylim(0.0, 1.02)  # below-chance points must stay visible
                 if j > 0:
                     ax.yaxis.set_tick_params(which="both", labelleft=False)
@@ -169,7 +195,8 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
                     ax.set_ylabel(f"{participant_label(s)}\nP(correct)")
                 if i == len(subjects) - 1:
                     ax.set_xlabel(level_label)
-        handles = [Line2D([], [], color="k", marker="o", ls="", label="proportion correct"),
+        points = f"proportion correct (marker area: trials, largest {n_max:g})" if varying else "proportion correct"
+        handles = [Line2D([], [], color="k", marker="o", ls="", label=points),
                    Line2D([], [], color="#1f77b4", label="fitted function (MAP)"),
                    Line2D([], [], color="#d62728", label="75 % threshold and 95 % CI")]
         fig.suptitle(title)

@@ -44,6 +44,7 @@ from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, rea
 from psyop.session.reach import horizontal_reach_m
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.schedule.rows import interval_values
+from psyop.datacontract import typed_response
 from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, ResponsePlan
 from psyop.session.progress import session_progress
 from psyop.session.responses.base import Response, ResponseSource
@@ -283,6 +284,7 @@ class TrialLoop:
             run=self.store.run_index,
         )
         record.update(dict(response.extras))
+        record.update(typed_response(response.response))  # response_value (a number where it is one), outcome
         record.update(hand_columns)
         return record, frames
 

@@ -85,7 +85,7 @@ def _read_trials(files: list[Path]) -> tuple[list[pd.DataFrame], list[bool | Non
                             f"`psyop recover {path.parent}` to rebuild it from the session's log", str(path)) from None
         value = (table.schema.metadata or {}).get(dc.SIMULATED_METADATA_KEY.encode())
         flags.append(None if value is None else json.loads(value) is True)
-        tables.append(table.to_pandas())
+        tables.append(dc.with_typed_response(table.to_pandas()))  # sessions logged before the typed columns
     return tables, flags
 
 

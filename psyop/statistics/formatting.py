@@ -23,10 +23,10 @@ def _df(value: float) -> str:
     return f"{value:.0f}" if abs(value - round(value)) < 1e-9 else f"{value:.2f}"
 
 
-def _low_df(df: float) -> str:
+def _low_df(df: float, what: str = "error") -> str:
     from psyop.statistics.small_sample import low_df_note
 
-    note = low_df_note(float(df))
+    note = low_df_note(float(df), what)
     return f" [{note}]" if note else ""
 
 
@@ -66,10 +66,13 @@ def format_binomial(row: Mapping) -> str:
 
 
 def format_linear_fit(fit: LinearFit, unit: str = "") -> str:
+    """Slope and intercept with their 95 % CIs, R^2, n and the residual df (n - 2) of the t-tests;
+    fewer than ``small_sample.MIN_RELIABLE_DF`` residual df append a LOW DF flag."""
     u = f" {unit}" if unit else ""
+    df = fit.n - 2
     return (f"slope = {fit.slope:.3f} [{fit.slope_ci_low:.3f}, {fit.slope_ci_high:.3f}], "
             f"intercept = {fit.intercept:.3f}{u} [{fit.intercept_ci_low:.3f}, {fit.intercept_ci_high:.3f}], "
-            f"R^2 = {fit.r2:.2f}, n = {fit.n}")
+            f"R^2 = {fit.r2:.2f}, n = {fit.n}, df = {df}" + _low_df(df, "residual"))
 
 
 def format_condition_comparison(c: ConditionComparison) -> str:

@@ -719,6 +719,47 @@ def _edge_mass(grid, post, bounds, names) -> bool:
     return False
 
 
+def _fit_conditions(data: np.ndarray, gp, t_map: float, lapse: float, level_range: tuple[float, float],
+                    ci: tuple[float, float]) -> tuple[list[str], bool]:
+    """The status conditions a fit meets (in :data:`STATUSES` terms), and whether the posterior grid
+    had separated peaks that turned out joined (the ``grid_peaks_joined`` flag)."""
+    lo_level, hi_level = level_range
+    low, high = ci
+    conditions: list[str] = []
+    if not np.isfinite(t_map) or lapse >= LAPSE_NO_THRESHOLD:
+        conditions.append("lapse_at_bound")
+    elif t_map < lo_level:
+        conditions.append("censored_below")
+    elif t_map > hi_level:
+        conditions.append("censored_above")
+    pairs = separated_peaks(np.asarray(gp.posterior))
+    apart = any(climbs_apart(data, gp.priors, gp.grid, gp.bounds, top, other) for top, other in pairs)
+    if apart or _distinct_thresholds(gp.modes, high - low):
+        conditions.append("bimodal")
+    if _edge_mass(gp.dense_grid, gp.dense_posterior, gp.bounds, gp.names) or gp.cut_axes:
+        conditions.append("posterior_at_grid_edge")
+    if not np.isfinite(high):
+        conditions.append("no_upper_bound")
+    return conditions, bool(pairs and not apart)
+
+
+def _fit_flags(data: np.ndarray, conditions: list[str], joined: bool, level_range: tuple[float, float],
+               ci: tuple[float, float]) -> list[str]:
+    """Every condition met, then the descriptive flags (joined peaks, all correct, CI beyond the levels)."""
+    lo_level, hi_level = level_range
+    low, high = ci
+    flags = [s for s in STATUSES if s in conditions]
+    if joined:
+        flags.append("grid_peaks_joined")
+    if np.all(data[:, 1] == data[:, 2]):
+        flags.append("all_correct")
+    if np.isfinite(low) and low < lo_level:
+        flags.append("ci_below_range")
+    if np.isfinite(high) and high > hi_level:
+        flags.append("ci_above_range")
+    return flags
+
+
 def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), source: str = "psychometric data"
                      ) -> PsychometricFit:
     """Fit a 2AFC cumulative normal to ``data`` (rows ``[level_D, n_correct, n_total]``).
@@ -752,32 +793,9 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), sourc
             free = grid_posterior(data, replace(options, fixed_eta=None, map_refinements=0, posterior_refinements=0))
             eta = float((free.mesh["eta"] * free.posterior).sum())
 
-    conditions: list[str] = []
-    if not np.isfinite(t_map) or lapse >= LAPSE_NO_THRESHOLD:
-        conditions.append("lapse_at_bound")
-    elif t_map < lo_level:
-        conditions.append("censored_below")
-    elif t_map > hi_level:
-        conditions.append("censored_above")
-    pairs = separated_peaks(np.asarray(gp.posterior))
-    apart = any(climbs_apart(data, gp.priors, gp.grid, gp.bounds, top, other) for top, other in pairs)
-    if apart or _distinct_thresholds(gp.modes, high - low):
-        conditions.append("bimodal")
-    if _edge_mass(gp.dense_grid, gp.dense_posterior, gp.bounds, gp.names) or gp.cut_axes:
-        conditions.append("posterior_at_grid_edge")
-    if not np.isfinite(high):
-        conditions.append("no_upper_bound")
+    conditions, joined = _fit_conditions(data, gp, t_map, lapse, (lo_level, hi_level), (low, high))
     status = next((s for s in STATUSES if s in conditions), "ok")
-
-    flags = [s for s in STATUSES if s in conditions]
-    if pairs and not apart:
-        flags.append("grid_peaks_joined")
-    if np.all(data[:, 1] == data[:, 2]):
-        flags.append("all_correct")
-    if np.isfinite(low) and low < lo_level:
-        flags.append("ci_below_range")
-    if np.isfinite(high) and high > hi_level:
-        flags.append("ci_above_range")
+    flags = _fit_flags(data, conditions, joined, (lo_level, hi_level), (low, high))
 
     threshold = t_map
     bound = float("nan")

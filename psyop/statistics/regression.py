@@ -175,6 +175,25 @@ def _mixed_fit(d: pd.DataFrame, re_formula: str):
     return fit, problems
 
 
+def _first_mixed_fit(d: pd.DataFrame, n_subjects: int):
+    """The first mixed model that fits (random intercept and slope, then intercept only):
+    ``(fit or None, method, reasons)``, where ``reasons`` says why each one before it failed."""
+    reasons: list[str] = []
+    if n_subjects < 3:
+        reasons.append(f"only {n_subjects} participant(s): no between-participant variance to estimate")
+        return None, "", reasons
+    for re_formula, name in (("~x", "MixedLM, random intercept and slope per participant (REML)"),
+                             ("~1", "MixedLM, random intercept per participant (REML)")):
+        try:
+            candidate, problems = _mixed_fit(d, re_formula)
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            candidate, problems = None, [f"{type(exc).__name__}: {exc}"]
+        if not problems:
+            return candidate, name, reasons
+        reasons.append(f"{name.split(', ')[1].split(' (')[0]}: {'; '.join(problems)}")
+    return None, "", reasons
+
+
 def mixed_condition_comparison(data: pd.DataFrame, x: str, y: str, condition: str, subject: str = "participant",
                                reference: str | None = None) -> MixedComparison:
     """Do intercept and slope of ``y`` on ``x`` differ between two conditions, participants random?
@@ -196,21 +215,7 @@ def mixed_condition_comparison(data: pd.DataFrame, x: str, y: str, condition: st
     x_mean = float(d["x"].mean())
     d["xc"] = d["x"] - x_mean
     n_subjects = int(d["subject"].nunique())
-    reasons: list[str] = []
-    fit, method = None, ""
-    if n_subjects < 3:
-        reasons.append(f"only {n_subjects} participant(s): no between-participant variance to estimate")
-    else:
-        for re_formula, name in (("~x", "MixedLM, random intercept and slope per participant (REML)"),
-                                 ("~1", "MixedLM, random intercept per participant (REML)")):
-            try:
-                candidate, problems = _mixed_fit(d, re_formula)
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                candidate, problems = None, [f"{type(exc).__name__}: {exc}"]
-            if not problems:
-                fit, method = candidate, name
-                break
-            reasons.append(f"{name.split(', ')[1].split(' (')[0]}: {'; '.join(problems)}")
+    fit, method, reasons = _first_mixed_fit(d, n_subjects)
     if fit is None:
         return _cr2_fallback(d, x_mean, method_reasons=reasons, reference=reference, other=other, n_subjects=n_subjects)
     # x is centred for the fit (intercept and slope variances are otherwise nearly collinear and

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
+
+import pyarrow as pa
 
 import numpy as np
 import pandas as pd
@@ -98,3 +101,41 @@ def test_posthoc_family_all_corrects_over_every_comparison():
     ph = posthoc_paired(cm, "correct", "mode", by="separation_D", family="all")
     assert (ph["m"] == 6).all()
     np.testing.assert_allclose(ph["p_bonf"], np.minimum(ph["p_unc"] * 6, 1))
+
+
+def test_typed_response_columns_and_an_old_session_without_them_reads_the_same(tmp_path):
+    """New sessions log response_value (a number where the response is one) and outcome; a session
+    logged before them (trials.parquet without the columns) reads with the same columns derived."""
+    import subprocess
+    import sys
+
+    import pyarrow.parquet as pq
+
+    from psyop.datacontract import with_typed_response
+    from psyop.statistics.dataset import load_trials
+
+    root = Path(__file__).resolve().parents[2]
+    data = tmp_path / "data"
+    subprocess.run([sys.executable, "-m", "psyop", "simulate", "--data", str(data), "--protocols",
+                    str(root / "protocols" / "detection.yaml"), "--participants", "1", "--jobs", "1"],
+                   check=True, capture_output=True)
+    new = load_trials(data, "detection")
+    assert new["response_value"].dtype == "float64" and set(new["response_value"].dropna()) <= {1.0, 2.0}
+    assert new["response_value"].notna().all() and set(new["outcome"]) == {"answered"}
+    (path,) = sorted(data.glob("detection/sub-*/ses-*/trials.parquet"))
+    table = pq.read_table(path)
+    old = table.drop_columns(["response_value", "outcome"])
+    first = int(new["trial"].iloc[0])  # a counted (not practice) trial: it becomes a timeout
+    responses = ["timeout" if t == first else r for t, r in zip(old.column("trial").to_pylist(),
+                                                                 old.column("response").to_pylist())]
+    old = old.set_column(old.schema.get_field_index("response"), "response", pa.array(responses, pa.string()))
+    pq.write_table(old.replace_schema_metadata(table.schema.metadata), path)
+    subprocess.run([sys.executable, "-m", "psyop", "reseal", str(path.parent), "--reason",
+                    "test: rewritten in the format before the typed response columns"], check=True, capture_output=True)
+    read = load_trials(data, "detection")  # the loader derives the typed columns, then drops the timeout
+    assert read.attrs["n_timeout_dropped"] == 1 and set(read["outcome"]) == {"answered"}
+    rest = new[new["trial"] != first]
+    assert read["trial"].tolist() == rest["trial"].tolist()
+    assert read["response_value"].tolist() == rest["response_value"].tolist()
+    typed = with_typed_response(old.to_pandas()).set_index("trial")
+    assert typed.loc[first, "outcome"] == "timeout" and pd.isna(typed.loc[first, "response_value"])

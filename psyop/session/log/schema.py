@@ -11,6 +11,9 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
     pa.field("participant", pa.string()),
     pa.field("session", pa.int64()),
     pa.field("response", pa.string()),
+    # the typed form of response (psyop.datacontract.typed_response): a number where it is one, and the outcome
+    pa.field("response_value", pa.float64()),
+    pa.field("outcome", pa.string()),
     pa.field("correct", pa.bool_()),
     pa.field("reach_m", pa.float64()),
     pa.field("chosen_mode", pa.string()),

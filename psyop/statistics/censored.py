@@ -1,0 +1,197 @@
+"""Censored thresholds in the group analysis: a Tobit (censored-normal) likelihood, not the drop rule.
+
+A threshold fit whose status is ``censored_below`` says only "the threshold is below the lowest
+tested level"; ``censored_above`` and ``lapse_at_bound`` say "above the highest". Leaving such fits
+out biases a group mean (dropping the best observers raises it). Here they enter the likelihood as
+what they are: an observed threshold contributes the normal density, a censored one the normal
+probability of lying beyond its bound (Tobin 1958; the model of R's ``AER::tobit`` /
+``survival::survreg(dist="gaussian")``).
+
+- :func:`censoring_of`: the per-fit value, bound and side (-1 below, 0 observed, +1 above) from a fit
+  table; statuses that are neither usable nor censored (bimodal, grid edge, no fit) stay left out.
+- :func:`tobit_fit`: maximum-likelihood y = X beta + e, e ~ N(0, sigma^2), with left/right censoring;
+  standard errors from the observed information, intervals from t with n - k df.
+- :func:`tobit_mean`: the one-column case (a group mean).
+
+Fits are treated as independent observations (no participant random effect); with repeated fits per
+participant the standard error is optimistic, which the result's ``model`` text says.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import optimize, stats
+
+from psyop.statistics.psychometric import USABLE_STATUSES
+
+#: statuses whose threshold lies below the lowest tested level / above the highest
+CENSORED_BELOW = ("censored_below",)
+CENSORED_ABOVE = ("censored_above", "lapse_at_bound")
+
+
+@dataclass(frozen=True)
+class TobitFit:
+    """Censored-normal regression. ``coef``/``se``/``ci_*`` follow the columns of the design."""
+
+    names: tuple[str, ...]
+    coef: tuple[float, ...]
+    se: tuple[float, ...]
+    ci_low: tuple[float, ...]
+    ci_high: tuple[float, ...]
+    sigma: float
+    n: int
+    n_below: int
+    n_above: int
+    df_resid: int
+    converged: bool
+    model: str
+
+    def get(self, name: str) -> tuple[float, float, float]:
+        """(estimate, CI low, CI high) of one coefficient."""
+        i = self.names.index(name)
+        return self.coef[i], self.ci_low[i], self.ci_high[i]
+
+
+def censoring_of(fits: pd.DataFrame, value: str = "threshold_D",
+                 bound: str = "threshold_bound_D") -> tuple[pd.DataFrame, dict[str, int]]:
+    """Rows that enter a censored-data model, with ``y`` (value or bound) and ``side`` (-1/0/+1).
+
+    Returns the rows (usable and censored) and ``{status: count}`` of the rows still left out
+    (ambiguous fits: bimodal, grid edge, no fit), so a caller can say what happened to each.
+    """
+    status = fits["status"].astype(str)
+    side = np.where(status.isin(CENSORED_BELOW), -1, np.where(status.isin(CENSORED_ABOVE), 1, 0))
+    enters = status.isin(USABLE_STATUSES) | (side != 0)
+    out = fits[enters].copy()
+    out["side"] = side[enters.to_numpy()]
+    y = pd.to_numeric(out[value], errors="coerce")
+    if bound in out:
+        y = y.where(out["side"] == 0, pd.to_numeric(out[bound], errors="coerce"))
+    out["y"] = y.astype(float)
+    out = out[np.isfinite(out["y"])]
+    left = status[~enters].value_counts().sort_index()
+    return out, {str(k): int(v) for k, v in left.items()}
+
+
+def _negloglik(params: np.ndarray, y: np.ndarray, X: np.ndarray, side: np.ndarray) -> float:
+    beta, log_sigma = params[:-1], params[-1]
+    sigma = np.exp(log_sigma)
+    z = (y - X @ beta) / sigma
+    ll = np.where(side == 0, stats.norm.logpdf(z) - log_sigma,
+                  np.where(side < 0, stats.norm.logcdf(z), stats.norm.logsf(z)))
+    return float(-ll.sum())
+
+
+def _hessian(f, x: np.ndarray, step: float = 1e-4) -> np.ndarray:
+    """Central finite-difference Hessian of a scalar function."""
+    k = len(x)
+    h = np.zeros((k, k))
+    eye = np.eye(k) * step
+    for i in range(k):
+        for j in range(i, k):
+            h[i, j] = h[j, i] = (f(x + eye[i] + eye[j]) - f(x + eye[i] - eye[j])
+                                 - f(x - eye[i] + eye[j]) + f(x - eye[i] - eye[j])) / (4 * step * step)
+    return h
+
+
+def tobit_fit(y: np.ndarray, X: np.ndarray, side: np.ndarray, names: tuple[str, ...],
+              ci_level: float = 0.95) -> TobitFit:
+    """Maximum-likelihood censored-normal regression.
+
+    Parameters
+    ----------
+    y : observed value, or the bound for a censored row
+    X : (n, k) design matrix
+    side : -1 (true value < y), 0 (observed), +1 (true value > y)
+    names : the k column names
+    """
+    y, X, side = np.asarray(y, float), np.asarray(X, float), np.asarray(side, int)
+    n, k = X.shape
+    if int((side == 0).sum()) < k + 1:
+        raise ValueError(f"a censored-data model needs at least {k + 1} uncensored values, have "
+                         f"{int((side == 0).sum())} of {n}")
+    beta0 = np.linalg.lstsq(X, y, rcond=None)[0]
+    start = np.r_[beta0, np.log(max(float(np.std(y - X @ beta0)), 1e-6))]
+    fun = lambda p: _negloglik(p, y, X, side)  # noqa: E731
+    res = optimize.minimize(fun, start, method="BFGS", options={"gtol": 1e-8})
+    cov = np.linalg.pinv(_hessian(fun, res.x))
+    se = np.sqrt(np.clip(np.diag(cov)[:k], 0, None))
+    df = max(n - k, 1)
+    half = stats.t.ppf(0.5 + ci_level / 2, df) * se
+    coef = res.x[:k]
+    n_below, n_above = int((side < 0).sum()), int((side > 0).sum())
+    return TobitFit(
+        names=tuple(names), coef=tuple(map(float, coef)), se=tuple(map(float, se)),
+        ci_low=tuple(map(float, coef - half)), ci_high=tuple(map(float, coef + half)),
+        sigma=float(np.exp(res.x[-1])), n=n, n_below=n_below, n_above=n_above, df_resid=n - k,
+        converged=bool(res.success or np.linalg.norm(res.jac) < 1e-4),
+        model=(f"censored-normal (Tobit) ML over {n} fits, {n_below} censored below and {n_above} above "
+               "the tested levels entered at their bounds as censored; fits treated as independent"))
+
+
+def tobit_mean(y: np.ndarray, side: np.ndarray, ci_level: float = 0.95) -> TobitFit:
+    """The group mean of values some of which are censored (the intercept-only Tobit model)."""
+    y = np.asarray(y, float)
+    return tobit_fit(y, np.ones((len(y), 1)), side, ("mean",), ci_level)
+
+
+def substituted(rows: pd.DataFrame) -> pd.DataFrame:
+    """The substitution rule: censored thresholds replaced by their bound (``threshold_D`` = ``y``)."""
+    out = rows.copy()
+    out["threshold_D"] = out["y"]
+    return out
+
+
+def format_tobit(fit: TobitFit, name: str, unit: str = "") -> str:
+    """'0.41 D [95 % CI 0.33, 0.49]; censored-normal (Tobit) ML over ...'."""
+    est, lo, hi = fit.get(name)
+    u = f" {unit}" if unit else ""
+    warn = "" if fit.converged else "; NOT CONVERGED"
+    return f"{est:.3f}{u} [95 % CI {lo:.3f}, {hi:.3f}; df = {fit.df_resid}]; {fit.model}{warn}"
+
+
+def censored_condition_means(rows: pd.DataFrame, cond: str) -> TobitFit:
+    """One Tobit mean per level of ``cond`` (cell-means design, a common sigma)."""
+    levels = sorted(rows[cond].unique())
+    X = np.column_stack([(rows[cond] == lv).to_numpy(float) for lv in levels])
+    return tobit_fit(rows["y"].to_numpy(), X, rows["side"].to_numpy(), tuple(str(lv) for lv in levels))
+
+
+def censored_line(rows: pd.DataFrame, x: str) -> TobitFit:
+    """Tobit regression of the threshold on a numeric ``x`` (intercept, slope)."""
+    xs = rows[x].to_numpy(float)
+    X = np.column_stack([np.ones_like(xs), xs])
+    return tobit_fit(rows["y"].to_numpy(), X, rows["side"].to_numpy(), ("intercept", "slope"))
+
+
+def censored_report(fits: pd.DataFrame, cond: str, unit: str, numeric: bool = False) -> dict:
+    """The censored-data analysis of a fit table, for a results JSON: how many fits were censored,
+    what was done with them, and the Tobit estimates (or why none could be made)."""
+    rows, left = censoring_of(fits)
+    n_b, n_a = int((rows["side"] < 0).sum()), int((rows["side"] > 0).sum())
+    out: dict = {"n_censored_below": n_b, "n_censored_above": n_a, "still_left_out_by_status": left,
+                 "rule": ("censored thresholds enter a censored-normal (Tobit) likelihood at their bound "
+                          "(the lowest / highest tested level); bimodal, grid-edge and no-fit fits stay out")}
+    try:
+        mean = tobit_mean(rows["y"].to_numpy(), rows["side"].to_numpy())
+        out["mean"] = mean.__dict__
+        out["text_mean"] = format_tobit(mean, "mean", unit)
+        if numeric:
+            line = censored_line(rows, cond)
+            out["line"] = line.__dict__
+            out["text_slope"] = format_tobit(line, "slope", "")
+        else:
+            out["condition_means"] = censored_condition_means(rows, cond).__dict__
+    except ValueError as exc:
+        out["text_mean"] = f"not computed: {exc}"
+    out["headline"] = (f"{n_b + n_a} of {len(fits)} fits censored ({n_b} below, {n_a} above the tested levels): "
+                       f"entered as censored (Tobit) at their bounds, not dropped; "
+                       f"{sum(left.values())} ambiguous fits left out: {left or 'none'}")
+    return out
+
+
+__all__ = ["censored_condition_means", "censored_line", "censored_report", "CENSORED_ABOVE", "CENSORED_BELOW", "TobitFit", "censoring_of", "format_tobit", "substituted",
+           "tobit_fit", "tobit_mean"]
