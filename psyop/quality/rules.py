@@ -73,6 +73,18 @@ def included_mask(trials: pd.DataFrame, exclusions: pd.DataFrame) -> pd.Series:
     return pd.Series([p not in gone_people and (p, s, t) not in gone for p, s, t in keys], index=trials.index)
 
 
+def unmeasured_sentence(measures: pd.DataFrame, rules: QualitySection | None) -> str:
+    """How many trials each rule could not judge (its measure NaN: not measurable), or ''."""
+    if rules is None or measures.empty:
+        return ""
+    names = sorted({rule.measure for rule in [*rules.trials, *rules.participants]})
+    counts = {name: int(measures[name].isna().sum()) for name in names if measures[name].isna().any()}
+    if not counts:
+        return ""
+    return ("Not measurable (no rule could judge them): " + ", ".join(f"{name} in {n} of {len(measures)} trials"
+                                                                      for name, n in counts.items()) + ".")
+
+
 def methods_sentence(exclusions: pd.DataFrame, n_participants: int, n_trials: int) -> str:
     """The exclusion counts the way a methods section states them."""
     if exclusions.empty:

@@ -81,3 +81,19 @@ def test_no_quality_section_excludes_nothing(measured) -> None:
     measures = measured[0]
     assert apply_rules(measures, None).empty
     assert included_mask(measures, apply_rules(measures, None)).all()
+
+
+def test_a_requested_stream_is_measured_from_its_requested_samples_only(tmp_path: Path) -> None:
+    from psyop.quality.session import NEEDS_EVERY_SAMPLE
+
+    protocol = load_protocol(small_protocol(tmp_path, "detection", 1))  # shipped: raw_stream: requested
+    options = SessionOptions(participant="Q", seed=1, data_root=tmp_path / "data", progress=False, render="cameras")
+    assert run_session(protocol, compile_schedule, options).status == "complete"
+    ses = tmp_path / "data" / "detection" / "sub-Q" / "ses-1"
+    measures = measure_session(ses)[0]
+    gaze = pd.read_parquet(ses / "gaze.parquet")
+    assert set(measures["raw_stream"]) == {"requested"}
+    assert measures[list(NEEDS_EVERY_SAMPLE)].isna().all().all()
+    assert measures["n_samples_expected"].sum() == len(gaze)  # loss over the samples it asked for, not 120 Hz
+    assert measures["data_loss_share"].dropna().between(0, 1).all()
+    assert measures.loc[measures["n_samples_expected"] == 0, "data_loss_share"].isna().all()
