@@ -61,11 +61,11 @@ def measured(tmp_path_factory: pytest.TempPathFactory) -> tuple[pd.DataFrame, ob
                                  render="cameras")
         assert run_session(protocol, compile_schedule, options).status == "complete"
         tables.append(measure_session(directory / "data" / "detection" / f"sub-{who}" / "ses-1")[0])
-    return pd.concat(tables, ignore_index=True), protocol
+    return pd.concat(tables, ignore_index=True), protocol, directory / "data"
 
 
 def test_rules_exclude_exactly_the_participants_simulated_to_fail(measured) -> None:
-    measures, protocol = measured
+    measures, protocol, _ = measured
     exclusions = apply_rules(measures, protocol.quality)
     people = exclusions[exclusions["level"] == "participant"]
     assert set(people["participant"]) == {"LOST", "LAZY"}
@@ -75,6 +75,15 @@ def test_rules_exclude_exactly_the_participants_simulated_to_fail(measured) -> N
     assert set(measures.loc[kept, "participant"]) == {"OK1", "OK2"}
     sentence = methods_sentence(exclusions, measures["participant"].nunique(), len(measures))
     assert sentence.startswith("Of 4 participants, 2 were excluded") and "failing to follow instructions" in sentence
+
+
+def test_the_study_analysis_loads_only_the_included_data_and_says_so(measured) -> None:
+    from psyop.statistics.dataset import load_dataset
+
+    trials = load_dataset(measured[2], "detection").trials
+    assert set(trials["participant"]) == {"OK1", "OK2"}
+    assert trials.attrs["quality"].startswith("Of 4 participants, 2 were excluded")
+    assert trials.attrs["n_quality_excluded"] > 0
 
 
 def test_no_quality_section_excludes_nothing(measured) -> None:
