@@ -25,14 +25,16 @@ class StudyQuality:
 
 
 def quality_rules(session_dirs: list[Path]) -> QualitySection | None:
-    """The ``quality:`` section of the protocol the first of ``session_dirs`` recorded (None: no rules)."""
+    """The ``quality:`` section of the protocol the first of ``session_dirs`` that recorded one has (None: no
+    rules; a session.json without its protocol text, as in hand-made test tables, has none)."""
     from psyop.protocol import parse_protocol
 
-    if not session_dirs:
-        return None
-    meta_path = Path(session_dirs[0]) / dc.SESSION_METADATA_FILE
-    meta = json.loads(meta_path.read_text())
-    return parse_protocol(meta["protocol_text"], str(meta_path)).quality
+    for directory in session_dirs:
+        meta_path = Path(directory) / dc.SESSION_METADATA_FILE
+        meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+        if "protocol_text" in meta:
+            return parse_protocol(meta["protocol_text"], str(meta_path)).quality
+    return None
 
 
 def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> StudyQuality:
