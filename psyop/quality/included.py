@@ -27,13 +27,13 @@ class StudyQuality:
 def quality_rules(session_dirs: list[Path]) -> QualitySection | None:
     """The ``quality:`` section of the protocol the first of ``session_dirs`` that recorded one has (None: no
     rules; a session.json without its protocol text, as in hand-made test tables, has none)."""
-    from psyop.protocol import parse_protocol
+    from psyop.quality.session import recorded_protocol
 
     for directory in session_dirs:
         meta_path = Path(directory) / dc.SESSION_METADATA_FILE
         meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
         if "protocol_text" in meta:
-            return parse_protocol(meta["protocol_text"], str(meta_path)).quality
+            return recorded_protocol(meta, meta_path).quality
     return None
 
 

@@ -14,6 +14,16 @@ from psyop.quality.measures import trial_measures
 from psyop.quality.samples import gaze_grid
 
 
+def recorded_protocol(meta: dict, meta_path: Path):
+    """The protocol a session recorded (session.json ``protocol_text``), its files (a mesh) resolved beside
+    the protocol file it was run from (``protocol_file``), as the session resolved them."""
+    from psyop.protocol import parse_protocol
+
+    source = meta.get("protocol_file")
+    base_dir = Path(source).parent if isinstance(source, str) and source and Path(source).parent.is_dir() else None
+    return parse_protocol(meta["protocol_text"], f"{meta_path} (protocol_text)", base_dir=base_dir)
+
+
 def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(per-trial measures, events) of the session in ``directory``, each with participant and session.
 
@@ -22,7 +32,6 @@ def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     is ``requested`` (the shipped protocols' choice) holds only the samples the session asked for (about one
     per trial on the virtual clock): its measures come from :func:`requested_stream_measures`; column
     ``raw_stream`` says which stream each row was measured from."""
-    from psyop.protocol import parse_protocol
     from psyop.session.gaze.simulated import tracker_config
     from psyop.session.plan import compile_plan
 
@@ -32,8 +41,7 @@ def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
         raise UserError("not a finalised psyop session (no session.json and trials.parquet)", str(directory))
     verify_session(directory)
     meta = json.loads(meta_path.read_text())
-    protocol = parse_protocol(meta["protocol_text"], str(meta_path))
-    plan = compile_plan(protocol)
+    plan = compile_plan(recorded_protocol(meta, meta_path))
     rate, stream = None, "every_sample"
     if meta.get("tracker") == "sim":
         config = tracker_config(plan.observer.eye if plan.observer is not None else None, str(meta.get("participant", "")))
