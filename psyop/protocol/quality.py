@@ -16,7 +16,8 @@ from psyop.protocol.base import Number, StrictModel
 #: the measures a rule may name (equal to psyop.quality.measures.TRIAL_MEASURES' keys: tests/quality)
 QUALITY_MEASURES: tuple[str, ...] = (
     "data_loss_share", "longest_gap_s", "accuracy_fixation_mean_deg", "accuracy_fixation_max_deg",
-    "accuracy_fixation_corrected_mean_deg", "accuracy_pursuit_mean_deg", "accuracy_pursuit_max_deg",
+    "accuracy_fixation_corrected_mean_deg", "accuracy_fixation_left_mean_deg", "accuracy_fixation_right_mean_deg",
+    "accuracy_pursuit_mean_deg", "accuracy_pursuit_max_deg",
     "accuracy_pursuit_corrected_mean_deg", "precision_rms_s2s_deg", "precision_sd_deg", "pursuit_gain",
     "pursuit_lag_s", "catch_up_saccades_per_s", "n_fixations", "n_saccades")
 
