@@ -331,8 +331,7 @@ def _write_physio(stem: Path, samples: pd.DataFrame, display: Any, eye: str, ipd
         "GazeSource": source,
         "StimulusPresentation": _stimulus_presentation(display, eye),
         "StimulusPresentationNote": _screen_note(display),
-        **calibration,
-        **columns,
+        **calibration, **columns,
     }
     _write_json(stem.with_suffix(".json"), sidecar)
 

@@ -9,6 +9,8 @@ without the section excludes nothing. docs/protocols.md "Quality rules", docs/qu
 
 from __future__ import annotations
 
+import math
+
 from pydantic import Field, field_validator, model_validator
 
 from psyop.protocol.base import Number, StrictModel
@@ -46,7 +48,7 @@ class QualityRule(StrictModel):
 
     def fails(self, value: float) -> bool:
         """Whether ``value`` breaks this rule (NaN, i.e. not measured, never does)."""
-        if value != value:
+        if math.isnan(value):
             return False
         return bool(value > self.max) if self.max is not None else bool(value < self.min)
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
 
-from psyop.protocol.quality import QualitySection  # noqa: E402
+from psyop.protocol.quality import QualitySection
 
 HEADLINE = ("data_loss_share", "accuracy_fixation_mean_deg", "precision_rms_s2s_deg", "pursuit_gain")
 

@@ -11,7 +11,12 @@ import pandas as pd
 
 from psyop import datacontract as dc
 from psyop.protocol.quality import QualitySection
-from psyop.quality.rules import apply_rules, included_mask, methods_sentence, unmeasured_sentence
+from psyop.quality.rules import (
+    apply_rules,
+    included_mask,
+    methods_sentence,
+    unmeasured_sentence,
+)
 
 
 @dataclass(frozen=True)

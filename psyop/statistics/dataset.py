@@ -118,8 +118,7 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
     less valid gaze than the protocol's ``trial.min_valid_gaze_share``; see
     :func:`psyop.datacontract.low_gaze_mask`) are kept and counted in
     ``trials.attrs["n_low_gaze"]``, with a :class:`LowGazeWarning` naming the count;
-    ``drop_low_gaze`` leaves them out (``trials.attrs["n_low_gaze_dropped"]``). The protocol's ``quality:``
-    rules leave out what they exclude (psyop.quality.included; ``trials.attrs["quality"]`` says what).
+    ``drop_low_gaze`` leaves them out (``trials.attrs["n_low_gaze_dropped"]``); ``quality:`` rules too (attrs["quality"]).
     """
     files = session_files(data_root, study)
     if not files:
