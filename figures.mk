@@ -32,7 +32,9 @@ ANALYSE ?= $(PY)
 DRY_RUN := $(findstring n,$(firstword -$(MAKEFLAGS)))
 
 OPTICS_SRC := $(wildcard psyop/optics/*.py) psyop/figures/optics_figures.py psyop/figures/labels.py
-STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py analysis/_twoafc.py
+# the gaze-quality measures and the quality: rules (load_dataset applies them: every study analysis reads them)
+QUALITY_SRC := $(wildcard psyop/quality/*.py) psyop/protocol/quality.py
+STATS_SRC := $(wildcard psyop/statistics/*.py) analysis/_common.py analysis/_twoafc.py $(QUALITY_SRC)
 DRAW_SRC := $(STATS_SRC) psyop/figures/study_figures.py psyop/figures/labels.py
 # each study's sessions (its trials.parquet files) are listed, escaped, by `psyop studies --make-rules`
 

@@ -84,10 +84,19 @@ def write_study_summaries(others: list[tuple[Path, dict]], results: Path) -> lis
             lines += ["**Simulated data**.", ""]
         for payload in payloads:
             lines += [f"## {payload['analysis']}", ""] + _statistics(payload, study)[2:]
+        lines += quality_lines(results, [study])
         path = results / f"{study}_summary.md"
         write_text(path, "\n".join(lines) + "\n")
         written.append(path)
     return written
+
+
+def quality_lines(results: Path, studies: list[str]) -> list[str]:
+    """The gaze-based exclusions of each study (results/<study>_quality.txt, analysis/gaze_quality.py)."""
+    found = [(s, results / f"{s}_quality.txt") for s in studies]
+    lines = [f"- {s}: {path.read_text().strip()}" for s, path in found if path.is_file()]
+    return ["## Gaze-based exclusions (quality: rules; every analysis above ran on the included data)", "", *lines, ""] \
+        if lines else []
 
 
 def _methods(studies: dict) -> list[str]:
@@ -148,6 +157,7 @@ def main(argv: list[str] | None = None) -> int:
                      f"| {r['criteria']} |")
     lines.append("")
     lines += _methods(studies)
+    lines += quality_lines(args.results, sorted({str(s.get("study")) for s in studies.values()}))
     lines += ["## Every statistic psyop computed", ""]
     for name in PAPER_PROTOCOLS:
         if name in studies:

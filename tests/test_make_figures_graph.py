@@ -22,6 +22,7 @@ OUTPUTS = [  # in build order: each is written after the ones before it
     "figures/detection_thresholds.png", "figures/discrimination_thresholds.png",
     "figures/supp_psychometric_detection.png", "figures/supp_psychometric_discrimination.png",
     "figures/ordinal_depth.png", "figures/egocentric_reach.png", "figures/realism_preferences.png",
+    *(f"figures/{study}_gaze_quality.png" for study in STUDIES),  # analysis/gaze_quality.py (issue 27)
     "results/summary.md",
 ]
 # the study rules are written before anything is built (psyop studies --make-rules)
@@ -77,7 +78,7 @@ def test_a_data_root_with_spaces(tmp_path: Path) -> None:
     later = (tree / "results" / "summary.md").stat().st_mtime + 10
     os.utime(new, (later, later))
     commands = [shlex.split(line) for line in dry_run(tree, "with a space/data").splitlines() if "analysis/" in line]
-    assert len(commands) == 4
+    assert len(commands) == 5  # fits, thresholds, psychometric functions, gaze quality, summary
     for words in commands:
         assert words[words.index("--data") + 1] == str(tree / "with a space" / "data")
 
@@ -107,7 +108,8 @@ def test_new_detection_session_rebuilds_only_detection_and_summary(built_tree: P
     for other in ["--study discrimination", "fig_discrimination", "fig_ordinal", "fig_egocentric", "fig_realism",
                   "fig03_parallax", "supp_linearity"]:
         assert other not in scripts, f"{other} rebuilt for a detection session"
-    assert len(commands) == 4
+    assert "gaze_quality.py --study detection" in scripts
+    assert len(commands) == 5
     assert "fig_detection_thresholds.py --study detection" in scripts  # by kind, outputs named after the study
 
 

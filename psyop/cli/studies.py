@@ -91,7 +91,10 @@ def make_rules(data: Path, protocols: Path) -> tuple[str, list[str]]:
     for facts in studies_in(data):
         uses_linear = bool(facts.protocol_sha256) and set(facts.protocol_sha256) <= linear
         sessions = sorted((data / facts.name).glob("sub-*/ses-*/trials.parquet"))
-        targets = targets_for(facts.name, facts.kind, uses_linear, " ".join(make_escaped(p) for p in sessions))
+        prerequisites = " ".join(make_escaped(p) for p in sessions)
+        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites) + [Target(  # issue 27: gaze quality
+            f"{facts.name}_gaze_quality.png", "analysis/gaze_quality.py", f"{prerequisites} $(QUALITY_SRC)",
+            f'--study {facts.name} --data "$(DATA)" --results "$(RESULTS)"')]
         figures = [t for t in targets if t.kind == "figure"]
         rules.append("STUDY_FIGURES += " + " ".join(f"$(FIGDIR)/{t.output}" for t in figures))
         for t in targets:

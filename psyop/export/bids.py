@@ -132,6 +132,7 @@ def _export_session(directory: Path, out: Path) -> ExportedSession:
     eyes = tuple(e for e in ("left", "right") if e in rig["eyes"])
     ipd_m = float(rig["ipd_m"])
     gaze = session_gaze(directory)
+    measures = _session_measures(directory)
     beh = out / f"sub-{participant}" / f"ses-{session}" / "beh"
     beh.mkdir(parents=True, exist_ok=True)
     runs = sorted(int(r) for r in trials["run"].dropna().unique()) if "run" in trials else [0]
@@ -144,7 +145,8 @@ def _export_session(directory: Path, out: Path) -> ExportedSession:
         samples = _run_samples(gaze.samples, run_trials, gaze.source)
         for index, eye in enumerate(eyes):
             recording = f"{stem}_recording-eye{index + 1}"
-            _write_physio(beh / f"{recording}_physio", samples, display, eye, ipd_m, gaze.source, gaze.file, meta)
+            _write_physio(beh / f"{recording}_physio", samples, display, eye, ipd_m, gaze.source, gaze.file, meta,
+                          calibration_fields(measures, run_trials, phases))
             _write_physioevents(beh / f"{recording}_physioevents", run_trials, phases, study)
     _copy_sourcedata(directory, out / "sourcedata" / study / f"sub-{participant}" / f"ses-{session}", meta)
     return ExportedSession(study, participant, session, len(runs), gaze.source, eyes, len(gaze.samples))
@@ -241,8 +243,41 @@ def _flag(value: object) -> int | str:
 
 
 # ---- physio ----------------------------------------------------------------------------------------------
+def _session_measures(directory: Path) -> pd.DataFrame:
+    """psyop.quality's per-trial measures of the session (empty when its recorded protocol no longer validates
+    here, e.g. a mesh it named has moved: the calibration fields are then left out, never guessed)."""
+    from psyop.quality.session import measure_session
+
+    try:
+        return measure_session(directory)[0]
+    except UserError:
+        return pd.DataFrame()
+
+
+def calibration_fields(measures: pd.DataFrame, run_trials: pd.DataFrame,
+                       phases: Sequence[JsonMapping]) -> JsonObject:
+    """BIDS eye-tracking calibration fields of one run (names, types and units as bids-validator-deno 3.0.2's
+    schema: AverageCalibrationError and MaximalCalibrationError numbers in degrees, CalibrationCount an
+    integer). psyop's calibration check is the per-trial single-point drift recalibration on the cross: the
+    errors are psyop.quality's ``accuracy_fixation_mean_deg`` (mean over the run's trials) and
+    ``accuracy_fixation_max_deg`` (largest), before the correction; the count is the run's recalibrations.
+    A field with nothing measured (no cross phase, no valid sample) is left out."""
+    n_cross = sum(1 for p in phases if p.get("name") == "recalibration")
+    fields: JsonObject = {}
+    if n_cross:
+        fields["CalibrationType"] = "one-point drift recalibration on the fixation cross before every trial (psyop)"
+        fields["CalibrationCount"] = int(n_cross * len(run_trials))
+    if measures.empty or "trial" not in run_trials:
+        return fields
+    rows = measures[measures["trial"].isin(run_trials["trial"].astype(int))]
+    mean, largest = rows["accuracy_fixation_mean_deg"].mean(), rows["accuracy_fixation_max_deg"].max()
+    if np.isfinite(mean) and np.isfinite(largest):
+        fields["AverageCalibrationError"], fields["MaximalCalibrationError"] = float(mean), float(largest)
+    return fields
+
+
 def _write_physio(stem: Path, samples: pd.DataFrame, display: DisplayProfile, eye: str, ipd_m: float, source: str,
-                  source_file: str, meta: JsonMapping) -> None:
+                  source_file: str, meta: JsonMapping, calibration: Mapping[str, object]) -> None:
     fixation = samples[["fixation_x_m", "fixation_y_m", "fixation_z_m"]].to_numpy(dtype=np.float64)
     valid = samples["gaze_valid"].fillna(False).astype(bool).to_numpy()
     px = gaze_on_image_px(fixation, display, eye, ipd_m)
@@ -298,7 +333,7 @@ def _write_physio(stem: Path, samples: pd.DataFrame, display: DisplayProfile, ey
         "GazeSource": source,
         "StimulusPresentation": _stimulus_presentation(display, eye),
         "StimulusPresentationNote": _screen_note(display),
-        **columns,
+        **calibration, **columns,
     }
     _write_json(stem.with_suffix(".json"), sidecar)
 

@@ -12,6 +12,7 @@ Every field of every protocol model is listed here with the part of psyop that r
 - ``validation``: a field that only selects or checks (discriminators, the format version);
 - ``refused``: validated structurally, then refused with its file:line (not available yet);
 - ``adaptive``: the session's adaptive levels (psyop.adaptive.session builds each procedure);
+- ``quality``: the exclusion rules at analysis time (psyop.quality.rules);
 - ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``).
 
 tests/protocol/test_protocol_fields.py walks the pydantic schema and checks that every field is
@@ -33,6 +34,7 @@ USERS: dict[str, tuple[str, ...]] = {
     "refused": ("psyop/protocol/semantics.py",),
     "adaptive": ("psyop/adaptive/session.py",),
     "tracker": ("psyop/session/gaze/simulated.py",),
+    "quality": ("psyop/quality/rules.py", "psyop/protocol/quality.py"),
 }
 
 _SCENE_COMMON = {"id": "stimulus", "kind": "validation"}
@@ -44,7 +46,8 @@ def _scene(**fields: str) -> dict[str, str]:
 
 FIELD_USERS: dict[str, dict[str, str]] = {
     "Protocol": {"psyop_protocol": "validation", "study": "plan", "display": "plan", "eyes": "plan", "scene": "stimulus",
-                 "trial": "plan", "design": "schedule", "response": "plan", "observer": "plan"},
+                 "trial": "plan", "design": "schedule", "response": "plan", "observer": "plan",
+                 "quality": "quality"},
     "StudyInfo": {"name": "plan", "title": "summary", "citation": "summary", "description": "summary"},
     "DisplaySpec": {"profile": "display", "eye_model": "display", "ipd": "plan", "rendering_nc": "display"},
     "RenderingNc": {"mm": "display", "scale": "display", "signed": "display"},
@@ -121,6 +124,9 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "ReachCondition": {"slope": "observer", "intercept_m": "observer", "noise_sd_m": "observer"},
     "WithAgainstResponse": {"kind": "plan", "question": "plan", "nc_factor": "schedule"},
     "NcNulling": {k: "observer" for k in ("kind", "nc_mm", "width_mm", "lapse", "between_subject_sd_mm")},
+    "QualitySection": {"trials": "quality", "participants": "quality", "min_included_trials": "quality",
+                       "min_included_trials_reason": "quality"},
+    "QualityRule": {"measure": "quality", "max": "quality", "min": "quality", "reason": "quality"},
     "EyeOverride": {k: "tracker" for k in ("precision_deg", "pursuit_gain", "pursuit_lag_s", "blink_rate_hz",
                                            "dropout_rate_hz", "dropout_s", "nan_burst_rate_hz")},
     "SimulatedEye": {k: "tracker" for k in ("precision_deg", "pursuit_gain", "pursuit_lag_s", "blink_rate_hz",

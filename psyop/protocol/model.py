@@ -10,6 +10,7 @@ from psyop.protocol.base import StrictModel
 from psyop.protocol.design import Design
 from psyop.protocol.display import DisplaySpec
 from psyop.protocol.observer import Observer
+from psyop.protocol.quality import QualitySection
 from psyop.protocol.response import Response
 from psyop.protocol.scene import Primitive
 from psyop.protocol.trial import TrialSpec
@@ -39,6 +40,7 @@ class Protocol(StrictModel):
     design: Design
     response: Response
     observer: Observer | None = None
+    quality: QualitySection | None = None  # gaze-based exclusions at analysis time (psyop.protocol.quality)
 
     _source_text: str = PrivateAttr(default="")
     _source_name: str = PrivateAttr(default="")

@@ -31,6 +31,8 @@ TRIAL_MEASURES: dict[str, str] = {
     "accuracy_fixation_mean_deg": "mean angular error on the cross (deg)",
     "accuracy_fixation_max_deg": "largest angular error on the cross (deg)",
     "accuracy_fixation_corrected_mean_deg": "mean error on the cross after drift correction (deg)",
+    "accuracy_fixation_left_mean_deg": "mean error of the left eye's gaze normal to the cross, from its centre (deg)",
+    "accuracy_fixation_right_mean_deg": "mean error of the right eye's gaze normal to the cross, from its centre (deg)",
     "accuracy_pursuit_mean_deg": "mean angular error to the pursuit target (deg)",
     "accuracy_pursuit_max_deg": "largest angular error to the pursuit target (deg)",
     "accuracy_pursuit_corrected_mean_deg": "mean error to the pursuit target after drift correction (deg)",
@@ -46,6 +48,19 @@ TRIAL_MEASURES: dict[str, str] = {
 
 def _err(az: np.ndarray, el: np.ndarray, taz: np.ndarray, tel: np.ndarray) -> np.ndarray:
     return np.asarray(angle_between_deg(fick_direction(az, el), fick_direction(taz, tel)), dtype=np.float64)
+
+
+def _eye_errors(grid: GazeGrid, sel: np.ndarray, centre_deg: tuple[float, float], distance_m: float) -> dict:
+    """Per eye the angle (deg) between its gaze normal and the line from its centre to the cross (at the
+    plan's distance along the cross direction from the head origin); only eyes the tracker gives."""
+    point = distance_m * fick_direction(*centre_deg)
+    out = {}
+    for eye, (az, el) in grid.eyes.items():
+        to_target = point - grid.eye_centres_m[eye][sel]
+        normal = fick_direction(az[sel], el[sel])
+        ok = np.all(np.isfinite(to_target), axis=1) & np.all(np.isfinite(normal), axis=1)
+        out[eye] = np.asarray(angle_between_deg(normal[ok], to_target[ok]), dtype=np.float64)
+    return out
 
 
 def _precision(az: np.ndarray, el: np.ndarray) -> tuple[float, float]:
@@ -88,6 +103,7 @@ def trial_measures(grid: GazeGrid, trials: pd.DataFrame, plan: SessionPlan,
                "data_loss_share": max(0.0, 1.0 - len(valid_t) / expected) if expected else 1.0,
                "longest_gap_s": float(np.max(np.diff(edges)))}
         fix_err, fix_corr, pur_err, pur_corr, fix_az, fix_el = [], [], [], [], [], []
+        per_eye: dict[str, list[np.ndarray]] = {"left": [], "right": []}
         speed_ratio, angle_diff, turn, pursuit_s, n_catch = [], [], [], 0.0, 0
         offset = None
         t0 = start
@@ -105,6 +121,8 @@ def trial_measures(grid: GazeGrid, trials: pd.DataFrame, plan: SessionPlan,
                     offset = (float(np.median(az[last] - taz[last])), float(np.median(el[last] - tel[last]))) \
                         if last.any() else None
                 fix_err.append(_err(az, el, taz, tel))
+                for eye, errors in _eye_errors(grid, sel, fplan.centre_deg, fplan.distance_m).items():
+                    per_eye[eye].append(errors)
                 if offset is not None:
                     fix_corr.append(_err(az - offset[0], el - offset[1], taz, tel))
                 still = ~in_saccade[sel]
@@ -146,7 +164,9 @@ def trial_measures(grid: GazeGrid, trials: pd.DataFrame, plan: SessionPlan,
         out.update(accuracy_fixation_mean_deg=stat(fix_err, np.mean), accuracy_fixation_max_deg=stat(fix_err, np.max),
                    accuracy_fixation_corrected_mean_deg=stat(fix_corr, np.mean),
                    accuracy_pursuit_mean_deg=stat(pur_err, np.mean), accuracy_pursuit_max_deg=stat(pur_err, np.max),
-                   accuracy_pursuit_corrected_mean_deg=stat(pur_corr, np.mean))
+                   accuracy_pursuit_corrected_mean_deg=stat(pur_corr, np.mean),
+                   accuracy_fixation_left_mean_deg=stat(per_eye["left"], np.mean),
+                   accuracy_fixation_right_mean_deg=stat(per_eye["right"], np.mean))
         rms, sd = _precision(np.concatenate(fix_az) if fix_az else np.zeros(0),
                              np.concatenate(fix_el) if fix_el else np.zeros(0))
         out.update(precision_rms_s2s_deg=rms, precision_sd_deg=sd)

@@ -33,6 +33,8 @@ class GazeGrid:
     rate_source: str
     flags: dict[str, int]
     eyes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: per eye with a gaze normal: its centre (n, 3) in head space (m; NaN where the tracker gave none)
+    eye_centres_m: dict[str, np.ndarray] = field(default_factory=dict)
 
     @staticmethod
     def empty(rate_hz: float, rate_source: str, flags: dict[str, int]) -> GazeGrid:
@@ -105,7 +107,7 @@ def gaze_grid(gaze: pd.DataFrame, nominal_rate_hz: float | None) -> GazeGrid:
         az = el = np.full(len(rows), np.nan)
     ok = valid_col & np.isfinite(az) & np.isfinite(el)
     grid_az, grid_el = place(az, el, ok)
-    eyes = {}
+    eyes, centres = {}, {}
     for eye in ("left", "right"):
         names = [f"gaze_normal_{eye}_{a}" for a in "xyz"]
         if all(c in rows for c in names):
@@ -113,4 +115,14 @@ def gaze_grid(gaze: pd.DataFrame, nominal_rate_hz: float | None) -> GazeGrid:
             e_ok = valid_col & np.isfinite(e_az)
             if e_ok.any():
                 eyes[eye] = place(e_az, e_el, e_ok)
-    return GazeGrid(grid_t, grid_az, grid_el, np.isfinite(grid_az), rate, source, flags, eyes)
+                centres[eye] = _placed_centre(rows, eye, tick, e_ok, n)
+    return GazeGrid(grid_t, grid_az, grid_el, np.isfinite(grid_az), rate, source, flags, eyes, centres)
+
+
+def _placed_centre(rows: pd.DataFrame, eye: str, tick: np.ndarray, ok: np.ndarray, n: int) -> np.ndarray:
+    """The eye's centre (``eye_centre_<eye>_<x|y|z>_m``) on the grid; NaN where absent."""
+    out = np.full((n, 3), np.nan)
+    names = [f"eye_centre_{eye}_{a}_m" for a in "xyz"]
+    if all(c in rows for c in names):
+        out[tick[ok]] = rows[names].to_numpy(dtype=np.float64)[ok]
+    return out

@@ -14,13 +14,25 @@ from psyop.quality.measures import trial_measures
 from psyop.quality.samples import gaze_grid
 
 
+def recorded_protocol(meta: dict, meta_path: Path):
+    """The protocol a session recorded (session.json ``protocol_text``), its files (a mesh) resolved beside
+    the protocol file it was run from (``protocol_file``), as the session resolved them."""
+    from psyop.protocol import parse_protocol
+
+    source = meta.get("protocol_file")
+    base_dir = Path(source).parent if isinstance(source, str) and source and Path(source).parent.is_dir() else None
+    return parse_protocol(meta["protocol_text"], f"{meta_path} (protocol_text)", base_dir=base_dir)
+
+
 def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(per-trial measures, events) of the session in ``directory``, each with participant and session.
 
     The nominal rate is the simulated tracker's ``rate_hz`` (protocol ``observer: eye:``, default 120 Hz)
-    for a simulated session, else the median interval between samples."""
-    from psyop.protocol import parse_protocol
-    from psyop.session.gaze.simulated import SimulatedTrackerConfig
+    for a simulated session, else the median interval between samples. A simulated session whose raw stream
+    is ``requested`` (the shipped protocols' choice) holds only the samples the session asked for (about one
+    per trial on the virtual clock): its measures come from :func:`requested_stream_measures`; column
+    ``raw_stream`` says which stream each row was measured from."""
+    from psyop.session.gaze.simulated import tracker_config
     from psyop.session.plan import compile_plan
 
     directory = Path(directory)
@@ -29,20 +41,42 @@ def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
         raise UserError("not a finalised psyop session (no session.json and trials.parquet)", str(directory))
     verify_session(directory)
     meta = json.loads(meta_path.read_text())
-    protocol = parse_protocol(meta["protocol_text"], str(meta_path))
-    plan = compile_plan(protocol)
-    rate = None
+    plan = compile_plan(recorded_protocol(meta, meta_path))
+    rate, stream = None, "every_sample"
     if meta.get("tracker") == "sim":
-        eye = plan.observer.eye if plan.observer is not None else None
-        rate = (eye.rate_hz if eye is not None and eye.rate_hz is not None else SimulatedTrackerConfig().rate_hz)
+        config = tracker_config(plan.observer.eye if plan.observer is not None else None, str(meta.get("participant", "")))
+        rate, stream = config.rate_hz, config.raw_stream or "requested"
     gaze_path = directory / dc.GAZE_FILE
     gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
     trials = pd.read_parquet(directory / dc.TRIALS_FILE)
     measures, events = trial_measures(gaze_grid(gaze, rate), trials, plan)
+    if stream == "requested":
+        measures, events = requested_stream_measures(measures, gaze), events.iloc[0:0]
+    measures.insert(1, "raw_stream", stream)
     for table in (measures, events):
         table.insert(0, "session", int(meta.get("session", 1)))
         table.insert(0, "participant", str(meta.get("participant", "")))
     return measures, events
+
+
+#: measures a stream of the requested samples cannot give (they need the tracker's every sample)
+NEEDS_EVERY_SAMPLE = ("longest_gap_s", "precision_rms_s2s_deg", "precision_sd_deg", "pursuit_gain", "pursuit_lag_s",
+                      "catch_up_saccades_per_s", "n_fixations", "n_saccades")
+
+
+def requested_stream_measures(measures: pd.DataFrame, gaze: pd.DataFrame) -> pd.DataFrame:
+    """``measures`` of a requested-samples stream: data loss is the share of the trial's requested samples
+    that were invalid (NaN for a trial that requested none; not against the nominal rate, which such a stream never meets), accuracy comes from
+    the valid ones, and :data:`NEEDS_EVERY_SAMPLE` are NaN (not measurable: no silent numbers)."""
+    out = measures.copy()
+    by_trial = gaze.groupby("trial")["gaze_valid"] if not gaze.empty else None
+    requested = out["trial"].map(by_trial.size() if by_trial is not None else {}).fillna(0).astype(int)
+    valid = out["trial"].map(by_trial.sum() if by_trial is not None else {}).fillna(0).astype(int)
+    out["n_samples_expected"], out["n_samples_valid"] = requested, valid
+    out["data_loss_share"] = 1.0 - valid / requested.where(requested > 0)  # NaN: the trial requested none
+    for name in NEEDS_EVERY_SAMPLE:
+        out[name] = float("nan")
+    return out
 
 
 def summary_lines(measures: pd.DataFrame) -> list[str]:

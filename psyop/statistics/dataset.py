@@ -15,6 +15,7 @@ from psyop.atomic import write_atomic
 from psyop.errors import UserError
 from psyop.finalised import record_finalised, verify_session
 from psyop.input_files import MAX_LOG_TABLE_BYTES, InputFile
+from psyop.quality.included import include as include_quality
 
 
 class LowGazeWarning(UserWarning):
@@ -117,7 +118,7 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
     less valid gaze than the protocol's ``trial.min_valid_gaze_share``; see
     :func:`psyop.datacontract.low_gaze_mask`) are kept and counted in
     ``trials.attrs["n_low_gaze"]``, with a :class:`LowGazeWarning` naming the count;
-    ``drop_low_gaze`` leaves them out (``trials.attrs["n_low_gaze_dropped"]``).
+    ``drop_low_gaze`` leaves them out (``trials.attrs["n_low_gaze_dropped"]``); ``quality:`` rules too (attrs["quality"]).
     """
     files = session_files(data_root, study)
     if not files:
@@ -153,6 +154,7 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
             f"trial.min_valid_gaze_share (gaze_ok false); {what}"), stacklevel=2)
     if drop_low_gaze:
         trials = trials[~low].reset_index(drop=True)
+    trials = include_quality(trials, [f.parent for f in files])  # the protocol's quality: rules (issue 27)
     # simulated only when the description says so and no session's own trials.parquet says real
     # (a real session whose session.json was deleted still carries its flag in its finalised table)
     simulated = is_simulated(data_root) and False not in file_flags

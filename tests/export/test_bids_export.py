@@ -232,3 +232,20 @@ def test_the_display_profile_is_read_back_as_session_json_records_it() -> None:
     assert display_from_metadata(recorded, "session.json") == plan.display
     with pytest.raises(UserError, match="no display profile"):
         display_from_metadata({}, "session.json")
+
+
+def test_eyetrack_sidecars_carry_the_measured_calibration_error(simulated: Path, exported: Path) -> None:
+    """BIDS AverageCalibrationError / MaximalCalibrationError (degrees) and CalibrationCount: psyop.quality's
+    error on the recalibration cross, before correction, over the run's trials (issue 27 item 5)."""
+    from psyop.quality.session import measure_session
+
+    for session_json in sorted((simulated / "detection").glob("sub-*/ses-*/session.json")):
+        measures = measure_session(session_json.parent)[0]
+        trials = pd.read_parquet(session_json.parent / "trials.parquet")
+        sub, ses = session_json.parents[1].name, session_json.parent.name
+        sidecar = json.loads((exported / sub / ses / "beh" /
+                              f"{sub}_{ses}_task-detection_run-1_recording-eye1_physio.json").read_text())
+        assert sidecar["CalibrationCount"] == len(trials)
+        assert sidecar["AverageCalibrationError"] == pytest.approx(measures["accuracy_fixation_mean_deg"].mean())
+        assert sidecar["MaximalCalibrationError"] == pytest.approx(measures["accuracy_fixation_max_deg"].max())
+        assert 0 < sidecar["AverageCalibrationError"] <= sidecar["MaximalCalibrationError"] < 10

@@ -1,0 +1,46 @@
+"""Gaze quality of one study (issue 27): the per-trial measures of every session (psyop.quality, from the
+raw gaze stream each session finalised; a ``requested`` stream is measured from the samples it holds),
+the fixation/saccade events (pymovements; built here from the finalised session files, not stored in
+them), the protocol's ``quality:`` exclusions and the methods sentence. Writes
+results/<study>_gaze_quality.csv, results/<study>_gaze_events.csv, results/<study>_exclusions.csv,
+results/<study>_quality.txt, the figure (each measure per participant with the rule thresholds) and
+<figure>_samples.png (raw gaze of the first session's first trials).
+"""
+
+from __future__ import annotations
+
+import sys
+
+import pandas as pd
+from _common import out_path, parser, results_file, run, write_csv, write_text
+
+from psyop import datacontract as dc
+from psyop.figures.output import save_figure
+from psyop.quality.figures import plot_measures, plot_sample_trials
+from psyop.quality.included import quality_rules, study_quality
+from psyop.statistics.dataset import session_files
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser(__doc__, "figures/{study}_gaze_quality.png", study="detection").parse_args(argv)
+    sessions = [f.parent for f in session_files(args.data, args.study)]
+    rules = quality_rules(sessions)
+    quality = study_quality(sessions, rules)
+    args.results.mkdir(parents=True, exist_ok=True)
+    write_csv(quality.measures, results_file(args.results, args.study, "gaze_quality", "csv"))
+    write_csv(quality.events, results_file(args.results, args.study, "gaze_events", "csv"))
+    write_csv(quality.exclusions, results_file(args.results, args.study, "exclusions", "csv"))
+    write_text(results_file(args.results, args.study, "quality", "txt"), quality.sentence + "\n")
+    out = out_path(args)
+    if sessions:
+        gaze_path = sessions[0] / dc.GAZE_FILE
+        gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
+        save_figure(plot_sample_trials(gaze, pd.read_parquet(sessions[0] / dc.TRIALS_FILE)),
+                    out.with_name(out.stem + "_samples.png"))
+    save_figure(plot_measures(quality.measures, rules, args.study), out)
+    print(f"[psyop] {args.study}: {quality.sentence}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run(main))

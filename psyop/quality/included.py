@@ -1,0 +1,72 @@
+"""The included data of a study: its protocol's ``quality:`` rules applied to its sessions at analysis time
+(psyop.quality.rules). Nothing recorded is read for a study without the section, and nothing is changed."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from psyop import datacontract as dc
+from psyop.protocol.quality import QualitySection
+from psyop.quality.rules import (
+    apply_rules,
+    included_mask,
+    methods_sentence,
+    unmeasured_sentence,
+)
+
+
+@dataclass(frozen=True)
+class StudyQuality:
+    """A study's per-trial measures (every session), events, exclusions and the methods sentence."""
+
+    measures: pd.DataFrame
+    events: pd.DataFrame
+    exclusions: pd.DataFrame
+    sentence: str
+
+
+def quality_rules(session_dirs: list[Path]) -> QualitySection | None:
+    """The ``quality:`` section of the protocol the first of ``session_dirs`` that recorded one has (None: no
+    rules; a session.json without its protocol text, as in hand-made test tables, has none)."""
+    from psyop.quality.session import recorded_protocol
+
+    for directory in session_dirs:
+        meta_path = Path(directory) / dc.SESSION_METADATA_FILE
+        meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+        if "protocol_text" in meta:
+            return recorded_protocol(meta, meta_path).quality
+    return None
+
+
+def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> StudyQuality:
+    """Measure every session, apply ``rules`` and state the counts."""
+    from psyop.quality.session import measure_session
+
+    tables = [measure_session(d) for d in session_dirs]
+    measures = pd.concat([t[0] for t in tables], ignore_index=True) if tables else pd.DataFrame()
+    events = pd.concat([t[1] for t in tables], ignore_index=True) if tables else pd.DataFrame()
+    exclusions = apply_rules(measures, rules)
+    n_people = measures["participant"].nunique() if not measures.empty else 0
+    sentence = methods_sentence(exclusions, n_people, len(measures)) if rules is not None else \
+        "No quality: section in the protocol: no gaze-based exclusions."
+    extra = unmeasured_sentence(measures, rules)
+    return StudyQuality(measures, events, exclusions, sentence + (" " + extra if extra else ""))
+
+
+def include(trials: pd.DataFrame, session_dirs: list[Path]) -> pd.DataFrame:
+    """``trials`` without what the study's ``quality:`` rules exclude; ``attrs["quality"]`` states the counts
+    and ``attrs["n_quality_excluded"]`` how many trials went. Without the section: ``trials`` as given."""
+    rules = quality_rules(session_dirs)
+    if rules is None:
+        trials.attrs["quality"], trials.attrs["n_quality_excluded"] = "no quality: rules (nothing excluded)", 0
+        return trials
+    quality = study_quality(session_dirs, rules)
+    keep = included_mask(trials, quality.exclusions)
+    kept = trials[keep].reset_index(drop=True)
+    kept.attrs.update(trials.attrs)
+    kept.attrs["quality"], kept.attrs["n_quality_excluded"] = quality.sentence, int((~keep).sum())
+    return kept
