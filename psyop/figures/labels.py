@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from matplotlib.typing import RcKeyType
+
 #: matplotlib rc settings every psyop figure is drawn under (``plt.rc_context(STYLE)``): no text
 #: below 9 pt at the saved size (figures are saved at 1:1, ``bbox_inches='tight'``).
-STYLE = {
+STYLE: dict[RcKeyType, object] = {
     "font.size": 10, "axes.titlesize": 11, "axes.labelsize": 10, "xtick.labelsize": 9, "ytick.labelsize": 9,
     "legend.fontsize": 9, "figure.titlesize": 11,
 }

@@ -173,7 +173,7 @@ def _wait_some(pending: set, poll_s: float, scheduler: str) -> tuple[set, set]:
         return set(done), set(still)
     except TimeoutError:
         return set(), pending
-    except Exception as exc:  # noqa: BLE001 - the futures of a dead scheduler are cancelled
+    except Exception as exc:
         if "Cancelled" in type(exc).__name__ or _connection_lost(exc):
             raise _lost(scheduler, f"the scheduler connection was lost ({type(exc).__name__})") from None
         raise
@@ -194,7 +194,7 @@ def _result(future, scheduler: str, describe: Callable[[], str], poll_s: float, 
                 return future.result(timeout=poll_s)
             except TimeoutError:
                 check()
-    except Exception as exc:  # noqa: BLE001 - a cancelled future of a dead scheduler
+    except Exception as exc:
         if type(exc).__name__ in ("CancelledError", "FutureCancelledError"):
             raise _lost(scheduler, f"the scheduler cancelled its tasks ({type(exc).__name__})") from None
         if future.status != "error" and _connection_lost(exc):  # not the replication's own error

@@ -50,7 +50,10 @@ class QualityRule(StrictModel):
         """Whether ``value`` breaks this rule (NaN, i.e. not measured, never does)."""
         if math.isnan(value):
             return False
-        return bool(value > self.max) if self.max is not None else bool(value < self.min)
+        if self.max is not None:
+            return bool(value > self.max)
+        assert self.min is not None  # the validator above requires exactly one of max:/min:
+        return bool(value < self.min)
 
     def describe(self) -> str:
         """e.g. ``data_loss_share > 0.5`` (what excludes)."""

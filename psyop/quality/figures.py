@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from psyop.protocol.quality import QualitySection
+from psyop.protocol.quality import QualityRule, QualitySection
 
 HEADLINE = ("data_loss_share", "accuracy_fixation_mean_deg", "precision_rms_s2s_deg", "pursuit_gain")
 
@@ -18,9 +18,15 @@ HEADLINE = ("data_loss_share", "accuracy_fixation_mean_deg", "precision_rms_s2s_
 def _thresholds(rules: QualitySection | None, measure: str) -> list[tuple[float, str]]:
     if rules is None:
         return []
-    out = [(r.max if r.max is not None else r.min, "trial rule") for r in rules.trials if r.measure == measure]
-    return out + [(r.max if r.max is not None else r.min, "participant median rule")
-                  for r in rules.participants if r.measure == measure]
+    out = [(_bound(r), "trial rule") for r in rules.trials if r.measure == measure]
+    return out + [(_bound(r), "participant median rule") for r in rules.participants if r.measure == measure]
+
+
+def _bound(rule: QualityRule) -> float:
+    """The rule's threshold: its max: or its min: (validation requires exactly one)."""
+    bound = rule.max if rule.max is not None else rule.min
+    assert bound is not None
+    return bound
 
 
 def plot_measures(measures: pd.DataFrame, rules: QualitySection | None, study: str):
