@@ -27,13 +27,21 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
+from psyop.datacontract import typed_response
 from psyop.session.simulate import plan_jobs, run_job
 
 ROOT = Path(__file__).resolve().parents[2]
 GOLDENS = Path(__file__).with_name("refactor_goldens.json")
 STUDIES = sorted(p.stem for p in (ROOT / "protocols").glob("*.yaml"))
 TIMING = ("trial_start_s", "trial_end_s")
-SESSION_JSON_EXCLUDED = ("finalised", "runs", "host", "python", "packages", "finalised_files", "rendering")
+#: columns added on purpose after the goldens (issue 29's typed responses): left out of the digest, and
+#: checked instead to be exactly what datacontract.typed_response derives from ``response``
+ADDED_AFTER = ("response_value", "outcome")
+SESSION_JSON_EXCLUDED = ("finalised", "runs", "host", "python", "packages", "finalised_files", "rendering",
+                         # inputs, not outputs: where the protocol lies (a machine path) and its text and hash
+                         # (protocols may change on purpose, e.g. egocentric's quality: rules); checked below to be
+                         # the protocol file that ran
+                         "protocol_file", "protocol_text", "protocol_sha256", "protocol_file_sha256")
 
 
 def _table_digest(path: Path, include: tuple[str, ...] | None = None, exclude: tuple[str, ...] = ()) -> str:
@@ -47,7 +55,7 @@ def _digests(session: Path) -> dict[str, str]:
     meta = json.loads((session / "session.json").read_text())
     kept = {k: v for k, v in meta.items() if k not in SESSION_JSON_EXCLUDED}
     return {
-        "trials": _table_digest(session / "trials.parquet", exclude=TIMING),
+        "trials": _table_digest(session / "trials.parquet", exclude=TIMING + ADDED_AFTER),
         "trials_timing": _table_digest(session / "trials.parquet", include=TIMING),
         "frames": _table_digest(session / "frames.parquet"),
         "gaze": _table_digest(session / "gaze.parquet"),
@@ -76,8 +84,15 @@ def test_simulated_session_unchanged(tmp_path: Path, study: str) -> None:
     golden = json.loads(GOLDENS.read_text())[study]
     got = _digests(_simulate(study, tmp_path))
     assert got["trials"] == golden["trials"], f"{study}: trials.parquet content changed"
+    trials = pq.read_table(tmp_path / study / "sub-S01" / "ses-1" / "trials.parquet").to_pylist()
+    assert [{k: row[k] for k in ADDED_AFTER} for row in trials] == [
+        typed_response(row["response"]) for row in trials], f"{study}: typed response columns"
     assert got["trials_timing"] == golden["trials_timing"], f"{study}: trial start/end times changed"
     assert got["session_json"] == golden["session_json"], f"{study}: session.json changed"
+    meta = json.loads((tmp_path / study / "sub-S01" / "ses-1" / "session.json").read_text())
+    protocol = ROOT / "protocols" / f"{study}.yaml"
+    assert meta["protocol_text"] == protocol.read_text()
+    assert meta["protocol_file_sha256"] == hashlib.sha256(protocol.read_bytes()).hexdigest()
     if got["rendering"] == golden["rendering"]:
         assert got["frames"] == golden["frames"], f"{study}: frames.parquet changed"
         assert got["gaze"] == golden["gaze"], f"{study}: gaze.parquet changed"
