@@ -13,13 +13,16 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from psyop.session.frames import FrameCheck, FrameRequest, HeadPose
 from psyop.session.phases import PhaseSpec
 from psyop.session.plan import SessionPlan
+
+if TYPE_CHECKING:
+    from psyop.mesh.load import MeshFiles
 
 
 #: A real session (every frame rendered) checks each eye's first image of every phase and then
@@ -48,7 +51,8 @@ class SceneRenderer:
     """
 
     def __init__(self, plan: SessionPlan, *, scale: float = 1.0, ctx: Any = None, max_images: int | None = None,
-                 owns_ctx: bool = True, check_every: int | None = None, frame_cache: bool = True) -> None:
+                 owns_ctx: bool = True, check_every: int | None = None, frame_cache: bool = True,
+                 mesh_files: MeshFiles | None = None) -> None:
         self.plan = plan
         self.protocol = plan.protocol
         display_profile = plan.display
@@ -77,7 +81,7 @@ class SceneRenderer:
         self._images = ImageFiles(self._base_dir)  # image surfaces decoded once per session
         from psyop.stimulus.meshes import SessionMeshes
 
-        self._meshes = SessionMeshes(self._base_dir)  # glTF models loaded once per session (uploaded once)
+        self._meshes = SessionMeshes(self._base_dir, mesh_files)  # glTF models loaded once per session (uploaded once)
         from psyop.rendering.text import TextImages, em_px_for_display
         from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
 
