@@ -88,9 +88,8 @@ def simulate_dataset(protocol_paths: list[Path], data_root: Path, *, jobs: int =
                      participants: dict[str, int] | None = None,
                      default_participants: int = 6) -> list[tuple[str, str, str, int]]:
     """Run every job (``jobs`` worker processes) and mark the dataset simulated."""
-    from psyop.session.log.layout import write_dataset_description
-
     from psyop.mesh.load import MeshFiles
+    from psyop.session.log.layout import write_dataset_description
 
     # one model cache per protocol: in one process every session reuses what validation read; spawned
     # workers cannot share it and read each session's models once of their own
