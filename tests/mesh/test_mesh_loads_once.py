@@ -67,3 +67,10 @@ def test_simulate_in_one_process_parses_each_model_once(tmp_path, counted):
     assert dict(parses) == {key: 1 for key in MODELS}
     # plan_jobs' validation, the session's validation, its records and its scene
     assert all(lookups[key] >= 4 for key in MODELS), dict(lookups)
+
+
+def test_audit_parses_each_model_once_not_per_frame(tmp_path, counted):
+    parses, lookups = counted
+    assert cli_main(["audit", str(TEASER), "--no-progress", "--scale", "0.05", "--gazes", "1"]) == 0
+    assert dict(parses) == {key: 1 for key in MODELS}
+    assert all(lookups[key] >= 2 for key in MODELS), dict(lookups)  # validation, then the audited frames
