@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from psyop.rendering.scene import Scene
     from psyop.session.phases import PhaseSpec
     from psyop.session.plan import SessionPlan
+    from psyop.mesh.load import MeshFiles
 
 # Visible means covering at least half of one of the S x S samples of an edge pixel; exact
 # occlusion leaves a hidden primitive's mask at exactly 0.
@@ -145,14 +146,16 @@ def iter_frames(plan: SessionPlan, settings: AuditSettings) -> Iterator[tuple[Au
 
 
 def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context | None = None, base_dir: Path | None = None,
-              progress: Callable[[int, int], None] | None = None) -> AuditReport:
+              progress: Callable[[int, int], None] | None = None, mesh_files: MeshFiles | None = None) -> AuditReport:
     """Render and check every audited frame of ``protocol`` (see the module docstring).
 
-    ``progress(done, total)``: called after each rendered frame (``psyop audit`` prints a progress line)."""
+    ``progress(done, total)``: called after each rendered frame (``psyop audit`` prints a progress line).
+    ``mesh_files``: the models validation read (psyop.mesh.MeshFiles); each is loaded once per audit, not per frame."""
     from psyop.rendering import RenderSettings
     from psyop.rendering.renderer import create_headless_context
     from psyop.session.plan import compile_plan
     from psyop.stimulus import build_scene, scene_origin_m
+    from psyop.stimulus.meshes import SessionMeshes
 
     plan = compile_plan(protocol, tracker_ipd_m=settings.ipd_m)
     display = dataclasses.replace(plan.display, width_px=max(16, round(plan.display.width_px * settings.scale)),
@@ -164,12 +167,13 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
     ctx = ctx if ctx is not None else create_headless_context()
     measurer = FrameMeasurer(ctx, RenderSettings(samples_per_axis=settings.samples_per_axis, reuse_tolerance_px=None))
     records: list[FrameRecord] = []
+    meshes = SessionMeshes(base_dir, mesh_files)
     try:
         frames = list(iter_frames(plan, settings))
         for done, (frame, phase) in enumerate(frames, 1):
             centre = plan.rig.centre_m(frame.eye)
             scene = build_scene(protocol, frame.row, frame.time_s, centre, interval=frame.interval, base_dir=base_dir,
-                                show=phase.primitives)
+                                show=phase.primitives, meshes=meshes)
             origin = scene_origin_m(protocol, centre)
             fixation = fixation_point(scene, fixation_prefix, origin, frame.gaze_index, settings.gazes)
             camera = plan.rig.camera(display, frame.eye, fixation, frame.mode, row=frame.row)

@@ -56,12 +56,16 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--sheet must name a .png file, got {args.sheet!r}")
     settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=args.ipd_mm / 1000.0, seed=args.seed,
                              levels=tuple(args.level or ()))
+    from psyop.mesh.load import MeshFiles
+
     path = Path(args.protocol)
-    protocol = load_protocol(path)
+    mesh_files = MeshFiles(path.parent)  # each model read once: validation and every audited frame
+    protocol = load_protocol(path, meshes=mesh_files)
     def show(done: int, total: int) -> None:
         print("\r" + progress_line(done, total), end="\n" if done == total else "", file=sys.stderr, flush=True)
 
-    report = run_audit(protocol, settings, base_dir=path.parent, progress=None if args.no_progress else show)
+    report = run_audit(protocol, settings, base_dir=path.parent, progress=None if args.no_progress else show,
+                       mesh_files=mesh_files)
     print(format_table(report))
     if args.sheet is not None:
         write_contact_sheet(report, Path(args.sheet))

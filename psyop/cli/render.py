@@ -133,15 +133,18 @@ def write_png(path: Path, image_uint8: np.ndarray) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from psyop.mesh.load import MeshFiles
     from psyop.optics.camera import make_eye_camera
     from psyop.protocol import load_protocol, resolve_display_profile, resolve_eye_model
     from psyop.rendering import Renderer, RenderSettings
     from psyop.rendering.builders import direction_from_angles
     from psyop.schedule import compile_schedule, interval_values
     from psyop.stimulus import build_scene, interval_mode, interval_phases
+    from psyop.stimulus.meshes import SessionMeshes
 
     protocol_path = Path(args.protocol)
-    protocol = load_protocol(protocol_path)
+    mesh_files = MeshFiles(protocol_path.parent)  # each model read once: validation and the scene
+    protocol = load_protocol(protocol_path, meshes=mesh_files)
     schedule = compile_schedule(protocol, args.seed, participant_index=args.participant_index)
     if not 0 <= args.trial < len(schedule):
         raise UserError(f"--trial must be in 0..{len(schedule) - 1}, got {args.trial}")
@@ -194,7 +197,8 @@ def run(args: argparse.Namespace) -> int:
         scene = (blank_scene() if response_text is None
                  else text_scene(text_image(response_text, em_px), scene_origin_m(protocol, centre)))
     else:
-        scene = build_scene(protocol, row, args.time_s, centre, interval=args.interval, base_dir=protocol_path.parent)
+        scene = build_scene(protocol, row, args.time_s, centre, interval=args.interval, base_dir=protocol_path.parent,
+                            meshes=SessionMeshes(protocol_path.parent, mesh_files))
     with Renderer(scene, RenderSettings(antialiasing=args.antialiasing, reuse_tolerance_px=None)) as renderer:
         renderer.render(camera)
         image = renderer.image_uint8(eye)

@@ -64,14 +64,17 @@ def main(args: argparse.Namespace) -> int:
 
     if not args.protocol.exists():
         raise UserError("protocol file not found", str(args.protocol))
-    protocol = load_protocol(args.protocol)
+    from psyop.mesh.load import MeshFiles
+
+    mesh_files = MeshFiles(args.protocol.parent)  # models read once: validation, session.json and the scene
+    protocol = load_protocol(args.protocol, meshes=mesh_files)
     options = SessionOptions(
         participant=args.participant, session=args.session, seed=args.seed, tracker=args.tracker,
         participant_index=args.participant_index,
         responses=args.responses, display=args.display, clock=args.clock, data_root=args.data,
         window_scale=args.window_scale, lsl_markers=args.lsl_markers, lsl_wait_s=args.lsl_wait_s,
         progress=not args.no_progress, allow_protocol_change=args.allow_protocol_change, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
-        xr_request_exit_at_frame=args.xr_request_exit_at_frame,
+        xr_request_exit_at_frame=args.xr_request_exit_at_frame, mesh_files=mesh_files,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),
     )

@@ -683,6 +683,8 @@ class MeshFiles:
     ``load`` reads the model file (bounded) and hashes it; an entry is reused when the path,
     the node and the SHA-256 of the model and of every file it read match, so an edited model
     or texture is loaded again and an unchanged one never is (``loads`` counts real loads).
+    One is made per command and passed explicitly to validation (``load_protocol(..., meshes=)``),
+    the session.json records and the session's scene, so each model is parsed once in all of them.
     Looking up costs reading and hashing the files, no parsing or decoding: call it once per
     item and session (or per trial where a factor picks the file).
     """
@@ -692,8 +694,9 @@ class MeshFiles:
         self._assets: dict[tuple[str, str | None], MeshAsset] = {}
         self.loads = 0
 
-    def load(self, path: Path | str, node: str | None = None) -> MeshAsset:
-        full = self.base_dir / path
+    def load(self, path: Path | str, node: str | None = None, *, base_dir: Path | None = None) -> MeshAsset:
+        """The model at ``path`` (relative to ``base_dir``, default the cache's own folder), or one node of it."""
+        full = Path(base_dir if base_dir is not None else self.base_dir) / path
         raw = _model_file(full).read_bytes(full)
         key = (str(full.resolve()), node)
         cached = self._assets.get(key)

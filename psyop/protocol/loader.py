@@ -4,6 +4,7 @@ where (file:line:column), which key, and what to do."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
@@ -14,11 +15,16 @@ from psyop.protocol.model import Protocol
 from psyop.protocol.semantics import check_protocol
 from psyop.protocol.source import format_path, read_yaml
 
+if TYPE_CHECKING:
+    from psyop.mesh.load import MeshFiles
 
-def parse_protocol(text: str, source_name: str = "<protocol>", base_dir: Path | None = None) -> Protocol:
+
+def parse_protocol(text: str, source_name: str = "<protocol>", base_dir: Path | None = None,
+                   meshes: MeshFiles | None = None) -> Protocol:
     """Validate protocol YAML ``text``. ``source_name`` appears in messages; relative texture
     paths are resolved against ``base_dir`` (default: the folder of ``source_name`` when that is
-    a file, else the working directory)."""
+    a file, else the working directory). ``meshes``: the command's model cache (psyop.mesh.MeshFiles)
+    the mesh items are read into, for the session to reuse (None: a fresh one for this check)."""
     if base_dir is None:
         candidate = Path(source_name)
         base_dir = candidate.parent if candidate.is_file() else None
@@ -28,7 +34,7 @@ def parse_protocol(text: str, source_name: str = "<protocol>", base_dir: Path | 
     except ValidationError as error:
         location, message = format_validation_error(error, document, Protocol)
         raise UserError(message, location) from None
-    issues = check_protocol(protocol, base_dir)
+    issues = check_protocol(protocol, base_dir, meshes)
     if issues:
         lines = []
         first = None
@@ -61,8 +67,8 @@ def read_protocol_bytes(path: Path) -> bytes:
     return PROTOCOL_FILE.read_bytes(path)
 
 
-def load_protocol(path: str | Path) -> Protocol:
-    """Read and validate the protocol file at ``path``."""
+def load_protocol(path: str | Path, meshes: MeshFiles | None = None) -> Protocol:
+    """Read and validate the protocol file at ``path`` (``meshes``: as :func:`parse_protocol`)."""
     path = Path(path)
     raw = read_protocol_bytes(path)
     try:
@@ -73,4 +79,4 @@ def load_protocol(path: str | Path) -> Protocol:
         column = error.start - (before.rfind(b"\n") + 1) + 1
         raise UserError("this file is not UTF-8 text; save it as UTF-8 (protocols are YAML text files)",
                         f"{path}:{line}:{column}") from None
-    return parse_protocol(text, str(path), base_dir=path.parent)
+    return parse_protocol(text, str(path), base_dir=path.parent, meshes=meshes)

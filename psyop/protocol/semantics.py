@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path as FsPath
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel
 
@@ -28,6 +28,9 @@ from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTar
                                   Mesh, ReachTarget, Room, SinusoidalBorder, TargetField, centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
 from psyop.records import JsonObject, Loc
+
+if TYPE_CHECKING:
+    from psyop.mesh.load import MeshFiles
 
 #: Random sequential placement of equal discs jams at about 54.7 % area coverage. Measured for
 #: 2.6 deg targets in a 60 deg field (centres within field/2 - size/2): 40 % coverage needs about
@@ -55,9 +58,10 @@ def _suggest(name: str, options: list[str]) -> str:
 
 
 class _Checker:
-    def __init__(self, protocol: Protocol, base_dir: FsPath | None) -> None:
+    def __init__(self, protocol: Protocol, base_dir: FsPath | None, meshes: MeshFiles | None = None) -> None:
         self.p = protocol
         self.base_dir = base_dir
+        self.meshes = meshes  # the models read by check_mesh (a fresh MeshFiles when None)
         self.issues: list[Issue] = []
         self.factors = protocol.design.factors
         self.mesh_triangles: dict[str, int] = {}  # mesh item id -> triangles of its model (read by check_mesh)
@@ -254,10 +258,13 @@ class _Checker:
     def check_mesh(self, item: Mesh, path: Loc) -> None:
         """The model is read now (psyop.mesh.load: every file-level problem is one line at the item's ``file``),
         and a mesh at optical infinity is refused (a model has a place, not only directions)."""
-        from psyop.mesh.load import load_mesh
+        from psyop.mesh.load import MeshFiles
 
+        base_dir = self.base_dir or FsPath.cwd()
+        if self.meshes is None:
+            self.meshes = MeshFiles(base_dir)
         try:
-            asset = load_mesh(FsPath(item.file), item.node, base_dir=self.base_dir or FsPath.cwd())
+            asset = self.meshes.load(FsPath(item.file), item.node, base_dir=base_dir)
         except UserError as error:
             self.add(path + (("node",) if item.node is not None and "node" in str(error) else ("file",)), str(error))
             return
@@ -637,9 +644,10 @@ def _same(a: float | str, b: float | str) -> bool:
     return abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(a)))
 
 
-def check_protocol(protocol: Protocol, base_dir: FsPath | None) -> list[Issue]:
-    """Every cross-section problem of a structurally valid protocol (empty list: fine)."""
-    checker = _Checker(protocol, base_dir)
+def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFiles | None = None) -> list[Issue]:
+    """Every cross-section problem of a structurally valid protocol (empty list: fine). ``meshes``: the
+    command's model cache (psyop.mesh.MeshFiles), so the session reuses the models read here."""
+    checker = _Checker(protocol, base_dir, meshes)
     checker.check_factors()
     if checker.issues:
         return checker.issues  # conditions cannot be expanded reliably

@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import pandas as pd
 import pyarrow as pa
@@ -37,6 +37,9 @@ from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop, pursuit_fi
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.resume import accept_protocol_change, check_free, check_options, resolve_seed
+
+if TYPE_CHECKING:
+    from psyop.mesh.load import MeshFiles
 
 __all__ = ["DEFAULT_IPD_M", "SessionOptions", "StoreFactory", "print_outcome", "run_session"]
 _PACKAGES = ("psyop", "numpy", "scipy", "pandas", "pyarrow", "pydantic", "pyzmq", "pyserial", "msgpack", "moderngl", "tqdm")
@@ -70,6 +73,7 @@ class SessionOptions:
     lsl_markers: bool = False  # publish trial events as an LSL marker stream (psyop.devices.lsl_markers)
     lsl_wait_s: float = 10.0  # --lsl-markers: wait this long for a recorder to connect before the first trial
     participant_index: int | None = None  # keys block_order: latin_square (None: the number the ID ends in)
+    mesh_files: MeshFiles | None = None  # the models validation read (psyop.mesh.MeshFiles), reused (None: read anew)
 
     @property
     def simulated_sources(self) -> tuple[str, ...]:
@@ -111,8 +115,8 @@ def _package_versions() -> tuple[tuple[str, str], ...]:
 
 
 def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale: float, scale: float,
-                   max_images: int | None) -> tuple[FrameRenderer, str]:
-    """The frame renderer and a description of it for session.json.
+                   max_images: int | None, mesh_files: MeshFiles | None = None) -> tuple[FrameRenderer, str]:
+    """The frame renderer and a description of it for session.json (``mesh_files``: the session's models).
 
     'images': the protocol's stimulus ray-cast by psyop.rendering (needs OpenGL/EGL);
     'cameras': only the gaze-dependent eye cameras; 'auto': images if a context can be
@@ -129,7 +133,7 @@ def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale:
         scale_used = window_scale if display.name == "window" else 1.0
         where = "in the window" if display.name == "window" else f"in the {display.name} display's swapchain images"
         return (SceneRenderer(plan, scale=scale_used, ctx=display.gl_context, owns_ctx=False,
-                              check_every=WATCHED_CHECK_EVERY),
+                              check_every=WATCHED_CHECK_EVERY, mesh_files=mesh_files),
                 f"images at scale {scale_used:g} {where}, each eye's first and every {WATCHED_CHECK_EVERY}th rendered "
                 "image checked")
     try:
@@ -143,7 +147,7 @@ def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale:
     limit = (f"every stimulus frame, each eye's first and every {WATCHED_CHECK_EVERY}th rendered image checked"
              if max_images is None else f"first {max_images} stimulus frames checked")
     return (SceneRenderer(plan, scale=scale, ctx=ctx, max_images=max_images,
-                          check_every=WATCHED_CHECK_EVERY if max_images is None else 1),
+                          check_every=WATCHED_CHECK_EVERY if max_images is None else 1, mesh_files=mesh_files),
             f"images at scale {scale:g}, {limit}")
 
 
@@ -163,6 +167,7 @@ class _Opened:
     clock: Clock
     store: SessionLog
     metadata: JsonObject = field(default_factory=dict)
+    mesh_files: MeshFiles | None = None  # the session's models, read once for session.json and the scene
 
 
 def run_session(
@@ -229,10 +234,12 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
               protocol_sha256: str) -> JsonObject:
     """session.json's fields known before the backends are built (in the order they are written)."""
     from psyop.schedule.counterbalance import block_sequence
+    from psyop.mesh.load import MeshFiles
     from psyop.stimulus.meshes import protocol_mesh_records
 
     randomisation = protocol.design.randomisation
     source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
+    opened.mesh_files = options.mesh_files if options.mesh_files is not None else MeshFiles(source or Path.cwd())
     return {
         "study": opened.plan.study, "participant": options.participant, "session": options.session,
         "seed": opened.seed, "simulated": options.simulated, "simulated_sources": list(options.simulated_sources),
@@ -246,7 +253,7 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
         "python": platform.python_version(), "host": platform.node(),
         "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,
-        "pose": options.pose, "meshes": protocol_mesh_records(protocol.scene, source),
+        "pose": options.pose, "meshes": protocol_mesh_records(protocol.scene, source, opened.mesh_files),
     }
 
 
@@ -285,7 +292,7 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
         else options.every_frame
     renderer, rendering = _make_renderer(options.render, plan, bundle.display, options.window_scale,
                                          1.0 if every_frame else options.check_scale,
-                                         None if every_frame else options.check_images)
+                                         None if every_frame else options.check_images, opened.mesh_files)
     bundle.stack.callback(renderer.close)
     store.update_metadata(rendering=rendering)
     config = LoopConfig(refresh_hz=float(plan.display.refresh_hz), every_frame=every_frame,

@@ -21,6 +21,9 @@ from psyop.session.frames import FrameCheck, FrameRequest, HeadPose
 from psyop.session.phases import PhaseSpec
 from psyop.session.plan import SessionPlan
 
+if TYPE_CHECKING:
+    from psyop.mesh.load import MeshFiles
+
 
 if TYPE_CHECKING:
     import moderngl
@@ -52,7 +55,8 @@ class SceneRenderer:
     """
 
     def __init__(self, plan: SessionPlan, *, scale: float = 1.0, ctx: moderngl.Context | None = None, max_images: int | None = None,
-                 owns_ctx: bool = True, check_every: int | None = None, frame_cache: bool = True) -> None:
+                 owns_ctx: bool = True, check_every: int | None = None, frame_cache: bool = True,
+                 mesh_files: MeshFiles | None = None) -> None:
         self.plan = plan
         self.protocol = plan.protocol
         display_profile = plan.display
@@ -81,7 +85,7 @@ class SceneRenderer:
         self._images = ImageFiles(self._base_dir)  # image surfaces decoded once per session
         from psyop.stimulus.meshes import SessionMeshes
 
-        self._meshes = SessionMeshes(self._base_dir)  # glTF models loaded once per session (uploaded once)
+        self._meshes = SessionMeshes(self._base_dir, mesh_files)  # glTF models loaded once per session (uploaded once)
         from psyop.rendering.text import TextImages, em_px_for_display
         from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
 

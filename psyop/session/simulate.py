@@ -12,8 +12,12 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from psyop.session.gaze.simulated import seed_for
+
+if TYPE_CHECKING:
+    from psyop.mesh.load import MeshFiles
 
 #: Participants analysed in the paper (Sec. 5-6): detection 6, discrimination 6, ordinal 19,
 #: egocentric 13 (16 minus 3 excluded), realism 19.
@@ -33,15 +37,15 @@ class SimulatedJob:
 
 
 def plan_jobs(protocol_paths: list[Path], base_seed: int, participants: dict[str, int] | None = None,
-              default_participants: int = 6) -> list[SimulatedJob]:
+              default_participants: int = 6, mesh_files: dict[Path, MeshFiles] | None = None) -> list[SimulatedJob]:
     """One job per (study, participant); studies without a paper size (or one in ``participants``)
-    get ``default_participants``."""
+    get ``default_participants``. ``mesh_files``: per protocol path, the cache its models are read into."""
     from psyop.protocol import load_protocol
 
     sizes = dict(PAPER_PARTICIPANTS, **(participants or {}))
     jobs = []
     for path in protocol_paths:
-        protocol = load_protocol(path)
+        protocol = load_protocol(path, meshes=(mesh_files or {}).get(path))
         study = protocol.study.name
         if protocol.observer is None:
             continue
@@ -51,8 +55,10 @@ def plan_jobs(protocol_paths: list[Path], base_seed: int, participants: dict[str
     return jobs
 
 
-def run_job(job: SimulatedJob, data_root: Path) -> tuple[str, str, str, int]:
-    """Run (or finish) one simulated session; returns (study, participant, status, trials)."""
+def run_job(job: SimulatedJob, data_root: Path, mesh_files: MeshFiles | None = None) -> tuple[str, str, str, int]:
+    """Run (or finish) one simulated session; returns (study, participant, status, trials). ``mesh_files``:
+    the models already read (in this process), else a cache of this session's own."""
+    from psyop.mesh.load import MeshFiles
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
     from psyop.session.runner import SessionOptions, run_session
@@ -65,11 +71,12 @@ def run_job(job: SimulatedJob, data_root: Path) -> tuple[str, str, str, int]:
     from psyop.session.lock import SessionInUse
     from psyop.session.log.store import SessionComplete
 
+    files = mesh_files if mesh_files is not None else MeshFiles(job.protocol.parent)
     options = SessionOptions(participant=job.participant, seed=job.seed, data_root=data_root,
                              progress=False, write_description=False,
-                             render="auto" if job.participant == "S01" else "cameras")
+                             render="auto" if job.participant == "S01" else "cameras", mesh_files=files)
     try:
-        outcome = run_session(load_protocol(job.protocol), compile_schedule, options)
+        outcome = run_session(load_protocol(job.protocol, meshes=files), compile_schedule, options)
     except SessionInUse as busy:  # another `psyop simulate` (or run) has it: skip it, do the rest
         return job.study, job.participant, f"in use by {busy.holder}, skipped", 0
     except SessionComplete:  # another process completed it since the check above
@@ -81,12 +88,16 @@ def simulate_dataset(protocol_paths: list[Path], data_root: Path, *, jobs: int =
                      participants: dict[str, int] | None = None,
                      default_participants: int = 6) -> list[tuple[str, str, str, int]]:
     """Run every job (``jobs`` worker processes) and mark the dataset simulated."""
+    from psyop.mesh.load import MeshFiles
     from psyop.session.log.layout import write_dataset_description
 
-    planned = plan_jobs(protocol_paths, base_seed, participants, default_participants)
+    # one model cache per protocol: in one process every session reuses what validation read; spawned
+    # workers cannot share it and read each session's models once of their own
+    files = {path: MeshFiles(path.parent) for path in protocol_paths}
+    planned = plan_jobs(protocol_paths, base_seed, participants, default_participants, files)
     start = time.perf_counter()
     if jobs <= 1:
-        results = [run_job(job, data_root) for job in planned]
+        results = [run_job(job, data_root, files[job.protocol]) for job in planned]
     else:
         with ProcessPoolExecutor(max_workers=jobs, mp_context=_SPAWN) as pool:
             results = list(pool.map(run_job, planned, [data_root] * len(planned)))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,22 +21,25 @@ from psyop.rendering.mesh_scene import MeshInstance, model_matrix
 from psyop.stimulus.placement import centre_angles_deg
 from psyop.records import JsonMapping
 
+if TYPE_CHECKING:
+    from psyop.mesh.load import MeshFiles
+
 
 class SessionMeshes:
     """The session's models by the protocol's (file, node), looked up without touching the files
     again (a scene is built every frame); each is loaded once through :class:`psyop.mesh.MeshFiles`."""
 
-    def __init__(self, base_dir: Path | None) -> None:
+    def __init__(self, base_dir: Path | None, files: MeshFiles | None = None) -> None:
         from psyop.mesh.load import MeshFiles
 
         self.base_dir = base_dir or Path.cwd()
-        self._files = MeshFiles(self.base_dir)
+        self._files = files if files is not None else MeshFiles(self.base_dir)  # the command's, when given
         self._assets: dict[tuple[str, str | None], MeshAsset] = {}
 
     def asset(self, file: str, node: str | None) -> MeshAsset:
         key = (file, node)
         if key not in self._assets:
-            self._assets[key] = self._files.load(file, node)
+            self._assets[key] = self._files.load(file, node, base_dir=self.base_dir)
         return self._assets[key]
 
     def records(self) -> list[dict[str, object]]:
@@ -43,11 +47,13 @@ class SessionMeshes:
         return [asset.record() for asset in self._assets.values()]
 
 
-def protocol_mesh_records(scene: Sequence[ps.Primitive], base_dir: Path | None) -> list[dict[str, object]]:
+def protocol_mesh_records(scene: Sequence[ps.Primitive], base_dir: Path | None,
+                          mesh_files: MeshFiles | None = None) -> list[dict[str, object]]:
     """session.json's ``meshes``: the record (MeshAsset.record) of every (file, node) the protocol's mesh
     items name, read when the session opens, whether or not the session renders images (``file`` and
-    ``node`` are plain strings, never factors, so this is every model the session can show)."""
-    files = SessionMeshes(base_dir)
+    ``node`` are plain strings, never factors, so this is every model the session can show).
+    ``mesh_files``: the session's model cache (the models validation read are not read again)."""
+    files = SessionMeshes(base_dir, mesh_files)
     for item in scene:
         if isinstance(item, ps.Mesh):
             files.asset(item.file, item.node)
