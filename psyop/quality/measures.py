@@ -23,8 +23,9 @@ import pandas as pd
 from psyop.optics.angles import angle_between_deg, fick_direction
 from psyop.quality.events import EventMethod, detect_events
 from psyop.quality.samples import GazeGrid
-from psyop.session.gaze.plan import CirclingTarget, FixationPlan
-from psyop.session.loop import LoopConfig, fixation_plan, pursuit_fields
+from psyop.quality.target import loop_config, target_positions_deg, trial_phases
+from psyop.session.gaze.plan import FixationPlan
+from psyop.session.loop import LoopConfig
 from psyop.session.plan import SessionPlan
 from psyop.session.rows import TrialRow
 
@@ -100,13 +101,6 @@ def _loss_measures(grid: GazeGrid, window: np.ndarray, start_s: float, end_s: fl
     return {"n_samples_valid": int(len(valid_t)), "n_samples_expected": expected,
             "data_loss_share": max(0.0, 1.0 - len(valid_t) / expected) if expected else 1.0,
             "longest_gap_s": float(np.max(np.diff(edges)))}
-
-
-def target_positions_deg(target: Callable[[float], tuple[float, float]], t_rel_s: np.ndarray) -> np.ndarray:
-    """The pursuit target's Fick (az, el) in degrees at ``t_rel_s`` (s from the phase start); shape (n, 2)."""
-    if isinstance(target, CirclingTarget):
-        return target.positions(t_rel_s)
-    return np.array([target(float(x)) for x in t_rel_s]).reshape(-1, 2)
 
 
 @dataclass
@@ -226,21 +220,17 @@ def _trial_row(session: _SessionGaze, row: TrialRow, plan: SessionPlan, config: 
     window = (grid.t_s >= start) & (grid.t_s < end)
     out: dict[str, object] = {"trial": int(row["trial"]), **_loss_measures(grid, window, start, end)}
     parts = _TrialParts()
-    t0 = start
-    for phase in plan.phases:
-        p_end = t0 + phase.duration_s
-        sel = window & grid.valid & (grid.t_s >= t0) & (grid.t_s < p_end)
-        fplan = fixation_plan(config, phase, row, t0)
-        ev = (events["onset_s"] >= t0) & (events["onset_s"] < p_end)
-        events.loc[ev, "trial"], events.loc[ev, "phase"] = int(row["trial"]), phase.name
+    for p in trial_phases(plan, row, config):
+        sel = window & grid.valid & (grid.t_s >= p.start_s) & (grid.t_s < p.end_s)
+        ev = (events["onset_s"] >= p.start_s) & (events["onset_s"] < p.end_s)
+        events.loc[ev, "trial"], events.loc[ev, "phase"] = int(row["trial"]), p.phase.name
         s = _Samples(sel, grid.az_deg[sel], grid.el_deg[sel], grid.t_s[sel])
-        if phase.gaze == "cross" and len(s.t):
-            _cross_phase(parts, grid, s, fplan, p_end, session.in_saccade)
-        elif phase.gaze == "pursuit" and fplan.target is not None and len(s.t):
-            _pursuit_phase(parts, s, fplan.target, t0, session.velocity[sel], session.near_saccade[sel])
-            parts.pursuit_s += phase.duration_s
+        if p.phase.gaze == "cross" and len(s.t):
+            _cross_phase(parts, grid, s, p.fixation, p.end_s, session.in_saccade)
+        elif p.phase.gaze == "pursuit" and p.fixation.target is not None and len(s.t):
+            _pursuit_phase(parts, s, p.fixation.target, p.start_s, session.velocity[sel], session.near_saccade[sel])
+            parts.pursuit_s += p.phase.duration_s
             parts.n_catch += int((ev & (events["name"] != "fixation")).sum())
-        t0 = p_end
     out.update(_summary(parts))
     in_trial = events["trial"] == int(row["trial"])
     out["n_fixations"] = int((in_trial & (events["name"] == "fixation")).sum())
@@ -257,7 +247,7 @@ def trial_measures(grid: GazeGrid, trials: pd.DataFrame, plan: SessionPlan,
     events, velocity = detect_events(grid.t_s, grid.az_deg, grid.el_deg, grid.rate_hz, method)
     events["trial"], events["phase"] = -1, ""
     session = _SessionGaze(grid, events, velocity, *_saccade_masks(grid.t_s, events))
-    config = LoopConfig(**pursuit_fields(plan.fixation))
+    config = loop_config(plan)
     table = pd.DataFrame([_trial_row(session, row, plan, config) for row in trials.to_dict("records")])
     for name, value in grid.flags.items():
         table[name] = value  # the session's stream faults, by name, on every row
