@@ -4,7 +4,7 @@ the fixation/saccade events (pymovements; built here from the finalised session 
 them), the protocol's ``quality:`` exclusions and the methods sentence. Writes
 results/<study>_gaze_quality.csv, results/<study>_gaze_events.csv, results/<study>_exclusions.csv,
 results/<study>_quality.txt, the figure (each measure per participant with the rule thresholds) and
-<figure>_samples.png (raw gaze of the first session's first trials).
+<figure>_samples.png (raw gaze of the first session's first trials against the target).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from psyop import datacontract as dc
 from psyop.figures.output import save_figure
 from psyop.quality.figures import plot_measures, plot_sample_trials
 from psyop.quality.included import quality_rules, study_quality
+from psyop.quality.session import recorded_plan
 from psyop.statistics.dataset import session_files
 
 
@@ -35,7 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     if sessions:
         gaze_path = sessions[0] / dc.GAZE_FILE
         gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
-        save_figure(plot_sample_trials(gaze, pd.read_parquet(sessions[0] / dc.TRIALS_FILE)),
+        trials = pd.read_parquet(sessions[0] / dc.TRIALS_FILE)
+        save_figure(plot_sample_trials(gaze, trials, recorded_plan(sessions[0])),
                     out.with_name(out.stem + "_samples.png"))
     save_figure(plot_measures(quality.measures, rules, args.study), out)
     print(f"[psyop] {args.study}: {quality.sentence}")

@@ -1,5 +1,5 @@
 """The gaze-quality figures a researcher looks at first: each ruled (or headline) measure per participant
-with the rule's threshold drawn, and the raw gaze of sample trials over time."""
+with the rule's threshold drawn, and the raw gaze of sample trials over time against the target."""
 
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ import numpy as np
 import pandas as pd
 
 from psyop.protocol.quality import QualityRule, QualitySection
+from psyop.quality.target import target_path_deg
+from psyop.session.plan import SessionPlan
 
 HEADLINE = ("data_loss_share", "accuracy_fixation_mean_deg", "precision_rms_s2s_deg", "pursuit_gain")
 
@@ -57,24 +59,38 @@ def plot_measures(measures: pd.DataFrame, rules: QualitySection | None, study: s
     return fig
 
 
-def plot_sample_trials(gaze: pd.DataFrame, trials: pd.DataFrame, n_trials: int = 3):
+#: the step (s) at which the sample figure draws the target's path
+TARGET_STEP_S = 0.001
+
+
+def plot_sample_trials(gaze: pd.DataFrame, trials: pd.DataFrame, plan: SessionPlan | None = None,
+                       n_trials: int = 3):
     """Raw gaze azimuth and elevation (deg, Fick) over the first ``n_trials`` trials of one session, with the
-    trial boundaries; only valid samples are drawn (each as recorded, not on a grid)."""
+    trial boundaries; only valid samples are drawn (each as recorded, not on a grid). With the session's
+    ``plan``, the target the gaze is measured against (:func:`psyop.quality.target.target_path_deg`: the
+    cross, the pursuit path) is drawn dashed every :data:`TARGET_STEP_S` (gaps: phases without a target)."""
     from psyop.quality.samples import _angles
 
-    fig, ax = plt.subplots(figsize=(8, 3))
+    fig, ax = plt.subplots(figsize=(9, 3))
     rows = trials.head(n_trials)
-    if len(gaze) and len(rows):
+    if len(rows):
         start, end = float(rows["trial_start_s"].min()), float(rows["trial_end_s"].max())
-        t = gaze["gaze_sample_t_s"].to_numpy(dtype=float)
-        az, el = _angles(*(gaze[f"fixation_{a}_m"].to_numpy(dtype=float) for a in "xyz"))
-        ok = (t >= start) & (t <= end) & gaze["gaze_valid"].to_numpy(dtype=bool)
-        ax.plot(t[ok] - start, az[ok], ".-", ms=3, lw=0.5, label="azimuth (deg)")
-        ax.plot(t[ok] - start, el[ok], ".-", ms=3, lw=0.5, label="elevation (deg)")
-        for t in rows["trial_start_s"]:
-            ax.axvline(float(t) - start, color="0.7", lw=0.5)
+        if len(gaze):
+            t = gaze["gaze_sample_t_s"].to_numpy(dtype=float)
+            az, el = _angles(*(gaze[f"fixation_{a}_m"].to_numpy(dtype=float) for a in "xyz"))
+            ok = (t >= start) & (t <= end) & gaze["gaze_valid"].to_numpy(dtype=bool)
+            ax.plot(t[ok] - start, az[ok], ".-", ms=3, lw=0.5, color="C0", label="azimuth (deg)")
+            ax.plot(t[ok] - start, el[ok], ".-", ms=3, lw=0.5, color="C1", label="elevation (deg)")
+        if plan is not None:
+            t_target = start + np.arange(int(np.ceil((end - start) / TARGET_STEP_S))) * TARGET_STEP_S
+            target = target_path_deg(plan, rows, t_target)
+            ax.plot(t_target - start, target[:, 0], "--", lw=1.0, color="C0", alpha=0.8, label="target azimuth (deg)")
+            ax.plot(t_target - start, target[:, 1], "--", lw=1.0, color="C1", alpha=0.8, label="target elevation (deg)")
+        for trial_start_s in rows["trial_start_s"]:
+            ax.axvline(float(trial_start_s) - start, color="0.7", lw=0.5)
     ax.set_xlabel("time from the first trial's start (s)")
     ax.set_ylabel("gaze (deg)")
-    ax.legend(fontsize=7)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))  # beside the traces, not over them
     fig.tight_layout()
     return fig

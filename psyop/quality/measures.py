@@ -14,6 +14,8 @@ velocity over the target velocity's turning rate) and catch-up saccades per seco
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -21,9 +23,11 @@ import pandas as pd
 from psyop.optics.angles import angle_between_deg, fick_direction
 from psyop.quality.events import EventMethod, detect_events
 from psyop.quality.samples import GazeGrid
-from psyop.session.gaze.plan import CirclingTarget
-from psyop.session.loop import LoopConfig, fixation_plan, pursuit_fields
+from psyop.quality.target import loop_config, target_positions_deg, trial_phases
+from psyop.session.gaze.plan import FixationPlan
+from psyop.session.loop import LoopConfig
 from psyop.session.plan import SessionPlan
+from psyop.session.rows import TrialRow
 
 TRIAL_MEASURES: dict[str, str] = {
     "data_loss_share": "share of the samples expected at the nominal rate that are missing or invalid",
@@ -76,6 +80,164 @@ def _precision(az: np.ndarray, el: np.ndarray) -> tuple[float, float]:
     return float(out["rms_s2s"][0]), float(out["std_rms"][0])
 
 
+def _saccade_masks(t_s: np.ndarray, events: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(in a saccade, within 2 samples of one) per sample: a velocity next to a saccade still carries part
+    of it."""
+    in_saccade = np.zeros(len(t_s), dtype=bool)
+    for onset, offset in events.loc[events["name"] != "fixation", ["onset_s", "offset_s"]].itertuples(index=False):
+        in_saccade |= (t_s >= onset) & (t_s <= offset)
+    near_saccade = in_saccade.copy()
+    for k in (1, 2):
+        near_saccade[k:] |= in_saccade[:-k]
+        near_saccade[:-k] |= in_saccade[k:]
+    return in_saccade, near_saccade
+
+
+def _loss_measures(grid: GazeGrid, window: np.ndarray, start_s: float, end_s: float) -> dict[str, float | int]:
+    """Valid and expected sample counts, data loss share and longest gap of one trial's ``window``."""
+    expected = max(1, int(round((end_s - start_s) * grid.rate_hz))) if math.isfinite(grid.rate_hz) else 0
+    valid_t = grid.t_s[window & grid.valid]
+    edges = np.concatenate([[start_s], valid_t, [end_s]])
+    return {"n_samples_valid": int(len(valid_t)), "n_samples_expected": expected,
+            "data_loss_share": max(0.0, 1.0 - len(valid_t) / expected) if expected else 1.0,
+            "longest_gap_s": float(np.max(np.diff(edges)))}
+
+
+@dataclass
+class _TrialParts:
+    """What one trial's phases contribute, concatenated into its measures by :func:`_summary`."""
+
+    fix_err: list[np.ndarray] = field(default_factory=list)
+    fix_corr: list[np.ndarray] = field(default_factory=list)
+    pur_err: list[np.ndarray] = field(default_factory=list)
+    pur_corr: list[np.ndarray] = field(default_factory=list)
+    fix_az: list[np.ndarray] = field(default_factory=list)
+    fix_el: list[np.ndarray] = field(default_factory=list)
+    per_eye: dict[str, list[np.ndarray]] = field(default_factory=lambda: {"left": [], "right": []})
+    speed_ratio: list[np.ndarray] = field(default_factory=list)
+    angle_diff: list[np.ndarray] = field(default_factory=list)
+    turn: list[np.ndarray] = field(default_factory=list)
+    pursuit_s: float = 0.0
+    n_catch: int = 0
+    #: the drift correction (az, el) in deg: median error over the last 0.25 s of the first cross phase
+    offset: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class _Samples:
+    """The valid samples of one phase: ``sel`` over the grid, and their az, el (deg) and times (s)."""
+
+    sel: np.ndarray
+    az: np.ndarray
+    el: np.ndarray
+    t: np.ndarray
+
+
+def _cross_phase(parts: _TrialParts, grid: GazeGrid, s: _Samples, fplan: FixationPlan, p_end: float,
+                 in_saccade: np.ndarray) -> None:
+    """Add a cross phase's errors (binocular, drift corrected, per eye) and still samples to ``parts``."""
+    taz, tel = np.full(len(s.t), fplan.centre_deg[0]), np.full(len(s.t), fplan.centre_deg[1])
+    if parts.offset is None:
+        last = s.t >= p_end - 0.25
+        parts.offset = (float(np.median(s.az[last] - taz[last])), float(np.median(s.el[last] - tel[last]))) \
+            if last.any() else None
+    parts.fix_err.append(_err(s.az, s.el, taz, tel))
+    for eye, errors in _eye_errors(grid, s.sel, fplan.centre_deg, fplan.distance_m).items():
+        parts.per_eye[eye].append(errors)
+    if parts.offset is not None:
+        parts.fix_corr.append(_err(s.az - parts.offset[0], s.el - parts.offset[1], taz, tel))
+    still = ~in_saccade[s.sel]
+    parts.fix_az.append(s.az[still])
+    parts.fix_el.append(s.el[still])
+
+
+def _pursuit_phase(parts: _TrialParts, s: _Samples, target: Callable[[float], tuple[float, float]], t0: float,
+                   v_e: np.ndarray, near_saccade: np.ndarray) -> None:
+    """Add a pursuit phase's errors and, over its smooth samples, the eye's velocity against the target's
+    (gain, direction difference, turning rate) to ``parts``; ``v_e``: the eye's velocity (deg/s) at them."""
+    tpos = target_positions_deg(target, s.t - t0)
+    parts.pur_err.append(_err(s.az, s.el, tpos[:, 0], tpos[:, 1]))
+    if parts.offset is not None:
+        parts.pur_corr.append(_err(s.az - parts.offset[0], s.el - parts.offset[1], tpos[:, 0], tpos[:, 1]))
+    h = 1e-3
+    ahead, behind = target_positions_deg(target, s.t - t0 + h), target_positions_deg(target, s.t - t0 - h)
+    v_t = (ahead - behind) / (2 * h)
+    a_t = (ahead - 2 * tpos + behind) / h**2
+    smooth = (~near_saccade) & np.all(np.isfinite(v_e), axis=1) & (s.t >= t0 + 0.1)
+    s_t = np.hypot(*v_t.T)
+    good = smooth & (s_t > 1.0)
+    # the eye's velocity along the target's (zero-mean noise does not bias it, unlike |v|)
+    parts.speed_ratio.append(np.sum(v_e[good] * v_t[good], axis=1) / s_t[good] ** 2)
+    parts.angle_diff.append(np.arctan2(v_t[good, 0] * v_e[good, 1] - v_t[good, 1] * v_e[good, 0],
+                                       np.sum(v_t[good] * v_e[good], axis=1)))
+    parts.turn.append((v_t[good, 0] * a_t[good, 1] - v_t[good, 1] * a_t[good, 0]) / s_t[good] ** 2)
+
+
+def _stat(parts: list[np.ndarray], fn: Callable[[np.ndarray], np.floating | float]) -> float:
+    """``fn`` of the concatenated ``parts``; NaN when they hold no value."""
+    values = np.concatenate(parts) if parts else np.zeros(0)
+    return float(fn(values)) if len(values) else math.nan
+
+
+def _summary(parts: _TrialParts) -> dict[str, float]:
+    """The accuracy, precision and pursuit measures of one trial's ``parts``."""
+    out = dict(accuracy_fixation_mean_deg=_stat(parts.fix_err, np.mean),
+               accuracy_fixation_max_deg=_stat(parts.fix_err, np.max),
+               accuracy_fixation_corrected_mean_deg=_stat(parts.fix_corr, np.mean),
+               accuracy_pursuit_mean_deg=_stat(parts.pur_err, np.mean),
+               accuracy_pursuit_max_deg=_stat(parts.pur_err, np.max),
+               accuracy_pursuit_corrected_mean_deg=_stat(parts.pur_corr, np.mean),
+               accuracy_fixation_left_mean_deg=_stat(parts.per_eye["left"], np.mean),
+               accuracy_fixation_right_mean_deg=_stat(parts.per_eye["right"], np.mean))
+    rms, sd = _precision(np.concatenate(parts.fix_az) if parts.fix_az else np.zeros(0),
+                         np.concatenate(parts.fix_el) if parts.fix_el else np.zeros(0))
+    out.update(precision_rms_s2s_deg=rms, precision_sd_deg=sd)
+    out["pursuit_gain"] = _stat(parts.speed_ratio, np.median)
+    # the eye's velocity direction is the target's turned back by (turning rate x lag): lag = -angle / rate
+    rate = _stat(parts.turn, np.median)
+    out["pursuit_lag_s"] = (-_stat(parts.angle_diff, np.median) / rate) if math.isfinite(rate) and abs(rate) > 0.1 \
+        else math.nan
+    out["catch_up_saccades_per_s"] = parts.n_catch / parts.pursuit_s if parts.pursuit_s > 0 else math.nan
+    return out
+
+
+@dataclass(frozen=True)
+class _SessionGaze:
+    """One session's samples, events (``trial``/``phase`` filled in trial by trial) and what is derived from
+    them once: the pymovements velocity (n, 2; deg/s) and the saccade masks of :func:`_saccade_masks`."""
+
+    grid: GazeGrid
+    events: pd.DataFrame
+    velocity: np.ndarray
+    in_saccade: np.ndarray
+    near_saccade: np.ndarray
+
+
+def _trial_row(session: _SessionGaze, row: TrialRow, plan: SessionPlan, config: LoopConfig) -> dict[str, object]:
+    """One trial's measures; marks the events that began in it with its trial number and phase."""
+    grid, events = session.grid, session.events
+    start, end = float(row["trial_start_s"]), float(row["trial_end_s"])
+    window = (grid.t_s >= start) & (grid.t_s < end)
+    out: dict[str, object] = {"trial": int(row["trial"]), **_loss_measures(grid, window, start, end)}
+    parts = _TrialParts()
+    for p in trial_phases(plan, row, config):
+        sel = window & grid.valid & (grid.t_s >= p.start_s) & (grid.t_s < p.end_s)
+        ev = (events["onset_s"] >= p.start_s) & (events["onset_s"] < p.end_s)
+        events.loc[ev, "trial"], events.loc[ev, "phase"] = int(row["trial"]), p.phase.name
+        s = _Samples(sel, grid.az_deg[sel], grid.el_deg[sel], grid.t_s[sel])
+        if p.phase.gaze == "cross" and len(s.t):
+            _cross_phase(parts, grid, s, p.fixation, p.end_s, session.in_saccade)
+        elif p.phase.gaze == "pursuit" and p.fixation.target is not None and len(s.t):
+            _pursuit_phase(parts, s, p.fixation.target, p.start_s, session.velocity[sel], session.near_saccade[sel])
+            parts.pursuit_s += p.phase.duration_s
+            parts.n_catch += int((ev & (events["name"] != "fixation")).sum())
+    out.update(_summary(parts))
+    in_trial = events["trial"] == int(row["trial"])
+    out["n_fixations"] = int((in_trial & (events["name"] == "fixation")).sum())
+    out["n_saccades"] = int((in_trial & (events["name"] != "fixation")).sum())
+    return out
+
+
 def trial_measures(grid: GazeGrid, trials: pd.DataFrame, plan: SessionPlan,
                    method: EventMethod | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(per-trial measures, events) of one session: one row per trial of ``trials`` (columns ``trial`` and
@@ -84,103 +246,9 @@ def trial_measures(grid: GazeGrid, trials: pd.DataFrame, plan: SessionPlan,
     method = method or EventMethod()
     events, velocity = detect_events(grid.t_s, grid.az_deg, grid.el_deg, grid.rate_hz, method)
     events["trial"], events["phase"] = -1, ""
-    in_saccade = np.zeros(len(grid.t_s), dtype=bool)
-    for onset, offset in events.loc[events["name"] != "fixation", ["onset_s", "offset_s"]].itertuples(index=False):
-        in_saccade |= (grid.t_s >= onset) & (grid.t_s <= offset)
-    near_saccade = in_saccade.copy()  # a velocity next to a saccade still carries part of it: 2 samples each side
-    for k in (1, 2):
-        near_saccade[k:] |= in_saccade[:-k]
-        near_saccade[:-k] |= in_saccade[k:]
-    config = LoopConfig(**pursuit_fields(plan.fixation))
-    rows = []
-    for row in trials.to_dict("records"):
-        start, end = float(row["trial_start_s"]), float(row["trial_end_s"])
-        window = (grid.t_s >= start) & (grid.t_s < end)
-        expected = max(1, int(round((end - start) * grid.rate_hz))) if math.isfinite(grid.rate_hz) else 0
-        valid_t = grid.t_s[window & grid.valid]
-        edges = np.concatenate([[start], valid_t, [end]])
-        out = {"trial": int(row["trial"]), "n_samples_valid": int(len(valid_t)), "n_samples_expected": expected,
-               "data_loss_share": max(0.0, 1.0 - len(valid_t) / expected) if expected else 1.0,
-               "longest_gap_s": float(np.max(np.diff(edges)))}
-        fix_err, fix_corr, pur_err, pur_corr, fix_az, fix_el = [], [], [], [], [], []
-        per_eye: dict[str, list[np.ndarray]] = {"left": [], "right": []}
-        speed_ratio, angle_diff, turn, pursuit_s, n_catch = [], [], [], 0.0, 0
-        offset = None
-        t0 = start
-        for phase in plan.phases:
-            p_end = t0 + phase.duration_s
-            sel = window & grid.valid & (grid.t_s >= t0) & (grid.t_s < p_end)
-            fplan = fixation_plan(config, phase, row, t0)
-            ev = (events["onset_s"] >= t0) & (events["onset_s"] < p_end)
-            events.loc[ev, "trial"], events.loc[ev, "phase"] = int(row["trial"]), phase.name
-            az, el, t = grid.az_deg[sel], grid.el_deg[sel], grid.t_s[sel]
-            if phase.gaze == "cross" and len(t):
-                taz, tel = np.full(len(t), fplan.centre_deg[0]), np.full(len(t), fplan.centre_deg[1])
-                if offset is None:
-                    last = t >= p_end - 0.25
-                    offset = (float(np.median(az[last] - taz[last])), float(np.median(el[last] - tel[last]))) \
-                        if last.any() else None
-                fix_err.append(_err(az, el, taz, tel))
-                for eye, errors in _eye_errors(grid, sel, fplan.centre_deg, fplan.distance_m).items():
-                    per_eye[eye].append(errors)
-                if offset is not None:
-                    fix_corr.append(_err(az - offset[0], el - offset[1], taz, tel))
-                still = ~in_saccade[sel]
-                fix_az.append(az[still])
-                fix_el.append(el[still])
-            elif phase.gaze == "pursuit" and fplan.target is not None and len(t):
-                target = fplan.target
-
-                def at(times: np.ndarray) -> np.ndarray:
-                    if isinstance(target, CirclingTarget):
-                        return target.positions(times)
-                    return np.array([target(float(x)) for x in times]).reshape(-1, 2)
-
-                tpos = at(t - t0)
-                pur_err.append(_err(az, el, tpos[:, 0], tpos[:, 1]))
-                if offset is not None:
-                    pur_corr.append(_err(az - offset[0], el - offset[1], tpos[:, 0], tpos[:, 1]))
-                h = 1e-3
-                ahead, behind = at(t - t0 + h), at(t - t0 - h)
-                v_t = (ahead - behind) / (2 * h)
-                a_t = (ahead - 2 * tpos + behind) / h**2
-                v_e = velocity[sel]
-                smooth = (~near_saccade[sel]) & np.all(np.isfinite(v_e), axis=1) & (t >= t0 + 0.1)
-                s_t = np.hypot(*v_t.T)
-                good = smooth & (s_t > 1.0)
-                # the eye's velocity along the target's (zero-mean noise does not bias it, unlike |v|)
-                speed_ratio.append(np.sum(v_e[good] * v_t[good], axis=1) / s_t[good] ** 2)
-                angle_diff.append(np.arctan2(v_t[good, 0] * v_e[good, 1] - v_t[good, 1] * v_e[good, 0],
-                                             np.sum(v_t[good] * v_e[good], axis=1)))
-                turn.append((v_t[good, 0] * a_t[good, 1] - v_t[good, 1] * a_t[good, 0]) / s_t[good] ** 2)
-                pursuit_s += phase.duration_s
-                n_catch += int((ev & (events["name"] != "fixation")).sum())
-            t0 = p_end
-
-        def stat(parts: list[np.ndarray], fn) -> float:
-            values = np.concatenate(parts) if parts else np.zeros(0)
-            return float(fn(values)) if len(values) else math.nan
-
-        out.update(accuracy_fixation_mean_deg=stat(fix_err, np.mean), accuracy_fixation_max_deg=stat(fix_err, np.max),
-                   accuracy_fixation_corrected_mean_deg=stat(fix_corr, np.mean),
-                   accuracy_pursuit_mean_deg=stat(pur_err, np.mean), accuracy_pursuit_max_deg=stat(pur_err, np.max),
-                   accuracy_pursuit_corrected_mean_deg=stat(pur_corr, np.mean),
-                   accuracy_fixation_left_mean_deg=stat(per_eye["left"], np.mean),
-                   accuracy_fixation_right_mean_deg=stat(per_eye["right"], np.mean))
-        rms, sd = _precision(np.concatenate(fix_az) if fix_az else np.zeros(0),
-                             np.concatenate(fix_el) if fix_el else np.zeros(0))
-        out.update(precision_rms_s2s_deg=rms, precision_sd_deg=sd)
-        out["pursuit_gain"] = stat(speed_ratio, np.median)
-        # the eye's velocity direction is the target's turned back by (turning rate x lag): lag = -angle / rate
-        rate = stat(turn, np.median)
-        out["pursuit_lag_s"] = (-stat(angle_diff, np.median) / rate) if math.isfinite(rate) and abs(rate) > 0.1 \
-            else math.nan
-        out["catch_up_saccades_per_s"] = n_catch / pursuit_s if pursuit_s > 0 else math.nan
-        in_trial = events["trial"] == int(row["trial"])
-        out["n_fixations"] = int((in_trial & (events["name"] == "fixation")).sum())
-        out["n_saccades"] = int((in_trial & (events["name"] != "fixation")).sum())
-        rows.append(out)
-    table = pd.DataFrame(rows)
+    session = _SessionGaze(grid, events, velocity, *_saccade_masks(grid.t_s, events))
+    config = loop_config(plan)
+    table = pd.DataFrame([_trial_row(session, row, plan, config) for row in trials.to_dict("records")])
     for name, value in grid.flags.items():
         table[name] = value  # the session's stream faults, by name, on every row
     table["rate_hz"], table["rate_source"] = grid.rate_hz, grid.rate_source

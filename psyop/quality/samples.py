@@ -65,6 +65,34 @@ def gaze_grid(gaze: pd.DataFrame, nominal_rate_hz: float | None) -> GazeGrid:
     flags = dict.fromkeys(FLAG_NAMES, 0)
     if len(gaze) == 0 or "gaze_sample_t_s" not in gaze:
         return GazeGrid.empty(float(nominal_rate_hz or math.nan), "no samples", flags)
+    rows, t = _ordered_samples(gaze, flags)
+    if len(t) == 0:
+        return GazeGrid.empty(float(nominal_rate_hz or math.nan), "no samples", flags)
+    if nominal_rate_hz is not None:
+        rate, source = float(nominal_rate_hz), "the simulated tracker's rate_hz"
+    elif len(t) > 1:
+        rate, source = 1.0 / float(np.median(np.diff(t))), "median interval between samples"
+    else:
+        return GazeGrid.empty(math.nan, "one sample: no rate", flags)
+    tick, on = _ticks(t, rate, flags)
+    tick, rows = tick[on], rows[on]
+    n = int(tick[-1]) + 1
+    grid_t = t[0] + np.arange(n) / rate
+    valid_col = rows["gaze_valid"].to_numpy(dtype=bool) if "gaze_valid" in rows else np.ones(len(rows), dtype=bool)
+    columns = [f"fixation_{a}_m" for a in "xyz"]
+    if all(c in rows for c in columns):
+        az, el = _angles(*(rows[c].to_numpy(dtype=np.float64) for c in columns))
+    else:
+        az = el = np.full(len(rows), np.nan)
+    ok = valid_col & np.isfinite(az) & np.isfinite(el)
+    grid_az, grid_el = _place(tick, n, az, el, ok)
+    eyes, centres = _placed_eyes(rows, valid_col, tick, n)
+    return GazeGrid(grid_t, grid_az, grid_el, np.isfinite(grid_az), rate, source, flags, eyes, centres)
+
+
+def _ordered_samples(gaze: pd.DataFrame, flags: dict[str, int]) -> tuple[pd.DataFrame, np.ndarray]:
+    """The rows of ``gaze`` with a finite, strictly increasing ``gaze_sample_t_s`` and those times; counts
+    the non-finite, backwards and duplicated ones into ``flags``."""
     t = gaze["gaze_sample_t_s"].to_numpy(dtype=np.float64)
     finite = np.isfinite(t)
     flags["n_non_finite_time"] = int((~finite).sum())
@@ -75,38 +103,31 @@ def gaze_grid(gaze: pd.DataFrame, nominal_rate_hz: float | None) -> GazeGrid:
     duplicate = keep & np.concatenate([[False], t[1:] == t[:-1]])
     flags["n_duplicate_timestamps"] = int(duplicate.sum())
     keep &= ~duplicate
-    rows = gaze[keep]
-    t = t[keep]
-    if len(t) == 0:
-        return GazeGrid.empty(float(nominal_rate_hz or math.nan), "no samples", flags)
-    if nominal_rate_hz is not None:
-        rate, source = float(nominal_rate_hz), "the simulated tracker's rate_hz"
-    elif len(t) > 1:
-        rate, source = 1.0 / float(np.median(np.diff(t))), "median interval between samples"
-    else:
-        return GazeGrid.empty(math.nan, "one sample: no rate", flags)
-    tick = np.rint((t - t[0]) * rate).astype(np.int64)
-    off = np.abs((t - t[0]) * rate - tick) > 0.25
+    return gaze[keep], t[keep]
+
+
+def _ticks(t: np.ndarray, rate_hz: float, flags: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(grid tick of each time, whether it is on the grid): off by more than a quarter tick, or a second
+    sample on the same tick, is off grid (counted as ``n_off_grid`` in ``flags``)."""
+    tick = np.rint((t - t[0]) * rate_hz).astype(np.int64)
+    off = np.abs((t - t[0]) * rate_hz - tick) > 0.25
     same = np.concatenate([[False], tick[1:] == tick[:-1]])
     flags["n_off_grid"] = int((off | same).sum())
-    on = ~(off | same)
-    tick, rows = tick[on], rows[on]
-    n = int(tick[-1]) + 1
-    grid_t = t[0] + np.arange(n) / rate
-    valid_col = rows["gaze_valid"].to_numpy(dtype=bool) if "gaze_valid" in rows else np.ones(len(rows), dtype=bool)
+    return tick, ~(off | same)
 
-    def place(az: np.ndarray, el: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        out_az, out_el = np.full(n, np.nan), np.full(n, np.nan)
-        out_az[tick[ok]], out_el[tick[ok]] = az[ok], el[ok]
-        return out_az, out_el
 
-    columns = [f"fixation_{a}_m" for a in "xyz"]
-    if all(c in rows for c in columns):
-        az, el = _angles(*(rows[c].to_numpy(dtype=np.float64) for c in columns))
-    else:
-        az = el = np.full(len(rows), np.nan)
-    ok = valid_col & np.isfinite(az) & np.isfinite(el)
-    grid_az, grid_el = place(az, el, ok)
+def _place(tick: np.ndarray, n: int, az: np.ndarray, el: np.ndarray,
+           ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``az``, ``el`` where ``ok`` at their ``tick`` of an ``n``-tick grid; NaN elsewhere."""
+    out_az, out_el = np.full(n, np.nan), np.full(n, np.nan)
+    out_az[tick[ok]], out_el[tick[ok]] = az[ok], el[ok]
+    return out_az, out_el
+
+
+def _placed_eyes(rows: pd.DataFrame, valid_col: np.ndarray, tick: np.ndarray,
+                 n: int) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], dict[str, np.ndarray]]:
+    """Per eye whose ``gaze_normal_<eye>_<x|y|z>`` the rows hold (with a valid one): its gaze normal's
+    (az, el) and its centre on the grid."""
     eyes, centres = {}, {}
     for eye in ("left", "right"):
         names = [f"gaze_normal_{eye}_{a}" for a in "xyz"]
@@ -114,9 +135,9 @@ def gaze_grid(gaze: pd.DataFrame, nominal_rate_hz: float | None) -> GazeGrid:
             e_az, e_el = _angles(*(rows[c].to_numpy(dtype=np.float64) for c in names))
             e_ok = valid_col & np.isfinite(e_az)
             if e_ok.any():
-                eyes[eye] = place(e_az, e_el, e_ok)
+                eyes[eye] = _place(tick, n, e_az, e_el, e_ok)
                 centres[eye] = _placed_centre(rows, eye, tick, e_ok, n)
-    return GazeGrid(grid_t, grid_az, grid_el, np.isfinite(grid_az), rate, source, flags, eyes, centres)
+    return eyes, centres
 
 
 def _placed_centre(rows: pd.DataFrame, eye: str, tick: np.ndarray, ok: np.ndarray, n: int) -> np.ndarray:

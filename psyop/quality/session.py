@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pandas as pd
 
@@ -12,6 +13,9 @@ from psyop.errors import UserError
 from psyop.finalised import verify_session
 from psyop.quality.measures import trial_measures
 from psyop.quality.samples import gaze_grid
+
+if TYPE_CHECKING:
+    from psyop.session.plan import SessionPlan
 
 
 def recorded_protocol(meta: dict, meta_path: Path):
@@ -22,6 +26,15 @@ def recorded_protocol(meta: dict, meta_path: Path):
     source = meta.get("protocol_file")
     base_dir = Path(source).parent if isinstance(source, str) and source and Path(source).parent.is_dir() else None
     return parse_protocol(meta["protocol_text"], f"{meta_path} (protocol_text)", base_dir=base_dir)
+
+
+def recorded_plan(directory: Path) -> SessionPlan:
+    """The compiled plan of the protocol the finalised session in ``directory`` recorded
+    (:func:`recorded_protocol`); the session is read as it is (verify it first)."""
+    from psyop.session.plan import compile_plan
+
+    meta_path = Path(directory) / dc.SESSION_METADATA_FILE
+    return compile_plan(recorded_protocol(json.loads(meta_path.read_text()), meta_path))
 
 
 def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
