@@ -24,13 +24,14 @@ import math
 import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, assert_never
 
 import numpy as np
 
 from psyop.errors import UserError
 from psyop.protocol import scene as ps
 from psyop.rendering import builders
+from psyop.rendering.mesh_scene import MeshInstance
 from psyop.rendering.text import TextImage
 from psyop.rendering.textures import ImageFiles
 from psyop.rendering.scene import (
@@ -233,6 +234,80 @@ def interval_mode(protocol: Protocol, row: TrialRow, interval: int) -> str:
         raise UserError(f"cannot tell the rendering mode of interval {interval}: {error}; pass --mode") from None
 
 
+@dataclasses.dataclass(frozen=True)
+class _ItemContext:
+    """What every scene item of one trial, interval and time is built from."""
+
+    values: TrialRow
+    time_s: float
+    origin_m: np.ndarray
+    base_dir: Path | None
+    arm_reach_m: float
+    images: ImageFiles | None
+    meshes: SessionMeshes
+
+
+def _disc(item: ps.Disc, ctx: _ItemContext) -> list[Primitive]:
+    mat = _material(item.surface, ctx.values, float(item.size_deg), ctx.base_dir, ctx.images)
+    az, el = centre_angles_deg(item.centre_deg)
+    return [builders.placed_primitive(Shape.DISC, _distance_m(item.depth, ctx.values), float(item.size_deg),
+                                      float(item.size_deg), mat, az, el, ctx.origin_m, str(item.facing),
+                                      name=item.id)]
+
+
+def _quad(item: ps.Quad, ctx: _ItemContext) -> list[Primitive]:
+    size = max(float(item.width_deg), float(item.height_deg))
+    az, el = centre_angles_deg(item.centre_deg)
+    return [builders.placed_primitive(Shape.RECT, _distance_m(item.depth, ctx.values), float(item.width_deg),
+                                      float(item.height_deg),
+                                      _material(item.surface, ctx.values, size, ctx.base_dir, ctx.images),
+                                      az, el, ctx.origin_m, str(item.facing), name=item.id)]
+
+
+def _target_field(item: ps.TargetField, ctx: _ItemContext) -> list[Primitive]:
+    values = ctx.values
+    near_D = item.near.resolve_D(values)
+    far_D = item.far.resolve_D(values)
+    mat = _material(item.surface, values, float(item.size_deg), ctx.base_dir, ctx.images)
+    field = builders.target_field(_trial_seed(values), int(item.count), near_D, far_D, float(item.size_deg),
+                                  float(item.field_deg), ctx.origin_m, material=mat,
+                                  min_gap_deg=float(item.min_gap_deg))
+    return [dataclasses.replace(p, name=f"{item.id}_{p.name}") for p in field]
+
+
+def _build_item(item: ps.Primitive, ctx: _ItemContext) -> list[Primitive] | Aperture | MeshInstance:
+    """One scene item's part of the scene: its primitives, the aperture, or a placed mesh.
+
+    The one dispatch over the closed set of scene item kinds (``psyop.protocol.scene.Primitive``):
+    a kind missing here fails the type check (``assert_never``).
+    """
+    from psyop.stimulus.meshes import mesh_instance
+
+    match item:
+        case ps.Disc():
+            return _disc(item, ctx)
+        case ps.Quad():
+            return _quad(item, ctx)
+        case ps.SinusoidalBorder():
+            return _sinusoidal_border(item, ctx.values, ctx.origin_m, ctx.base_dir, ctx.images)
+        case ps.Aperture():
+            return Aperture(radius_deg=float(item.diameter_deg) / 2.0, colour=tuple(item.surround_rgb))
+        case ps.GridPlanes():
+            return _grid_planes(item)
+        case ps.TargetField():
+            return _target_field(item, ctx)
+        case ps.FixationTarget():
+            return _fixation(item, ctx.values, ctx.time_s, ctx.origin_m)
+        case ps.Room():
+            return _room(item)
+        case ps.ReachTarget():
+            return _reach_target(item, ctx.values, ctx.arm_reach_m)
+        case ps.Mesh():
+            return mesh_instance(item, ctx.values, ctx.origin_m, ctx.meshes)
+        case _:
+            assert_never(item)
+
+
 def build_scene(
     protocol: Protocol,
     row: TrialRow,
@@ -260,62 +335,33 @@ def build_scene(
     :class:`psyop.stimulus.meshes.SessionMeshes` (each model loaded once); without it models are read from
     ``base_dir`` on this call.
     """
-    from psyop.stimulus.meshes import SessionMeshes, mesh_instance
+    from psyop.stimulus.meshes import SessionMeshes
 
-    mesh_files = meshes if meshes is not None else SessionMeshes(base_dir)
-    instances = []
     values = interval_values(row, interval)
     values = {**values, "trial_seed": row.get("trial_seed", 0)}
-    origin = scene_origin_m(protocol, eye_centre_m)
+    ctx = _ItemContext(values=values, time_s=time_s, origin_m=scene_origin_m(protocol, eye_centre_m),
+                       base_dir=base_dir, arm_reach_m=arm_reach_m, images=images,
+                       meshes=meshes if meshes is not None else SessionMeshes(base_dir))
     phases = interval_phases(protocol)
     if show is None:
         show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
     prims: list[Primitive] = []
+    instances: list[MeshInstance] = []
     aperture = None
     for item in protocol.scene:
         if show != "all" and item.id not in show:
             continue
         try:  # sizes and contrasts given as {factor: NAME} take this trial's (interval's) level
-            item = resolve_factor_fields(item, values)
+            resolved: ps.Primitive = resolve_factor_fields(item, values)
         except ValueError as error:
             raise UserError(f"scene item '{item.id}': {error}") from None
-        if isinstance(item, ps.Disc):
-            mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
-            az, el = centre_angles_deg(item.centre_deg)
-            prims.append(builders.placed_primitive(Shape.DISC, _distance_m(item.depth, values), float(item.size_deg),
-                                                   float(item.size_deg), mat, az, el, origin, str(item.facing),
-                                                   name=item.id))
-        elif isinstance(item, ps.Quad):
-            size = max(float(item.width_deg), float(item.height_deg))
-            az, el = centre_angles_deg(item.centre_deg)
-            prims.append(builders.placed_primitive(Shape.RECT, _distance_m(item.depth, values), float(item.width_deg),
-                                                   float(item.height_deg),
-                                                   _material(item.surface, values, size, base_dir, images),
-                                                   az, el, origin, str(item.facing), name=item.id))
-        elif isinstance(item, ps.SinusoidalBorder):
-            prims += _sinusoidal_border(item, values, origin, base_dir, images)
-        elif isinstance(item, ps.Aperture):
-            aperture = Aperture(radius_deg=float(item.diameter_deg) / 2.0, colour=tuple(item.surround_rgb))
-        elif isinstance(item, ps.GridPlanes):
-            prims += _grid_planes(item)
-        elif isinstance(item, ps.TargetField):
-            near_D = item.near.resolve_D(values)
-            far_D = item.far.resolve_D(values)
-            mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
-            field = builders.target_field(_trial_seed(values), int(item.count), near_D, far_D, float(item.size_deg),
-                                          float(item.field_deg), origin, material=mat,
-                                          min_gap_deg=float(item.min_gap_deg))
-            prims += [dataclasses.replace(p, name=f"{item.id}_{p.name}") for p in field]
-        elif isinstance(item, ps.FixationTarget):
-            prims += _fixation(item, values, time_s, origin)
-        elif isinstance(item, ps.Room):
-            prims += _room(item)
-        elif isinstance(item, ps.ReachTarget):
-            prims += _reach_target(item, values, arm_reach_m)
-        elif isinstance(item, ps.Mesh):
-            instances.append(mesh_instance(item, values, origin, mesh_files))
-        else:  # pragma: no cover - the protocol model is a closed union
-            raise UserError(f"unsupported scene element kind {getattr(item, 'kind', item)!r}")
+        part = _build_item(resolved, ctx)
+        if isinstance(part, Aperture):
+            aperture = part
+        elif isinstance(part, MeshInstance):
+            instances.append(part)
+        else:
+            prims += part
     return Scene(tuple(prims), background=background, aperture=aperture, meshes=tuple(instances))
 
 
