@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -16,6 +17,12 @@ from psyop.errors import UserError
 
 if TYPE_CHECKING:
     import numpy as np
+
+    from psyop.mesh.load import MeshFiles
+    from psyop.optics import DisplayProfile, EyeModel
+    from psyop.optics.camera import EyeCamera
+    from psyop.protocol.model import Protocol
+    from psyop.rendering.scene import Scene
 
 #: The sessions' default interpupillary distance (psyop.session.plan.DEFAULT_IPD_M, checked by
 #: tests/test_cli.py; not imported here so that ``psyop --help`` stays light).
@@ -130,21 +137,12 @@ def write_png(path: Path, image_uint8: np.ndarray) -> None:
     write_atomic(path, lambda handle: mpimg.imsave(handle, image_uint8, format="png"))
 
 
-def run(args: argparse.Namespace) -> int:
-    import numpy as np
+def _checked_trial(args: argparse.Namespace, protocol: Protocol) -> tuple[dict, float | None, tuple[float, float]]:
+    """The schedule row of ``--trial`` (at the adaptive level, if any), that level and the gaze's
+    Fick angles; the trial, interval, fixation and gaze options are checked in this order."""
+    from psyop.schedule import compile_schedule
+    from psyop.stimulus import interval_phases
 
-    from psyop.mesh.load import MeshFiles
-    from psyop.optics.camera import make_eye_camera
-    from psyop.protocol import load_protocol, resolve_display_profile, resolve_eye_model
-    from psyop.rendering import Renderer, RenderSettings
-    from psyop.rendering.builders import direction_from_angles
-    from psyop.schedule import compile_schedule, interval_values
-    from psyop.stimulus import build_scene, interval_mode, interval_phases
-    from psyop.stimulus.meshes import SessionMeshes
-
-    protocol_path = Path(args.protocol)
-    mesh_files = MeshFiles(protocol_path.parent)  # each model read once: validation and the scene
-    protocol = load_protocol(protocol_path, meshes=mesh_files)
     schedule = compile_schedule(protocol, args.seed, participant_index=args.participant_index)
     if not 0 <= args.trial < len(schedule):
         raise UserError(f"--trial must be in 0..{len(schedule) - 1}, got {args.trial}")
@@ -153,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--interval must be in 1..{n_intervals}, got {args.interval}")
     if not (math.isfinite(args.fixation_m) and args.fixation_m > 0.02):
         raise UserError(f"--fixation-m must be more than 0.02 m, got {args.fixation_m}")
-    az, el = parse_gaze(args.gaze_deg, args.gaze_polar_deg)
+    gaze_deg = parse_gaze(args.gaze_deg, args.gaze_polar_deg)
     row = schedule.iloc[args.trial].to_dict()
     level = _adaptive_level(protocol, args.level)
     if level is not None:
@@ -162,24 +160,52 @@ def run(args: argparse.Namespace) -> int:
         plan = adaptive_plan(protocol)
         assert plan is not None
         row = row_at_level(plan, row, level)
-    eye = args.eye or (protocol.eyes if protocol.eyes in ("right", "left") else "right")
-    response_text = None
+    return row, level, gaze_deg
+
+
+def _mode_and_text(args: argparse.Namespace, protocol: Protocol, row: dict) -> tuple[str, str | None]:
+    """The rendering mode and, for ``--phase response``, the participant's response text."""
+    from psyop.stimulus import interval_mode
+
     if args.phase == "response":
         from psyop.session.plan import compile_plan
 
         response = compile_plan(protocol, tracker_ipd_m=args.ipd_mm / 1000.0).response
-        response_text = response.participant_text
-        mode = args.mode or response.phase.mode
-    else:
-        mode = args.mode or interval_mode(protocol, row, args.interval)
+        return args.mode or response.phase.mode, response.participant_text
+    return args.mode or interval_mode(protocol, row, args.interval), None
+
+
+@dataclass(frozen=True)
+class _View:
+    """The rendered eye's geometry and camera for one frame."""
+
+    eye: str
+    mode: str
+    ipd_m: float
+    centre_m: np.ndarray
+    fixation_m: np.ndarray
+    nc_m: float
+    camera: EyeCamera
+    display: DisplayProfile
+    eye_model: EyeModel
+
+
+def _view(args: argparse.Namespace, protocol: Protocol, row: dict, mode: str, az: float, el: float) -> _View:
+    import numpy as np
+
+    from psyop.optics.camera import make_eye_camera
+    from psyop.protocol import resolve_display_profile, resolve_eye_model
+    from psyop.protocol.display import rendering_nc_rule
+    from psyop.rendering.builders import direction_from_angles
+    from psyop.schedule import interval_values
+
+    eye = args.eye or (protocol.eyes if protocol.eyes in ("right", "left") else "right")
     display = resolve_display_profile(protocol.display)
     eye_model = resolve_eye_model(protocol.display)
     ipd_spec = protocol.display.ipd
     ipd_m = float(ipd_spec.mm) / 1000.0 if hasattr(ipd_spec, "mm") else args.ipd_mm / 1000.0
     centre = np.array([ipd_m / 2.0 if eye == "right" else -ipd_m / 2.0, 0.0, 0.0])
     fixation = centre + direction_from_angles(az, el) * args.fixation_m
-    from psyop.protocol.display import rendering_nc_rule
-
     nc_rule = rendering_nc_rule(protocol.display)
     nc_m = eye_model.nc_m if nc_rule is None else nc_rule.nc_m_for(eye_model.nc_m, interval_values(row, args.interval))
     camera = make_eye_camera(display, eye, fixation, ipd_m, nc_m, mode)
@@ -188,40 +214,70 @@ def run(args: argparse.Namespace) -> int:
 
         x0, y0, w, h = _parse_crop(args.crop, camera.width_px, camera.height_px)
         camera = crop_camera(camera, x0, y0, w, h)
+    return _View(eye, mode, ipd_m, centre, fixation, nc_m, camera, display, eye_model)
+
+
+def _scene(args: argparse.Namespace, protocol: Protocol, protocol_path: Path, row: dict, view: _View,
+           response_text: str | None, mesh_files: MeshFiles) -> Scene:
+    from psyop.stimulus import build_scene
+    from psyop.stimulus.meshes import SessionMeshes
+
     if args.phase == "response":
         from psyop.rendering.text import em_px_for_display, text_image
         from psyop.stimulus import blank_scene, scene_origin_m, text_scene
         from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
 
-        em_px = em_px_for_display(display, TEXT_LETTER_HEIGHT_DEG)
-        scene = (blank_scene() if response_text is None
-                 else text_scene(text_image(response_text, em_px), scene_origin_m(protocol, centre)))
-    else:
-        scene = build_scene(protocol, row, args.time_s, centre, interval=args.interval, base_dir=protocol_path.parent,
-                            meshes=SessionMeshes(protocol_path.parent, mesh_files))
-    with Renderer(scene, RenderSettings(antialiasing=args.antialiasing, reuse_tolerance_px=None)) as renderer:
-        renderer.render(camera)
-        image = renderer.image_uint8(eye)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_png(out, image)
-    sidecar = {
+        em_px = em_px_for_display(view.display, TEXT_LETTER_HEIGHT_DEG)
+        return (blank_scene() if response_text is None
+                else text_scene(text_image(response_text, em_px), scene_origin_m(protocol, view.centre_m)))
+    return build_scene(protocol, row, args.time_s, view.centre_m, interval=args.interval, base_dir=protocol_path.parent,
+                       meshes=SessionMeshes(protocol_path.parent, mesh_files))
+
+
+def _sidecar(args: argparse.Namespace, protocol: Protocol, protocol_path: Path, level: float | None,
+             response_text: str | None, az: float, el: float, view: _View, scene: Scene) -> dict:
+    """What the frame is (the PNG's JSON sidecar)."""
+    import numpy as np
+
+    display, eye_model, camera = view.display, view.eye_model, view.camera
+    return {
         "protocol": str(protocol_path), "protocol_sha256": protocol.source_sha256, "seed": args.seed,
         "trial": args.trial, "phase": args.phase, "interval": args.interval, "time_s": args.time_s,
         "adaptive_level": level,
         "response_text": response_text,
-        "eye": eye, "mode": mode, "gaze_deg": [az, el], "fixation_m": fixation.tolist(),
+        "eye": view.eye, "mode": view.mode, "gaze_deg": [az, el], "fixation_m": view.fixation_m.tolist(),
         "camera_valid": bool(camera.valid),
         "centre_of_projection_m": np.asarray(camera.centre_of_projection_m).tolist(),
-        "eye_centre_m": centre.tolist(), "ipd_m": ipd_m,
+        "eye_centre_m": view.centre_m.tolist(), "ipd_m": view.ipd_m,
         "frustum_tangents": frustum_tangents(camera.pixel_to_ray),
         "resolution_px": [camera.width_px, camera.height_px],
         "display_profile": display.name, "image_distance_m": None if math.isinf(display.d_m) else display.d_m,
-        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m}, "rendered_nc_m": nc_m,
+        "eye_model": {"name": eye_model.name, "nc_m": eye_model.nc_m}, "rendered_nc_m": view.nc_m,
         "crop_px": args.crop, "antialiasing": args.antialiasing, "primitives": [p.name for p in scene.primitives],
     }
-    from psyop.atomic import write_atomic
 
+
+def run(args: argparse.Namespace) -> int:
+    from psyop.atomic import write_atomic
+    from psyop.mesh.load import MeshFiles
+    from psyop.protocol import load_protocol
+    from psyop.rendering import Renderer, RenderSettings
+
+    protocol_path = Path(args.protocol)
+    mesh_files = MeshFiles(protocol_path.parent)  # each model read once: validation and the scene
+    protocol = load_protocol(protocol_path, meshes=mesh_files)
+    row, level, (az, el) = _checked_trial(args, protocol)
+    mode, response_text = _mode_and_text(args, protocol, row)
+    view = _view(args, protocol, row, mode, az, el)
+    scene = _scene(args, protocol, protocol_path, row, view, response_text, mesh_files)
+    with Renderer(scene, RenderSettings(antialiasing=args.antialiasing, reuse_tolerance_px=None)) as renderer:
+        renderer.render(view.camera)
+        image = renderer.image_uint8(view.eye)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_png(out, image)
+    sidecar = _sidecar(args, protocol, protocol_path, level, response_text, az, el, view, scene)
     write_atomic(Path(str(out) + ".json"), json.dumps(sidecar, indent=2) + "\n")
-    print(f"wrote {out} ({camera.width_px}x{camera.height_px}, {eye} eye, {mode}) and {out}.json")
+    camera = view.camera
+    print(f"wrote {out} ({camera.width_px}x{camera.height_px}, {view.eye} eye, {mode}) and {out}.json")
     return 0

@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike
 
 from psyop.optics.ranges import IPD_M, NC_M
 from psyop.optics.display import DisplayProfile
+from psyop.optics.rotation import rotation_matrix
 from psyop.optics.nodal import (
     DEFAULT_MAX_ROTATION_DEG,
     DEFAULT_MIN_FIXATION_DISTANCE_M,
@@ -304,14 +305,7 @@ class ViewGeometry:
 
     def rotation(self) -> np.ndarray:
         """3x3 rotation eye -> head (columns: the eye frame's x, y, z axes in head space)."""
-        w, x, y, z = (float(v) for v in self.orientation_wxyz)
-        n = math.sqrt(w * w + x * x + y * y + z * z)
-        w, x, y, z = w / n, x / n, y / n, z / n
-        return np.array([
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ])
+        return rotation_matrix(self.orientation_wxyz)
 
     @property
     def canted(self) -> bool:

@@ -199,6 +199,28 @@ class Renderer:
             self._use_variant(bool(scene.meshes))
         if len(scene.primitives) > MAX_PRIMITIVES:
             raise ValueError(f"at most {MAX_PRIMITIVES} primitives, got {len(scene.primitives)}")
+        layer_of = self._upload_textures(scene)
+        self._upload_primitives(scene, layer_of)
+        aperture_changed = self._scene is None or scene.aperture != self._scene.aperture
+        self._scene = scene
+        for state in self._eyes.values():
+            if aperture_changed:  # the aperture is screen-fixed: recomputed only when it changes
+                self._release_eye_aperture(state)
+                state.aperture = None
+        self._set_scene_uniforms(scene)
+
+    def _set_scene_uniforms(self, scene: Scene) -> None:
+        """The scene's uniforms: primitive count, background, aperture colour and sampling settings."""
+        ap_colour = scene.aperture.colour if scene.aperture else (0.0, 0.0, 0.0)
+        self._set_if_present("u_n_prims", len(scene.primitives))
+        self._set_if_present("u_background", scene.background)
+        self._set_if_present("u_aperture_colour", ap_colour)
+        self._set_if_present("u_samples", int(self.settings.samples_per_axis))
+        self._set_if_present("u_edge_margin_px", float(self.settings.edge_margin_px))
+
+    def _upload_textures(self, scene: Scene) -> dict[NoiseTexture | tuple[str, str], int]:
+        """The texture layer of each texture material of ``scene``; the layers are re-synthesised and
+        re-uploaded only when the set of texture materials changes."""
         textures: list[NoiseTexture | ImageTexture] = []
         layer_of: dict[NoiseTexture | tuple[str, str], int] = {}
         for p in scene.primitives:
@@ -217,6 +239,10 @@ class Renderer:
             self._layers_tex = self.ctx.texture_array((side, side, layers.shape[0]), 4, layers.tobytes(), dtype="f4")
             self._layers_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self._texture_keys, self._texture_sizes = texture_keys, sizes
+        return layer_of
+
+    def _upload_primitives(self, scene: Scene, layer_of: dict[NoiseTexture | tuple[str, str], int]) -> None:
+        """Pack ``scene``'s primitives into the primitive texture and keep their head-space geometry."""
         sizes = self._texture_sizes
         data = np.zeros((max(1, len(scene.primitives)), TEXELS_PER_PRIMITIVE, 4), dtype=np.float32)
         n = len(scene.primitives)
@@ -247,18 +273,6 @@ class Renderer:
                 self._prims_tex.release()
             self._prims_tex = self.ctx.texture((TEXELS_PER_PRIMITIVE, data.shape[0]), 4, data.tobytes(), dtype="f4")
             self._prims_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        aperture_changed = self._scene is None or scene.aperture != self._scene.aperture
-        self._scene = scene
-        for state in self._eyes.values():
-            if aperture_changed:  # the aperture is screen-fixed: recomputed only when it changes
-                self._release_eye_aperture(state)
-                state.aperture = None
-        ap_colour = scene.aperture.colour if scene.aperture else (0.0, 0.0, 0.0)
-        self._set_if_present("u_n_prims", len(scene.primitives))
-        self._set_if_present("u_background", scene.background)
-        self._set_if_present("u_aperture_colour", ap_colour)
-        self._set_if_present("u_samples", int(self.settings.samples_per_axis))
-        self._set_if_present("u_edge_margin_px", float(self.settings.edge_margin_px))
 
     def _use_variant(self, meshes: bool) -> None:
         """Switch to the ray-cast programs with (or without) the mesh layer: a scene without meshes runs exactly

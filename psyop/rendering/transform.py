@@ -15,19 +15,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from psyop.optics.rotation import IDENTITY_WXYZ as IDENTITY_WXYZ, rotation_matrix as rotation_matrix
 from psyop.rendering.scene import Scene
-
-IDENTITY_WXYZ = (1.0, 0.0, 0.0, 0.0)
-
-
-def rotation_matrix(orientation_wxyz: Sequence[float]) -> np.ndarray:
-    """3x3 rotation of a unit quaternion (w, x, y, z); normalised first."""
-    w, x, y, z = np.asarray(orientation_wxyz, dtype=np.float64) / np.linalg.norm(orientation_wxyz)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def rotate_rows(r: np.ndarray, vectors: np.ndarray) -> np.ndarray:

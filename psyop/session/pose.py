@@ -23,6 +23,7 @@ from typing import Protocol
 
 import numpy as np
 
+from psyop.optics.rotation import quaternion_from_yaw_pitch_roll as quaternion_from_yaw_pitch_roll
 from psyop.session.rows import TrialRow
 from psyop.session.gaze.simulated import seed_for
 
@@ -102,20 +103,6 @@ def reach_from_positions(positions_m: np.ndarray, last_n: int) -> tuple[float, n
     """Distance from the eyes' mid-point (head-space origin) to the mean of the last ``last_n`` positions."""
     mean = np.asarray(positions_m, dtype=np.float64)[-last_n:].mean(axis=0)
     return float(np.linalg.norm(mean)), mean
-
-
-def quaternion_from_yaw_pitch_roll(yaw_rad: float, pitch_rad: float, roll_rad: float) -> tuple[float, float, float, float]:
-    """Unit quaternion (w, x, y, z) of R_y(yaw) R_x(pitch) R_z(roll) (scipy's intrinsic 'YXZ')."""
-    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
-    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
-    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
-    # q = q_yaw(y) * q_pitch(x) * q_roll(z)
-    w = cy * cp * cr + sy * sp * sr
-    x = cy * sp * cr + sy * cp * sr
-    y = sy * cp * cr - cy * sp * sr
-    z = cy * cp * sr - sy * sp * cr
-    norm = math.sqrt(w * w + x * x + y * y + z * z)
-    return (w / norm, x / norm, y / norm, z / norm)
 
 
 @dataclass(frozen=True)

@@ -24,13 +24,14 @@ import math
 import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, assert_never
 
 import numpy as np
 
 from psyop.errors import UserError
 from psyop.protocol import scene as ps
 from psyop.rendering import builders
+from psyop.rendering.mesh_scene import MeshInstance
 from psyop.rendering.text import TextImage
 from psyop.rendering.textures import ImageFiles
 from psyop.rendering.scene import (
@@ -46,6 +47,7 @@ from psyop.rendering.scene import (
     Solid,
 )
 from psyop.protocol.factor_fields import resolve_factor_fields
+from psyop.protocol.trial import Interval
 from psyop.schedule import interval_values
 from psyop.stimulus.placement import centre_angles_deg, circle_position_deg
 from psyop.records import TrialRow
@@ -54,7 +56,6 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
     from psyop.protocol.model import Protocol
-    from psyop.protocol.trial import Interval
     from psyop.stimulus.meshes import SessionMeshes
 
 INFINITY_M = math.inf  # the distance of 0 D: optical infinity, rendered as directions
@@ -68,6 +69,19 @@ def _distance_m(depth: ps.Depth, values: TrialRow) -> float:
     return INFINITY_M if depth_D == 0.0 else 1.0 / depth_D
 
 
+def _number(value: float | ps.FactorRef) -> float:
+    """A numeric field of a scene item whose ``{factor: NAME}`` fields are resolved (resolve_factor_fields)."""
+    if isinstance(value, ps.FactorRef):
+        raise UserError(f"factor {value.factor!r} was not resolved for this trial")
+    return float(value)
+
+
+def _rgb(rgb: Sequence[float]) -> tuple[float, float, float]:
+    """A colour field as the 3-tuple it is (validated by the protocol model)."""
+    r, g, b = rgb
+    return (r, g, b)
+
+
 def _trial_seed(values: TrialRow) -> int:
     return int(values.get("trial_seed", 0)) % (2**31)
 
@@ -76,16 +90,16 @@ def _material(surface: ps.Surface, values: TrialRow, size_deg: float, base_dir: 
               images: ImageFiles | None = None) -> Material:
     """A rendering material for a protocol surface (noise seeded from the trial seed)."""
     if isinstance(surface, ps.SolidSurface):
-        return Solid(tuple(float(c) for c in surface.rgb))
+        return Solid(_rgb(tuple(float(c) for c in surface.rgb)))
     seed = _trial_seed(values) + int(getattr(surface, "seed", 0))
     if isinstance(surface, ps.WhiteNoiseSurface):
         size = int(min(1024, max(4, round(size_deg / float(surface.grain_deg)))))
         # peak contrast c around the mean: grey = mean * (1 + c z), z ~ N(0, 1) clipped; RMS c/2
-        return NoiseTexture(NoiseKind.WHITE, seed=seed, size_px=size, mean=float(surface.mean),
-                            contrast=float(surface.contrast) / 2.0)
+        return NoiseTexture(NoiseKind.WHITE, seed=seed, size_px=size, mean=_number(surface.mean),
+                            contrast=_number(surface.contrast) / 2.0)
     if isinstance(surface, ps.PinkNoiseSurface):
-        return NoiseTexture(NoiseKind.PINK, seed=seed, size_px=256, mean=float(surface.mean),
-                            contrast=float(surface.contrast) / 2.0)
+        return NoiseTexture(NoiseKind.PINK, seed=seed, size_px=256, mean=_number(surface.mean),
+                            contrast=_number(surface.contrast) / 2.0)
     if isinstance(surface, ps.ImageSurface):
         repeats = size_deg / float(surface.tile_deg) if surface.tile_deg else 1.0
         return (images if images is not None else ImageFiles(base_dir)).texture(surface.path, repeats)
@@ -109,7 +123,7 @@ def _sinusoidal_border(item: ps.SinusoidalBorder, values: TrialRow, origin: np.n
     phase_deg = float(values.get(f"{item.id}_phase_deg", 0.0 if item.phase == "random" else item.phase))
     near_m = _distance_m(item.near_depth, values)
     far_m = _distance_m(item.far_depth, values)
-    size = float(item.size_deg)
+    size = _number(item.size_deg)
     near_surface = item.left if near_side == "left" else item.right
     far_surface = item.right if near_side == "left" else item.left
     half_tan = math.tan(math.radians(size) / 2.0)
@@ -139,7 +153,7 @@ def _grid_planes(item: ps.GridPlanes) -> list[Primitive]:
         n_lines = max(1, round(max(extent_u, extent_v) / float(item.spacing_m)))
         # a line subtends line_width_deg at 1 m: its width in cells of spacing_m
         width_fraction = min(0.5, math.tan(math.radians(float(item.line_width_deg))) / float(item.spacing_m))
-        mat = GridMaterial(background=tuple(item.background_rgb), line_colour=tuple(item.rgb),
+        mat = GridMaterial(background=_rgb(item.background_rgb), line_colour=_rgb(item.rgb),
                            lines_per_side=int(n_lines), line_width_fraction=width_fraction)
         out.append(Primitive(Shape.RECT, centre, u, v, mat, name=f"{item.id}_{plane}"))
     return out
@@ -150,15 +164,15 @@ def _fixation(item: ps.FixationTarget, values: TrialRow, time_s: float, origin: 
     if item.path is not None:
         start = float(values.get(f"{item.id}_start_deg", 0.0 if item.path.start == "random" else item.path.start))
         direction = int(values.get(f"{item.id}_direction", 1))
-        az, el = circle_position_deg(az, el, float(item.path.eccentricity_deg), start,
-                                     direction * float(item.path.speed_deg_s), time_s)
+        az, el = circle_position_deg(az, el, _number(item.path.eccentricity_deg), start,
+                                     direction * _number(item.path.speed_deg_s), time_s)
     dist = _distance_m(item.depth, values)
-    size = float(item.size_deg)
+    size = _number(item.size_deg)
     facing = str(item.facing)
-    outer = builders.placed_primitive(Shape.DISC, dist, size, size, Solid(tuple(item.rgb)), az, el, origin, facing,
+    outer = builders.placed_primitive(Shape.DISC, dist, size, size, Solid(_rgb(item.rgb)), az, el, origin, facing,
                                       name=f"{item.id}_outer")
     # coplanar with the outer disc and listed after it, so it is drawn on top (the coplanar rule)
-    inner = builders.placed_primitive(Shape.DISC, dist, size * 0.4, size * 0.4, Solid(tuple(item.centre_rgb)), az, el,
+    inner = builders.placed_primitive(Shape.DISC, dist, size * 0.4, size * 0.4, Solid(_rgb(item.centre_rgb)), az, el,
                                       origin, facing, name=f"{item.id}_inner")
     return [outer, inner]
 
@@ -219,7 +233,7 @@ def scene_origin_m(protocol: Protocol, eye_centre_m: ArrayLike) -> np.ndarray:
 
 def interval_phases(protocol: Protocol) -> list[Interval]:
     """The protocol's ``interval`` phases in order (interval K is element K - 1)."""
-    return [phase for phase in protocol.trial.phases if getattr(phase, "kind", None) == "interval"]
+    return [phase for phase in protocol.trial.phases if isinstance(phase, Interval)]
 
 
 def interval_mode(protocol: Protocol, row: TrialRow, interval: int) -> str:
@@ -231,6 +245,80 @@ def interval_mode(protocol: Protocol, row: TrialRow, interval: int) -> str:
         return rule(row, interval)
     except (KeyError, ValueError) as error:
         raise UserError(f"cannot tell the rendering mode of interval {interval}: {error}; pass --mode") from None
+
+
+@dataclasses.dataclass(frozen=True)
+class _ItemContext:
+    """What every scene item of one trial, interval and time is built from."""
+
+    values: TrialRow
+    time_s: float
+    origin_m: np.ndarray
+    base_dir: Path | None
+    arm_reach_m: float
+    images: ImageFiles | None
+    meshes: SessionMeshes
+
+
+def _disc(item: ps.Disc, ctx: _ItemContext) -> list[Primitive]:
+    mat = _material(item.surface, ctx.values, _number(item.size_deg), ctx.base_dir, ctx.images)
+    az, el = centre_angles_deg(item.centre_deg)
+    return [builders.placed_primitive(Shape.DISC, _distance_m(item.depth, ctx.values), _number(item.size_deg),
+                                      _number(item.size_deg), mat, az, el, ctx.origin_m, str(item.facing),
+                                      name=item.id)]
+
+
+def _quad(item: ps.Quad, ctx: _ItemContext) -> list[Primitive]:
+    size = max(_number(item.width_deg), _number(item.height_deg))
+    az, el = centre_angles_deg(item.centre_deg)
+    return [builders.placed_primitive(Shape.RECT, _distance_m(item.depth, ctx.values), _number(item.width_deg),
+                                      _number(item.height_deg),
+                                      _material(item.surface, ctx.values, size, ctx.base_dir, ctx.images),
+                                      az, el, ctx.origin_m, str(item.facing), name=item.id)]
+
+
+def _target_field(item: ps.TargetField, ctx: _ItemContext) -> list[Primitive]:
+    values = ctx.values
+    near_D = item.near.resolve_D(values)
+    far_D = item.far.resolve_D(values)
+    mat = _material(item.surface, values, _number(item.size_deg), ctx.base_dir, ctx.images)
+    field = builders.target_field(_trial_seed(values), int(item.count), near_D, far_D, _number(item.size_deg),
+                                  float(item.field_deg), ctx.origin_m, material=mat,
+                                  min_gap_deg=float(item.min_gap_deg))
+    return [dataclasses.replace(p, name=f"{item.id}_{p.name}") for p in field]
+
+
+def _build_item(item: ps.Primitive, ctx: _ItemContext) -> list[Primitive] | Aperture | MeshInstance:
+    """One scene item's part of the scene: its primitives, the aperture, or a placed mesh.
+
+    The one dispatch over the closed set of scene item kinds (``psyop.protocol.scene.Primitive``):
+    a kind missing here fails the type check (``assert_never``).
+    """
+    from psyop.stimulus.meshes import mesh_instance
+
+    match item:
+        case ps.Disc():
+            return _disc(item, ctx)
+        case ps.Quad():
+            return _quad(item, ctx)
+        case ps.SinusoidalBorder():
+            return _sinusoidal_border(item, ctx.values, ctx.origin_m, ctx.base_dir, ctx.images)
+        case ps.Aperture():
+            return Aperture(radius_deg=_number(item.diameter_deg) / 2.0, colour=_rgb(item.surround_rgb))
+        case ps.GridPlanes():
+            return _grid_planes(item)
+        case ps.TargetField():
+            return _target_field(item, ctx)
+        case ps.FixationTarget():
+            return _fixation(item, ctx.values, ctx.time_s, ctx.origin_m)
+        case ps.Room():
+            return _room(item)
+        case ps.ReachTarget():
+            return _reach_target(item, ctx.values, ctx.arm_reach_m)
+        case ps.Mesh():
+            return mesh_instance(item, ctx.values, ctx.origin_m, ctx.meshes)
+        case _:
+            assert_never(item)
 
 
 def build_scene(
@@ -260,62 +348,33 @@ def build_scene(
     :class:`psyop.stimulus.meshes.SessionMeshes` (each model loaded once); without it models are read from
     ``base_dir`` on this call.
     """
-    from psyop.stimulus.meshes import SessionMeshes, mesh_instance
+    from psyop.stimulus.meshes import SessionMeshes
 
-    mesh_files = meshes if meshes is not None else SessionMeshes(base_dir)
-    instances = []
     values = interval_values(row, interval)
     values = {**values, "trial_seed": row.get("trial_seed", 0)}
-    origin = scene_origin_m(protocol, eye_centre_m)
+    ctx = _ItemContext(values=values, time_s=time_s, origin_m=scene_origin_m(protocol, eye_centre_m),
+                       base_dir=base_dir, arm_reach_m=arm_reach_m, images=images,
+                       meshes=meshes if meshes is not None else SessionMeshes(base_dir))
     phases = interval_phases(protocol)
     if show is None:
         show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
     prims: list[Primitive] = []
+    instances: list[MeshInstance] = []
     aperture = None
     for item in protocol.scene:
         if show != "all" and item.id not in show:
             continue
         try:  # sizes and contrasts given as {factor: NAME} take this trial's (interval's) level
-            item = resolve_factor_fields(item, values)
+            resolved: ps.Primitive = resolve_factor_fields(item, values)
         except ValueError as error:
             raise UserError(f"scene item '{item.id}': {error}") from None
-        if isinstance(item, ps.Disc):
-            mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
-            az, el = centre_angles_deg(item.centre_deg)
-            prims.append(builders.placed_primitive(Shape.DISC, _distance_m(item.depth, values), float(item.size_deg),
-                                                   float(item.size_deg), mat, az, el, origin, str(item.facing),
-                                                   name=item.id))
-        elif isinstance(item, ps.Quad):
-            size = max(float(item.width_deg), float(item.height_deg))
-            az, el = centre_angles_deg(item.centre_deg)
-            prims.append(builders.placed_primitive(Shape.RECT, _distance_m(item.depth, values), float(item.width_deg),
-                                                   float(item.height_deg),
-                                                   _material(item.surface, values, size, base_dir, images),
-                                                   az, el, origin, str(item.facing), name=item.id))
-        elif isinstance(item, ps.SinusoidalBorder):
-            prims += _sinusoidal_border(item, values, origin, base_dir, images)
-        elif isinstance(item, ps.Aperture):
-            aperture = Aperture(radius_deg=float(item.diameter_deg) / 2.0, colour=tuple(item.surround_rgb))
-        elif isinstance(item, ps.GridPlanes):
-            prims += _grid_planes(item)
-        elif isinstance(item, ps.TargetField):
-            near_D = item.near.resolve_D(values)
-            far_D = item.far.resolve_D(values)
-            mat = _material(item.surface, values, float(item.size_deg), base_dir, images)
-            field = builders.target_field(_trial_seed(values), int(item.count), near_D, far_D, float(item.size_deg),
-                                          float(item.field_deg), origin, material=mat,
-                                          min_gap_deg=float(item.min_gap_deg))
-            prims += [dataclasses.replace(p, name=f"{item.id}_{p.name}") for p in field]
-        elif isinstance(item, ps.FixationTarget):
-            prims += _fixation(item, values, time_s, origin)
-        elif isinstance(item, ps.Room):
-            prims += _room(item)
-        elif isinstance(item, ps.ReachTarget):
-            prims += _reach_target(item, values, arm_reach_m)
-        elif isinstance(item, ps.Mesh):
-            instances.append(mesh_instance(item, values, origin, mesh_files))
-        else:  # pragma: no cover - the protocol model is a closed union
-            raise UserError(f"unsupported scene element kind {getattr(item, 'kind', item)!r}")
+        part = _build_item(resolved, ctx)
+        if isinstance(part, Aperture):
+            aperture = part
+        elif isinstance(part, MeshInstance):
+            instances.append(part)
+        else:
+            prims += part
     return Scene(tuple(prims), background=background, aperture=aperture, meshes=tuple(instances))
 
 

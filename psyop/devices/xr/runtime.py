@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from psyop.errors import UserError
 from psyop.devices.xr.binding import BindingChoice, XrObject, current_binding
+from psyop.optics.rotation import quaternion_multiply as quaternion_multiply, rotate as rotate  # the one implementation
 
 if TYPE_CHECKING:
     import moderngl
@@ -489,21 +490,6 @@ class XrRuntime:
 
 def _text(value: XrObject) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
-
-
-def quaternion_multiply(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
-    """Hamilton product of two (w, x, y, z) quaternions."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
-def rotate(q: tuple[float, ...], v: tuple[float, float, float]) -> tuple[float, float, float]:
-    """Rotate vector v by the unit quaternion q (w, x, y, z)."""
-    w, x, y, z = q
-    p = quaternion_multiply(quaternion_multiply((w, x, y, z), (0.0, *v)), (w, -x, -y, -z))
-    return (p[1], p[2], p[3])
 
 
 def tangents_from_fov(fov: XrObject) -> tuple[float, float, float, float]:
