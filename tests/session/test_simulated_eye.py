@@ -29,8 +29,14 @@ BEFORE = {"detection": "6430d67a4de4ab7bb7331000eca79faff2d8c9ec58b08960016a084a
           "ordinal": "57a94743300b76192468030e6ce0665848368981d24fecdcc7c3092fed9abada"}
 
 
+#: columns added after these digests on purpose (issue 29's typed responses, derived from ``response``:
+#: tests/session/test_refactor_equality.py checks them), left out of the digest
+ADDED_AFTER = ("response_value", "outcome")
+
+
 def _digest(path: Path) -> str:
-    rows = pq.read_table(path).to_pylist()
+    table = pq.read_table(path)
+    rows = table.select([n for n in table.column_names if n not in ADDED_AFTER]).to_pylist()
     return hashlib.sha256(json.dumps(rows, sort_keys=True, default=str).encode()).hexdigest()
 
 
