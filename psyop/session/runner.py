@@ -136,7 +136,7 @@ def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale:
         from psyop.rendering.renderer import create_headless_context
 
         ctx = create_headless_context()
-    except Exception as exc:  # noqa: BLE001 - any OpenGL/EGL failure
+    except Exception as exc:  # any OpenGL/EGL failure: re-raised or reported
         if mode == "images":
             raise UserError(f"cannot create an OpenGL context for rendering: {exc}", "--render") from exc
         return CameraRenderer(plan.display, plan.rig), f"cameras only (no OpenGL context: {exc})"
