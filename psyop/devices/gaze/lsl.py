@@ -263,7 +263,8 @@ class LslGazeSource:
             if not (math.isfinite(x) and math.isfinite(y)):
                 return _NAN3
             d = m.scene.direction_world(x, y)
-            return world_mm_to_head_m(tuple(1000.0 * m.scene.distance_m * c for c in d))  # type: ignore[arg-type]
+            x_mm, y_mm, z_mm = (1000.0 * m.scene.distance_m * c for c in d)
+            return world_mm_to_head_m((x_mm, y_mm, z_mm))
         point = (self._value(sample, "gaze_point_x"), self._value(sample, "gaze_point_y"),
                  self._value(sample, "gaze_point_z"))
         return world_mm_to_head_m(point) if m.fixation == "pupil_world_mm" else point
