@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from types import ModuleType
 
 from psyop.session.rows import JsonMapping
 from psyop.errors import UserError
@@ -26,7 +26,7 @@ CHANNELS = ("event", "trial", "condition", "value")
 STREAM_NAME = "psyop_markers"
 
 
-def _pylsl() -> Any:
+def _pylsl() -> ModuleType:
     try:
         import pylsl
     except (ImportError, OSError, RuntimeError) as exc:

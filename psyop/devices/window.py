@@ -12,7 +12,7 @@ which estimates the display's refresh period for session.json.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject
 from psyop.session.clock import FlipSync
@@ -64,7 +64,7 @@ class GlfwWindow:
     def ctx(self) -> moderngl.Context:
         return self._window.ctx
 
-    def _on_key(self, window: Any, key: int, scancode: int, action: int, mods: int) -> None:
+    def _on_key(self, window: object, key: int, scancode: int, action: int, mods: int) -> None:
         if action != self._glfw.PRESS:
             return
         name = self._glfw.get_key_name(key, scancode)

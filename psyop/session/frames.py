@@ -61,7 +61,7 @@ class RenderTarget:
     wrapped as a moderngl framebuffer) and its size in pixels. The renderer draws the eye at this
     size and copies the finished image into it."""
 
-    framebuffer: Any  # moderngl.Framebuffer (moderngl is imported only where a context exists)
+    framebuffer: moderngl.Framebuffer  # moderngl is imported only where a context exists
     width_px: int
     height_px: int
 
@@ -208,9 +208,9 @@ class FrameRecorder:
     """Collects one trial's frame rows column-wise; cheap to append, one batch per trial."""
 
     def __init__(self) -> None:
-        self._cols: dict[str, list[Any]] = {name: [] for name in FRAME_SCHEMA.names}
+        self._cols: dict[str, list[Any]] = {name: [] for name in FRAME_SCHEMA.names}  # Any: FRAME_SCHEMA's column types
 
-    def add(self, **values: Any) -> None:
+    def add(self, **values: Any) -> None:  # Any: one value per FRAME_SCHEMA column, of its type
         for name, column in self._cols.items():
             column.append(values.get(name))
 

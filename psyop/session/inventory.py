@@ -96,7 +96,7 @@ def _regular(path: Path) -> os.stat_result | None:
     return info
 
 
-def _read_meta(path: Path, data_root: Path) -> dict | None:  # type: ignore[type-arg]
+def _read_meta(path: Path, data_root: Path) -> dict | None:  # type: ignore[type-arg]  # session.json: a JSON object
     if _regular(path) is None:
         return None
     raw = _META_FILE.read_bytes(path)

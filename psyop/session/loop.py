@@ -45,7 +45,7 @@ from psyop.session.reach import horizontal_reach_m
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.schedule.rows import interval_values
 from psyop.datacontract import typed_response
-from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, ResponsePlan
+from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, ResponsePlan, SessionPlan
 from psyop.session.progress import session_progress
 from psyop.session.responses.base import Response, ResponseSource
 
@@ -59,15 +59,11 @@ class TrialState(str, Enum):
 
 
 @dataclass(frozen=True)
-class LoopConfig:
-    """How the loop runs (not what the study is)."""
+class LoopFacts:
+    """What the study fixes for the loop: the display's refresh, the fixation targets' geometry and
+    the protocol's response and gaze rules (:meth:`of_plan` reads them from the session plan)."""
 
     refresh_hz: float = 90.0
-    every_frame: bool = True
-    sampled_trials: tuple[int, ...] = (0, 1)
-    sample_every_n_trials: int = 50
-    stale_after_s: float = 0.1
-    confidence_threshold: float = 0.6
     pursuit_eccentricity_deg: float = 16.0
     pursuit_speed_deg_s: float = 90.0
     pursuit_centre_deg: tuple[float, float] = (0.0, 0.0)  # Fick angles the target circles (plan.fixation)
@@ -76,10 +72,41 @@ class LoopConfig:
     pursuit_path: FixationPath | None = None
     free_radius_deg: float = 10.0
     fixation_distance_m: float = 1.0
-    phase_delay_s: float = 0.0  # real sleep per phase; only for crash-safety tests
-    progress: bool = True
     hand_last_n: int = 10  # reach = mean of the last N hand samples (protocol response.average_last_samples)
     min_valid_gaze_share: float = 0.5  # protocol trial.min_valid_gaze_share: below it gaze_ok is False
+
+    @classmethod
+    def of_plan(cls, plan: SessionPlan) -> LoopFacts:
+        """The facts of ``plan``: its display's refresh, its moving target, its response and gaze rules."""
+        return cls(refresh_hz=float(plan.display.refresh_hz), **pursuit_fields(plan.fixation),
+                   hand_last_n=plan.response.average_last_samples, min_valid_gaze_share=plan.min_valid_gaze_share)
+
+
+@dataclass(frozen=True)
+class LoopOptions:
+    """How this run of the loop goes (not what the study is): which trials render every frame, the
+    gaze source's staleness and confidence limits, progress output, the crash tests' phase delay."""
+
+    every_frame: bool = True
+    sampled_trials: tuple[int, ...] = (0, 1)
+    sample_every_n_trials: int = 50
+    stale_after_s: float = 0.1
+    confidence_threshold: float = 0.6
+    phase_delay_s: float = 0.0  # real sleep per phase; only for crash-safety tests
+    progress: bool = True
+
+
+@dataclass(frozen=True)
+class LoopConfig(LoopOptions, LoopFacts):
+    """The loop's configuration: the plan's facts (:class:`LoopFacts`) and the run's options
+    (:class:`LoopOptions`), each field declared once, in its own part."""
+
+    @classmethod
+    def of(cls, facts: LoopFacts, options: LoopOptions) -> LoopConfig:
+        """The configuration of ``facts`` and ``options`` together."""
+        fields = {f.name: getattr(facts, f.name) for f in dataclasses.fields(LoopFacts)}
+        fields.update({f.name: getattr(options, f.name) for f in dataclasses.fields(LoopOptions)})
+        return cls(**fields)
 
 
 def gaze_ok(valid: int, total: int, min_share: float) -> bool | None:
@@ -426,14 +453,15 @@ def _pose_columns(prefix: str, pose: ConditionedPose) -> JsonObject:
 
 
 def pursuit_fields(path: FixationPath | None) -> JsonObject:
-    """The :class:`LoopConfig` fields of the protocol's moving fixation target (``plan.fixation``)."""
-    return dict(pursuit_eccentricity_deg=path.eccentricity_deg if path else 16.0,
-                pursuit_speed_deg_s=path.speed_deg_s if path else 90.0,
-                pursuit_centre_deg=path.centre_deg if path else (0.0, 0.0),
-                pursuit_id=path.id if path else "fixation", pursuit_path=path)
+    """The :class:`LoopFacts` fields of the protocol's moving fixation target (``plan.fixation``); none
+    without one (the defaults of :class:`LoopFacts` stand)."""
+    if path is None:
+        return {}
+    return dict(pursuit_eccentricity_deg=path.eccentricity_deg, pursuit_speed_deg_s=path.speed_deg_s,
+                pursuit_centre_deg=path.centre_deg, pursuit_id=path.id, pursuit_path=path)
 
 
-def fixation_plan(c: LoopConfig, phase: PhaseSpec, row: TrialRow, start_s: float) -> FixationPlan:
+def fixation_plan(c: LoopFacts, phase: PhaseSpec, row: TrialRow, start_s: float) -> FixationPlan:
     """Where the observer is asked to look in ``phase`` of trial ``row`` from ``start_s`` on: the pursuit
     target's path (the schedule fixes where it starts and which way it turns), free viewing, or the
     cross. The loop sets it on the gaze source; psyop.quality rebuilds the target from it."""

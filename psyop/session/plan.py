@@ -74,7 +74,7 @@ class FixationPath:
     #: the protocol's fixation target when a field of its centre or path is a factor's level, else None
     target: FixationTarget | None = None
 
-    def for_values(self, values: Mapping[str, Any]) -> "FixationPath":
+    def for_values(self, values: Mapping[str, Any]) -> "FixationPath":  # Any: a trial row's factor values
         """This path with the trial's (interval's) factor levels filled in (itself when it has no factor).
 
         Examples
@@ -98,13 +98,14 @@ class FixationPath:
         return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s), self.distance_m,
                             centre_angles_deg(item.centre_deg), self.id)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Any]:  # Any: session.json values
         """What session.json records: the numbers, or ``{factor: NAME}`` for each field a factor sets."""
-        out: dict[str, Any] = {"eccentricity_deg": self.eccentricity_deg, "speed_deg_s": self.speed_deg_s,
+        out: dict[str, Any] = {"eccentricity_deg": self.eccentricity_deg, "speed_deg_s": self.speed_deg_s,  # Any: JSON
                                "distance_m": self.distance_m, "centre_deg": list(self.centre_deg), "id": self.id}
         if self.target is not None:
             out["centre_deg"] = self.target.model_dump(mode="json")["centre_deg"]
-            out.update({key: self.target.path.model_dump(mode="json")[key] for key in ("eccentricity_deg", "speed_deg_s")})
+            out.update({key: self.target.path.model_dump(mode="json")[key]  # type: ignore[union-attr]  # target set: path set
+                        for key in ("eccentricity_deg", "speed_deg_s")})
         return out
 
 
@@ -141,7 +142,7 @@ class ResponsePlan:
                 return text.strip()
         return None
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Any]:  # Any: session.json values
         return {"kind": self.kind.value, "protocol_kind": self.protocol_kind, "question": self.question,
                 "prompt": self.prompt, "timeout_s": self.timeout_s, "display_off": self.display_off,
                 "average_last_samples": self.average_last_samples, "level_factor": self.level_factor}
@@ -171,11 +172,11 @@ class SessionPlan:
     def eyes(self) -> tuple[str, ...]:
         return self.rig.eyes
 
-    def mode_for(self, phase: PhaseSpec, row: dict[str, Any]) -> str:
+    def mode_for(self, phase: PhaseSpec, row: dict[str, Any]) -> str:  # Any: a trial row's columns
         """The rendering mode of ``phase`` in trial ``row`` (:func:`psyop.session.phases.mode_for`)."""
         return mode_for(phase, row)
 
-    def observer_params(self) -> dict[str, Any] | None:
+    def observer_params(self) -> dict[str, Any] | None:  # Any: the observer's JSON parameters
         """The simulated observer's parameters, with the schedule columns it reads."""
         if self.observer is None:
             return None
@@ -187,7 +188,7 @@ class SessionPlan:
             params["eye_model_nc_m"] = self.rig.nc_m
         return params
 
-    def metadata(self) -> dict[str, Any]:
+    def metadata(self) -> dict[str, Any]:  # Any: session.json values
         """The plan as session.json records it."""
         return {
             "response_kind": self.kind.value,
@@ -232,7 +233,8 @@ def fixation_path_of(item: FixationTarget) -> FixationPath:
     assert item.path is not None
     if any(True for _ in factor_fields(item)):
         return FixationPath(math.nan, math.nan, centre_deg=(math.nan, math.nan), id=item.id, target=item)
-    return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s),
+    # no field is {factor: NAME} (checked above), so both are numbers
+    return FixationPath(float(item.path.eccentricity_deg), float(item.path.speed_deg_s),  # type: ignore[arg-type]
                         centre_deg=centre_angles_deg(item.centre_deg), id=item.id)
 
 

@@ -159,7 +159,7 @@ class SimulatedPose:
         if c.head_dropout_p > 0:
             u = np.random.default_rng(seed_for(self.seed, "head-dropout", int(round(now_s * 1e6)))).uniform()
             valid = bool(u >= c.head_dropout_p)
-        return PoseSample(float(now_s), position, quaternion_from_yaw_pitch_roll(*angles), valid)  # type: ignore[arg-type]
+        return PoseSample(float(now_s), position, quaternion_from_yaw_pitch_roll(*angles), valid)  # type: ignore[arg-type]  # position: 3 floats, built with range(3)
 
     def hand(self, row: TrialRow, end_s: float, n: int, endpoint_m: Sequence[float] | None) -> list[PoseSample]:
         if endpoint_m is None:

@@ -34,7 +34,7 @@ HEAD_COLUMNS = ("head_sample_t_s", "head_x_m", "head_y_m", "head_z_m", "head_qw"
 HAND_COLUMNS = ("hand_sample_t_s", "hand_sample_x_m", "hand_sample_y_m", "hand_sample_z_m", "hand_sample_valid")
 
 
-def _flag(value: Any) -> bool:
+def _flag(value: object) -> bool:
     return bool(value) if value is not None and not (isinstance(value, float) and math.isnan(value)) else False
 
 
@@ -110,7 +110,7 @@ class ReplayPose:
         head = head.drop_duplicates(subset="head_sample_t_s").sort_values(available, kind="stable")
         self._head_t = head[available].astype(float).tolist()
         self._head = list(head[list(HEAD_COLUMNS)].itertuples(index=False, name=None))
-        self._hand: dict[int, tuple[Any, ...]] = {}
+        self._hand: dict[int, tuple[Any, ...]] = {}  # Any: the trials table's hand columns, as pandas gives them
         if trials is not None and all(c in trials.columns for c in HAND_COLUMNS):
             for trial, *values in trials[["trial", *HAND_COLUMNS]].itertuples(index=False, name=None):
                 if values[0] is not None and len(values[0]):

@@ -12,7 +12,7 @@ from typing import Any, Protocol, TextIO
 
 
 class Progress(Protocol):
-    def set_postfix(self, **fields: Any) -> None: ...
+    def set_postfix(self, **fields: Any) -> None: ...  # Any: tqdm's postfix values (numbers, text)
 
     def update(self, n: int = 1) -> None: ...
 
@@ -24,7 +24,7 @@ class NoProgress:
     process-shared lock; a session killed (SIGKILL) while holding it would block every later
     bar in any process forked from the same parent (seen in the crash-safety test)."""
 
-    def set_postfix(self, **_: Any) -> None:
+    def set_postfix(self, **_: Any) -> None:  # Any: as ProgressBar.set_postfix
         return None
 
     def update(self, _: int = 1) -> None:
@@ -48,7 +48,7 @@ class PlainLines:
         print(f"{self.desc}: {self.done}/{self.total} trials{self._postfix}", file=self.stream, flush=True)
         self._last_printed = self.done
 
-    def set_postfix(self, **fields: Any) -> None:
+    def set_postfix(self, **fields: Any) -> None:  # Any: as ProgressBar.set_postfix
         self._postfix = " (" + ", ".join(f"{k} {v}" for k, v in fields.items()) + ")" if fields else ""
 
     def update(self, n: int = 1) -> None:

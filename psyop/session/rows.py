@@ -14,10 +14,10 @@ from typing import Any
 __all__ = ["JsonMapping", "JsonObject", "TrialRecord", "TrialRow"]
 
 #: one schedule row (read only): column -> value (protocol-dependent columns, numpy/pandas scalars)
-TrialRow = Mapping[str, Any]
+TrialRow = Mapping[str, Any]  # Any: protocol-dependent columns (module docstring)
 #: one trial's record as the loop fills it (the schedule row plus response, timing and gaze columns)
-TrialRecord = dict[str, Any]
+TrialRecord = dict[str, Any]  # Any: as TrialRow
 #: a JSON object: session.json, a source's stats/summary, an event's fields
-JsonObject = dict[str, Any]
+JsonObject = dict[str, Any]  # Any: JSON values
 #: a JSON-like mapping read, not written: observer parameters, a summary handed to the log, a stream's identity
-JsonMapping = Mapping[str, Any]
+JsonMapping = Mapping[str, Any]  # Any: JSON values

@@ -33,7 +33,7 @@ from psyop.session.log.layout import SessionPaths, session_paths, write_dataset_
 from psyop.session.log.schema import trial_schema
 from psyop.adaptive.session import AdaptiveLevels, add_log_columns
 from psyop.session.log.store import SessionLog, SessionStore, recover_tables
-from psyop.session.loop import LoopConfig, SessionOutcome, TrialLoop, pursuit_fields
+from psyop.session.loop import LoopConfig, LoopFacts, LoopOptions, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.resume import accept_protocol_change, check_free, check_options, resolve_seed
@@ -140,7 +140,7 @@ def _make_renderer(mode: str, plan: SessionPlan, display: Display, window_scale:
         from psyop.rendering.renderer import create_headless_context
 
         ctx = create_headless_context()
-    except Exception as exc:  # noqa: BLE001 - any OpenGL/EGL failure
+    except Exception as exc:  # any OpenGL/EGL failure: re-raised or reported
         if mode == "images":
             raise UserError(f"cannot create an OpenGL context for rendering: {exc}", "--render") from exc
         return CameraRenderer(plan.display, plan.rig), f"cameras only (no OpenGL context: {exc})"
@@ -295,11 +295,9 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
                                          None if every_frame else options.check_images, opened.mesh_files)
     bundle.stack.callback(renderer.close)
     store.update_metadata(rendering=rendering)
-    config = LoopConfig(refresh_hz=float(plan.display.refresh_hz), every_frame=every_frame,
-                        **pursuit_fields(plan.fixation),  # the moving target's path (psyop.quality rebuilds it)
-                        phase_delay_s=options.phase_delay_s, progress=options.progress,
-                        hand_last_n=plan.response.average_last_samples,
-                        min_valid_gaze_share=plan.min_valid_gaze_share)
+    # the plan's facts (the moving target's path among them: psyop.quality rebuilds it) and this run's options
+    config = LoopConfig.of(LoopFacts.of_plan(plan), LoopOptions(every_frame=every_frame, phase_delay_s=options.phase_delay_s,
+                                                                progress=options.progress))
     loop = TrialLoop(
         identity={"study": plan.study, "participant": options.participant, "session": options.session},
         phases=plan.phases, clock=clock, gaze=gaze, responses=bundle.responses,

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -27,6 +28,15 @@ if TYPE_CHECKING:
 
 if TYPE_CHECKING:
     import moderngl
+
+    from psyop.optics import EyeCamera
+    from psyop.rendering import Renderer
+    from psyop.rendering.frame_check import FrameChecker, FrameSummary
+    from psyop.rendering.mesh_scene import MeshInstance
+    from psyop.rendering.scene import Primitive, Scene
+
+    #: a phase's time-independent parts (:meth:`SceneRenderer._static_parts`)
+    StaticParts = tuple[Scene | None] | list[tuple[str, Scene | None]]
 
 
 #: A real session (every frame rendered) checks each eye's first image of every phase and then
@@ -69,9 +79,9 @@ class SceneRenderer:
         self._ctx = ctx
         self._owns_ctx = owns_ctx
         self.last_eye: str | None = None
-        self._renderer: Any = None
-        self._checker: Any = None
-        self._summaries: JsonObject = {}  # per eye: the check summary of its current image (None: unchecked)
+        self._renderer: Renderer | None = None
+        self._checker: FrameChecker | None = None
+        self._summaries: dict[str, FrameSummary | None] = {}  # per eye: the check summary of its current image (None: unchecked)
         self._rendered: dict[str, int] = {}  # per eye: images rendered (not reused) in the current phase
         self._shown: JsonObject = {}  # per eye: (trial, phase) of the current image
         # 1: every rendered image is checked; n: each eye's first image of every phase and then
@@ -103,10 +113,10 @@ class SceneRenderer:
         # the time-independent parts of the current trial's scenes: per (phase, eye centre) either the whole
         # scene (nothing in it moves) or each shown item's primitives (None: the item moves, built per frame)
         self._parts_row: TrialRecord | None = None
-        self._parts: dict[tuple[Any, ...], Any] = {}
+        self._parts: dict[tuple[PhaseSpec, tuple[float, ...]], StaticParts] = {}
 
     def _scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str,
-               head_pose: HeadPose | None) -> Any:
+               head_pose: HeadPose | None) -> Scene | None:
         """The scene this eye sees in this phase, or None when nothing is drawn (cameras only)."""
         from psyop.rendering.transform import scene_in_head_per_primitive as scene_in_head  # the former path
         from psyop.stimulus import blank_scene, build_scene, recalibration_cross_scene, scene_origin_m, text_scene
@@ -129,7 +139,7 @@ class SceneRenderer:
         return scene_in_head(scene, *head_pose) if head_pose is not None else scene
 
     def _frame_scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str,
-                     head_pose: HeadPose | None, frame_scenes: dict[tuple[float, ...], Any]) -> Any:
+                     head_pose: HeadPose | None, frame_scenes: dict[tuple[float, ...], Scene | None]) -> Scene | None:
         """:meth:`_scene` for this frame, each scene built once for the eyes that share it and only its moving
         items rebuilt (see the class docstring); ``frame_scenes``: this frame's scenes so far, by eye centre or
         scene origin."""
@@ -144,8 +154,9 @@ class SceneRenderer:
         key = tuple(float(c) for c in where)
         if key not in frame_scenes:
             scene = self._world_scene(row, phase, t_in_phase_s, eye)
-            world_fixed = scene is not None and head_pose is not None and not self._head_fixed(phase)
-            frame_scenes[key] = scene_in_head(scene, *head_pose) if world_fixed else scene
+            if scene is not None and head_pose is not None and not self._head_fixed(phase):  # world-fixed
+                scene = scene_in_head(scene, *head_pose)
+            frame_scenes[key] = scene
         return frame_scenes[key]
 
     def _head_fixed(self, phase: PhaseSpec) -> bool:
@@ -154,7 +165,7 @@ class SceneRenderer:
         text = phase == self.plan.response.phase and self.plan.response.participant_text is not None
         return phase.show == "cross" or text or (phase.show == "blank" and not phase.primitives)
 
-    def _world_scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str) -> Any:
+    def _world_scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str) -> Scene | None:
         """:meth:`_scene` without a head pose, from the trial's cached time-independent parts."""
         from psyop.rendering.scene import Scene
         from psyop.stimulus import build_scene
@@ -168,8 +179,8 @@ class SceneRenderer:
             parts = self._parts[key] = self._static_parts(row, phase, eye)
         if isinstance(parts, tuple):
             return parts[0]
-        prims: list[Any] = []
-        meshes: list[Any] = []
+        prims: list[Primitive] = []
+        meshes: list[MeshInstance] = []
         aperture = None
         for item_id, part in parts:
             if part is None:  # a moving item: built for this frame's time
@@ -180,7 +191,7 @@ class SceneRenderer:
             aperture = part.aperture if part.aperture is not None else aperture
         return Scene(tuple(prims), aperture=aperture, meshes=tuple(meshes))
 
-    def _static_parts(self, row: TrialRow, phase: PhaseSpec, eye: str) -> Any:
+    def _static_parts(self, row: TrialRow, phase: PhaseSpec, eye: str) -> StaticParts:
         """What of this phase's scene does not depend on time: ``(scene,)`` when nothing in it moves (the
         whole scene, or None), else ``[(id, its one-item scene, or None for an item that moves)]`` for
         every shown item in the protocol's order (the order is the layer order; the last aperture wins)."""
@@ -191,7 +202,7 @@ class SceneRenderer:
         if whole is None or phase.show not in ("stimulus", "blank") or self._head_fixed(phase):
             return (whole,)  # the cross, the text, an empty blank, nothing drawn: never move
         interval = max(1, phase.interval)
-        show: Any = phase.primitives
+        show: Literal["all"] | Sequence[str] | None = phase.primitives
         if show is None:  # build_scene's default: the interval's own show: list
             phases = interval_phases(self.protocol)
             show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
@@ -205,7 +216,7 @@ class SceneRenderer:
                 for item in shown]
 
     def _camera(self, eye: str, fixation_m: tuple[float, float, float], mode: str, frame: FrameRequest | None,
-                row: TrialRow | None = None) -> Any:
+                row: TrialRow | None = None) -> EyeCamera:
         """This eye's camera: from the display's view and at its target's size where the display
         gives them (a headset runtime), else from the protocol's display profile and the rig; ``row``
         (the trial) sets a rendered NC that is a factor (display.rendering_nc)."""
@@ -232,7 +243,7 @@ class SceneRenderer:
         cameras_ok = True
         ok = True
         images = checked = 0
-        frame_scenes: dict[tuple[float, ...], Any] = {}
+        frame_scenes: dict[tuple[float, ...], Scene | None] = {}
         for eye in self.eyes:
             camera = self._camera(eye, fixation_m, mode, frame, row)
             cameras_ok &= bool(np.isfinite(camera.view).all() and np.isfinite(camera.projection).all())
@@ -273,15 +284,18 @@ class SceneRenderer:
     def _background(self) -> tuple[float, float, float]:
         from psyop.stimulus import blank_scene
 
-        return tuple(blank_scene().background) if self._renderer is None else tuple(self._renderer.scene.background)
+        r, g, b = blank_scene().background if self._renderer is None else self._renderer.scene.background
+        return (r, g, b)
 
-    def _check(self, eye: str) -> Any:
+    def _check(self, eye: str) -> FrameSummary:
         """The frame's check summary, reduced on the GPU (no full readback)."""
+        renderer = self._renderer
+        assert renderer is not None, "checked after this eye's image was rendered"
         if self._checker is None:
             from psyop.rendering.frame_check import FrameChecker
 
-            self._checker = FrameChecker(self._renderer.ctx)
-        return self._checker.summarise(self._renderer.colour_texture(eye))
+            self._checker = FrameChecker(renderer.ctx)
+        return self._checker.summarise(renderer.colour_texture(eye))
 
     def close(self) -> None:
         if self._checker is not None:
@@ -294,7 +308,7 @@ class SceneRenderer:
             self._ctx.release()
         self._ctx = None
 
-    def eye_textures(self) -> list[Any]:
+    def eye_textures(self) -> list[moderngl.Texture]:
         """Each eye's latest image as a colour texture, left eye first; [] until every eye has one."""
         if self._renderer is None:
             return []

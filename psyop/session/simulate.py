@@ -6,7 +6,6 @@ analysis and checking that the analysis recovers the observers' known parameters
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -63,8 +62,11 @@ def run_job(job: SimulatedJob, data_root: Path, mesh_files: MeshFiles | None = N
     from psyop.schedule import compile_schedule
     from psyop.session.runner import SessionOptions, run_session
 
-    meta = data_root / job.study / f"sub-{job.participant}" / "ses-1" / "session.json"
-    if meta.exists() and json.loads(meta.read_text()).get("status") == "complete":
+    from psyop.session.log.layout import SessionPaths
+    from psyop.session.log.record import read_record
+
+    record = read_record(SessionPaths(data_root, job.study, job.participant, 1))  # session.json, typed
+    if record is not None and record.status == "complete":
         return job.study, job.participant, "already complete", 0
     # images are rendered and checked in the first participant's session of each study only:
     # the check is of the pipeline, and an OpenGL context per session would double the run time

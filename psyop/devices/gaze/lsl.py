@@ -60,7 +60,7 @@ def parse_spec(arg: str) -> tuple[str, str | None]:
     return name, (map_spec or None)
 
 
-def stream_channels(info: Any) -> tuple[tuple[str, str | None], ...]:
+def stream_channels(info: Any) -> tuple[tuple[str, str | None], ...]:  # Any: pylsl.StreamInfo (pylsl is untyped)
     """(label, eye) of each channel of a full ``pylsl.StreamInfo`` (``desc/channels``); a stream
     without channel descriptions gets labels ``"0"``, ``"1"``, ..."""
     found: list[tuple[str, str | None]] = []
@@ -90,7 +90,7 @@ class LslGazeSource:
         self.clock_jump_s = clock_jump_s
         self.map: ChannelMap | None = None
         self._index: dict[str, int] = {}
-        self._inlet: Any = None
+        self._inlet: Any = None  # Any: a pylsl.StreamInlet (untyped)
         self._source_id = ""
         self._period_s = math.nan
         self._lock = threading.Lock()
@@ -111,7 +111,7 @@ class LslGazeSource:
         self._reconnect_from_s: float | None = None  # session time of the loss, until data comes back
 
     # connection --------------------------------------------------------------------------
-    def _resolve(self, timeout_s: float) -> Any | None:
+    def _resolve(self, timeout_s: float) -> Any | None:  # Any: a pylsl.StreamInfo (untyped)
         import pylsl
 
         for prop in ("name", "type"):
@@ -120,7 +120,7 @@ class LslGazeSource:
                 return found[0]
         return None
 
-    def _open(self, info: Any) -> None:
+    def _open(self, info: Any) -> None:  # Any: a pylsl.StreamInfo (untyped)
         import pylsl
 
         inlet = pylsl.StreamInlet(info, max_buflen=30, recover=False)
@@ -263,7 +263,8 @@ class LslGazeSource:
             if not (math.isfinite(x) and math.isfinite(y)):
                 return _NAN3
             d = m.scene.direction_world(x, y)
-            return world_mm_to_head_m(tuple(1000.0 * m.scene.distance_m * c for c in d))  # type: ignore[arg-type]
+            x_mm, y_mm, z_mm = (1000.0 * m.scene.distance_m * c for c in d)
+            return world_mm_to_head_m((x_mm, y_mm, z_mm))
         point = (self._value(sample, "gaze_point_x"), self._value(sample, "gaze_point_y"),
                  self._value(sample, "gaze_point_z"))
         return world_mm_to_head_m(point) if m.fixation == "pupil_world_mm" else point

@@ -20,7 +20,6 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
 
 import msgpack
 import numpy as np
@@ -48,7 +47,7 @@ def world_to_head_direction(direction: tuple[float, float, float]) -> tuple[floa
     return (x, -y, -z)
 
 
-def _triple(value: Any) -> tuple[float, float, float] | None:
+def _triple(value: object) -> tuple[float, float, float] | None:
     if isinstance(value, (list, tuple)) and len(value) >= 3:
         return (float(value[0]), float(value[1]), float(value[2]))
     return None
@@ -406,7 +405,8 @@ class PupilClient:
             pupil_t = float(payload["timestamp"])
             confidence = float(payload.get("confidence", 0.0))
             point = payload.get("gaze_point_3d") or (math.nan, math.nan, math.nan)
-            fixation = world_mm_to_head_m(tuple(float(v) for v in point[:3]))
+            x_mm, y_mm, z_mm = (float(v) for v in point[:3])
+            fixation = world_mm_to_head_m((x_mm, y_mm, z_mm))
             left, right = pupil_eyes(payload)
             norm = payload.get("norm_pos") or (math.nan, math.nan)
             norm_pos = (float(norm[0]), float(norm[1]))

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 GraphicsApi = Literal["egl", "xlib"]
 #: a pyopenxr struct, handle or enum: pyopenxr ships no type stubs, so its ctypes objects are untyped
-XrObject = Any
+XrObject = Any  # Any: pyopenxr is untyped (above)
 
 GRAPHICS_APIS: tuple[GraphicsApi, ...] = ("egl", "xlib")
 
@@ -86,7 +86,10 @@ def create_context(api: GraphicsApi) -> moderngl.Context:
     """A standalone moderngl context of the kind ``api`` binds (made current on this thread)."""
     import moderngl
 
-    return moderngl.create_standalone_context(backend="egl") if api == "egl" else moderngl.create_standalone_context()
+    if api == "egl":
+        # moderngl-stubs 5.13 type each keyword of **settings as a dict (it is one setting's value)
+        return moderngl.create_standalone_context(backend="egl")  # type: ignore[arg-type]
+    return moderngl.create_standalone_context()
 
 
 @dataclass

@@ -92,7 +92,7 @@ class OpenXRDisplay:
             raise xr_error(choice, "unsupported")
         try:
             self._ctx = create_context(choice.api)
-        except Exception as exc:  # noqa: BLE001 - no EGL device, or no GLX on $DISPLAY
+        except Exception as exc:  # re-raised as a one-line UserError: no EGL device, or no GLX on $DISPLAY
             raise xr_error(f"psyop could not create its OpenGL context for the {choice.api} binding", exc) from exc
         try:
             self.runtime = XrRuntime(self._ctx, choice, reference_space=reference_space)
@@ -117,7 +117,7 @@ class OpenXRDisplay:
         try:
             self._offset_ns = self.runtime.xr_time_now_ns()
             self._swapchains = self._create_swapchains()
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:  # re-raised as a one-line UserError after closing
             self.close()
             raise xr_error("creating the swapchains failed", exc, self.runtime.facts.runtime) from exc
         except BaseException:  # a Ctrl-C during the start: close the runtime before it propagates

@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, ParamSpec, TypeVar
 
 from psyop.errors import UserError
 from psyop.devices.xr.binding import BindingChoice, XrObject, current_binding
@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     import moderngl
 
 T = TypeVar("T")
+P = ParamSpec("P")
 
 #: exit code of a headset runtime that is absent or fails (a device problem, not bad input)
 XR_EXIT_CODE = 3
@@ -67,8 +68,8 @@ def xr_error(what: str, exc: BaseException | str, runtime: str = "the OpenXR run
 def import_xr() -> XrObject:
     """pyopenxr, or one line naming the extra that brings it."""
     try:
-        import xr  # noqa: PLC0415 - optional dependency
-        import xr.raw_functions  # noqa: F401
+        import xr  # optional dependency, imported lazily
+        import xr.raw_functions  # binds xr.raw_functions (xrGetSystemProperties, xrLocateSpace below)
     except ImportError as exc:
         raise UserError(f"--display openxr needs pyopenxr: pip install 'psyop[xr]' ({exc})", "--display",
                         XR_EXIT_CODE) from exc
@@ -150,15 +151,15 @@ def runtime_threads_without_signals() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)  # a held signal is delivered now
         for signum, handler in previous_handlers.items():
             signal.signal(signum, handler)
-        for signum in dict.fromkeys(arrived):
-            previous_handlers[signum](signum, None)
+        for number in dict.fromkeys(arrived):
+            previous_handlers[signal.Signals(number)](number, None)
 
 
-def signals_held(method: Callable[..., T]) -> Callable[..., T]:
+def signals_held(method: Callable[P, T]) -> Callable[P, T]:
     """A method that calls into the runtime, run with the signals held (see above)."""
 
     @functools.wraps(method)
-    def held(*args: Any, **kwargs: Any) -> T:
+    def held(*args: P.args, **kwargs: P.kwargs) -> T:
         with runtime_threads_without_signals():
             return method(*args, **kwargs)
 
@@ -169,7 +170,7 @@ def runtime_extensions(xr: ModuleType) -> set[str]:
     """The instance extensions the active runtime offers; no runtime is a one-line error (exit 3)."""
     try:
         return {_text(e.extension_name) for e in xr.enumerate_instance_extension_properties()}
-    except Exception as exc:  # noqa: BLE001 - the loader finds no runtime
+    except Exception as exc:  # re-raised as a one-line UserError: the loader finds no runtime
         raise xr_error("no OpenXR runtime could be loaded", exc) from exc
 
 
@@ -196,7 +197,7 @@ class XrRuntime:
         self.graphics = binding
         self.facts = RuntimeFacts(reference_space=reference_space, graphics=binding.api)
         self.instance = self.system = self.session = None
-        self._spaces: list[XrObject] = []
+        self._spaces = []
         self.state = xr.SessionState.UNKNOWN
         self.running = False
         self._lost = ""
@@ -216,7 +217,7 @@ class XrRuntime:
             props = xr.get_instance_properties(self.instance)
             self.facts.runtime = f"{_text(props.runtime_name)} {xr.Version(props.runtime_version)}"
             self.system = xr.get_system(self.instance, xr.SystemGetInfo(form_factor=xr.FormFactor.HEAD_MOUNTED_DISPLAY))
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:  # re-raised as a one-line UserError after closing
             self.close()
             raise xr_error("no headset (HMD system) is available", exc, self.facts.runtime or "the OpenXR runtime") from exc
         try:
@@ -224,7 +225,7 @@ class XrRuntime:
         except UserError:
             self.close()
             raise
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:  # re-raised as a one-line UserError after closing
             self.close()
             raise xr_error("creating the session failed", exc, self.facts.runtime) from exc
 

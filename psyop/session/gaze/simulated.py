@@ -253,7 +253,7 @@ class SimulatedTracker:
         for window in np.unique(windows):
             rows = windows == window
             self._noise(int(window) * 256)
-            noise[rows] = self._noise_cache[1][index[rows]]  # type: ignore[index]
+            noise[rows] = self._noise_cache[1][index[rows]]  # type: ignore[index]  # _noise() just filled the cache
         ecc = np.hypot(angles[:, 0], angles[:, 1])
         err = offsets + self._error_grow_dir[None, :] * c.error_per_15deg * (ecc / 15.0)[:, None]
         drift = self._drift_dir[None, :] * (c.drift_start_deg + c.drift_deg_per_min * t / 60.0)[:, None]

@@ -84,7 +84,7 @@ class SessionPaths:
 
     def next_run_index(self) -> int:
         """One more than the highest segment index of either kind (0 for a new session)."""
-        indices = [int(_SEGMENT_NAME.fullmatch(p.name).group(2))  # type: ignore[union-attr]
+        indices = [int(_SEGMENT_NAME.fullmatch(p.name).group(2))  # type: ignore[union-attr]  # segments() lists matching names only
                    for kind in ("trials", "frames", "gaze") for p in self.segments(kind)]
         return max(indices, default=-1) + 1
 

@@ -58,7 +58,7 @@ class DurableStreamWriter:
         self.schema = schema
         self._fsync = fsync
         fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0), 0o644)
-        self._file = os.fdopen(fd, "wb", buffering=0)  # noqa: SIM115 - lifetime managed by close()
+        self._file = os.fdopen(fd, "wb", buffering=0)  # lifetime managed by close()
         schema_bytes = schema.serialize().to_pybytes()
         self._schema_crc = zlib.crc32(schema_bytes)
         self._n_batches = 0

@@ -9,6 +9,7 @@ once per participant from (seed, participant).
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from typing import Any
 
@@ -26,7 +27,7 @@ def _phi(z: float) -> float:
     return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
 
 
-def _get(params: JsonMapping, key: str, default: Any = None, *, required: bool = False) -> Any:
+def _get(params: JsonMapping, key: str, default: Any = None, *, required: bool = False) -> Any:  # Any: a JSON parameter
     if key in params and params[key] is not None:
         return params[key]
     if required:
@@ -34,8 +35,9 @@ def _get(params: JsonMapping, key: str, default: Any = None, *, required: bool =
     return default
 
 
-class SimulatedObserver:
-    """Base: per-trial and per-participant random streams."""
+class SimulatedObserver(ABC):
+    """Base: per-trial and per-participant random streams; each kind implements :meth:`collect`
+    (the :class:`~psyop.session.responses.base.ResponseSource` seam)."""
 
     needs_images = False
 
@@ -47,6 +49,10 @@ class SimulatedObserver:
 
     def trial_rng(self, row: TrialRow) -> np.random.Generator:
         return np.random.default_rng([self.seed & 0xFFFFFFFF, seed_for(self.participant), int(row["trial_seed"]) & 0xFFFFFFFF, 11])
+
+    @abstractmethod
+    def collect(self, row: TrialRow, now_s: float) -> Response:
+        """The simulated answer to ``row`` (at once: a simulated observer never waits)."""
 
     def timed_out(self) -> None:
         return None
