@@ -83,14 +83,18 @@ def test_a_shipped_study_reports_n_consistent_with_power_at_n_minus_1_and_n() ->
 def test_a_user_protocol_with_quest_plus_inside(tmp_path: Path) -> None:
     text = (ROOT / "protocols" / "examples" / "detection_quest_plus.yaml").read_text()
     assert "repetitions: 40 " in text and "name: detection_quest_plus" in text
-    path = tmp_path / "my_quest.yaml"  # a protocol an author wrote: 8 QUEST+ trials per back distance
-    path.write_text(text.replace("repetitions: 40 ", "repetitions: 8 ").replace("name: detection_quest_plus",
-                                                                                 "name: my_quest"))
+    assert "  level_column: level_D\n" in text
+    path = tmp_path / "my_quest.yaml"  # an author's protocol: 8 QUEST+ trials per back distance, a threshold slope
+    path.write_text(text.replace("repetitions: 40 ", "repetitions: 8 ")
+                    .replace("name: detection_quest_plus", "name: my_quest")
+                    .replace("  level_column: level_D\n", "  level_column: level_D\n  threshold_slope: 0.15\n"
+                             "  threshold_offset_column: back_D\n"))
     run = PowerRun(path, (), replications=2, seed=2)
-    search = TargetSearch(0.5, 3, 6)
+    search = TargetSearch(0.5, 2, 4)
     table, target = search_target(run, search)
-    assert set(table["participants"]) <= set(range(3, 7)) and 3 in set(table["participants"])
-    assert len(target) >= 1 and _check_against_direct(run, search, table, target) >= 1
+    assert set(table["participants"]) == {2, 3, 4}  # bracket 2, 4, then bisection at 3
+    assert target["n"].notna().any()  # the slope's n is found by bisection, not only flagged
+    assert len(target) == 2 and _check_against_direct(run, search, table, target) >= 2
 
 
 def test_cli_unreachable_target_is_a_flag_and_bad_arguments_exit_2(tmp_path: Path,
