@@ -144,13 +144,18 @@ def _sorted(table: pd.DataFrame, tests: list[str]) -> pd.DataFrame:
 
 
 def _flags(search: TargetSearch, test: str, found: dict[tuple[str, str], _Bisection | None],
-           largest_tried: int) -> str:
+           largest_tried: int, replications: int) -> str:
+    from scipy.stats import binomtest
+
     flags = []
     for _, column, label in CRITERIA:
         b = found[(test, column)]
         if b is None:
+            ceiling = float(binomtest(replications, replications).proportion_ci(method="exact").low)
+            why = (f" (with {replications} replications per n the lower bound is at most {ceiling:.3f})"
+                   if column == "ci_low" and ceiling < search.target_power else "")
             flags.append(f"{test}: {label} below {search.target_power:g} at every n tried, up to {largest_tried} "
-                         f"(--max-participants {search.max_participants}): not reached")
+                         f"(--max-participants {search.max_participants}): not reached{why}")
         elif b.lo is None:
             flags.append(f"{label} reaches {search.target_power:g} already at --min-participants "
                          f"{search.min_participants}: smaller n not tried")
@@ -170,7 +175,7 @@ def target_table(table: pd.DataFrame, search: TargetSearch, found: dict[tuple[st
         below = _value(table, test, n - 1, "power") if n is not None else float("nan")
         rows.append({"test": test, "target_power": search.target_power, **ns, **at, "power_below": below,
                      "max_participants": search.max_participants,
-                     "flag": _flags(search, test, found, largest_tried)})
+                     "flag": _flags(search, test, found, largest_tried, int(table["n_replications"].max()))})
     out = pd.DataFrame(rows, columns=TARGET_COLUMNS)
     for column in ("n", "n_ci_high", "n_ci_low", "n_replications"):
         out[column] = out[column].astype("Int64")
