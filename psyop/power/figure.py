@@ -24,7 +24,10 @@ def _mark_targets(ax: Axes, target: pd.DataFrame, colours: dict[str, str]) -> No
         high = int(row["n_ci_low"]) if not pd.isna(row["n_ci_low"]) else int(row["max_participants"])
         ax.axvspan(low, high, color=colour, alpha=0.08, lw=0)
         upper = str(high) if not pd.isna(row["n_ci_low"]) else f"> {high}"
-        ax.plot([], [], ls=":", marker="*", color=colour, label=f"{row['test']}: N = {int(row['n'])} [{low}, {upper}]")
+        at_min = int(row["min_participants"])  # reached at the smallest n tried: fewer may do
+        n_text, low_text = (f"<= {at_min}" if int(row["n"]) == at_min else f"= {int(row['n'])}",
+                            f"<= {low}" if low == at_min else str(low))
+        ax.plot([], [], ls=":", marker="*", color=colour, label=f"{row['test']}: N {n_text} [{low_text}, {upper}]")
 
 
 def plot_power(table: pd.DataFrame, title: str, target: pd.DataFrame | None = None) -> Figure:
@@ -48,7 +51,7 @@ def plot_power(table: pd.DataFrame, title: str, target: pd.DataFrame | None = No
     ax.set_ylabel(f"power (share of replications with p < {alpha:g})")
     ax.set_ylim(0, 1.02)
     n = int(table["n_replications"].max()) if len(table) else 0
-    marked = f"; target power {level:g}: N and its interval marked" if target is not None else ""
+    marked = f"\ntarget power {level:g}: each test's N (star) and its interval (band) marked" if target is not None else ""
     ax.set_title(f"{title}\nSIMULATED: {n} replications per point, 95 % Clopper-Pearson CIs{marked}", fontsize=9)
     ax.legend(fontsize=6 if target is not None else 7, loc="lower right")
     fig.tight_layout()

@@ -30,7 +30,7 @@ from psyop.power.run import PowerRun, run_power
 CRITERIA = (("n_ci_high", "ci_high", "upper 95 % bound"), ("n", "power", "power estimate"),
             ("n_ci_low", "ci_low", "lower 95 % bound"))
 TARGET_COLUMNS = ["test", "target_power", "n", "n_ci_high", "n_ci_low", "power", "ci_low", "ci_high",
-                  "power_below", "n_replications", "max_participants", "flag"]
+                  "power_below", "n_replications", "min_participants", "max_participants", "flag"]
 
 #: evaluates power at the given participant counts: the rows of power_table for them
 Evaluate = Callable[[PowerRun, tuple[int, ...]], pd.DataFrame]
@@ -174,7 +174,7 @@ def target_table(table: pd.DataFrame, search: TargetSearch, found: dict[tuple[st
               for c in ("power", "ci_low", "ci_high", "n_replications")}
         below = _value(table, test, n - 1, "power") if n is not None else float("nan")
         rows.append({"test": test, "target_power": search.target_power, **ns, **at, "power_below": below,
-                     "max_participants": search.max_participants,
+                     "min_participants": search.min_participants, "max_participants": search.max_participants,
                      "flag": _flags(search, test, found, largest_tried, int(table["n_replications"].max()))})
     out = pd.DataFrame(rows, columns=TARGET_COLUMNS)
     for column in ("n", "n_ci_high", "n_ci_low", "n_replications"):

@@ -106,7 +106,7 @@ def test_cli_unreachable_target_is_a_flag_and_bad_arguments_exit_2(tmp_path: Pat
     assert main(["power", realism, "--target-power", "0.99", "--replications", "2", "--min-participants", "2",
                  "--max-participants", "3", "--no-progress", "--jobs", "1", "--out", str(out)]) == 0
     target = pd.read_csv(out / "target.csv")
-    assert target["n_ci_low"].isna().all() and len(target) == 3
+    assert target["n_ci_low"].isna().all() and len(target) == 3 and set(target["min_participants"]) == {2}
     assert target["flag"].str.contains(r"lower 95 % bound below 0.99 at every n tried, up to 3 \(--max-par").all()
     assert sorted(pd.read_csv(out / "power.csv")["participants"].unique()) in ([2, 3], [3], [2])
     assert "target power 0.99" in capsys.readouterr().out and (out / "power.png").stat().st_size > 0
