@@ -8,7 +8,15 @@ import sys
 import time
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 from psyop.errors import UserError
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from psyop.power.run import PowerRun
+    from psyop.power.target import TargetSearch
 
 
 def _counts(text: str) -> tuple[int, ...]:
@@ -32,7 +40,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "processes and on a Dask cluster (--scheduler). See docs/adaptive.md.",
     )
     parser.add_argument("protocol", type=Path, help="protocol YAML with an observer: section")
-    parser.add_argument("--participants", type=_counts, default=(4, 6, 8, 12, 19), help="comma-separated sample sizes")
+    parser.add_argument("--participants", type=_counts, default=None,
+                        help="comma-separated sample sizes (default 4,6,8,12,19; not with --target-power)")
     parser.add_argument("--replications", type=int, default=100, help="simulated studies per sample size")
     parser.add_argument("--effect", action="append", default=[], metavar="KEY=VALUE",
                         help="set an observer parameter, e.g. threshold_slope=0.05 (repeatable)")
@@ -49,12 +58,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-checkpoint", action="store_true", help="keep no replications (nothing resumes)")
     parser.add_argument("--lost-after-s", type=float, default=60.0, metavar="S",
                         help="--scheduler: a cluster without any worker for S seconds is lost (exit 3; default 60)")
+    parser.add_argument("--target-power", type=float, default=None, metavar="P",
+                        help="search the number of participants each test needs for power P (e.g. 0.8): "
+                        "bracketing n = MIN, 2 MIN, 4 MIN, ... MAX, then bisection on integers, --replications "
+                        "per n; reports n and its interval (docs/adaptive.md)")
+    parser.add_argument("--min-participants", type=int, default=2, metavar="MIN",
+                        help="--target-power: the smallest n tried (default 2)")
+    parser.add_argument("--max-participants", type=int, default=40, metavar="MAX",
+                        help="--target-power: the largest n tried; a target not reached by then is flagged (default 40)")
     parser.set_defaults(func=main)
 
 
 def main(args: argparse.Namespace) -> int:
     from psyop.power.effects import parse_effects
-    from psyop.power.run import PowerRun, run_power
+    from psyop.power.run import PowerRun
     from psyop.power.summary import format_table
 
     if not args.protocol.exists():
@@ -69,23 +86,30 @@ def main(args: argparse.Namespace) -> int:
 
     checkpoint = None if args.no_checkpoint else (
         args.checkpoint or (args.out / "replications" if args.out is not None else DEFAULT_DIR))
-    run = PowerRun(protocol_path=args.protocol, participants=args.participants, replications=args.replications,
+    search = _search(args)
+    run = PowerRun(protocol_path=args.protocol, participants=args.participants or (4, 6, 8, 12, 19), replications=args.replications,
                    seed=args.seed, effects=parse_effects(args.effect), alpha=args.alpha, scheduler=args.scheduler,
                    jobs=max(1, args.jobs), progress=not args.no_progress and sys.stderr.isatty(),
                    checkpoint=checkpoint, lost_after_s=args.lost_after_s)
     start = time.perf_counter()
     resumed: list[int] = []
     try:
-        table, results = run_power(run, resumed)
+        table, target, n_studies = _run(run, search, resumed)
     except KeyboardInterrupt:
         kept = f"; the finished ones are kept in {checkpoint}/: rerun the same command to resume" if checkpoint else ""
         print(f"psyop power: interrupted{kept}", file=sys.stderr)
         return 130
     where = args.scheduler or f"{run.jobs} local process(es)"
     again = f", {resumed[0]} of them resumed from {checkpoint}/" if resumed and resumed[0] else ""
-    print(f"psyop power: {args.protocol} -- SIMULATED, {len(results)} studies{again} on {where} in "
+    print(f"psyop power: {args.protocol} -- SIMULATED, {n_studies} studies{again} on {where} in "
           f"{time.perf_counter() - start:.1f} s (seed {args.seed}, alpha {args.alpha:g})")
     print(format_table(table))
+    if target is not None and search is not None:
+        from psyop.power.target import format_target
+
+        print(f"\ntarget power {search.target_power:g} (bracketing then bisection over n = "
+              f"{search.min_participants}..{search.max_participants}, {run.replications} replications per n):")
+        print(format_target(target))
     if args.out is not None:
         from psyop.figures.output import save_figure
         from psyop.power.figure import plot_power
@@ -94,6 +118,37 @@ def main(args: argparse.Namespace) -> int:
         from psyop.atomic import write_atomic
 
         write_atomic(args.out / "power.csv", table.to_csv(index=False))
-        save_figure(plot_power(table, f"Power by simulation: {args.protocol.name}"), args.out / "power.png")
-        print(f"wrote {args.out / 'power.csv'} and {args.out / 'power.png'}", file=sys.stderr)
+        if target is not None:
+            write_atomic(args.out / "target.csv", target.to_csv(index=False))
+        save_figure(plot_power(table, f"Power by simulation: {args.protocol.name}", target), args.out / "power.png")
+        extra = f", {args.out / 'target.csv'}" if target is not None else ""
+        print(f"wrote {args.out / 'power.csv'}{extra} and {args.out / 'power.png'}", file=sys.stderr)
     return 0
+
+
+def _search(args: argparse.Namespace) -> TargetSearch | None:
+    """The --target-power search, validated; None without --target-power."""
+    from psyop.power.target import TargetSearch
+
+    if args.target_power is None:
+        if args.min_participants != 2 or args.max_participants != 40:
+            raise UserError("--min-participants/--max-participants need --target-power", "--max-participants")
+        return None
+    if args.participants is not None:
+        raise UserError("--participants and --target-power exclude each other: the search chooses n "
+                        "(bound it with --min-participants/--max-participants)", "--participants")
+    return TargetSearch(args.target_power, args.min_participants, args.max_participants)
+
+
+def _run(run: PowerRun, search: TargetSearch | None,
+         resumed: list[int]) -> tuple[pd.DataFrame, pd.DataFrame | None, int]:
+    """The power table, the target table (None without a search) and the number of studies simulated."""
+    from psyop.power.run import run_power
+
+    if search is None:
+        table, results = run_power(run, resumed)
+        return table, None, len(results)
+    from psyop.power.target import search_target
+
+    table, target = search_target(run, search)
+    return table, target, int(table.groupby("participants")["n_replications"].max().sum())
