@@ -108,6 +108,12 @@ def item_of(name: str, item_ids: list[str]) -> str:
     return max(matches, key=len) if matches else name
 
 
+def _point3(point: np.ndarray) -> tuple[float, float, float]:
+    """A 3-vector as a tuple of Python floats."""
+    x, y, z = (float(c) for c in point)
+    return x, y, z
+
+
 def _fixation_prefix(protocol: Protocol) -> str | None:
     from psyop.protocol import scene as ps
 
@@ -133,6 +139,8 @@ def iter_frames(plan: SessionPlan, settings: AuditSettings) -> Iterator[tuple[Au
                      condition=f"{row['condition']}|{plan.adaptive.factor}={level:g}")
                 for row in rows for level in levels]
     elif settings.levels:
+        from psyop.adaptive.session import preview_levels
+
         preview_levels(plan.protocol, settings.levels)  # the error: no adaptive factor to set
     for row in rows:
         for index, phase in phases:
@@ -183,7 +191,7 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
             records.append(FrameRecord(frame, names, tuple(item_of(n, item_ids) for n in names),
                                        tuple(float(a) for a in areas),
                                        hidden_by(scene.primitives, camera.centre_of_projection_m), image,
-                                       tuple(float(c) for c in camera.centre_of_projection_m),
+                                       _point3(camera.centre_of_projection_m),
                                        _px_per_m_shift(scene, camera, display)))
             if progress is not None:
                 progress(done, len(frames))
