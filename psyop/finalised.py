@@ -78,7 +78,8 @@ def record_finalised(meta: JsonObject, directory: Path, files: Iterable[Path]) -
     ['trials.parquet']
     """
     directory = Path(directory)
-    previous = meta.get(FINALISED_KEY) if isinstance(meta.get(FINALISED_KEY), dict) else {}
+    stored = meta.get(FINALISED_KEY)
+    previous: JsonObject = stored if isinstance(stored, dict) else {}
     record: JsonObject = {name: value for name, value in previous.items() if (directory / name).is_file()}
     for path in files:
         record[Path(path).relative_to(directory).as_posix()] = file_record(Path(path))
@@ -99,7 +100,7 @@ class FileProblem:
     def describe(self) -> str:
         if self.kind == "changed":
             return (f"{self.name} does not match the SHA-256 recorded when the session was finalised "
-                    f"(damaged or edited since: recorded {self.recorded_sha256[:12]}..., now "
+                    f"(damaged or edited since: recorded {(self.recorded_sha256 or '')[:12]}..., now "
                     f"{(self.found_sha256 or '')[:12]}...)")
         if self.kind == "missing":
             return f"{self.name} is recorded as finalised but missing"

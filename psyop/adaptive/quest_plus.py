@@ -87,11 +87,12 @@ class QuestPlusSpec:
             raise ValueError(f"guess rate must be in [0, 1), got {self.guess}")
         if not all(0 <= l < 1 - self.guess for l in self.lapse):
             raise ValueError(f"lapse grid values must be in [0, {1 - self.guess})")
-        if self.first_level is not None:
+        first_level = self.first_level
+        if first_level is not None:
             # the protocol's start, a declared level too: the grid point it stands for, else its exact decimal
-            nearest = min(self.stimulus, key=lambda v: abs(v - float(self.first_level)))
-            first = nearest if abs(nearest - float(self.first_level)) <= _ON_GRID_TOL else \
-                float(Fraction(repr(float(self.first_level))))
+            nearest = min(self.stimulus, key=lambda v: abs(v - float(first_level)))
+            first = nearest if abs(nearest - float(first_level)) <= _ON_GRID_TOL else \
+                float(Fraction(repr(float(first_level))))
             object.__setattr__(self, "first_level", first)
 
     @classmethod

@@ -109,6 +109,12 @@ def item_of(name: str, item_ids: list[str]) -> str:
     return max(matches, key=len) if matches else name
 
 
+def _point3(point: np.ndarray) -> tuple[float, float, float]:
+    """A 3-vector as a tuple of Python floats."""
+    x, y, z = (float(c) for c in point)
+    return x, y, z
+
+
 def _fixation_prefix(protocol: Protocol) -> str | None:
     from psyop.protocol import scene as ps
 
@@ -134,6 +140,8 @@ def iter_frames(plan: SessionPlan, settings: AuditSettings) -> Iterator[tuple[Au
                      condition=f"{row['condition']}|{plan.adaptive.factor}={level:g}")
                 for row in rows for level in levels]
     elif settings.levels:
+        from psyop.adaptive.session import preview_levels
+
         preview_levels(plan.protocol, settings.levels)  # the error: no adaptive factor to set
     for row in rows:
         for index, phase in phases:
@@ -187,7 +195,7 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
             records.append(FrameRecord(frame, names, tuple(item_of(n, item_ids) for n in names),
                                        tuple(float(a) for a in areas),
                                        hidden_by(scene.primitives, camera.centre_of_projection_m), image,
-                                       tuple(float(c) for c in camera.centre_of_projection_m),
+                                       _point3(camera.centre_of_projection_m),
                                        _px_per_m_shift(scene, camera, display)))
             if progress is not None:
                 progress(done, len(frames))
@@ -198,8 +206,8 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
     min_visible = MIN_VISIBLE_SAMPLES / settings.samples_per_axis**2 / px_scale
     from psyop.protocol.scene import Mesh
 
-    meshes = frozenset(str(item.id) for item in protocol.scene if isinstance(item, Mesh))
-    failures, notes = _check(records, item_ids, min_visible, meshes)
+    mesh_ids = frozenset(str(item.id) for item in protocol.scene if isinstance(item, Mesh))
+    failures, notes = _check(records, item_ids, min_visible, mesh_ids)
     return AuditReport(str(protocol.study.name), settings, tuple(records), tuple(failures), tuple(notes))
 
 

@@ -109,9 +109,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:  # disk full, I/O error, permissions: one line naming the file and the fix
         from psyop.atomic import io_error
 
-        error = io_error(exc)
-        print(f"psyop {args.command}: error: {error}", file=sys.stderr)
-        return error.exit_code
+        io_problem = io_error(exc)
+        print(f"psyop {args.command}: error: {io_problem}", file=sys.stderr)
+        return io_problem.exit_code
 
 
 if __name__ == "__main__":  # pragma: no cover

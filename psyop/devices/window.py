@@ -50,7 +50,7 @@ class GlfwWindow:
         self._clock = clock
         self._period_s = 1.0 / float(display_profile.refresh_hz)
         self._keys: list[tuple[str, float]] = []
-        glfw.set_key_callback(self._window._window, self._on_key)
+        glfw.set_key_callback(self._window.handle, self._on_key)
         self.shade = 0.5
         self.scale = scale
         self.flips = FlipSync()
@@ -106,7 +106,7 @@ class GlfwWindow:
         else:
             ctx.screen.use()
             ctx.clear(self.shade, self.shade, self.shade)
-            self._glfw.swap_buffers(self._window._window)
+            self._glfw.swap_buffers(self._window.handle)
         t_s = self._clock.now_s()
         self.flips.add(t_s)
         return t_s

@@ -310,7 +310,7 @@ def plot_preferences(prefs: pd.DataFrame, simulated: bool = False) -> plt.Figure
         se = prefs["se_subjects"].fillna(prefs["se"]) * 100
         ax.bar(xs, prefs["proportion"] * 100, yerr=se, capsize=4, color="#1f77b4", label="% chosen, mean ± SE across participants")
         for x, p, e, s in zip(xs, prefs["proportion"] * 100, se, prefs["stars"]):
-            ax.text(x, p + e + 1.5, s, ha="center", fontsize=10)
+            ax.text(float(x), p + e + 1.5, s, ha="center", fontsize=10)
         ax.axhline(50, color="k", ls=":", lw=0.8, label="no preference (50 %)")
         ax.set_xticks(xs, labels)
         ax.set_ylabel("% of trials the first mode was chosen")

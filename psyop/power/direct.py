@@ -33,6 +33,10 @@ def direct_trials(task: ReplicationTask) -> pd.DataFrame:
         raise UserError("the direct re-simulation needs an observer that answers from the trial row; "
                         "reach answers depend on the rendered geometry", "protocol response")
     plan = compile_plan(protocol)
+    params = plan.observer_params()
+    if params is None:
+        raise UserError("the direct re-simulation needs the protocol's simulated observer (an observer: section)",
+                        "protocol observer")
     if plan.kind is ResponseKind.REACH or plan.adaptive is not None:
         raise UserError("the direct re-simulation covers constant stimuli answered from the trial row only",
                         "protocol design")
@@ -41,7 +45,7 @@ def direct_trials(task: ReplicationTask) -> pd.DataFrame:
         participant = f"S{j + 1:02d}"
         seed = session_seed(task.seed, task.participants, task.replication, j)
         schedule = compile_schedule(protocol, seed, participant_index=j + 1)  # as the ID S{j+1} gives a session
-        observer = make_observer(plan.observer_params(), seed=seed, participant=participant)
+        observer = make_observer(params, seed=seed, participant=participant)
         main = schedule[~schedule["practice"].astype(bool)] if "practice" in schedule else schedule
         answers = [observer.collect(row, 0.0) for row in main.to_dict("records")]
         table = main.reset_index(drop=True).copy()

@@ -25,6 +25,7 @@ import pandas as pd
 
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
+from psyop.protocol.response import TwoIntervalResponse
 
 if TYPE_CHECKING:
     from psyop.statistics.psychometric import FitOptions
@@ -46,9 +47,16 @@ def _not_computed(test: str, exc: Exception) -> TestOutcome:
     return TestOutcome(test, math.nan, f"not computed: {exc}")
 
 
+def _level_factor(protocol: Protocol) -> str:
+    """The two-interval response's level factor (the only response kind with thresholds)."""
+    response = protocol.response
+    assert isinstance(response, TwoIntervalResponse)  # study_tests sends two_interval protocols only
+    return response.level_factor
+
+
 def threshold_condition(protocol: Protocol) -> str:
     """The crossed factor thresholds are compared over (first non-level, non-adaptive factor)."""
-    level = protocol.response.level_factor
+    level = _level_factor(protocol)
     for name in protocol.design.factors:
         if name != level:
             return name
@@ -74,7 +82,7 @@ def two_interval_tests(protocol: Protocol, trials: pd.DataFrame,
     from psyop.statistics.regression import linear_fit
 
     condition = threshold_condition(protocol)
-    level = protocol.response.level_factor
+    level = _level_factor(protocol)
     options = power_fit_options() if options is None else options
     groups = ["participant", condition]
     # only the columns the fit reads: boolean selections of the whole trial table (38 columns, string

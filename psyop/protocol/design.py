@@ -142,7 +142,9 @@ class Factor(StrictModel):
 
 
 def _values(levels: list[Level] | SteppedLevels) -> list[Level]:
-    return levels.values() if isinstance(levels, SteppedLevels) else list(levels)
+    if isinstance(levels, SteppedLevels):
+        return list(levels.values())
+    return list(levels)
 
 
 def _same_level(a: Level | None, b: Level | None) -> bool:
@@ -226,13 +228,13 @@ def count_conditions(factors: dict[str, Factor], limit: int) -> int | None:
             del remaining[name]
     parents = {f.depends_on for f in factors.values() if f.depends_on}
     tracked: list[str] = []
-    states: dict[tuple[object, ...], int] = {(): 1}
+    states: dict[tuple[Level, ...], int] = {(): 1}
     for name in order:
         factor = factors[name]
-        grown: dict[tuple[object, ...], int] = {}
+        grown: dict[tuple[Level, ...], int] = {}
         for state, multiplicity in states.items():
             if factor.adaptive is not None:
-                options: list[Level | SteppedLevels] | None = None
+                options: list[Level] | None = None
                 n_levels = 1
             elif factor.levels is not None:
                 options, n_levels = None, _n_levels(factor.levels)

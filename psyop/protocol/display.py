@@ -77,7 +77,9 @@ class InlineDisplayProfile(StrictModel):
             raise ValueError("give either the four tangents or horizontal_fov_deg, not both")
         if not all(given) and self.horizontal_fov_deg is None:
             raise ValueError("give horizontal_fov_deg (symmetric) or the four tangents tan_left/right/bottom/top")
-        if all(given) and not (self.tan_left < self.tan_right and self.tan_bottom < self.tan_top):
+        left, right, bottom, top = tangents
+        if (left is not None and right is not None and bottom is not None and top is not None
+                and not (left < right and bottom < top)):
             raise ValueError("tan_left must be < tan_right and tan_bottom < tan_top")
         if self.left_tangents is not None:
             if not all(given):
@@ -172,6 +174,7 @@ def rendering_nc_rule(spec: DisplaySpec):
         return NcRule(column=nc.scale.factor, column_unit="scale", signed=nc.signed)
     if nc.mm is not None:
         return NcRule(nc_m=float(nc.mm) / 1000.0)
+    assert nc.scale is not None  # RenderingNc._one: exactly one of mm and scale is given
     return NcRule(scale=float(nc.scale))
 
 

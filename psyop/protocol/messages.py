@@ -14,9 +14,10 @@ import typing
 from typing import Any
 
 from pydantic import BaseModel, ValidationError
+from pydantic_core import ErrorDetails
 
 from psyop.protocol.source import Path, YamlDocument, format_path
-from psyop.records import JsonObject, Loc
+from psyop.records import Loc
 
 MAX_REPORTED = 8
 _BOUNDS = {"greater_than": "greater than", "greater_than_equal": "at least", "less_than": "less than",
@@ -82,7 +83,7 @@ def _short(value: object) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _describe(root: type[BaseModel], error: JsonObject) -> tuple[str, bool]:
+def _describe(root: type[BaseModel], error: ErrorDetails) -> tuple[str, bool]:
     """(message with a hint, whether it points at a key rather than a value)."""
     kind = error["type"]
     loc = tuple(error["loc"])
@@ -117,8 +118,8 @@ def _describe(root: type[BaseModel], error: JsonObject) -> tuple[str, bool]:
         hint = f" Did you mean '{close[0]}'?" if close else ""
         return f"unknown kind '{tag}'.{hint} Kinds: {', '.join(expected)}", False
     if kind == "literal_error":
-        expected = str((error.get("ctx") or {}).get("expected", ""))
-        options = [t.strip().strip("'") for t in expected.replace(" or ", ",").split(",") if t.strip()]
+        expected_text = str((error.get("ctx") or {}).get("expected", ""))
+        options = [t.strip().strip("'") for t in expected_text.replace(" or ", ",").split(",") if t.strip()]
         close = difflib.get_close_matches(str(error.get("input")), options, n=1)
         hint = f" Did you mean '{close[0]}'?" if close else ""
         return f"{_short(error.get('input'))} is not allowed here.{hint} Use one of: {', '.join(options)}", False

@@ -72,6 +72,11 @@ class PairwisePreferenceResponse(StrictModel):
     order: Counterbalance = "balanced"
 
 
+def _reach_modes() -> dict[str, RenderingMode]:
+    """The reach response's default modes: rendering factor level -> rendering mode."""
+    return {"enabled": "ocular", "disabled": "conventional"}
+
+
 class ReachResponse(StrictModel):
     """Blind reach. ``modes`` maps each level of the rendering factor to a rendering mode."""
 
@@ -79,7 +84,7 @@ class ReachResponse(StrictModel):
     question: str = "Reach to where the target was, then pull the trigger."
     rendering_factor: str = "rendering"
     target_factor: str = "target_fraction"
-    modes: dict[str, RenderingMode] = Field(default_factory=lambda: {"enabled": "ocular", "disabled": "conventional"})
+    modes: dict[str, RenderingMode] = Field(default_factory=_reach_modes)
     average_last_samples: Annotated[int, Field(ge=1, le=10000)] = 10
 
 

@@ -162,9 +162,10 @@ def centre_eccentricity_deg(centre: "Centre") -> float:
     NaN while an angle is a factor (known per trial, once the factor's level is filled in)."""
     if isinstance(centre, PolarPoint):
         return math.nan if isinstance(centre.eccentricity_deg, FactorRef) else float(centre.eccentricity_deg)
-    if any(isinstance(c, FactorRef) for c in centre):
+    numbers = [c for c in centre if not isinstance(c, FactorRef)]
+    if len(numbers) != len(centre):
         return math.nan
-    az, el = (math.radians(float(c)) for c in centre)
+    az, el = (math.radians(float(c)) for c in numbers)
     return math.degrees(math.acos(max(-1.0, min(1.0, math.cos(az) * math.cos(el)))))
 
 

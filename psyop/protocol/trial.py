@@ -101,5 +101,7 @@ class TrialSpec(StrictModel):
         total = 0.0
         for phase in self.phases:
             fixed = getattr(phase, "duration_s", None)
-            total += float(fixed if fixed is not None else phase.expected_s)
+            expected = fixed if fixed is not None else phase.expected_s
+            assert expected is not None  # Interval._timing: duration_s or expected_s is given
+            total += float(expected)
         return total

@@ -117,7 +117,7 @@ def placed_primitive(
         u, v = right * hw, up * hh
     else:
         u, v = np.array([hw, 0.0, 0.0]), np.array([0.0, hh, 0.0])
-    return Primitive(shape, centre, tuple(u), tuple(v), material, border=border, name=name)
+    return Primitive(shape, tuple(centre.tolist()), tuple(u), tuple(v), material, border=border, name=name)
 
 
 def frontoparallel_radial_subtense_deg(size_deg: float, eccentricity_deg: float) -> float:

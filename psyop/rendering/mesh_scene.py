@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from psyop.mesh.asset import MeshAsset
 
@@ -98,8 +99,8 @@ def rotation_yaw_pitch_roll(rotation_deg: Sequence[float]) -> np.ndarray:
     return ry @ rx @ rz
 
 
-def model_matrix(position_m: Sequence[float], rotation_deg: Sequence[float], scale: float,
-                 pivot_m: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+def model_matrix(position_m: ArrayLike, rotation_deg: Sequence[float], scale: float,
+                 pivot_m: ArrayLike = (0.0, 0.0, 0.0)) -> np.ndarray:
     """4x4 float64 model matrix: the model point ``pivot_m`` (model units) lands at ``position_m`` (head space),
     the model scaled by ``scale`` (model units -> metres) and rotated by :func:`rotation_yaw_pitch_roll`
     about that point: ``p_head = position + R (scale (p - pivot))``."""

@@ -10,9 +10,13 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
 
 import moderngl
 import numpy as np
+
+if TYPE_CHECKING:
+    import glfw
 
 
 class WindowUnavailable(RuntimeError):
@@ -54,6 +58,9 @@ void main() {
 class Window:
     """A glfw window with an OpenGL 4.1 core context wrapped by moderngl."""
 
+    _window: glfw._GLFWwindowPointerT | None  # None once released
+    _blit: tuple[moderngl.Program, moderngl.VertexArray] | None  # set by the first present_side_by_side
+
     def __init__(self, width_px: int, height_px: int, title: str = "psyop", swap_interval: int = 1):
         import glfw  # imported here: headless use never needs it
 
@@ -74,9 +81,16 @@ class Window:
         self.ctx = moderngl.create_context()
         self.width_px, self.height_px = width_px, height_px
 
+    @property
+    def handle(self) -> glfw._GLFWwindowPointerT:
+        """The live glfw window (for key callbacks and flips by the display that owns this window)."""
+        assert self._window is not None, "window used after release"
+        return self._window
+
     def present(self, framebuffer: moderngl.Framebuffer) -> None:
         """Copy a framebuffer of the window's size to the screen and swap."""
         self.ctx.copy_framebuffer(self.ctx.screen, framebuffer)
+        assert self._window is not None, "present after release"
         self._glfw.swap_buffers(self._window)
         self._glfw.poll_events()
 
@@ -85,21 +99,23 @@ class Window:
         render resolution: texel = screen pixel), then swap. The window must be wide enough."""
         from psyop.rendering.shaders import VERTEX_SHADER
 
-        if getattr(self, "_blit", None) is None:
+        blit = getattr(self, "_blit", None)
+        if blit is None:
             prog = self.ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=BLIT_SHADER)
-            self._blit = (prog, self.ctx.vertex_array(prog, []))
-        prog, vao = self._blit
+            blit = self._blit = (prog, self.ctx.vertex_array(prog, []))
+        prog, vao = blit
         self.ctx.screen.use()
         x = 0
         for texture in textures:
             width, height = texture.size
             self.ctx.viewport = (x, 0, width, height)
             texture.use(0)
-            prog["u_image"].value = 0
-            prog["u_offset_px"].value = (float(x), 0.0)
+            cast(moderngl.Uniform, prog["u_image"]).value = 0  # BLIT_SHADER declares both as uniforms
+            cast(moderngl.Uniform, prog["u_offset_px"]).value = (float(x), 0.0)
             vao.render(moderngl.TRIANGLES, vertices=3)
             x += width
         self.ctx.viewport = (0, 0, self.width_px, self.height_px)
+        assert self._window is not None, "present after release"
         self._glfw.swap_buffers(self._window)
         self._glfw.poll_events()
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import warnings
@@ -234,7 +235,7 @@ def write_dataset(data_root: Path, tables: dict[str, pd.DataFrame], simulated: b
             arrow = pa.Table.from_pandas(part.reset_index(drop=True), preserve_index=False)
             arrow = arrow.replace_schema_metadata({**(arrow.schema.metadata or {}),  # as a finalised session's
                                                    dc.SIMULATED_METADATA_KEY.encode(): json.dumps(simulated).encode()})
-            write_atomic(path, lambda handle, arrow=arrow: pq.write_table(arrow, handle))
+            write_atomic(path, functools.partial(pq.write_table, arrow))  # pq.write_table(arrow, handle)
             meta = {"study": study, "participant": str(participant), "session": int(session),
                     dc.SIMULATED_KEY: bool(simulated), "status": "complete", "written_by": "write_dataset"}
             if protocol_sha256 and study in protocol_sha256:

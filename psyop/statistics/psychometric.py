@@ -669,7 +669,7 @@ def _climb(data, priors, grid: dict[str, np.ndarray], bounds, index: np.ndarray)
 
     def negative(u: np.ndarray) -> float:
         x = np.clip(x0 + u * step, lo, hi)
-        point = dict(start, **{n: np.atleast_1d(v) for n, v in zip(free, x)})
+        point: dict[str, float | np.ndarray] = dict(start, **{n: np.atleast_1d(v) for n, v in zip(free, x)})
         value = float(log_posterior_2afc(data, priors, {k: np.atleast_1d(v) for k, v in point.items()}).max())
         return -value if np.isfinite(value) else 1e300
 

@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import warnings
 
@@ -24,6 +25,9 @@ import pandas as pd
 import statsmodels.api as sm
 from scipy.stats import chi2
 import statsmodels.formula.api as smf
+
+if TYPE_CHECKING:
+    from psyop.statistics.small_sample import ClusterRobustTest
 
 
 @dataclass(frozen=True)
@@ -250,6 +254,17 @@ def mixed_condition_comparison(data: pd.DataFrame, x: str, y: str, condition: st
     )
 
 
+def _joint_cr2(design: np.ndarray, y: np.ndarray, clusters: np.ndarray,
+               contrasts: np.ndarray) -> tuple[ClusterRobustTest | None, str]:
+    """The HTZ F of both differences, or None and why cr2_test refused it (its ValueError's text)."""
+    from psyop.statistics.small_sample import cr2_test
+
+    try:
+        return cr2_test(design, y, clusters, contrasts), ""
+    except ValueError as exc:
+        return None, str(exc)
+
+
 def _cr2_fallback(d: pd.DataFrame, x_mean: float, method_reasons: list[str], reference: str, other: str,
                   n_subjects: int) -> MixedComparison:
     """No mixed model fits: OLS of y ~ xc * other with CR2 participant-clustered errors, Satterthwaite t for
@@ -274,17 +289,16 @@ def _cr2_fallback(d: pd.DataFrame, x_mean: float, method_reasons: list[str], ref
         beta = np.linalg.lstsq(design, y, rcond=None)[0]
         values = dict(intercept=inter.estimate[0], intercept_diff=idiff.estimate[0], intercept_diff_p=idiff.p,
                       slope_diff=sdiff.estimate[0], slope_diff_p=sdiff.p, slope=float(beta[1]))
-        try:
-            joint = cr2_test(design, y, clusters, joint_c)
-        except ValueError as exc:  # 2 clusters cannot inform 2 contrasts: refused, not a number
-            joint = None
+        joint, refused = _joint_cr2(design, y, clusters, joint_c)
+        if joint is None:  # 2 clusters cannot inform 2 contrasts: refused, not a number
             flags.append("joint_not_testable")
-            texts.append(f"JOINT TEST NOT COMPUTED with {n_subjects} participants: {exc}")
-            values.update(joint_chi2=float("nan"), joint_p=float("nan"), joint_test="HTZ F",
+            texts.append(f"JOINT TEST NOT COMPUTED with {n_subjects} participants: {refused}")
+            values.update(joint_chi2=float("nan"), joint_p=float("nan"),
                           joint_statistic=float("nan"), joint_df_denom=float("nan"))
         else:
-            values.update(joint_chi2=joint.wald_q, joint_p=joint.p, joint_test="HTZ F", joint_statistic=joint.statistic,
+            values.update(joint_chi2=joint.wald_q, joint_p=joint.p, joint_statistic=joint.statistic,
                           joint_df_denom=joint.df_denom)
+        joint_test = "HTZ F"
         if n_subjects < MIN_PARTICIPANTS:
             flags.append("few_participants")
             texts.append(f"FEW PARTICIPANTS: {n_subjects} clusters (< {MIN_PARTICIPANTS}); CR2 with small-sample df is "
@@ -303,12 +317,13 @@ def _cr2_fallback(d: pd.DataFrame, x_mean: float, method_reasons: list[str], ref
                       intercept_diff_p=float(np.squeeze(fit.t_test(intercept_diff_w.reshape(1, -1)).pvalue)),
                       slope_diff=float(fit.params[3]), slope_diff_p=float(fit.pvalues[3]),
                       joint_chi2=float(np.squeeze(joint_f.fvalue)) * 2, joint_p=float(np.squeeze(joint_f.pvalue)),
-                      joint_test="F", joint_statistic=float(np.squeeze(joint_f.fvalue)),
+                      joint_statistic=float(np.squeeze(joint_f.fvalue)),
                       joint_df_denom=float(fit.df_resid), slope=float(fit.params[1]))
+        joint_test = "F"
         flags.append("one_participant")
         texts.append("ONE PARTICIPANT: the test is about this participant's reaches only")
     return MixedComparison(method=method, fallback_reason="; ".join(method_reasons), reference=reference, other=other,
-                           joint_df=2, n=int(len(d)), n_subjects=n_subjects, flags=";".join(flags),
+                           joint_df=2, n=int(len(d)), n_subjects=n_subjects, joint_test=joint_test, flags=";".join(flags),
                            flag_text="; ".join(texts), **values)
 
 

@@ -60,13 +60,25 @@ def protocol_mesh_records(scene: Sequence[ps.Primitive], base_dir: Path | None,
     return files.records()
 
 
+def _number(value: float | ps.FactorRef | None) -> float:
+    """A mesh's number field once resolve_factor_fields has put the trial's level in it."""
+    assert value is not None and not isinstance(value, ps.FactorRef)  # resolved; None ruled out by the caller
+    return float(value)
+
+
+def _direction3(direction: Sequence[float]) -> tuple[float, float, float]:
+    """A light direction (3 numbers, checked by the protocol) as a tuple of Python floats."""
+    x, y, z = (float(v) for v in direction)
+    return x, y, z
+
+
 def mesh_instance(item: ps.Mesh, values: JsonMapping, origin_m: np.ndarray, files: SessionMeshes) -> MeshInstance:
     """The placed model of a mesh item whose factor fields hold this trial's numbers."""
     asset = files.asset(item.file, item.node)
     extent = asset.largest_extent
-    rotation = tuple(float(a) for a in item.rotation_deg)
+    rotation = tuple(_number(a) for a in item.rotation_deg)
     if item.position_m is not None:
-        position = np.array([float(v) for v in item.position_m])
+        position = np.array([_number(v) for v in item.position_m])
         pivot = np.zeros(3)
         distance = float(np.linalg.norm(position - origin_m))
     else:
@@ -79,17 +91,17 @@ def mesh_instance(item: ps.Mesh, values: JsonMapping, origin_m: np.ndarray, file
         position = place_centre_m(direction_from_angles(az, el), distance, origin_m, facing="eye")
         pivot = (np.asarray(asset.bbox_min, dtype=np.float64) + np.asarray(asset.bbox_max, dtype=np.float64)) / 2.0
     if item.scale is not None:
-        scale = float(item.scale)
+        scale = _number(item.scale)
     elif item.size_m is not None or item.size_deg is not None:
         if not extent > 0:
             raise UserError(f"scene item '{item.id}': the model has no extent to size (a flat point set)")
-        size_m = float(item.size_m) if item.size_m is not None else \
-            2.0 * distance * math.tan(math.radians(float(item.size_deg)) / 2.0)
+        size_m = _number(item.size_m) if item.size_m is not None else \
+            2.0 * distance * math.tan(math.radians(_number(item.size_deg)) / 2.0)
         scale = size_m / extent
     else:
         scale = 1.0
     model = model_matrix(position, rotation, scale, pivot)
     if item.light is not None:
         return MeshInstance(asset, tuple(model.reshape(-1).tolist()), item.id, item.shading,
-                            tuple(float(v) for v in item.light.direction), float(item.light.ambient))
+                            _direction3(item.light.direction), float(item.light.ambient))
     return MeshInstance(asset, tuple(model.reshape(-1).tolist()), item.id, item.shading)

@@ -43,10 +43,10 @@ def centre_angles_deg(centre: ps.Centre) -> tuple[float, float]:
     if unresolved:  # resolve_factor_fields fills in a trial's levels first
         raise ValueError(f"the centre's angle is factor {unresolved[0]!r}: give the trial's level "
                          "(psyop.protocol.factor_fields.resolve_factor_fields)")
+    first, second = (float(p) for p in parts if not isinstance(p, ps.FactorRef))  # none is, checked above
     if isinstance(centre, ps.PolarPoint):
-        return polar_centre_deg(float(centre.eccentricity_deg), float(centre.meridian_deg))
-    az, el = centre
-    return float(az), float(el)
+        return polar_centre_deg(first, second)
+    return first, second
 
 
 def circle_position_deg(centre_azimuth_deg: float, centre_elevation_deg: float, eccentricity_deg: float,
