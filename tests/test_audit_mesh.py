@@ -15,7 +15,7 @@ import pytest
 from psyop.audit import AuditSettings, format_table, run_audit
 from psyop.audit.masks import FrameMeasurer
 from psyop.audit.meshes import MESH_AREA_RELATIVE_TOLERANCE
-from psyop.audit.run import FrameRecord, mesh_findings
+from psyop.audit.run import FrameRecord, _check, mesh_findings
 from psyop.protocol.loader import load_protocol
 from psyop.rendering import RenderSettings, Scene, Solid
 from psyop.rendering.measure import RIGHT_CENTRE_M, right_eye_camera
@@ -97,10 +97,16 @@ def test_reference_from_a_moved_mesh_fails(measurer):
     cam = dataclasses.replace(right_eye_camera(8.0, 4.0, "ocular"), width_px=180, height_px=200)
     scene = _mixed_scene()
     checks = {c.name: c for c in measurer.mesh_checks(scene, cam, exact_scene=_mixed_scene(0.003))}
-    assert not checks["quad"].passed, checks["quad"]
+    quad = checks["quad"]
+    assert not quad.passed, quad
+    # a sideways shift keeps the area nearly equal: the per-pixel mismatch is what catches it
+    assert quad.error_px2 <= quad.tolerance_px2 and quad.mismatch_px2 > quad.mismatch_tolerance_px2, quad
     record = _record(tuple(checks.values()))
     failures, _ = mesh_findings([record])
     assert any(f.startswith("FAIL mesh quad: rendered silhouette") for f in failures), failures
+    # and the audit's report fails with it (psyop audit exits 1 on any failure line)
+    report_failures, _ = _check([record], ["quad", "back"], 0.0)
+    assert any(f.startswith("FAIL mesh quad") for f in report_failures)
 
 
 def _record(meshes) -> FrameRecord:
