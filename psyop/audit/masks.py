@@ -33,6 +33,9 @@ import dataclasses
 import moderngl
 import numpy as np
 
+from psyop.audit.meshes import (MSAA_SAMPLES_PER_AXIS, MarkerAssets, compare, MeshCheck, measure_window,
+                                mesh_mask_scene, mesh_screen_box_px, not_compared,
+                                silhouette_scene)
 from psyop.optics.camera import EyeCamera
 from psyop.rendering import Renderer, RenderSettings, Scene, Solid
 from psyop.rendering.camera_math import crop_camera
@@ -53,8 +56,9 @@ MAX_WINDOW_PIXELS = 128 * 128
 
 
 def slots(scene: Scene) -> int:
-    """Primitives per channel: 2 (packed) or 1 (with an aperture)."""
-    return 1 if scene.aperture is not None else 2
+    """Primitives per channel: 2 (packed) or 1 (with an aperture, or with meshes: their anti-aliased
+    edges and occlusion scale a channel continuously too)."""
+    return 1 if scene.aperture is not None or scene.meshes else 2
 
 
 def mask_scene(scene: Scene, first: int, samples_per_axis: int) -> Scene:
@@ -151,6 +155,8 @@ class FrameMeasurer:
         self._colour = Renderer(Scene(()), self.settings, ctx=ctx)
         self._masks = Renderer(Scene(()), self.settings, ctx=ctx)
         self._zoom = Renderer(Scene(()), self.settings, ctx=ctx)
+        self._mesh = Renderer(Scene(()), self.settings, ctx=ctx)
+        self._markers = MarkerAssets()
 
     def colour(self, scene: Scene, camera: EyeCamera) -> np.ndarray:
         """The participant's frame, (H, W, 3) float32."""
@@ -167,7 +173,7 @@ class FrameMeasurer:
         s = int(self.settings.samples_per_axis)
         areas = np.zeros(n)
         for first in range(0, n, 3 * per):
-            self._masks.set_scene(mask_scene(scene, first, s))
+            self._masks.set_scene(self._mask(scene, first))
             self._masks.render(camera)
             img = self._masks.image(_eye(camera))
             for channel in range(3):
@@ -184,7 +190,7 @@ class FrameMeasurer:
 
     def _zoomed_area_px(self, scene: Scene, camera: EyeCamera, index: int, window: tuple[int, int, int, int, int]) -> float:
         x0, y0, w, h, magnification = window
-        masks = mask_scene(scene, index, int(self.settings.samples_per_axis))
+        masks = self._mask(scene, index)
         if masks.aperture is not None:  # the renderer keeps a screen-fixed aperture mask per eye and
             # image size; a new window needs a new one, recomputed when the aperture changes
             self._zoom.set_scene(dataclasses.replace(masks, aperture=None))
@@ -195,10 +201,39 @@ class FrameMeasurer:
         cover = decode(img[..., 0], int(self.settings.samples_per_axis), slots(scene))[0]
         return float(cover.sum()) / magnification**2
 
+    def _mask(self, scene: Scene, first: int) -> Scene:
+        """:func:`mask_scene` with the scene's meshes drawn black (they occlude the primitives as in the frame)."""
+        mask = mask_scene(scene, first, int(self.settings.samples_per_axis))
+        if not scene.meshes:
+            return mask
+        return silhouette_scene(dataclasses.replace(mask, meshes=scene.meshes), self._markers)
+
+    def mesh_checks(self, scene: Scene, camera: EyeCamera, exact_scene: Scene | None = None) -> tuple[MeshCheck, ...]:
+        """Every mesh's rendered visible area in this frame against the exact one (:mod:`psyop.audit.meshes`),
+        in pixels of ``camera``. ``exact_scene``: the geometry the reference is computed from (default
+        ``scene``; a test passes a moved mesh to see the check fail)."""
+        exact_scene = silhouette_scene(scene if exact_scene is None else exact_scene, self._markers)
+        base = self._mask(scene, len(scene.primitives))  # every primitive black
+        out = []
+        for index, inst in enumerate(scene.meshes):
+            why = not_compared(scene, inst)
+            if why:
+                out.append(MeshCheck(inst.name, 0.0, 0.0, 0.0, skipped=why))
+                continue
+            w, h = int(camera.width_px), int(camera.height_px)
+            window = zoom_window(mesh_screen_box_px(inst, camera), w, h, MSAA_SAMPLES_PER_AXIS)
+            x0, y0, ww, wh, mag = window if window is not None else (0, 0, w, h, 1)
+            cam = camera if window is None else zoom_camera(camera, x0, y0, ww, wh, mag)
+            rendered, exact = measure_window(self._mesh, mesh_mask_scene(base, scene, index, self._markers),
+                                             exact_scene, inst.name, cam, _eye(cam))
+            out.append(compare(inst.name, rendered, exact, mag))
+        return tuple(out)
+
     def release(self) -> None:
         self._colour.release()
         self._masks.release()
         self._zoom.release()
+        self._mesh.release()
 
 
 def _eye(camera: EyeCamera) -> str:

@@ -5,6 +5,9 @@ area over the audited frames in that mode, in display pixels (full resolution), 
 those frames exact geometry says hide it (``hid``). A primitive's change with mode is read across
 a line: e.g. the detection study's red back disc is 0 in conventional frames and a crescent of
 a few px^2 in ocular frames at non-zero levels.
+
+Mesh table (:func:`mesh_table`): one line per mesh item; per mode the range of its exact visible
+area and the worst disagreement of its rendered silhouette with it (:mod:`psyop.audit.meshes`).
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from psyop.audit.meshes import (EDGE_PIXEL_TOLERANCE, EXACT_SAMPLES_PER_AXIS, MESH_AREA_FLOOR_WINDOW_PX, MESH_AREA_RELATIVE_TOLERANCE,
+                                MSAA_SAMPLES)
 from psyop.audit.run import AuditReport, FrameRecord
 
 MODES = ("conventional", "ocular", "reversed")
@@ -43,10 +48,54 @@ def format_table(report: AuditReport) -> str:
                 continue
             cells.append(f"  {f'{min(values):9.2f} ..{max(values):9.2f} ({hidden[(name, m)]}/{len(values)})':>40}")
         lines.append(f"{name:<{width}}  {item:<{item_width}}" + "".join(cells))
+    lines += mesh_table(report, modes)
     lines += list(report.notes)
     lines += list(report.failures) if report.failures else ["PASS: every primitive is seen, none shows where it is "
-                                                             "covered, differing intervals render differently"]
+                                                             "covered, differing intervals render differently"
+                                                             + (", every mesh silhouette matches exact ray-triangle "
+                                                                "intersection" if _has_meshes(report) else "")]
     return "\n".join(lines)
+
+
+def _has_meshes(report: AuditReport) -> bool:
+    return any(c for rec in report.records for c in rec.meshes if not c.skipped)
+
+
+def mesh_table(report: AuditReport, modes: list[str]) -> list[str]:
+    """Lines per mesh item: per mode the exact visible area's range over the compared frames, the worst
+    disagreement of the rendered visible area with it and the worst silhouette mismatch (sum of per-pixel
+    coverage differences), both in percent of the exact area, and the frames compared."""
+    stats: dict[tuple[str, str], list[tuple[float, float, float]]] = {}
+    names: list[str] = []
+    for rec in report.records:
+        for c in rec.meshes:
+            if c.name not in names:
+                names.append(c.name)
+            if not c.skipped:
+                mismatch = c.mismatch_px2 / c.exact_px2 if c.exact_px2 > 0 else (0.0 if c.mismatch_px2 == 0 else float("inf"))
+                stats.setdefault((c.name, rec.frame.mode), []).append((c.exact_px2, c.relative_error, mismatch))
+    if not names:
+        return []
+    modes = [m for m in MODES if any(k[1] == m for k in stats)] or modes
+    width = max([9] + [len(n) for n in names])
+    head = f"{'mesh':<{width}}" + "".join(f"  {m + ' exact px^2 min..max, area/mismatch %':>52}" for m in modes)
+    lines = [f"mesh silhouettes: rendered (MSAA {MSAA_SAMPLES} samples) against exact ray-triangle intersection "
+             f"({EXACT_SAMPLES_PER_AXIS}x{EXACT_SAMPLES_PER_AXIS} rays per pixel); allowed "
+             f"area {100 * MESH_AREA_RELATIVE_TOLERANCE:g} % + {MESH_AREA_FLOOR_WINDOW_PX:g} window px, mismatch "
+             f"{EDGE_PIXEL_TOLERANCE:g} px per edge pixel", head, "-" * len(head)]
+    for name in names:
+        cells = []
+        for m in modes:
+            values = stats.get((name, m))
+            if not values:
+                cells.append(f"  {'-':>52}")
+                continue
+            exact = [v[0] for v in values]
+            cell = (f"{min(exact):9.1f} ..{max(exact):9.1f}, {100 * max(v[1] for v in values):6.3f} / "
+                    f"{100 * max(v[2] for v in values):6.3f} ({len(values)})")
+            cells.append(f"  {cell:>52}")
+        lines.append(f"{name:<{width}}" + "".join(cells))
+    return lines
 
 
 def _column_of(rec: FrameRecord) -> tuple[str, int]:

@@ -27,6 +27,7 @@ import numpy as np
 
 from psyop.audit.frames import AuditFrame, fixation_point, representative_rows
 from psyop.audit.masks import FrameMeasurer
+from psyop.audit.meshes import MeshCheck
 from psyop.audit.occlusion import hidden_by
 from psyop.errors import UserError
 from psyop.session.plan import DEFAULT_IPD_M
@@ -61,6 +62,9 @@ class AuditSettings:
     seed: int = 0
     #: an adaptive factor's levels to audit (each condition at each); empty: the range's min, start and max
     levels: tuple[float, ...] = ()
+    #: compare every mesh item's silhouette with exact ray-triangle intersection (numpy: ~2 s of CPU per
+    #: frame for a room that fills it); off, each mesh gets a note that it was not compared
+    mesh_check: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale) and 0.01 <= self.scale <= 1.0):
@@ -88,6 +92,8 @@ class FrameRecord:
     #: pixels of this (audit-scale) frame per metre of centre-of-projection shift, for the nearest
     #: finite primitive: a shift ``s`` moves no edge by more than about ``s * px_per_m_shift``
     px_per_m_shift: float = 0.0
+    #: each mesh item's rendered silhouette against exact ray-triangle intersection, display pixels
+    meshes: tuple[MeshCheck, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -188,6 +194,10 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
             try:
                 image = measurer.colour(scene, camera)
                 areas = measurer.visible_areas_px(scene, camera) / px_scale
+                mesh_checks = (tuple(_in_display_px(c, px_scale) for c in measurer.mesh_checks(scene, camera))
+                               if settings.mesh_check else
+                               tuple(MeshCheck(m.name, 0.0, 0.0, 0.0, skipped="the audit ran with mesh_check off")
+                                     for m in scene.meshes))
             except ValueError as error:  # e.g. more primitives than the renderer takes
                 raise UserError(f"{protocol.source_name or protocol.study.name}: cannot render {frame.label}: "
                                 f"{error}") from None
@@ -196,7 +206,7 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
                                        tuple(float(a) for a in areas),
                                        hidden_by(scene.primitives, camera.centre_of_projection_m), image,
                                        _point3(camera.centre_of_projection_m),
-                                       _px_per_m_shift(scene, camera, display)))
+                                       _px_per_m_shift(scene, camera, display), mesh_checks))
             if progress is not None:
                 progress(done, len(frames))
     finally:
@@ -204,15 +214,38 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
         if owns_ctx:
             ctx.release()
     min_visible = MIN_VISIBLE_SAMPLES / settings.samples_per_axis**2 / px_scale
-    from psyop.protocol.scene import Mesh
-
-    mesh_ids = frozenset(str(item.id) for item in protocol.scene if isinstance(item, Mesh))
-    failures, notes = _check(records, item_ids, min_visible, mesh_ids)
+    failures, notes = _check(records, item_ids, min_visible)
     return AuditReport(str(protocol.study.name), settings, tuple(records), tuple(failures), tuple(notes))
 
 
-def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float,
-           meshes: frozenset[str] = frozenset()) -> tuple[list[str], list[str]]:
+def _in_display_px(check: MeshCheck, px_scale: float) -> MeshCheck:
+    """``check``'s areas from audit pixels to display pixels (full resolution)."""
+    return dataclasses.replace(check, rendered_px2=check.rendered_px2 / px_scale, exact_px2=check.exact_px2 / px_scale,
+                               tolerance_px2=check.tolerance_px2 / px_scale, mismatch_px2=check.mismatch_px2 / px_scale,
+                               mismatch_tolerance_px2=check.mismatch_tolerance_px2 / px_scale)
+
+
+def mesh_findings(records: list[FrameRecord]) -> tuple[list[str], list[str]]:
+    """Failures: a mesh whose rendered visible area differs from the exact one by more than its tolerance in a
+    frame. Notes: meshes not compared in some frames, and why (the first reason per mesh)."""
+    failures: list[str] = []
+    skipped: dict[str, tuple[int, str]] = {}
+    for rec in records:
+        for c in rec.meshes:
+            if c.skipped:
+                count, why = skipped.get(c.name, (0, c.skipped))
+                skipped[c.name] = (count + 1, why)
+            elif not c.passed:
+                failures.append(f"FAIL mesh {c.name}: rendered silhouette {c.rendered_px2:.4g} px^2, exact ray-triangle "
+                                f"{c.exact_px2:.4g} px^2 (off by {c.error_px2:.3g}, allowed {c.tolerance_px2:.3g}; "
+                                f"per-pixel mismatch {c.mismatch_px2:.3g}, allowed {c.mismatch_tolerance_px2:.3g}) "
+                                f"in {rec.frame.label}")
+    notes = [f"note: mesh {name}: silhouette not compared with exact ray-triangle intersection in {count} frame(s): "
+             f"{why}" for name, (count, why) in skipped.items()]
+    return failures, notes
+
+
+def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float) -> tuple[list[str], list[str]]:
     failures: list[str] = []
     notes: list[str] = []
     best: dict[str, float] = {}
@@ -233,15 +266,13 @@ def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float,
             frames = sum(1 for rec in records if name in rec.names)
             failures.append(f"FAIL {name} (item {item_of_name[name]}): never visible in {frames} audited frames "
                             f"(largest visible area {area:.3g} px^2){why}")
-    shown = set(item_of_name.values())
+    shown = set(item_of_name.values()) | {c.name for rec in records for c in rec.meshes}
     for item in item_ids:
-        if item in meshes:  # drawn in the audited frames (it occludes primitives there), not itself checked
-            notes.append(f"note: item {item} is a mesh: drawn in every audited frame, but psyop audit does not yet "
-                         "compare mesh silhouettes with exact ray-triangle intersection (docs/rendering.md, Meshes)")
-        elif item not in shown:
+        if item not in shown:
             notes.append(f"note: item {item} has no primitive in any audited frame (an aperture, or in no show:)")
     identical, same_centre = _identical_intervals(records)
-    return failures + identical, notes + same_centre
+    mesh_failures, mesh_notes = mesh_findings(records)
+    return failures + mesh_failures + identical, notes + mesh_notes + same_centre
 
 
 def _px_per_m_shift(scene: Scene, camera: EyeCamera, display: DisplayProfile) -> float:

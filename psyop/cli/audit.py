@@ -28,8 +28,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Render every condition of a protocol (one trial each; every interval in its mode, every "
                     "eye, several gazes along the fixation path or on a grid) at a reduced scale with the "
                     "session's renderer, and report per primitive its visible area by mode. Fails (exit 1) when a "
-                    "primitive is never visible, when one that exact geometry says is covered shows, or when two "
-                    "intervals that differ (level, mode) render identically.")
+                    "primitive is never visible, when one that exact geometry says is covered shows, when two "
+                    "intervals that differ (level, mode) render identically, or when a mesh item's silhouette "
+                    "differs from exact ray-triangle intersection beyond the anti-aliasing tolerance.")
     parser.add_argument("protocol", help="protocol YAML file")
     parser.add_argument("--scale", type=float, default=0.125,
                         help="fraction of the display's pixels in each direction (default 0.125)")
