@@ -24,13 +24,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-
-from psyop.optics.camera import EyeCamera
+from typing import cast
 
 import moderngl
 import numpy as np
 
 from psyop.mesh.asset import AlphaMode, Filter, MeshAsset, MeshTexture, Wrap
+from psyop.optics.camera import EyeCamera
 from psyop.rendering.camera_math import near_far_m
 from psyop.rendering.mesh_data import (
     MeshBatch,
@@ -111,6 +111,11 @@ _MIN_FILTER = {Filter.NEAREST: moderngl.NEAREST, Filter.LINEAR: moderngl.LINEAR,
 _MAG_FILTER = {Filter.NEAREST: moderngl.NEAREST, Filter.LINEAR: moderngl.LINEAR, Filter.LINEAR_MIPMAP: moderngl.LINEAR}
 
 
+
+def _u(program: moderngl.Program, name: str) -> moderngl.Uniform:
+    """The program's uniform ``name`` (moderngl types a member lookup as any kind of member)."""
+    return cast(moderngl.Uniform, program[name])
+
 def mesh_projection(camera: EyeCamera, far_m: float) -> np.ndarray:
     """The camera's projection with its depth row spanning [the camera's near, ``far_m``] (x, y and w rows
     untouched: the same off-axis frustum as the ray-caster's pixel rays)."""
@@ -173,7 +178,7 @@ class MeshPass:
 
     def __post_init__(self) -> None:
         self.program = self.ctx.program(vertex_shader=MESH_VERTEX_SHADER, fragment_shader=MESH_FRAGMENT_SHADER)
-        self.program["u_texture"].value = 5
+        _u(self.program, "u_texture").value = 5
 
     @property
     def samples(self) -> int:
@@ -227,7 +232,7 @@ class MeshPass:
         view = np.asarray(camera.view, dtype=np.float64)
         cop = np.asarray(camera.centre_of_projection_m, dtype=np.float64)
         proj = mesh_projection(camera, instance_far_m(instances, cop))
-        self.program["u_projection"].write(proj.astype(np.float32).T.tobytes())
+        _u(self.program, "u_projection").write(proj.astype(np.float32).T.tobytes())
         drawn = 0
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
@@ -240,7 +245,7 @@ class MeshPass:
                     drawn += self._draw_instance(inst, gpu, view, proj, blend_pass)
         finally:
             ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
-            ctx.depth_mask = True
+            ctx.fbo.depth_mask = True
         return drawn
 
     def _draw_instance(self, inst: MeshInstance, gpu: _GpuMesh, view: np.ndarray, proj: np.ndarray,
@@ -255,14 +260,14 @@ class MeshPass:
             return 0
         linear = model_view[:3, :3]
         normal_matrix = np.linalg.inv(linear).T
-        prog["u_model_view"].write(model_view.astype(np.float32).T.tobytes())
-        prog["u_normal_matrix"].write(normal_matrix.astype(np.float32).T.tobytes())
+        _u(prog, "u_model_view").write(model_view.astype(np.float32).T.tobytes())
+        _u(prog, "u_normal_matrix").write(normal_matrix.astype(np.float32).T.tobytes())
         lambert = inst.shading == "lambert"
-        prog["u_lambert"].value = lambert
+        _u(prog, "u_lambert").value = lambert
         if lambert:
             light = view[:3, :3] @ np.asarray(inst.light_direction, dtype=np.float64)
-            prog["u_light_eye"].value = tuple(float(v) for v in light / np.linalg.norm(light))
-            prog["u_ambient"].value = float(inst.ambient)
+            _u(prog, "u_light_eye").value = tuple(float(v) for v in light / np.linalg.norm(light))
+            _u(prog, "u_ambient").value = float(inst.ambient)
         drawn = 0
         for gb in gpu.batches:
             batch = gb.batch
@@ -278,18 +283,18 @@ class MeshPass:
             if blend_pass:
                 ctx.enable(moderngl.BLEND)
                 ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA  # premultiplied "over"
-                ctx.depth_mask = False
+                ctx.fbo.depth_mask = False
             else:
                 ctx.disable(moderngl.BLEND)
-                ctx.depth_mask = True
-            prog["u_alpha_mode"].value = _ALPHA_CODE[batch.alpha_mode]
-            prog["u_alpha_cutoff"].value = float(batch.alpha_cutoff)
-            prog["u_has_normals"].value = bool(batch.has_normals)
-            prog["u_has_texture"].value = gb.texture is not None
+                ctx.fbo.depth_mask = True
+            _u(prog, "u_alpha_mode").value = _ALPHA_CODE[batch.alpha_mode]
+            _u(prog, "u_alpha_cutoff").value = float(batch.alpha_cutoff)
+            _u(prog, "u_has_normals").value = bool(batch.has_normals)
+            _u(prog, "u_has_texture").value = gb.texture is not None
             if gb.texture is not None:
                 tex = batch.texture
                 assert tex is not None
-                prog["u_mirror"].value = (int(tex.wrap_s is Wrap.MIRROR), int(tex.wrap_t is Wrap.MIRROR))
+                _u(prog, "u_mirror").value = (int(tex.wrap_s is Wrap.MIRROR), int(tex.wrap_t is Wrap.MIRROR))
                 gb.texture.use(5)
             for first, count in ranges:
                 gb.vao.render(moderngl.TRIANGLES, vertices=count, first=first)

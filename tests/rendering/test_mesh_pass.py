@@ -182,3 +182,25 @@ def test_scenes_without_meshes_run_the_analytic_programs_unchanged(gl_context):
         r.set_scene(Scene((disc,)))
         r.render(cam)
         assert np.array_equal(r.image(), fresh)
+
+
+def test_a_blend_part_writes_no_depth_so_a_blend_part_behind_it_still_shows(gl_context):
+    """BLEND parts are drawn with depth writes off (the framebuffer's depth mask: moderngl's Context has no
+    depth_mask, so setting it there was a silent no-op): a BLEND glass drawn first in file order, in front of
+    a second BLEND glass, must not depth-reject it."""
+    from psyop.mesh.asset import AlphaMode
+
+    def glass(colour, z_m):
+        q = quad_part(0.01, 0.01, colour=colour, alpha_mode=AlphaMode.BLEND)
+        return type(q)(**{**q.__dict__, "positions": q.positions + [0, 0, z_m],
+                          "bbox_min": q.bbox_min + [0, 0, z_m], "bbox_max": q.bbox_max + [0, 0, z_m]})
+
+    near, far = glass((0.0, 0.0, 1.0, 0.5), 0.1), glass((0.0, 1.0, 0.0, 0.5), 0.0)
+    centre = RIGHT_CENTRE_M + np.array([0.0, 0.0, -1.0])
+    inst = MeshInstance(asset(near, far), tuple(model_matrix(centre, (0, 0, 0), 1.0).reshape(-1)))
+    cam = _window(right_eye_camera(0.0, 0.0, "conventional"), centre, 30)
+    img = _render(Scene((), background=(0, 0, 0), meshes=(inst,)), cam, gl_context)
+    x, y = project_points_px(cam, [centre])[0]
+    # file order, premultiplied "over": blue (0, 0, 0.5) then green over it: (0, 0.5, 0.25); with depth
+    # writes on, the far green glass would be rejected and the pixel would stay (0, 0, 0.5)
+    assert img[int(y), int(x)] == pytest.approx([0.0, 0.5, 0.25], abs=1e-6)
