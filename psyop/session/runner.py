@@ -210,6 +210,7 @@ def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], opt
     seed = resolve_seed(paths, record, options.seed, seed_for(plan.study, options.participant, options.session))
     protocol_sha256 = accept_protocol_change(paths, record, protocol) if options.allow_protocol_change \
         else protocol.source_sha256
+    from psyop.mesh.load import MeshFiles
     from psyop.schedule.counterbalance import resolve_participant_index
 
     participant_index = resolve_participant_index(options.participant_index, options.participant,
@@ -225,7 +226,9 @@ def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], opt
         raise UserError(f"unknown clock {options.clock!r}; use virtual or real", "--clock")
     store = (SessionStore(paths, trial_schema(schedule), fsync=options.fsync) if store_factory is None
              else store_factory(paths, trial_schema(schedule)))
-    opened = _Opened(plan, paths, seed, schedule, clock, store)
+    source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
+    mesh_files = options.mesh_files if options.mesh_files is not None else MeshFiles(source or Path.cwd())
+    opened = _Opened(plan, paths, seed, schedule, clock, store, mesh_files=mesh_files)
     opened.metadata = _metadata(protocol, opened, options, participant_index, protocol_sha256)
     return opened
 
@@ -234,12 +237,10 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
               protocol_sha256: str) -> JsonObject:
     """session.json's fields known before the backends are built (in the order they are written)."""
     from psyop.schedule.counterbalance import block_sequence
-    from psyop.mesh.load import MeshFiles
     from psyop.stimulus.meshes import protocol_mesh_records
 
     randomisation = protocol.design.randomisation
     source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
-    opened.mesh_files = options.mesh_files if options.mesh_files is not None else MeshFiles(source or Path.cwd())
     return {
         "study": opened.plan.study, "participant": options.participant, "session": options.session,
         "seed": opened.seed, "simulated": options.simulated, "simulated_sources": list(options.simulated_sources),
