@@ -13,10 +13,14 @@ import fcntl
 import json
 import os
 import platform
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from psyop.errors import UserError
+
+# how long a refused writer waits for the holder's description to appear (see _read_holder)
+HOLDER_WAIT_S = 1.0
 
 
 @dataclass
@@ -105,9 +109,16 @@ class SessionLock:
         self.release()
 
 
-def _read_holder(fd: int) -> str:
-    try:
-        info = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
-        return f"pid {int(info['pid'])} on host {str(info['host'])[:100]!r} ({str(info.get('purpose', 'run'))[:20]})"
-    except (OSError, ValueError, KeyError, TypeError):
-        return "another process (pid and host not yet written)"
+def _read_holder(fd: int, wait_s: float = HOLDER_WAIT_S) -> str:
+    """Who holds the lock, as the holder wrote it. A holder writes its description just after
+    taking the lock and truncates it just before releasing, so an empty file is re-read (polling,
+    up to ``wait_s``) before the holder is reported as unnamed."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            info = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
+            return f"pid {int(info['pid'])} on host {str(info['host'])[:100]!r} ({str(info.get('purpose', 'run'))[:20]})"
+        except (OSError, ValueError, KeyError, TypeError):
+            if time.monotonic() >= deadline:
+                return "another process (it had not written its pid and host yet, or was releasing the lock)"
+            time.sleep(0.01)

@@ -105,7 +105,9 @@ def test_three_runs_at_once_one_wins_the_others_exit_2(protocol: Path, reference
     for code, err in results:
         assert "Traceback" not in err
         if code == 2:
-            assert "in use by pid" in err or "already complete" in err
+            # the holder is named when it has written its pid; in the instant between its flock and
+            # that write (or its truncate and release) the refusal says so instead (lock._read_holder)
+            assert "in use by" in err or "already complete" in err
     final = pd.read_parquet(SessionPaths(tmp_path, "detection", "L1", 1).trials_parquet)
     assert final["trial"].tolist() == reference["trial"].tolist()
     pd.testing.assert_frame_equal(_comparable(final), _comparable(reference), check_dtype=False)
@@ -143,3 +145,23 @@ def test_the_lock_is_exclusive_within_one_process_too(tmp_path: Path) -> None:
         SessionLock(tmp_path / ".lock").acquire()
     first.release()
     SessionLock(tmp_path / ".lock").acquire()
+
+
+def test_a_refused_writer_waits_for_the_holders_description_then_names_it(tmp_path: Path) -> None:
+    import threading
+
+    from psyop.session.lock import _read_holder
+    lock_file = tmp_path / ".lock"
+    lock_file.write_bytes(b"")
+    fd = os.open(lock_file, os.O_RDONLY)
+    try:
+        assert "had not written its pid" in _read_holder(fd, wait_s=0.0)
+        writer = threading.Timer(0.05, lambda: lock_file.write_text(
+            json.dumps({"pid": 4242, "host": "lab-pc", "purpose": "run"})))
+        writer.start()
+        try:
+            assert _read_holder(fd, wait_s=30.0).startswith("pid 4242 on host 'lab-pc'")
+        finally:
+            writer.join()
+    finally:
+        os.close(fd)
