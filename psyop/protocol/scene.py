@@ -332,6 +332,19 @@ class MeshLight(StrictModel):
 FactorNumber = Union[Number, FactorRef]
 
 
+class LevelRef(StrictModel):
+    """``{factor: NAME}`` on a word field (a mesh's ``file`` or ``node``): the trial's level of a factor whose
+    levels are words (file names, node names), so a categorical factor picks which model a trial shows.
+    Kept apart from :class:`FactorRef` (numbers): the numeric resolution (psyop.protocol.factor_fields)
+    leaves it alone and :meth:`Mesh.model_for` fills it in."""
+
+    factor: str
+
+
+#: A word, or ``{factor: NAME}``: a mesh's file or node, fixed or the trial's level of a word factor.
+FactorWord = Union[Annotated[str, Field(min_length=1)], LevelRef]
+
+
 class Mesh(_Primitive):
     """A glTF 2.0 model (``.gltf`` or ``.glb``, path relative to the protocol file), or one ``node`` of its
     scene, rasterised beside the analytic primitives with the same per-eye camera (docs/protocols.md, "Meshes").
@@ -340,11 +353,12 @@ class Mesh(_Primitive):
     origin there; or ``depth`` (and ``centre_deg``, either angle form) puts its bounding-box centre at that
     distance in that direction from the scene origin. ``rotation_deg: [yaw, pitch, roll]`` turns it about
     that point. Size: ``scale`` (model units to metres), ``size_m`` or ``size_deg`` (the bounding box's
-    largest extent; size_deg at ``depth``), default scale 1. Numbers may be ``{factor: NAME}``."""
+    largest extent; size_deg at ``depth``), default scale 1. Numbers may be ``{factor: NAME}``, and so may
+    ``file`` and ``node`` (a factor of words: each level a file name or a node name; :meth:`model_for`)."""
 
     kind: Literal["mesh"]
-    file: str = Field(min_length=1)
-    node: str | None = Field(default=None, min_length=1)
+    file: FactorWord
+    node: FactorWord | None = None
     position_m: tuple[FactorNumber, FactorNumber, FactorNumber] | None = None
     centre_deg: Centre | None = None
     depth: Depth | None = None
@@ -372,6 +386,27 @@ class Mesh(_Primitive):
         if self.shading == "unlit" and self.light is not None:
             raise ValueError("a light is used only with shading: lambert; remove it or set shading: lambert")
         return self
+
+    @property
+    def word_factors(self) -> tuple[tuple[str, str], ...]:
+        """(field, factor name) of ``file`` and ``node`` where they are ``{factor: NAME}``."""
+        return tuple((name, ref.factor) for name, ref in (("file", self.file), ("node", self.node))
+                     if isinstance(ref, LevelRef))
+
+    def model_for(self, values: Mapping[str, object]) -> tuple[str, str | None]:
+        """(file, node) this trial shows: each ``{factor: NAME}`` replaced by the trial's level (a word).
+        A missing or non-word level is a ValueError naming the factor (validation rules both out)."""
+        def word(value: str | LevelRef | None) -> str | None:
+            if not isinstance(value, LevelRef):
+                return value
+            level = values.get(value.factor)
+            if not isinstance(level, str) or not level:
+                raise ValueError(f"factor {value.factor!r} gives {level!r} here; a mesh's file or node needs a "
+                                 "factor whose levels are file or node names (words)")
+            return level
+        file = word(self.file)
+        assert file is not None  # file is required, a word or a LevelRef
+        return file, word(self.node)
 
 
 Primitive = Annotated[

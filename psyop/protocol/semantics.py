@@ -24,8 +24,9 @@ from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.primitive_count import primitive_count
 from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
-from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, PinkNoiseSurface,
-                                  Mesh, ReachTarget, Room, SinusoidalBorder, TargetField, centre_eccentricity_deg)
+from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, LevelRef, Mesh,
+                                  PinkNoiseSurface, ReachTarget, Room, SinusoidalBorder, TargetField,
+                                  centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
 from psyop.records import JsonObject, Loc
 
@@ -64,7 +65,8 @@ class _Checker:
         self.meshes = meshes  # the models read by check_mesh (a fresh MeshFiles when None)
         self.issues: list[Issue] = []
         self.factors = protocol.design.factors
-        self.mesh_triangles: dict[str, int] = {}  # mesh item id -> triangles of its model (read by check_mesh)
+        # mesh item id -> triangles of each (file, node) it can show (read by check_mesh)
+        self.mesh_triangles: dict[str, dict[tuple[str, str | None], int]] = {}
 
     def add(self, path: Loc, message: str) -> None:
         self.issues.append(Issue(path, message))
@@ -175,7 +177,7 @@ class _Checker:
             if isinstance(item, TargetField):
                 self.check_target_field(item, path, conditions)
             if isinstance(item, Mesh):
-                self.check_mesh(item, path)
+                self.check_mesh(item, path, conditions)
             if isinstance(item, SinusoidalBorder):
                 self.check_order(item.near_depth, item.far_depth, path + ("near_depth",), conditions,
                                  "near_depth must be nearer (more dioptres) than far_depth")
@@ -255,38 +257,54 @@ class _Checker:
             except ValueError:  # an adaptive level, known at run time: its range's ends are checked next
                 continue
 
-    def check_mesh(self, item: Mesh, path: Loc) -> None:
-        """The model is read now (psyop.mesh.load: every file-level problem is one line at the item's ``file``),
-        and a mesh at optical infinity is refused (a model has a place, not only directions)."""
+    def check_mesh(self, item: Mesh, path: Loc, conditions: list[JsonObject]) -> None:
+        """Every model the item can show is read now (psyop.mesh.load: every file-level problem is one line at
+        the item's ``file`` or ``node``, naming the factor level that picks it), and a mesh at optical infinity
+        is refused (a model has a place, not only directions). ``{factor: NAME}`` on file/node: a word factor."""
         from psyop.mesh.load import MeshFiles
+        from psyop.protocol.mesh_models import item_models, level_note
 
+        if not all(self.factor_exists(factor, path + (field, "factor"), numeric=False)
+                   for field, factor in item.word_factors):
+            return
         base_dir = self.base_dir or FsPath.cwd()
         if self.meshes is None:
             self.meshes = MeshFiles(base_dir)
-        try:
-            asset = self.meshes.load(FsPath(item.file), item.node, base_dir=base_dir)
-        except UserError as error:
-            self.add(path + (("node",) if item.node is not None and "node" in str(error) else ("file",)), str(error))
-            return
-        self.mesh_triangles[item.id] = asset.triangle_count
+        counts: dict[tuple[str, str | None], int] = {}
+        for (file, node), values in item_models(item, self._value_sets(conditions)).items():
+            try:
+                counts[(file, node)] = self.meshes.load(FsPath(file), node, base_dir=base_dir).triangle_count
+            except UserError as error:
+                field = "node" if node is not None and "node" in str(error) else "file"
+                self.add(path + (field,), level_note(item, values) + str(error))
+                return
+        self.mesh_triangles[item.id] = counts
         if item.depth is not None and item.depth.constant_D() == 0.0:
             self.add(path + ("depth",), "a mesh cannot lie at optical infinity (0 D); give a finite depth")
 
-    def check_mesh_budget(self) -> None:
-        """Each phase's mesh items together hold at most MAX_MESH_TRIANGLES triangles."""
+    def check_mesh_budget(self, conditions: list[JsonObject]) -> None:
+        """Each phase's mesh items together hold at most MAX_MESH_TRIANGLES triangles, in every trial (a factor
+        on ``file`` or ``node`` counts the models that trial's levels pick)."""
+        from psyop.protocol.mesh_models import level_note
+
         for index, phase in enumerate(self.p.trial.phases):
             if not isinstance(phase, (Interval, Blank)) or getattr(phase, "display_off", False):
                 continue
-            shown = [(i, item) for i, item in enumerate(self.p.scene)
-                     if isinstance(item, Mesh) and (phase.show == "all" or item.id in phase.show)]
-            counts = [(self.mesh_triangles.get(item.id, 0), i, item) for i, item in shown]
-            total = sum(c for c, _, _ in counts)
-            if total > MAX_MESH_TRIANGLES:
-                most, i, item = max(counts, key=lambda t: t[0])
-                self.add(("scene", i), f"phase trial.phases[{index}] ({phase.kind}) draws {total} mesh triangles, more "
-                                       f"than the budget of {MAX_MESH_TRIANGLES} (psyop.limits.MAX_MESH_TRIANGLES); "
-                                       f"'{item.id}' has {most}. Fix: a simpler model, or show fewer meshes in that phase")
-                return
+            shown = [(i, item) for i, item in enumerate(self.p.scene) if isinstance(item, Mesh)
+                     and item.id in self.mesh_triangles and (phase.show == "all" or item.id in phase.show)]
+            if not shown:
+                continue
+            varying = any(item.word_factors for _, item in shown)
+            for values in (self._value_sets(conditions) if varying else iter([{}])):
+                counts = [(self.mesh_triangles[item.id].get(item.model_for(values), 0), i, item) for i, item in shown]
+                total = sum(c for c, _, _ in counts)
+                if total > MAX_MESH_TRIANGLES:
+                    most, i, item = max(counts, key=lambda t: t[0])
+                    self.add(("scene", i), f"{level_note(item, values)}phase trial.phases[{index}] ({phase.kind}) "
+                                           f"draws {total} mesh triangles, more than the budget of {MAX_MESH_TRIANGLES} "
+                                           f"(psyop.limits.MAX_MESH_TRIANGLES); '{item.id}' has {most}. Fix: a "
+                                           "simpler model, or show fewer meshes in that phase")
+                    return
 
     def check_primitive_limit(self) -> None:
         """Each phase's scene (its ``show:`` items) must fit the renderer's MAX_PRIMITIVES; the
@@ -625,7 +643,7 @@ def _in_order(sub: Loc, loc: Loc) -> bool:
 
 def _factor_refs(value: object) -> set[str]:
     """Every factor name a scene item refers to (``FactorRef``, ``Depth.factor``), at any depth."""
-    if isinstance(value, FactorRef):
+    if isinstance(value, (FactorRef, LevelRef)):
         return {value.factor}
     if isinstance(value, Depth):
         return set(value.factor_names)
@@ -657,7 +675,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
                                                "repetitions is over 10 million trials; reduce them")
     checker.check_scene(conditions)
     checker.check_primitive_limit()
-    checker.check_mesh_budget()
+    checker.check_mesh_budget(conditions)
     checker.check_response()
     checker.check_level_factor_levels()
     checker.check_pair_orders()

@@ -16,6 +16,8 @@ import numpy as np
 from psyop.errors import UserError
 from psyop.mesh.asset import MeshAsset
 from psyop.protocol import scene as ps
+from psyop.protocol.mesh_models import protocol_models
+from psyop.protocol.model import Protocol
 from psyop.rendering.builders import direction_from_angles, place_centre_m
 from psyop.rendering.mesh_scene import MeshInstance, model_matrix
 from psyop.stimulus.placement import centre_angles_deg
@@ -47,16 +49,15 @@ class SessionMeshes:
         return [asset.record() for asset in self._assets.values()]
 
 
-def protocol_mesh_records(scene: Sequence[ps.Primitive], base_dir: Path | None,
+def protocol_mesh_records(protocol: Protocol, base_dir: Path | None,
                           mesh_files: MeshFiles | None = None) -> list[dict[str, object]]:
     """session.json's ``meshes``: the record (MeshAsset.record) of every (file, node) the protocol's mesh
-    items name, read when the session opens, whether or not the session renders images (``file`` and
-    ``node`` are plain strings, never factors, so this is every model the session can show).
+    items can show (every level of a factor on ``file`` or ``node``; psyop.protocol.mesh_models), read when
+    the session opens, whether or not the session renders images.
     ``mesh_files``: the session's model cache (the models validation read are not read again)."""
     files = SessionMeshes(base_dir, mesh_files)
-    for item in scene:
-        if isinstance(item, ps.Mesh):
-            files.asset(item.file, item.node)
+    for file, node in protocol_models(protocol):
+        files.asset(file, node)
     return files.records()
 
 
@@ -73,8 +74,13 @@ def _direction3(direction: Sequence[float]) -> tuple[float, float, float]:
 
 
 def mesh_instance(item: ps.Mesh, values: JsonMapping, origin_m: np.ndarray, files: SessionMeshes) -> MeshInstance:
-    """The placed model of a mesh item whose factor fields hold this trial's numbers."""
-    asset = files.asset(item.file, item.node)
+    """The placed model of a mesh item whose factor fields hold this trial's numbers; a factor on ``file`` or
+    ``node`` picks the trial's model (each loaded once per session by ``files``)."""
+    try:
+        file, node = item.model_for(values)
+    except ValueError as error:
+        raise UserError(f"scene item '{item.id}': {error}") from None
+    asset = files.asset(file, node)
     extent = asset.largest_extent
     rotation = tuple(_number(a) for a in item.rotation_deg)
     if item.position_m is not None:
