@@ -11,13 +11,24 @@ from collections.abc import Iterable, Iterator, Mapping
 
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
-from psyop.protocol.scene import Mesh
+from psyop.protocol.scene import Mesh, Primitive, ReachMesh, ReachTarget
 
 #: (file, node) as the protocol names them (node None: the file's whole scene)
 ModelKey = tuple[str, str | None]
+#: what names a model: a mesh item, or a reach target's ``object`` (both have file, node, model_for)
+ModelSource = Mesh | ReachMesh
 
 
-def item_models(item: Mesh, value_sets: Iterable[Mapping[str, object]]) -> dict[ModelKey, Mapping[str, object]]:
+def model_source(item: Primitive) -> tuple[ModelSource, tuple[str, ...]] | None:
+    """The part of a scene item that names a glTF model and its key path below the item, or None."""
+    if isinstance(item, Mesh):
+        return item, ()
+    if isinstance(item, ReachTarget) and isinstance(item.object, ReachMesh):
+        return item.object, ("object",)
+    return None
+
+
+def item_models(item: ModelSource, value_sets: Iterable[Mapping[str, object]]) -> dict[ModelKey, Mapping[str, object]]:
     """Each distinct (file, node) the item shows over ``value_sets``, in first-seen order, with the first
     value set that picks it (validation names its levels in a message). A fixed file and node: one entry.
     Value sets whose level is not a word are skipped (validation reports the factor's kind)."""
@@ -50,13 +61,15 @@ def protocol_models(protocol: Protocol) -> list[ModelKey]:
     """Every (file, node) some mesh item of the protocol can show, in scene then first-seen order."""
     models: list[ModelKey] = []
     for item in protocol.scene:
-        if isinstance(item, Mesh):
-            sets = protocol_value_sets(protocol) if item.word_factors else iter([{}])
-            models += [key for key in item_models(item, sets) if key not in models]
+        found = model_source(item)
+        if found is not None:
+            source = found[0]
+            sets = protocol_value_sets(protocol) if source.word_factors else iter([{}])
+            models += [key for key in item_models(source, sets) if key not in models]
     return models
 
 
-def level_note(item: Mesh, values: Mapping[str, object]) -> str:
+def level_note(item: ModelSource, values: Mapping[str, object]) -> str:
     """``"model = 'a.glb': "``: the levels that picked a model, for a message (empty for a fixed model)."""
     named = ", ".join(f"{factor} = {values.get(factor)!r}" for _, factor in item.word_factors)
     return f"{named}: " if named else ""

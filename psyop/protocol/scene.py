@@ -306,14 +306,69 @@ class Room(_Primitive):
     eye_height_m: Number = Field(default=1.2, gt=0, description="seated eye height above the floor")
 
 
+class LevelRef(StrictModel):
+    """``{factor: NAME}`` on a word field (a mesh's ``file`` or ``node``): the trial's level of a factor whose
+    levels are words (file names, node names), so a categorical factor picks which model a trial shows.
+    Kept apart from :class:`FactorRef` (numbers): the numeric resolution (psyop.protocol.factor_fields)
+    leaves it alone and :meth:`Mesh.model_for` fills it in."""
+
+    factor: str
+
+
+#: A word, or ``{factor: NAME}``: a mesh's file or node, fixed or the trial's level of a word factor.
+FactorWord = Union[Annotated[str, Field(min_length=1)], LevelRef]
+
+
+def _word_factors(file: str | LevelRef, node: str | LevelRef | None) -> tuple[tuple[str, str], ...]:
+    return tuple((name, ref.factor) for name, ref in (("file", file), ("node", node)) if isinstance(ref, LevelRef))
+
+
+def _model_for(file: str | LevelRef, node: str | LevelRef | None,
+               values: Mapping[str, object]) -> tuple[str, str | None]:
+    def word(value: str | LevelRef | None) -> str | None:
+        if not isinstance(value, LevelRef):
+            return value
+        level = values.get(value.factor)
+        if not isinstance(level, str) or not level:
+            raise ValueError(f"factor {value.factor!r} gives {level!r} here; a mesh's file or node needs a "
+                             "factor whose levels are file or node names (words)")
+        return level
+    chosen = word(file)
+    assert chosen is not None  # file is required, a word or a LevelRef
+    return chosen, word(node)
+
+
+class ReachMesh(StrictModel):
+    """A glTF model as a reach target's object (``object: {file: pencil.glb, node: pencil}``): ``file`` and
+    ``node`` as a mesh item's (either may be ``{factor: NAME}`` of a word factor), turned by ``rotation_deg``
+    [yaw, pitch, roll] about its bounding-box centre, scaled so that box's largest extent (in the model's own
+    axes, as a mesh item's ``size_m``) is the target's ``size_m``, and that centre placed where the target is
+    (straight ahead at ``distance_fraction`` of the arm reach, ``height_m``): the target's position is the
+    placed box's centre and its size the box's largest side. Drawn unlit (base colour and texture)."""
+
+    file: FactorWord
+    node: FactorWord | None = None
+    rotation_deg: tuple[Number, Number, Number] = (0.0, 0.0, 0.0)
+
+    @property
+    def word_factors(self) -> tuple[tuple[str, str], ...]:
+        """(field, factor name) of ``file`` and ``node`` where they are ``{factor: NAME}``."""
+        return _word_factors(self.file, self.node)
+
+    def model_for(self, values: Mapping[str, object]) -> tuple[str, str | None]:
+        """(file, node) this trial shows (see :meth:`Mesh.model_for`)."""
+        return _model_for(self.file, self.node, values)
+
+
 class ReachTarget(_Primitive):
     """An object to reach for, straight ahead at a fraction of the participant's arm reach.
 
-    ``distance_fraction``: a number, or ``{factor: target_fraction}``."""
+    ``distance_fraction``: a number, or ``{factor: target_fraction}``. ``object``: an analytic pencil, sphere
+    or cube, or a glTF model (:class:`ReachMesh`), sized and placed by its bounding box."""
 
     kind: Literal["reach_target"]
-    object: Literal["pencil", "sphere", "cube"] = "pencil"
-    size_m: Number = Field(gt=0, le=1, description="longest dimension of the object")
+    object: Literal["pencil", "sphere", "cube"] | ReachMesh = "pencil"
+    size_m: Number = Field(gt=0, le=1, description="longest dimension of the object (a model's bounding box)")
     distance_fraction: Annotated[Number, Field(gt=0, le=1.5)] | "FactorRef"
     height_m: Number = Field(default=-0.15, ge=-2, le=2, description="relative to eye height, up positive")
 
@@ -331,18 +386,6 @@ class MeshLight(StrictModel):
 
 FactorNumber = Union[Number, FactorRef]
 
-
-class LevelRef(StrictModel):
-    """``{factor: NAME}`` on a word field (a mesh's ``file`` or ``node``): the trial's level of a factor whose
-    levels are words (file names, node names), so a categorical factor picks which model a trial shows.
-    Kept apart from :class:`FactorRef` (numbers): the numeric resolution (psyop.protocol.factor_fields)
-    leaves it alone and :meth:`Mesh.model_for` fills it in."""
-
-    factor: str
-
-
-#: A word, or ``{factor: NAME}``: a mesh's file or node, fixed or the trial's level of a word factor.
-FactorWord = Union[Annotated[str, Field(min_length=1)], LevelRef]
 
 
 class Mesh(_Primitive):
@@ -390,23 +433,12 @@ class Mesh(_Primitive):
     @property
     def word_factors(self) -> tuple[tuple[str, str], ...]:
         """(field, factor name) of ``file`` and ``node`` where they are ``{factor: NAME}``."""
-        return tuple((name, ref.factor) for name, ref in (("file", self.file), ("node", self.node))
-                     if isinstance(ref, LevelRef))
+        return _word_factors(self.file, self.node)
 
     def model_for(self, values: Mapping[str, object]) -> tuple[str, str | None]:
         """(file, node) this trial shows: each ``{factor: NAME}`` replaced by the trial's level (a word).
         A missing or non-word level is a ValueError naming the factor (validation rules both out)."""
-        def word(value: str | LevelRef | None) -> str | None:
-            if not isinstance(value, LevelRef):
-                return value
-            level = values.get(value.factor)
-            if not isinstance(level, str) or not level:
-                raise ValueError(f"factor {value.factor!r} gives {level!r} here; a mesh's file or node needs a "
-                                 "factor whose levels are file or node names (words)")
-            return level
-        file = word(self.file)
-        assert file is not None  # file is required, a word or a LevelRef
-        return file, word(self.node)
+        return _model_for(self.file, self.node, values)
 
 
 Primitive = Annotated[

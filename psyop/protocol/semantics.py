@@ -25,7 +25,7 @@ from psyop.protocol.model import Protocol
 from psyop.protocol.primitive_count import primitive_count
 from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, LevelRef, Mesh,
-                                  PinkNoiseSurface, ReachTarget, Room, SinusoidalBorder, TargetField,
+                                  PinkNoiseSurface, ReachMesh, ReachTarget, Room, SinusoidalBorder, TargetField,
                                   centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
 from psyop.records import JsonObject, Loc
@@ -176,7 +176,7 @@ class _Checker:
                 self.add(path + ("eye_height_m",), "the eyes are above the ceiling; make eye_height_m less than height_m")
             if isinstance(item, TargetField):
                 self.check_target_field(item, path, conditions)
-            if isinstance(item, Mesh):
+            if isinstance(item, Mesh) or (isinstance(item, ReachTarget) and isinstance(item.object, ReachMesh)):
                 self.check_mesh(item, path, conditions)
             if isinstance(item, SinusoidalBorder):
                 self.check_order(item.near_depth, item.far_depth, path + ("near_depth",), conditions,
@@ -257,52 +257,57 @@ class _Checker:
             except ValueError:  # an adaptive level, known at run time: its range's ends are checked next
                 continue
 
-    def check_mesh(self, item: Mesh, path: Loc, conditions: list[JsonObject]) -> None:
-        """Every model the item can show is read now (psyop.mesh.load: every file-level problem is one line at
-        the item's ``file`` or ``node``, naming the factor level that picks it), and a mesh at optical infinity
-        is refused (a model has a place, not only directions). ``{factor: NAME}`` on file/node: a word factor."""
+    def check_mesh(self, item: Mesh | ReachTarget, path: Loc, conditions: list[JsonObject]) -> None:
+        """Every model the item (a mesh, or a reach target whose object is one) can show is read now
+        (psyop.mesh.load: every file-level problem is one line at the item's ``file`` or ``node``, naming the
+        factor level that picks it), and a mesh at optical infinity is refused (a model has a place, not only
+        directions). ``{factor: NAME}`` on file/node: a factor of words."""
         from psyop.mesh.load import MeshFiles
-        from psyop.protocol.mesh_models import item_models, level_note
+        from psyop.protocol.mesh_models import item_models, level_note, model_source
 
+        found = model_source(item)
+        assert found is not None  # called for items that name a model
+        source, below = found
+        path = path + below
         if not all(self.factor_exists(factor, path + (field, "factor"), numeric=False)
-                   for field, factor in item.word_factors):
+                   for field, factor in source.word_factors):
             return
         base_dir = self.base_dir or FsPath.cwd()
         if self.meshes is None:
             self.meshes = MeshFiles(base_dir)
         counts: dict[tuple[str, str | None], int] = {}
-        for (file, node), values in item_models(item, self._value_sets(conditions)).items():
+        for (file, node), values in item_models(source, self._value_sets(conditions)).items():
             try:
                 counts[(file, node)] = self.meshes.load(FsPath(file), node, base_dir=base_dir).triangle_count
             except UserError as error:
                 field = "node" if node is not None and "node" in str(error) else "file"
-                self.add(path + (field,), level_note(item, values) + str(error))
+                self.add(path + (field,), level_note(source, values) + str(error))
                 return
         self.mesh_triangles[item.id] = counts
-        if item.depth is not None and item.depth.constant_D() == 0.0:
+        if isinstance(item, Mesh) and item.depth is not None and item.depth.constant_D() == 0.0:
             self.add(path + ("depth",), "a mesh cannot lie at optical infinity (0 D); give a finite depth")
 
     def check_mesh_budget(self, conditions: list[JsonObject]) -> None:
         """Each phase's mesh items together hold at most MAX_MESH_TRIANGLES triangles, in every trial (a factor
         on ``file`` or ``node`` counts the models that trial's levels pick)."""
-        from psyop.protocol.mesh_models import level_note
+        from psyop.protocol.mesh_models import level_note, model_source
 
         for index, phase in enumerate(self.p.trial.phases):
             if not isinstance(phase, (Interval, Blank)) or getattr(phase, "display_off", False):
                 continue
-            shown = [(i, item) for i, item in enumerate(self.p.scene) if isinstance(item, Mesh)
-                     and item.id in self.mesh_triangles and (phase.show == "all" or item.id in phase.show)]
-            if not shown:
-                continue
-            varying = any(item.word_factors for _, item in shown)
+            shown = [(i, item.id, found[0]) for i, item in enumerate(self.p.scene)
+                     if (found := model_source(item)) is not None and item.id in self.mesh_triangles
+                     and (phase.show == "all" or item.id in phase.show)]
+            varying = any(source.word_factors for _, _, source in shown)
             for values in (self._value_sets(conditions) if varying else iter([{}])):
-                counts = [(self.mesh_triangles[item.id].get(item.model_for(values), 0), i, item) for i, item in shown]
-                total = sum(c for c, _, _ in counts)
+                counts = [(self.mesh_triangles[name].get(source.model_for(values), 0), i, name, source)
+                          for i, name, source in shown]
+                total = sum(c[0] for c in counts)
                 if total > MAX_MESH_TRIANGLES:
-                    most, i, item = max(counts, key=lambda t: t[0])
-                    self.add(("scene", i), f"{level_note(item, values)}phase trial.phases[{index}] ({phase.kind}) "
+                    most, i, name, source = max(counts, key=lambda t: t[0])
+                    self.add(("scene", i), f"{level_note(source, values)}phase trial.phases[{index}] ({phase.kind}) "
                                            f"draws {total} mesh triangles, more than the budget of {MAX_MESH_TRIANGLES} "
-                                           f"(psyop.limits.MAX_MESH_TRIANGLES); '{item.id}' has {most}. Fix: a "
+                                           f"(psyop.limits.MAX_MESH_TRIANGLES); '{name}' has {most}. Fix: a "
                                            "simpler model, or show fewer meshes in that phase")
                     return
 

@@ -111,3 +111,20 @@ def mesh_instance(item: ps.Mesh, values: JsonMapping, origin_m: np.ndarray, file
         return MeshInstance(asset, tuple(model.reshape(-1).tolist()), item.id, item.shading,
                             _direction3(item.light.direction), float(item.light.ambient))
     return MeshInstance(asset, tuple(model.reshape(-1).tolist()), item.id, item.shading)
+
+
+def reach_mesh_instance(name: str, obj: ps.ReachMesh, values: JsonMapping, centre_m: tuple[float, float, float],
+                        size_m: float, files: SessionMeshes) -> MeshInstance:
+    """A reach target's model (psyop.protocol.scene.ReachMesh): its bounding box's centre at ``centre_m`` (head
+    space: where the analytic target's centre would be), its largest extent ``size_m``, turned about that centre."""
+    try:
+        file, node = obj.model_for(values)
+    except ValueError as error:
+        raise UserError(f"scene item '{name}': {error}") from None
+    asset = files.asset(file, node)
+    if not asset.largest_extent > 0:
+        raise UserError(f"scene item '{name}': the model has no extent to size (a flat point set)")
+    pivot = (np.asarray(asset.bbox_min, dtype=np.float64) + np.asarray(asset.bbox_max, dtype=np.float64)) / 2.0
+    rotation = tuple(float(a) for a in obj.rotation_deg)
+    model = model_matrix(np.asarray(centre_m, dtype=np.float64), rotation, size_m / asset.largest_extent, pivot)
+    return MeshInstance(asset, tuple(model.reshape(-1).tolist()), name, "unlit")

@@ -158,14 +158,20 @@ def test_the_triangle_budget_is_checked_per_level(tmp_path, monkeypatch):
 
 
 def test_a_session_loads_each_levels_model_once_and_records_all(tmp_path, monkeypatch):
+    selections: collections.Counter = collections.Counter()
     parses: collections.Counter = collections.Counter()
-    real_load = mesh_load._load
+    real_select, real_parse = mesh_load._select, mesh_load._parse
 
-    def counted(path, raw, node, *args, **kwargs):
-        parses[(Path(path).name, node)] += 1
-        return real_load(path, raw, node, *args, **kwargs)
+    def select(reader, node):
+        selections[(Path(reader.path).name, node)] += 1
+        return real_select(reader, node)
 
-    monkeypatch.setattr(mesh_load, "_load", counted)
+    def parse(path, raw):
+        parses[Path(path).name] += 1
+        return real_parse(path, raw)
+
+    monkeypatch.setattr(mesh_load, "_select", select)
+    monkeypatch.setattr(mesh_load, "_parse", parse)
     data = tmp_path / "data"
     assert cli_main(["run", str(_write(tmp_path)), "--participant", "P1", "--data", str(data), "--render", "images",
                      "--no-progress"]) == 0
@@ -173,5 +179,7 @@ def test_a_session_loads_each_levels_model_once_and_records_all(tmp_path, monkey
     meta = json.loads(session.read_text())
     assert meta["status"] == "complete"
     assert [(m["file"], m["node"]) for m in meta["meshes"]] == MODELS
-    # 6 trials (each model in 2), looked up by validation, session.json and each trial's scene: one load each
-    assert dict(parses) == {model: 1 for model in MODELS}
+    # 6 trials (each model in 2), looked up by validation, session.json and each trial's scene: one load each,
+    # and one parse per file (teaser.glb's two nodes share it)
+    assert dict(selections) == {model: 1 for model in MODELS}
+    assert dict(parses) == {"teaser.glb": 1, "pencil.glb": 1}
