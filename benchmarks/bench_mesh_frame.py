@@ -1,12 +1,13 @@
-"""Mesh frame cost (issue 26): a frame with a mesh disc of 1k, 10k and 100k triangles as a ratio to the
+"""Mesh frame cost (issue 26): a frame with a mesh disc of 1k, 10k, 100k and 1M triangles as a ratio to the
 same frame with the analytic disc of the same geometry (the fan's vertices lie on the analytic disc's rim:
 its area is the disc's times (n / 2 pi) sin(2 pi / n): 0.0007 % less at 1k triangles), right eye, ocular mode, frames interleaved (mesh,
-analytic, mesh, ...), median of the per-pair ratios. And the CPU side of an egocentric frame with the
-dining-room mesh against the same frame with the former box room (bench_frame_cpu.measure).
+analytic, mesh, ...), median of the per-pair ratios; and the slope: the mesh frame's median ms and the
+ratio, each fitted by least squares against the triangle count over the rows, per 100k triangles. And the
+CPU side of an egocentric frame with the dining-room mesh against the same frame with the former box room
+(bench_frame_cpu.measure).
 
-Not measured here (issue 26 item 6, open): 1M triangles and the slope, stereo mesh-disc frames, and a
-GPU's 90 Hz budget. On llvmpipe the frame times are CPU times of the
-software rasteriser: ratios only, absolute times are context.
+Not measured here (issue 26 item 6, open): stereo mesh-disc frames, and a GPU's 90 Hz budget. On llvmpipe
+the frame times are CPU times of the software rasteriser: ratios only, absolute times are context.
 ``quick``: a 160 x 160 window around the disc and 3 frame pairs.
 """
 
@@ -25,7 +26,7 @@ from psyop.rendering.mesh_scene import MeshInstance, model_matrix
 from psyop.rendering.renderer import Renderer, RenderSettings, create_headless_context
 from psyop.rendering.scene import Primitive, Scene, Shape, Solid
 
-TRIANGLES = (1_000, 10_000, 100_000)
+TRIANGLES = (1_000, 10_000, 100_000, 1_000_000)
 #: protocols/egocentric.yaml's former analytic room (kind: room), the same size as the dining-room mesh
 BOX_ROOM = """  - id: room
     kind: room
@@ -79,6 +80,21 @@ def _room_rows(ctx, quick: bool) -> list[str]:  # type: ignore[no-untyped-def]
             f"| dining room (assets/dining_room.glb) | {mesh['after_ms']:.2f} | {mesh['after_ms'] - box['after_ms']:+.2f} |"]
 
 
+def slope_per_100k(triangles: list[int], values: list[float]) -> tuple[float, float]:
+    """(slope per 100k triangles, intercept) of the least-squares line through (triangles, values)."""
+    slope, intercept = np.polyfit(np.asarray(triangles, dtype=np.float64), np.asarray(values, dtype=np.float64), 1)
+    return float(slope) * 1e5, float(intercept)
+
+
+def _slope_lines(fit: list[tuple[int, float, float]]) -> list[str]:
+    counts = [n for n, _, _ in fit]
+    ms, ms0 = slope_per_100k(counts, [t for _, t, _ in fit])
+    ratio, ratio0 = slope_per_100k(counts, [r for _, _, r in fit])
+    return ["", (f"Slope, least squares over the {len(fit)} rows ({', '.join(f'{n:,}' for n in counts)} triangles): "
+                 f"{ms:.3f} ms per 100k triangles (intercept {ms0:.2f} ms), ratio {ratio:.3f} per 100k triangles "
+                 f"(intercept {ratio0:.2f}).")]
+
+
 def run(out: Path, quick: bool = False) -> str:
     pairs = 3 if quick else 15
     ctx = create_headless_context()
@@ -93,6 +109,7 @@ def run(out: Path, quick: bool = False) -> str:
              (f"Right eye, ocular, {camera.width_px} x {camera.height_px} px, a disc {2 * RADIUS_M:g} m across at 1 m; "
               f"{pairs} interleaved frame pairs, median of per-pair ratios (first frame of each discarded)."), "",
              "| triangles | mesh frame ms (median) | analytic frame ms | ratio mesh / analytic |", "|---|---|---|---|"]
+    fit: list[tuple[int, float, float]] = []  # (triangles, mesh ms, ratio) per row
     try:
         with Renderer(analytic, settings, ctx=ctx) as flat:
             _time_frame(flat, camera)
@@ -106,11 +123,13 @@ def run(out: Path, quick: bool = False) -> str:
                         m.append(_time_frame(mesh, camera))
                         a.append(_time_frame(flat, camera))
                 ratio = statistics.median(x / y for x, y in zip(m, a))
+                fit.append((n, 1e3 * statistics.median(m), ratio))
                 lines.append(f"| {n} | {1e3 * statistics.median(m):.2f} | {1e3 * statistics.median(a):.2f} | "
                              f"{ratio:.2f} |")
+        lines += _slope_lines(fit)
         lines += _room_rows(ctx, quick)
     finally:
         ctx.release()
-    lines += ["", ("Not measured: 1M triangles and the slope, stereo mesh-disc frames, "
-                   "a GPU's 90 Hz budget (issue 26 item 6, open). llvmpipe: ratios only, absolute times are context.")]
+    lines += ["", ("Not measured: stereo mesh-disc frames, a GPU's 90 Hz budget (issue 26 item 6, open). "
+                   "llvmpipe: ratios only, absolute times are context.")]
     return "\n".join(lines) + "\n"

@@ -229,6 +229,7 @@ class _Reader:
         self.resources = _Resources(path, container.glb_bin)
         self._buffers: dict[int, bytes] = {}
         self._textures: dict[int, MeshTexture] = {}
+        self.used: set[tuple[str, int]] = set()  # ("buffer" | "texture", index) read by the current selection
 
     def fail(self, where: str, message: str) -> UserError:
         return UserError(f"{self.path}: {where}: {message}")
@@ -255,6 +256,7 @@ class _Reader:
         return items[index]
 
     def buffer(self, index: int, where: str) -> bytes:
+        self.used.add(("buffer", index))
         if index not in self._buffers:
             buffer = self.item(self.gltf.buffers, index, "buffer", where)
             if buffer.uri is None:
@@ -339,6 +341,7 @@ class _Reader:
 
     # -- textures ---------------------------------------------------------------------------
     def texture(self, index: int, where: str) -> MeshTexture:
+        self.used.add(("texture", index))
         if index in self._textures:
             return self._textures[index]
         texture = self.item(self.gltf.textures, index, "texture", where)
@@ -495,6 +498,18 @@ class _Reader:
             raise self.fail(where, f"{name} has non-finite values; fix the model")
         return values
 
+    def used_resources(self) -> tuple[tuple[str, str], ...]:
+        """(relative uri, sha256) of the external files the current selection's buffers and images came from."""
+        uris = []
+        for kind, index in self.used:
+            if kind == "buffer":
+                uris.append(self.gltf.buffers[index].uri)
+            else:
+                image = self.gltf.textures[index].source
+                uris.append(self.gltf.images[image].uri if image is not None else None)
+        relative = {unquote(uri) for uri in uris if isinstance(uri, str) and not uri.startswith("data:")}
+        return tuple(sorted((uri, self.resources.read[uri]) for uri in relative if uri in self.resources.read))
+
     # -- the scene --------------------------------------------------------------------------
     def roots(self) -> list[int]:
         nodes, scenes = self.gltf.nodes or [], self.gltf.scenes or []
@@ -608,23 +623,42 @@ def _blend_last(parts: list[MeshPart]) -> tuple[MeshPart, ...]:
                  + [p for p in parts if p.alpha_mode is AlphaMode.BLEND])
 
 
+def _parse(path: Path, raw: bytes) -> _Reader:
+    """The one parse of a model file's container and document (its buffers and images are read and decoded
+    lazily, once each, by the nodes selected from it)."""
+    return _Reader(path, raw)
+
+
 def _load(path: Path, raw: bytes, node: str | None) -> MeshAsset:
-    reader = _Reader(path, raw)
+    """Parse ``raw`` and select ``node`` (or the whole scene)."""
+    return _select(_parse(path, raw), node)
+
+
+def _chosen_nodes(reader: _Reader, node: str | None) -> list[tuple[int, str, np.ndarray, tuple[int, ...]]]:
+    """The walked nodes under ``node`` (all of the scene when None); an unknown or ambiguous name is refused."""
+    walked = reader.walk()
+    if node is None:
+        return walked
+    path = reader.path
+    matches = [w for w in walked if w[1] == node]
+    if not matches:
+        names = [w[1] for w in walked]
+        shown = ", ".join(f"'{n}'" for n in names[:30]) + (f" and {len(names) - 30} more" if len(names) > 30 else "")
+        raise UserError(f"{path}: no node named '{node}' in the model's scene; its nodes are {shown or 'none'}")
+    if len(matches) > 1:
+        raise UserError(f"{path}: {len(matches)} nodes are named '{node}' (nodes "
+                        f"{', '.join(str(m[0]) for m in matches)}); rename them so the name picks one")
+    chosen = matches[0][0]
+    return [w for w in walked if w[0] == chosen or chosen in w[3]]
+
+
+def _select(reader: _Reader, node: str | None) -> MeshAsset:
+    """The asset of one node (with its descendants) of a parsed model, or of its whole scene."""
+    path = reader.path
+    reader.used = set()
     try:
-        walked = reader.walk()
-        if node is not None:
-            matches = [w for w in walked if w[1] == node]
-            if not matches:
-                names = [w[1] for w in walked]
-                shown = ", ".join(f"'{n}'" for n in names[:30]) + (f" and {len(names) - 30} more" if len(names) > 30 else "")
-                raise UserError(f"{path}: no node named '{node}' in the model's scene; its nodes are {shown or 'none'}")
-            if len(matches) > 1:
-                raise UserError(f"{path}: {len(matches)} nodes are named '{node}' (nodes "
-                                f"{', '.join(str(m[0]) for m in matches)}); rename them so the name picks one")
-            chosen = matches[0][0]
-            walked = [w for w in walked if w[0] == chosen or chosen in w[3]]
         parts: list[MeshPart] = []
-        for index, name, world, _ in walked:
+        for index, name, world, _ in _chosen_nodes(reader, node):
             if reader.gltf.nodes[index].mesh is not None:
                 parts.extend(reader.parts(index, name, world))
         total = sum(p.triangle_count for p in parts)
@@ -643,7 +677,7 @@ def _load(path: Path, raw: bytes, node: str | None) -> MeshAsset:
     return MeshAsset(
         path=path, sha256=reader.sha256, node=node, parts=_blend_last(parts),
         bbox_min=np.min([p.bbox_min for p in parts], axis=0), bbox_max=np.max([p.bbox_max for p in parts], axis=0),
-        resources=tuple(sorted(reader.resources.read.items())))
+        resources=reader.used_resources())
 
 
 def load_mesh(path: Path, node: str | None = None, *, base_dir: Path) -> MeshAsset:
@@ -678,11 +712,13 @@ def load_mesh(path: Path, node: str | None = None, *, base_dir: Path) -> MeshAss
 
 
 class MeshFiles:
-    """The models of one session, each loaded once per content.
+    """The models of one session, each file parsed once and each (file, node) selected once per content.
 
-    ``load`` reads the model file (bounded) and hashes it; an entry is reused when the path,
-    the node and the SHA-256 of the model and of every file it read match, so an edited model
-    or texture is loaded again and an unchanged one never is (``loads`` counts real loads).
+    ``load`` reads the model file (bounded) and hashes it; an asset is reused when the path, the node and
+    the SHA-256 of the model and of every file it read match, so an edited model or texture is loaded again
+    and an unchanged one never is (``loads`` counts selections made, ``parses`` the files parsed). Two nodes
+    of one file share its parse: the document, its buffers and its decoded textures (one MeshTexture object
+    per image, so a renderer uploads it once), as long as the file and every file it read are unchanged.
     One is made per command and passed explicitly to validation (``load_protocol(..., meshes=)``),
     the session.json records and the session's scene, so each model is parsed once in all of them.
     Looking up costs reading and hashing the files, no parsing or decoding: call it once per
@@ -692,25 +728,35 @@ class MeshFiles:
     def __init__(self, base_dir: Path) -> None:
         self.base_dir = Path(base_dir)
         self._assets: dict[tuple[str, str | None], MeshAsset] = {}
+        self._readers: dict[str, _Reader] = {}  # resolved path -> its parse (checked against the file's hash)
         self.loads = 0
+        self.parses = 0
 
     def load(self, path: Path | str, node: str | None = None, *, base_dir: Path | None = None) -> MeshAsset:
         """The model at ``path`` (relative to ``base_dir``, default the cache's own folder), or one node of it."""
         full = Path(base_dir if base_dir is not None else self.base_dir) / path
         raw = _model_file(full).read_bytes(full)
-        key = (str(full.resolve()), node)
+        digest = sha256_hex(raw)
+        resolved = str(full.resolve())
+        key = (resolved, node)
         cached = self._assets.get(key)
-        if cached is not None and cached.sha256 == sha256_hex(raw) and self._resources_unchanged(cached):
+        if cached is not None and cached.sha256 == digest and self._resources_unchanged(full, cached.resources):
             return cached
-        asset = _load(full, raw, node)
+        reader = self._readers.get(resolved)
+        if reader is None or reader.sha256 != digest or \
+                not self._resources_unchanged(full, tuple(reader.resources.read.items())):
+            reader = _parse(full, raw)
+            self.parses += 1
+            self._readers[resolved] = reader
+        asset = _select(reader, node)
         self.loads += 1
         self._assets[key] = asset
         return asset
 
     @staticmethod
-    def _resources_unchanged(asset: MeshAsset) -> bool:
-        folder = asset.path.parent
-        for uri, digest in asset.resources:
+    def _resources_unchanged(model: Path, resources: tuple[tuple[str, str], ...]) -> bool:
+        folder = model.parent
+        for uri, digest in resources:
             target = folder.joinpath(*PurePosixPath(uri.replace("\\", "/")).parts)
             try:
                 reader = InputFile(what=uri, give="a file", max_bytes=MAX_MESH_FILE_BYTES, typical="",

@@ -89,6 +89,8 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                    shading="stimulus", light="stimulus"),
     "MeshLight": {"direction": "stimulus", "ambient": "stimulus"},
     "FactorRef": {"factor": "stimulus"},
+    "LevelRef": {"factor": "stimulus"},
+    "ReachMesh": {"file": "stimulus", "node": "stimulus", "rotation_deg": "stimulus"},  # a mesh's file/node as {factor: NAME} (psyop.protocol.mesh_models)
     "TrialSpec": {"phases": "plan", "min_valid_gaze_share": "plan"},
     "DriftRecalibration": {"kind": "validation", "target_size_deg": "plan", "expected_s": "plan"},
     "Interval": {"kind": "validation", "duration_s": "plan", "min_duration_s": "plan", "expected_s": "plan",

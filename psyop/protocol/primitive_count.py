@@ -6,7 +6,8 @@ compares); validation sums them per phase against psyop.limits.MAX_PRIMITIVES.
 
 from __future__ import annotations
 
-from psyop.protocol.scene import (Aperture, Disc, FixationTarget, GridPlanes, Mesh, Primitive, Quad, ReachTarget, Room,
+from psyop.protocol.scene import (Aperture, Disc, FixationTarget, GridPlanes, Mesh, Primitive, Quad, ReachMesh,
+                                  ReachTarget, Room,
                                   SinusoidalBorder, TargetField)
 
 #: Room: floor, ceiling, two side walls, back wall; with a table also the table top, a plate and a bottle.
@@ -29,5 +30,7 @@ def primitive_count(item: Primitive) -> int:
     if isinstance(item, Room):
         return ROOM_WALLS + (0 if item.table_height_m is None else ROOM_TABLE_ITEMS)
     if isinstance(item, ReachTarget):
+        if isinstance(item.object, ReachMesh):
+            return 0  # a model: rasterised, like a mesh item
         return 2 if item.object == "pencil" else 1  # body + tip
     raise TypeError(f"no primitive count for scene kind {type(item).__name__}")  # the model is a closed union

@@ -306,14 +306,69 @@ class Room(_Primitive):
     eye_height_m: Number = Field(default=1.2, gt=0, description="seated eye height above the floor")
 
 
+class LevelRef(StrictModel):
+    """``{factor: NAME}`` on a word field (a mesh's ``file`` or ``node``): the trial's level of a factor whose
+    levels are words (file names, node names), so a categorical factor picks which model a trial shows.
+    Kept apart from :class:`FactorRef` (numbers): the numeric resolution (psyop.protocol.factor_fields)
+    leaves it alone and :meth:`Mesh.model_for` fills it in."""
+
+    factor: str
+
+
+#: A word, or ``{factor: NAME}``: a mesh's file or node, fixed or the trial's level of a word factor.
+FactorWord = Union[Annotated[str, Field(min_length=1)], LevelRef]
+
+
+def _word_factors(file: str | LevelRef, node: str | LevelRef | None) -> tuple[tuple[str, str], ...]:
+    return tuple((name, ref.factor) for name, ref in (("file", file), ("node", node)) if isinstance(ref, LevelRef))
+
+
+def _model_for(file: str | LevelRef, node: str | LevelRef | None,
+               values: Mapping[str, object]) -> tuple[str, str | None]:
+    def word(value: str | LevelRef | None) -> str | None:
+        if not isinstance(value, LevelRef):
+            return value
+        level = values.get(value.factor)
+        if not isinstance(level, str) or not level:
+            raise ValueError(f"factor {value.factor!r} gives {level!r} here; a mesh's file or node needs a "
+                             "factor whose levels are file or node names (words)")
+        return level
+    chosen = word(file)
+    assert chosen is not None  # file is required, a word or a LevelRef
+    return chosen, word(node)
+
+
+class ReachMesh(StrictModel):
+    """A glTF model as a reach target's object (``object: {file: pencil.glb, node: pencil}``): ``file`` and
+    ``node`` as a mesh item's (either may be ``{factor: NAME}`` of a word factor), turned by ``rotation_deg``
+    [yaw, pitch, roll] about its bounding-box centre, scaled so that box's largest extent (in the model's own
+    axes, as a mesh item's ``size_m``) is the target's ``size_m``, and that centre placed where the target is
+    (straight ahead at ``distance_fraction`` of the arm reach, ``height_m``): the target's position is the
+    placed box's centre and its size the box's largest side. Drawn unlit (base colour and texture)."""
+
+    file: FactorWord
+    node: FactorWord | None = None
+    rotation_deg: tuple[Number, Number, Number] = (0.0, 0.0, 0.0)
+
+    @property
+    def word_factors(self) -> tuple[tuple[str, str], ...]:
+        """(field, factor name) of ``file`` and ``node`` where they are ``{factor: NAME}``."""
+        return _word_factors(self.file, self.node)
+
+    def model_for(self, values: Mapping[str, object]) -> tuple[str, str | None]:
+        """(file, node) this trial shows (see :meth:`Mesh.model_for`)."""
+        return _model_for(self.file, self.node, values)
+
+
 class ReachTarget(_Primitive):
     """An object to reach for, straight ahead at a fraction of the participant's arm reach.
 
-    ``distance_fraction``: a number, or ``{factor: target_fraction}``."""
+    ``distance_fraction``: a number, or ``{factor: target_fraction}``. ``object``: an analytic pencil, sphere
+    or cube, or a glTF model (:class:`ReachMesh`), sized and placed by its bounding box."""
 
     kind: Literal["reach_target"]
-    object: Literal["pencil", "sphere", "cube"] = "pencil"
-    size_m: Number = Field(gt=0, le=1, description="longest dimension of the object")
+    object: Literal["pencil", "sphere", "cube"] | ReachMesh = "pencil"
+    size_m: Number = Field(gt=0, le=1, description="longest dimension of the object (a model's bounding box)")
     distance_fraction: Annotated[Number, Field(gt=0, le=1.5)] | "FactorRef"
     height_m: Number = Field(default=-0.15, ge=-2, le=2, description="relative to eye height, up positive")
 
@@ -332,6 +387,7 @@ class MeshLight(StrictModel):
 FactorNumber = Union[Number, FactorRef]
 
 
+
 class Mesh(_Primitive):
     """A glTF 2.0 model (``.gltf`` or ``.glb``, path relative to the protocol file), or one ``node`` of its
     scene, rasterised beside the analytic primitives with the same per-eye camera (docs/protocols.md, "Meshes").
@@ -340,11 +396,12 @@ class Mesh(_Primitive):
     origin there; or ``depth`` (and ``centre_deg``, either angle form) puts its bounding-box centre at that
     distance in that direction from the scene origin. ``rotation_deg: [yaw, pitch, roll]`` turns it about
     that point. Size: ``scale`` (model units to metres), ``size_m`` or ``size_deg`` (the bounding box's
-    largest extent; size_deg at ``depth``), default scale 1. Numbers may be ``{factor: NAME}``."""
+    largest extent; size_deg at ``depth``), default scale 1. Numbers may be ``{factor: NAME}``, and so may
+    ``file`` and ``node`` (a factor of words: each level a file name or a node name; :meth:`model_for`)."""
 
     kind: Literal["mesh"]
-    file: str = Field(min_length=1)
-    node: str | None = Field(default=None, min_length=1)
+    file: FactorWord
+    node: FactorWord | None = None
     position_m: tuple[FactorNumber, FactorNumber, FactorNumber] | None = None
     centre_deg: Centre | None = None
     depth: Depth | None = None
@@ -372,6 +429,16 @@ class Mesh(_Primitive):
         if self.shading == "unlit" and self.light is not None:
             raise ValueError("a light is used only with shading: lambert; remove it or set shading: lambert")
         return self
+
+    @property
+    def word_factors(self) -> tuple[tuple[str, str], ...]:
+        """(field, factor name) of ``file`` and ``node`` where they are ``{factor: NAME}``."""
+        return _word_factors(self.file, self.node)
+
+    def model_for(self, values: Mapping[str, object]) -> tuple[str, str | None]:
+        """(file, node) this trial shows: each ``{factor: NAME}`` replaced by the trial's level (a word).
+        A missing or non-word level is a ValueError naming the factor (validation rules both out)."""
+        return _model_for(self.file, self.node, values)
 
 
 Primitive = Annotated[

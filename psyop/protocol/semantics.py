@@ -24,8 +24,9 @@ from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.primitive_count import primitive_count
 from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
-from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, PinkNoiseSurface,
-                                  Mesh, ReachTarget, Room, SinusoidalBorder, TargetField, centre_eccentricity_deg)
+from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, LevelRef, Mesh,
+                                  PinkNoiseSurface, ReachMesh, ReachTarget, Room, SinusoidalBorder, TargetField,
+                                  centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
 from psyop.records import JsonObject, Loc
 
@@ -64,7 +65,8 @@ class _Checker:
         self.meshes = meshes  # the models read by check_mesh (a fresh MeshFiles when None)
         self.issues: list[Issue] = []
         self.factors = protocol.design.factors
-        self.mesh_triangles: dict[str, int] = {}  # mesh item id -> triangles of its model (read by check_mesh)
+        # mesh item id -> triangles of each (file, node) it can show (read by check_mesh)
+        self.mesh_triangles: dict[str, dict[tuple[str, str | None], int]] = {}
 
     def add(self, path: Loc, message: str) -> None:
         self.issues.append(Issue(path, message))
@@ -174,8 +176,8 @@ class _Checker:
                 self.add(path + ("eye_height_m",), "the eyes are above the ceiling; make eye_height_m less than height_m")
             if isinstance(item, TargetField):
                 self.check_target_field(item, path, conditions)
-            if isinstance(item, Mesh):
-                self.check_mesh(item, path)
+            if isinstance(item, Mesh) or (isinstance(item, ReachTarget) and isinstance(item.object, ReachMesh)):
+                self.check_mesh(item, path, conditions)
             if isinstance(item, SinusoidalBorder):
                 self.check_order(item.near_depth, item.far_depth, path + ("near_depth",), conditions,
                                  "near_depth must be nearer (more dioptres) than far_depth")
@@ -255,38 +257,59 @@ class _Checker:
             except ValueError:  # an adaptive level, known at run time: its range's ends are checked next
                 continue
 
-    def check_mesh(self, item: Mesh, path: Loc) -> None:
-        """The model is read now (psyop.mesh.load: every file-level problem is one line at the item's ``file``),
-        and a mesh at optical infinity is refused (a model has a place, not only directions)."""
+    def check_mesh(self, item: Mesh | ReachTarget, path: Loc, conditions: list[JsonObject]) -> None:
+        """Every model the item (a mesh, or a reach target whose object is one) can show is read now
+        (psyop.mesh.load: every file-level problem is one line at the item's ``file`` or ``node``, naming the
+        factor level that picks it), and a mesh at optical infinity is refused (a model has a place, not only
+        directions). ``{factor: NAME}`` on file/node: a factor of words."""
         from psyop.mesh.load import MeshFiles
+        from psyop.protocol.mesh_models import item_models, level_note, model_source
 
+        found = model_source(item)
+        assert found is not None  # called for items that name a model
+        source, below = found
+        path = path + below
+        if not all(self.factor_exists(factor, path + (field, "factor"), numeric=False)
+                   for field, factor in source.word_factors):
+            return
         base_dir = self.base_dir or FsPath.cwd()
         if self.meshes is None:
             self.meshes = MeshFiles(base_dir)
-        try:
-            asset = self.meshes.load(FsPath(item.file), item.node, base_dir=base_dir)
-        except UserError as error:
-            self.add(path + (("node",) if item.node is not None and "node" in str(error) else ("file",)), str(error))
-            return
-        self.mesh_triangles[item.id] = asset.triangle_count
-        if item.depth is not None and item.depth.constant_D() == 0.0:
+        counts: dict[tuple[str, str | None], int] = {}
+        for (file, node), values in item_models(source, self._value_sets(conditions)).items():
+            try:
+                counts[(file, node)] = self.meshes.load(FsPath(file), node, base_dir=base_dir).triangle_count
+            except UserError as error:
+                field = "node" if node is not None and "node" in str(error) else "file"
+                self.add(path + (field,), level_note(source, values) + str(error))
+                return
+        self.mesh_triangles[item.id] = counts
+        if isinstance(item, Mesh) and item.depth is not None and item.depth.constant_D() == 0.0:
             self.add(path + ("depth",), "a mesh cannot lie at optical infinity (0 D); give a finite depth")
 
-    def check_mesh_budget(self) -> None:
-        """Each phase's mesh items together hold at most MAX_MESH_TRIANGLES triangles."""
+    def check_mesh_budget(self, conditions: list[JsonObject]) -> None:
+        """Each phase's mesh items together hold at most MAX_MESH_TRIANGLES triangles, in every trial (a factor
+        on ``file`` or ``node`` counts the models that trial's levels pick)."""
+        from psyop.protocol.mesh_models import level_note, model_source
+
         for index, phase in enumerate(self.p.trial.phases):
             if not isinstance(phase, (Interval, Blank)) or getattr(phase, "display_off", False):
                 continue
-            shown = [(i, item) for i, item in enumerate(self.p.scene)
-                     if isinstance(item, Mesh) and (phase.show == "all" or item.id in phase.show)]
-            counts = [(self.mesh_triangles.get(item.id, 0), i, item) for i, item in shown]
-            total = sum(c for c, _, _ in counts)
-            if total > MAX_MESH_TRIANGLES:
-                most, i, item = max(counts, key=lambda t: t[0])
-                self.add(("scene", i), f"phase trial.phases[{index}] ({phase.kind}) draws {total} mesh triangles, more "
-                                       f"than the budget of {MAX_MESH_TRIANGLES} (psyop.limits.MAX_MESH_TRIANGLES); "
-                                       f"'{item.id}' has {most}. Fix: a simpler model, or show fewer meshes in that phase")
-                return
+            shown = [(i, item.id, found[0]) for i, item in enumerate(self.p.scene)
+                     if (found := model_source(item)) is not None and item.id in self.mesh_triangles
+                     and (phase.show == "all" or item.id in phase.show)]
+            varying = any(source.word_factors for _, _, source in shown)
+            for values in (self._value_sets(conditions) if varying else iter([{}])):
+                counts = [(self.mesh_triangles[name].get(source.model_for(values), 0), i, name, source)
+                          for i, name, source in shown]
+                total = sum(c[0] for c in counts)
+                if total > MAX_MESH_TRIANGLES:
+                    most, i, name, source = max(counts, key=lambda t: t[0])
+                    self.add(("scene", i), f"{level_note(source, values)}phase trial.phases[{index}] ({phase.kind}) "
+                                           f"draws {total} mesh triangles, more than the budget of {MAX_MESH_TRIANGLES} "
+                                           f"(psyop.limits.MAX_MESH_TRIANGLES); '{name}' has {most}. Fix: a "
+                                           "simpler model, or show fewer meshes in that phase")
+                    return
 
     def check_primitive_limit(self) -> None:
         """Each phase's scene (its ``show:`` items) must fit the renderer's MAX_PRIMITIVES; the
@@ -625,7 +648,7 @@ def _in_order(sub: Loc, loc: Loc) -> bool:
 
 def _factor_refs(value: object) -> set[str]:
     """Every factor name a scene item refers to (``FactorRef``, ``Depth.factor``), at any depth."""
-    if isinstance(value, FactorRef):
+    if isinstance(value, (FactorRef, LevelRef)):
         return {value.factor}
     if isinstance(value, Depth):
         return set(value.factor_names)
@@ -657,7 +680,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
                                                "repetitions is over 10 million trials; reduce them")
     checker.check_scene(conditions)
     checker.check_primitive_limit()
-    checker.check_mesh_budget()
+    checker.check_mesh_budget(conditions)
     checker.check_response()
     checker.check_level_factor_levels()
     checker.check_pair_orders()

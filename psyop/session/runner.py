@@ -254,7 +254,7 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
         "python": platform.python_version(), "host": platform.node(),
         "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,
-        "pose": options.pose, "meshes": protocol_mesh_records(protocol.scene, source, opened.mesh_files),
+        "pose": options.pose, "meshes": protocol_mesh_records(protocol, source, opened.mesh_files),
     }
 
 

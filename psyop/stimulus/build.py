@@ -200,7 +200,8 @@ def _room(item: ps.Room) -> list[Primitive]:
     return [dataclasses.replace(p, name=f"{item.id}_{p.name}") for p in prims if not p.name.startswith("pencil")]
 
 
-def _reach_target(item: ps.ReachTarget, values: TrialRow, arm_reach_m: float) -> list[Primitive]:
+def _reach_target(item: ps.ReachTarget, values: TrialRow, arm_reach_m: float,
+                  meshes: SessionMeshes) -> list[Primitive] | MeshInstance:
     if isinstance(item.distance_fraction, ps.FactorRef):
         fraction = float(values[item.distance_fraction.factor])
     else:
@@ -208,6 +209,10 @@ def _reach_target(item: ps.ReachTarget, values: TrialRow, arm_reach_m: float) ->
     distance = fraction * float(values.get("arm_reach_m", arm_reach_m))
     size = float(item.size_m)
     height = float(item.height_m)
+    if isinstance(item.object, ps.ReachMesh):
+        from psyop.stimulus.meshes import reach_mesh_instance
+
+        return reach_mesh_instance(item.id, item.object, values, (0.0, height, -distance), size, meshes)
     if item.object == "pencil":
         body = Primitive(Shape.RECT, (0.0, height, -distance), (size * 0.43, 0, 0), (0, size * 0.023, 0),
                          Solid((0.95, 0.8, 0.1)), name=f"{item.id}_body")
@@ -314,7 +319,7 @@ def _build_item(item: ps.Primitive, ctx: _ItemContext) -> list[Primitive] | Aper
         case ps.Room():
             return _room(item)
         case ps.ReachTarget():
-            return _reach_target(item, ctx.values, ctx.arm_reach_m)
+            return _reach_target(item, ctx.values, ctx.arm_reach_m, ctx.meshes)
         case ps.Mesh():
             return mesh_instance(item, ctx.values, ctx.origin_m, ctx.meshes)
         case _:

@@ -16,6 +16,8 @@ import numpy as np
 from psyop.errors import UserError
 from psyop.mesh.asset import MeshAsset
 from psyop.protocol import scene as ps
+from psyop.protocol.mesh_models import protocol_models
+from psyop.protocol.model import Protocol
 from psyop.rendering.builders import direction_from_angles, place_centre_m
 from psyop.rendering.mesh_scene import MeshInstance, model_matrix
 from psyop.stimulus.placement import centre_angles_deg
@@ -47,16 +49,15 @@ class SessionMeshes:
         return [asset.record() for asset in self._assets.values()]
 
 
-def protocol_mesh_records(scene: Sequence[ps.Primitive], base_dir: Path | None,
+def protocol_mesh_records(protocol: Protocol, base_dir: Path | None,
                           mesh_files: MeshFiles | None = None) -> list[dict[str, object]]:
     """session.json's ``meshes``: the record (MeshAsset.record) of every (file, node) the protocol's mesh
-    items name, read when the session opens, whether or not the session renders images (``file`` and
-    ``node`` are plain strings, never factors, so this is every model the session can show).
+    items can show (every level of a factor on ``file`` or ``node``; psyop.protocol.mesh_models), read when
+    the session opens, whether or not the session renders images.
     ``mesh_files``: the session's model cache (the models validation read are not read again)."""
     files = SessionMeshes(base_dir, mesh_files)
-    for item in scene:
-        if isinstance(item, ps.Mesh):
-            files.asset(item.file, item.node)
+    for file, node in protocol_models(protocol):
+        files.asset(file, node)
     return files.records()
 
 
@@ -73,8 +74,13 @@ def _direction3(direction: Sequence[float]) -> tuple[float, float, float]:
 
 
 def mesh_instance(item: ps.Mesh, values: JsonMapping, origin_m: np.ndarray, files: SessionMeshes) -> MeshInstance:
-    """The placed model of a mesh item whose factor fields hold this trial's numbers."""
-    asset = files.asset(item.file, item.node)
+    """The placed model of a mesh item whose factor fields hold this trial's numbers; a factor on ``file`` or
+    ``node`` picks the trial's model (each loaded once per session by ``files``)."""
+    try:
+        file, node = item.model_for(values)
+    except ValueError as error:
+        raise UserError(f"scene item '{item.id}': {error}") from None
+    asset = files.asset(file, node)
     extent = asset.largest_extent
     rotation = tuple(_number(a) for a in item.rotation_deg)
     if item.position_m is not None:
@@ -105,3 +111,20 @@ def mesh_instance(item: ps.Mesh, values: JsonMapping, origin_m: np.ndarray, file
         return MeshInstance(asset, tuple(model.reshape(-1).tolist()), item.id, item.shading,
                             _direction3(item.light.direction), float(item.light.ambient))
     return MeshInstance(asset, tuple(model.reshape(-1).tolist()), item.id, item.shading)
+
+
+def reach_mesh_instance(name: str, obj: ps.ReachMesh, values: JsonMapping, centre_m: tuple[float, float, float],
+                        size_m: float, files: SessionMeshes) -> MeshInstance:
+    """A reach target's model (psyop.protocol.scene.ReachMesh): its bounding box's centre at ``centre_m`` (head
+    space: where the analytic target's centre would be), its largest extent ``size_m``, turned about that centre."""
+    try:
+        file, node = obj.model_for(values)
+    except ValueError as error:
+        raise UserError(f"scene item '{name}': {error}") from None
+    asset = files.asset(file, node)
+    if not asset.largest_extent > 0:
+        raise UserError(f"scene item '{name}': the model has no extent to size (a flat point set)")
+    pivot = (np.asarray(asset.bbox_min, dtype=np.float64) + np.asarray(asset.bbox_max, dtype=np.float64)) / 2.0
+    rotation = tuple(float(a) for a in obj.rotation_deg)
+    model = model_matrix(np.asarray(centre_m, dtype=np.float64), rotation, size_m / asset.largest_extent, pivot)
+    return MeshInstance(asset, tuple(model.reshape(-1).tolist()), name, "unlit")

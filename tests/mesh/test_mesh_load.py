@@ -226,17 +226,37 @@ def test_mesh_files_loads_each_content_once(tmp_path: Path) -> None:
     _hierarchy().save_gltf(tmp_path / "h.gltf")
     files = MeshFiles(tmp_path)
     first = files.load("h.gltf")
-    assert files.load("h.gltf") is first and files.loads == 1
-    assert files.load("h.gltf", "leaf") is not first and files.loads == 2
+    assert files.load("h.gltf") is first and files.loads == 1 and files.parses == 1
+    leaf = files.load("h.gltf", "leaf")
+    assert leaf is not first and files.loads == 2 and files.parses == 1  # a second node shares the file's parse
     raw = _hierarchy()
     raw.doc["nodes"][-1]["translation"] = [3.0, 0, 0]
     raw.save_gltf(tmp_path / "h.gltf")  # same .bin, edited .gltf
-    assert files.load("h.gltf") is not first and files.loads == 3
+    assert files.load("h.gltf") is not first and files.loads == 3 and files.parses == 2
     again = files.load("h.gltf")
     edited = bytearray((tmp_path / "model.bin").read_bytes())
     edited[0] ^= 1  # a vertex moves
     (tmp_path / "model.bin").write_bytes(bytes(edited))
-    assert files.load("h.gltf") is not again and files.loads == 4
+    assert files.load("h.gltf") is not again and files.loads == 4 and files.parses == 3
+    assert files.load("h.gltf", "leaf") is not leaf and files.parses == 3  # the edited .bin: parsed again
+
+
+@pytest.mark.parametrize("writer", ["glb", "gltf"])
+def test_nodes_of_one_file_share_its_parse_and_equal_separate_loads(tmp_path: Path, writer: str) -> None:
+    raw = _hierarchy()
+    path = raw.save_glb(tmp_path / "h.glb") if writer == "glb" else raw.save_gltf(tmp_path / "h.gltf")
+    files = MeshFiles(tmp_path)
+    for node in ("leaf", "other", "parent", None):
+        shared = files.load(path.name, node)
+        alone = load_mesh(Path(path.name), node, base_dir=tmp_path)  # its own parse
+        assert shared.sha256 == alone.sha256 and shared.resources == alone.resources
+        assert [p.node for p in shared.parts] == [p.node for p in alone.parts]
+        for a, b in zip(shared.parts, alone.parts):
+            np.testing.assert_array_equal(a.positions, b.positions)
+            np.testing.assert_array_equal(a.indices, b.indices)
+        np.testing.assert_array_equal(shared.bbox_min, alone.bbox_min)
+        np.testing.assert_array_equal(shared.bbox_max, alone.bbox_max)
+    assert files.parses == 1 and files.loads == 4
 
 
 def test_sparse_accessor_and_quantized_positions(tmp_path: Path) -> None:

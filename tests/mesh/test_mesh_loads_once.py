@@ -1,8 +1,9 @@
 """A model is loaded and prepared once per session (issue 26): ``psyop run`` and ``psyop simulate`` of
 protocols/examples/teaser.yaml (two nodes of assets/teaser.glb) validate the protocol, record the models in
-session.json and render the scene from one psyop.mesh.MeshFiles, so each (file, node) is parsed once
-(psyop.mesh.load._load, the one function that parses a model, counted by a wrapper) although it is looked up
-by validation, by the session.json records and by the scene."""
+session.json and render the scene from one psyop.mesh.MeshFiles, so the file is parsed once for both its nodes
+(psyop.mesh.load._parse, the one function that parses a model file, counted by a wrapper) and each (file, node)
+selected from that parse once (psyop.mesh.load._select) although it is looked up by validation, by the
+session.json records and by the scene."""
 
 from __future__ import annotations
 
@@ -21,22 +22,30 @@ MODELS = {("teaser.glb", "bottle"), ("teaser.glb", "candle")}
 
 @pytest.fixture
 def counted(monkeypatch):
-    """(parses, lookups) per (file name, node), counted around the real functions."""
-    parses: collections.Counter = collections.Counter()
+    """(selections, lookups) per (file name, node), and parses per file name, counted around the real functions."""
+    selections: collections.Counter = collections.Counter()
     lookups: collections.Counter = collections.Counter()
-    real_load, real_lookup = mesh_load._load, mesh_load.MeshFiles.load
+    parses: collections.Counter = collections.Counter()
+    real_select, real_parse, real_lookup = mesh_load._select, mesh_load._parse, mesh_load.MeshFiles.load
 
-    def parse(path, raw, node):
-        parses[(Path(path).name, node)] += 1
-        return real_load(path, raw, node)
+    def select(reader, node):
+        selections[(Path(reader.path).name, node)] += 1
+        return real_select(reader, node)
+
+    def parse(path, raw):
+        parses[Path(path).name] += 1
+        return real_parse(path, raw)
 
     def lookup(self, path, node=None, **kwargs):
         lookups[(Path(path).name, node)] += 1
         return real_lookup(self, path, node, **kwargs)
 
-    monkeypatch.setattr(mesh_load, "_load", parse)
+    monkeypatch.setattr(mesh_load, "_select", select)
+    monkeypatch.setattr(mesh_load, "_parse", parse)
     monkeypatch.setattr(mesh_load.MeshFiles, "load", lookup)
-    return parses, lookups
+    yield selections, lookups
+    # the two nodes of teaser.glb share one parse of the file (issue 26: not one parse per node)
+    assert dict(parses) == {"teaser.glb": 1}
 
 
 def _meta(data: Path, participant: str) -> dict:
