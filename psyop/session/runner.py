@@ -23,7 +23,7 @@ from psyop.session.rows import JsonObject
 from psyop.atomic import io_error
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
-from psyop.session.assembly import Backends, assemble, open_markers
+from psyop.session.assembly import Backends, assemble, display_used, open_markers
 from psyop.session.backends import BackendContext, is_real_time
 from psyop.session.clock import Clock, RealClock, VirtualClock
 from psyop.session.frames import CameraRenderer, Display, FrameRenderer
@@ -323,6 +323,9 @@ def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: Sessi
     summary["display"] = display_summary
     if loop.display_interruptions:
         summary["display_interruptions"] = loop.display_interruptions
+    # the display as it really was, per run (a resume may run on another headset): docs/data.md
+    opened.store.update_run(display_used=display_used(bundle, opened.plan.display, opened.plan.rig.eyes,
+                                                      options.window_scale))
     opened.store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
     if options.write_description:
         try:
