@@ -303,19 +303,7 @@ def _write_physio(stem: Path, samples: pd.DataFrame, used: RunDisplay, eye: str,
     columns["confidence"] = {"Description": "the tracker's confidence in the sample (0..1; n/a: not reported)"}
     columns["valid"] = {"Description": "1: a usable sample; 0: blink, dropout or low confidence (coordinates n/a)"}
     _write_tsv_gz(stem.with_suffix(".tsv.gz"), table)
-    if source == FRAME_LOG:
-        sampling = ("Samples are the gaze samples the rendered frames used (psyop's frame log, frames.parquet): at "
-                    "most one per displayed frame, after psyop's per-trial drift correction, so SamplingFrequency is the display refresh rate; frames not "
-                    "rendered or checked (simulated sessions render a few per trial) leave gaps and a sample reused "
-                    "by several frames is written once. The timestamp column gives each sample's time. No pupil "
-                    "size: the frame log does not record it.")
-        rate = float(display.refresh_hz)
-    else:
-        sampling = ("Samples are every sample of the tracker's raw gaze stream (gaze.parquet), as the tracker "
-                    "delivered them: before psyop's per-trial drift correction.")
-        rate = _median_rate_hz(table["timestamp"].to_numpy())
-        sampling += (f" SamplingFrequency ({rate:.6g} Hz) is 1 / the median interval between samples: psyop does not "
-                     "record the tracker's nominal rate.")
+    sampling, rate = _sampling(source, display, table)
     sidecar = {
         "TaskName": str(meta.get("study", "")),
         "PhysioType": "eyetrack",
@@ -338,6 +326,20 @@ def _write_physio(stem: Path, samples: pd.DataFrame, used: RunDisplay, eye: str,
         **calibration, **columns,
     }
     _write_json(stem.with_suffix(".json"), sidecar)
+
+
+def _sampling(source: str, display: DisplayProfile, table: pd.DataFrame) -> tuple[str, float]:
+    """The physio sidecar's account of its samples, and its SamplingFrequency."""
+    if source == FRAME_LOG:
+        return ("Samples are the gaze samples the rendered frames used (psyop's frame log, frames.parquet): at "
+                "most one per displayed frame, after psyop's per-trial drift correction, so SamplingFrequency is the "
+                "display refresh rate; frames not rendered or checked (simulated sessions render a few per trial) "
+                "leave gaps and a sample reused by several frames is written once. The timestamp column gives each "
+                "sample's time. No pupil size: the frame log does not record it."), float(display.refresh_hz)
+    rate = _median_rate_hz(table["timestamp"].to_numpy())
+    return ("Samples are every sample of the tracker's raw gaze stream (gaze.parquet), as the tracker delivered them: "
+            f"before psyop's per-trial drift correction. SamplingFrequency ({rate:.6g} Hz) is 1 / the median interval "
+            "between samples: psyop does not record the tracker's nominal rate."), rate
 
 
 def _median_rate_hz(timestamps_s: np.ndarray) -> float:

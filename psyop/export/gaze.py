@@ -198,18 +198,19 @@ def run_display(meta: JsonMapping, run: int, profile: DisplayProfile, where: str
     if not isinstance(eyes_used, Mapping) or not eyes_used:
         raise UserError(f"session.json's display_used of run {run} has no eyes: cannot place gaze on the image", where)
     rate = used.get("refresh_hz")
-    measured_rate = isinstance(rate, (int, float)) and not isinstance(rate, bool) and math.isfinite(rate) and rate > 0
+    rate_hz = float(rate) if isinstance(rate, (int, float)) and not isinstance(rate, bool) else math.nan
+    measured_rate = math.isfinite(rate_hz) and rate_hz > 0
     kind = str(used.get("display"))
     name = f"{used.get('system') or used.get('runtime')} (OpenXR)" if kind == "openxr" else f"{profile.name} (window)"
     eyes = {}
     for eye, entry in eyes_used.items():
         try:
-            tangents = tuple(float(entry[k]) for k in _TANGENT_KEYS)
+            left, right, bottom, top = (float(entry[k]) for k in _TANGENT_KEYS)
             eyes[str(eye)] = DisplayProfile(
                 name=name, width_px=int(entry["width_px"]), height_px=int(entry["height_px"]),
-                refresh_hz=float(rate) if measured_rate else float(profile.refresh_hz),  # type: ignore[arg-type]
-                tan_left=tangents[0], tan_right=tangents[1], tan_bottom=tangents[2], tan_top=tangents[3],
-                d_m=math.inf if kind == "openxr" else profile.d_m, left_tangents=tangents)  # type: ignore[arg-type]
+                refresh_hz=rate_hz if measured_rate else float(profile.refresh_hz),
+                tan_left=left, tan_right=right, tan_bottom=bottom, tan_top=top,
+                d_m=math.inf if kind == "openxr" else profile.d_m, left_tangents=(left, right, bottom, top))
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"session.json's display_used of run {run}, {eye} eye, is not usable: {exc}", where) from exc
     return RunDisplay(eyes, True, _measured_note(used, kind, profile, measured_rate))
