@@ -187,13 +187,18 @@ class RunDisplay:
 def run_display(meta: JsonMapping, run: int, profile: DisplayProfile, where: str) -> RunDisplay:
     """The display of run ``run`` (the trials' ``run``) of the session whose session.json is ``meta``."""
     runs = meta.get("runs")
-    used = next((r.get("display_used") for r in (runs if isinstance(runs, list) else [])
-                 if isinstance(r, Mapping) and r.get("run") == run), None)
+    entry = next((r for r in (runs if isinstance(runs, list) else []) if isinstance(r, Mapping) and r.get("run") == run),
+                 {})
+    used = entry.get("display_used")
     if not isinstance(used, Mapping) or used.get("measured") is not True:
         why = "no screen (headless)" if isinstance(used, Mapping) else "the run recorded no display_used"
-        return RunDisplay({eye: profile for eye in ("left", "right")}, False,
-                          f"Screen geometry and refresh rate are the protocol's display profile {profile.name!r} "
-                          f"({why}): nothing was measured.")
+        note = (f"Screen geometry and refresh rate are the protocol's display profile {profile.name!r} ({why}): "
+                "nothing was measured.")
+        if not isinstance(used, Mapping) and str(entry.get("display_mode", "")).startswith(("openxr", "window")):
+            note += (f" This {entry.get('display_mode')} run was not finalised by psyop run (killed, then recovered), "
+                     "so the display it really used may differ from the profile; for a headset, frames.parquet's "
+                     "view_<eye>_tan_* columns hold the runtime's field of view per frame.")
+        return RunDisplay({eye: profile for eye in ("left", "right")}, False, note)
     eyes_used = used.get("eyes")
     if not isinstance(eyes_used, Mapping) or not eyes_used:
         raise UserError(f"session.json's display_used of run {run} has no eyes: cannot place gaze on the image", where)
