@@ -191,7 +191,8 @@ def run_display(meta: JsonMapping, run: int, profile: DisplayProfile, where: str
                  {})
     used = entry.get("display_used")
     if not isinstance(used, Mapping) or used.get("measured") is not True:
-        why = "no screen (headless)" if isinstance(used, Mapping) else "the run recorded no display_used"
+        why = ("the run recorded no display_used" if not isinstance(used, Mapping) else "no screen (headless)"
+               if used.get("display") == "headless" else "the run showed no frame")
         note = (f"Screen geometry and refresh rate are the protocol's display profile {profile.name!r} ({why}): "
                 "nothing was measured.")
         if not isinstance(used, Mapping) and str(entry.get("display_mode", "")).startswith(("openxr", "window")):

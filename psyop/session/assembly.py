@@ -127,7 +127,7 @@ def display_used(bundle: Backends, profile: DisplayProfile, eyes: Sequence[str],
         from psyop.devices.xr.display import OpenXRDisplay
 
         if isinstance(display, OpenXRDisplay):
-            return {**display.views_used(), "measured": True, "profile": profile.name}
+            return {**display.views_used(), "profile": profile.name}
     if display.name == "window":
         from psyop.devices.window import GlfwWindow
 

@@ -54,3 +54,12 @@ def test_a_damaged_display_record_is_one_located_error() -> None:
     with pytest.raises(UserError, match="display_used of run 1, left eye, is not usable") as caught:
         run_display(_meta(eyes={"left": {"width_px": 320}}), 1, VIVE_PRO, "x/session.json")
     assert "x/session.json" in str(caught.value)
+
+
+def test_a_headset_run_that_showed_no_frame_is_not_measured() -> None:
+    from psyop.devices.xr.views_used import ViewsSeen
+
+    record = ViewsSeen().record([(320, 240), (320, 240)], "R", "S")
+    assert record["measured"] is False and record["refresh_hz"] is None
+    got = run_display({"runs": [{"run": 0, "display_used": record}]}, 0, VIVE_PRO, "session.json")
+    assert not got.measured and "showed no frame" in got.note

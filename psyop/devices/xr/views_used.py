@@ -78,6 +78,7 @@ class ViewsSeen:
         interval = _median(self._intervals_s)
         return {
             "display": "openxr", "runtime": runtime, "system": system,
+            "measured": bool(self.tangents),  # false: no frame was located (the run ended before its first)
             "source": "the OpenXR runtime: swapchain size per eye (xrEnumerateViewConfigurationViews, recommended), "
                       "field of view per eye (xrLocateViews, first frame), rate from the predicted display times "
                       "(xrWaitFrame)",
