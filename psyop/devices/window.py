@@ -111,6 +111,11 @@ class GlfwWindow:
         self.flips.add(t_s)
         return t_s
 
+    def framebuffer_size_px(self) -> tuple[int, int]:
+        """The window's framebuffer as the window system made it (pixels; it may differ from the size asked for)."""
+        width, height = self._glfw.get_framebuffer_size(self._window.handle)
+        return int(width), int(height)
+
     def summary(self) -> JsonObject:
         out: JsonObject = {"display": self.name, "frames": self._index}
         if len(self.flips.times_s) >= 8:  # from the flip timestamps (least squares)

@@ -34,8 +34,8 @@ from psyop import __version__
 from psyop import datacontract as dc
 from psyop.atomic import write_atomic
 from psyop.errors import UserError
-from psyop.export.gaze import (FRAME_LOG, display_from_metadata, gaze_on_image_px, image_geometry,
-                               session_gaze)
+from psyop.export.gaze import (FRAME_LOG, RunDisplay, display_from_metadata, gaze_on_image_px, image_geometry,
+                               run_display, session_gaze)
 from psyop.finalised import FINALISED_KEY, read_session_meta, verify_session
 from psyop.optics.display import DisplayProfile
 from psyop.records import JsonMapping, JsonObject
@@ -141,11 +141,12 @@ def _export_session(directory: Path, out: Path) -> ExportedSession:
         run_trials = trials[trials["run"] == run] if "run" in trials else trials
         run_trials = run_trials.sort_values("trial_start_s", kind="stable")
         stem = f"sub-{participant}_ses-{session}_task-{task_label(study)}_run-{run + 1}"
-        _write_events(beh / f"{stem}_events", run_trials, display, eyes, meta, study)
+        used = run_display(meta, run, display, where)  # the display this run really used, where it measured it
+        _write_events(beh / f"{stem}_events", run_trials, used, eyes, meta, study)
         samples = _run_samples(gaze.samples, run_trials, gaze.source)
         for index, eye in enumerate(eyes):
             recording = f"{stem}_recording-eye{index + 1}"
-            _write_physio(beh / f"{recording}_physio", samples, display, eye, ipd_m, gaze.source, gaze.file, meta,
+            _write_physio(beh / f"{recording}_physio", samples, used, eye, ipd_m, gaze.source, gaze.file, meta,
                           calibration_fields(measures, run_trials, phases))
             _write_physioevents(beh / f"{recording}_physioevents", run_trials, phases, study)
     _copy_sourcedata(directory, out / "sourcedata" / study / f"sub-{participant}" / f"ses-{session}", meta)
@@ -186,7 +187,7 @@ def _screen_note(display: DisplayProfile) -> str:
             "that subtends the same angles (the same visual angle for every pixel), not a physical screen.")
 
 
-def _write_events(stem: Path, trials: pd.DataFrame, display: DisplayProfile, eyes: Sequence[str], meta: JsonMapping,
+def _write_events(stem: Path, trials: pd.DataFrame, used: RunDisplay, eyes: Sequence[str], meta: JsonMapping,
                   study: str) -> None:
     events = pd.DataFrame({
         "onset": trials["trial_start_s"].astype(float).to_numpy(),
@@ -222,8 +223,8 @@ def _write_events(stem: Path, trials: pd.DataFrame, display: DisplayProfile, eye
     sidecar: JsonObject = {
         "TaskName": study,
         "TaskDescription": str((meta.get("response") or {}).get("question") or study),
-        "StimulusPresentation": _stimulus_presentation(display, eyes[0]),
-        "StimulusPresentationNote": _screen_note(display),
+        "StimulusPresentation": _stimulus_presentation(used.eyes[eyes[0]], eyes[0]),
+        "StimulusPresentationNote": f"{_screen_note(used.eyes[eyes[0]])} {used.note}",
     }
     for column in events.columns:
         sidecar[column] = described.get(column, {"Description": f"schedule column {column!r} of psyop's "
@@ -276,8 +277,9 @@ def calibration_fields(measures: pd.DataFrame, run_trials: pd.DataFrame,
     return fields
 
 
-def _write_physio(stem: Path, samples: pd.DataFrame, display: DisplayProfile, eye: str, ipd_m: float, source: str,
+def _write_physio(stem: Path, samples: pd.DataFrame, used: RunDisplay, eye: str, ipd_m: float, source: str,
                   source_file: str, meta: JsonMapping, calibration: Mapping[str, object]) -> None:
+    display = used.eyes[eye]
     fixation = samples[["fixation_x_m", "fixation_y_m", "fixation_z_m"]].to_numpy(dtype=np.float64)
     valid = samples["gaze_valid"].fillna(False).astype(bool).to_numpy()
     px = gaze_on_image_px(fixation, display, eye, ipd_m)
@@ -301,19 +303,7 @@ def _write_physio(stem: Path, samples: pd.DataFrame, display: DisplayProfile, ey
     columns["confidence"] = {"Description": "the tracker's confidence in the sample (0..1; n/a: not reported)"}
     columns["valid"] = {"Description": "1: a usable sample; 0: blink, dropout or low confidence (coordinates n/a)"}
     _write_tsv_gz(stem.with_suffix(".tsv.gz"), table)
-    if source == FRAME_LOG:
-        sampling = ("Samples are the gaze samples the rendered frames used (psyop's frame log, frames.parquet): at "
-                    "most one per displayed frame, after psyop's per-trial drift correction, so SamplingFrequency is the display refresh rate; frames not "
-                    "rendered or checked (simulated sessions render a few per trial) leave gaps and a sample reused "
-                    "by several frames is written once. The timestamp column gives each sample's time. No pupil "
-                    "size: the frame log does not record it.")
-        rate = float(display.refresh_hz)
-    else:
-        sampling = ("Samples are every sample of the tracker's raw gaze stream (gaze.parquet), as the tracker "
-                    "delivered them: before psyop's per-trial drift correction.")
-        rate = _median_rate_hz(table["timestamp"].to_numpy())
-        sampling += (f" SamplingFrequency ({rate:.6g} Hz) is 1 / the median interval between samples: psyop does not "
-                     "record the tracker's nominal rate.")
+    sampling, rate = _sampling(source, display, table)
     sidecar = {
         "TaskName": str(meta.get("study", "")),
         "PhysioType": "eyetrack",
@@ -332,10 +322,24 @@ def _write_physio(stem: Path, samples: pd.DataFrame, display: DisplayProfile, ey
                         f"{eye} eye, on its image. {sampling}"),
         "GazeSource": source,
         "StimulusPresentation": _stimulus_presentation(display, eye),
-        "StimulusPresentationNote": _screen_note(display),
+        "StimulusPresentationNote": f"{_screen_note(display)} {used.note}",
         **calibration, **columns,
     }
     _write_json(stem.with_suffix(".json"), sidecar)
+
+
+def _sampling(source: str, display: DisplayProfile, table: pd.DataFrame) -> tuple[str, float]:
+    """The physio sidecar's account of its samples, and its SamplingFrequency."""
+    if source == FRAME_LOG:
+        return ("Samples are the gaze samples the rendered frames used (psyop's frame log, frames.parquet): at "
+                "most one per displayed frame, after psyop's per-trial drift correction, so SamplingFrequency is the "
+                "display refresh rate; frames not rendered or checked (simulated sessions render a few per trial) "
+                "leave gaps and a sample reused by several frames is written once. The timestamp column gives each "
+                "sample's time. No pupil size: the frame log does not record it."), float(display.refresh_hz)
+    rate = _median_rate_hz(table["timestamp"].to_numpy())
+    return ("Samples are every sample of the tracker's raw gaze stream (gaze.parquet), as the tracker delivered them: "
+            f"before psyop's per-trial drift correction. SamplingFrequency ({rate:.6g} Hz) is 1 / the median interval "
+            "between samples: psyop does not record the tracker's nominal rate."), rate
 
 
 def _median_rate_hz(timestamps_s: np.ndarray) -> float:

@@ -164,3 +164,84 @@ def image_geometry(display: DisplayProfile, eye: str) -> ImageGeometry:
     d_m = EQUIVALENT_DISTANCE_M if equivalent else float(display.d_m)
     return ImageGeometry(d_m, d_m * (right - left), d_m * (top - bottom), display.width_px, display.height_px,
                          equivalent)
+
+
+_TANGENT_KEYS = ("tan_left", "tan_right", "tan_bottom", "tan_top")
+
+
+@dataclass(frozen=True)
+class RunDisplay:
+    """Each eye's display image in one psyop run, as the export describes it (``StimulusPresentation``, gaze
+    pixel coordinates), and a note saying where it came from.
+
+    From the run's ``display_used`` (session.json ``runs``; psyop.session.assembly.display_used) when the run
+    measured its display: a headset's swapchain size, field of view and measured rate per eye, or a window's
+    presented image size and measured flip rate. Otherwise (headless, or a session recorded before psyop
+    recorded ``display_used``) the protocol's display profile, and the note says so."""
+
+    eyes: Mapping[str, DisplayProfile]
+    measured: bool
+    note: str
+
+
+def run_display(meta: JsonMapping, run: int, profile: DisplayProfile, where: str) -> RunDisplay:
+    """The display of run ``run`` (the trials' ``run``) of the session whose session.json is ``meta``."""
+    runs = meta.get("runs")
+    entry = next((r for r in (runs if isinstance(runs, list) else []) if isinstance(r, Mapping) and r.get("run") == run),
+                 {})
+    used = entry.get("display_used")
+    if not isinstance(used, Mapping) or used.get("measured") is not True:
+        why = ("the run recorded no display_used" if not isinstance(used, Mapping) else "no screen (headless)"
+               if used.get("display") == "headless" else "the run showed no frame")
+        note = (f"Screen geometry and refresh rate are the protocol's display profile {profile.name!r} ({why}): "
+                "nothing was measured.")
+        if not isinstance(used, Mapping) and str(entry.get("display_mode", "")).startswith(("openxr", "window")):
+            note += (f" This {entry.get('display_mode')} run was not finalised by psyop run (killed, then recovered), "
+                     "so the display it really used may differ from the profile; for a headset, frames.parquet's "
+                     "view_<eye>_tan_* columns hold the runtime's field of view per frame.")
+        return RunDisplay({eye: profile for eye in ("left", "right")}, False, note)
+    eyes_used = used.get("eyes")
+    if not isinstance(eyes_used, Mapping) or not eyes_used:
+        raise UserError(f"session.json's display_used of run {run} has no eyes: cannot place gaze on the image", where)
+    rate = used.get("refresh_hz")
+    rate_hz = float(rate) if isinstance(rate, (int, float)) and not isinstance(rate, bool) else math.nan
+    measured_rate = math.isfinite(rate_hz) and rate_hz > 0
+    kind = str(used.get("display"))
+    name = f"{used.get('system') or used.get('runtime')} (OpenXR)" if kind == "openxr" else f"{profile.name} (window)"
+    eyes = {}
+    for eye, entry in eyes_used.items():
+        try:
+            left, right, bottom, top = (float(entry[k]) for k in _TANGENT_KEYS)
+            eyes[str(eye)] = DisplayProfile(
+                name=name, width_px=int(entry["width_px"]), height_px=int(entry["height_px"]),
+                refresh_hz=rate_hz if measured_rate else float(profile.refresh_hz),
+                tan_left=left, tan_right=right, tan_bottom=bottom, tan_top=top,
+                d_m=math.inf if kind == "openxr" else profile.d_m, left_tangents=(left, right, bottom, top))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"session.json's display_used of run {run}, {eye} eye, is not usable: {exc}", where) from exc
+    return RunDisplay(eyes, True, _measured_note(used, kind, profile, measured_rate))
+
+
+def _measured_note(used: JsonMapping, kind: str, profile: DisplayProfile, measured_rate: bool) -> str:
+    if kind == "openxr":
+        note = (f"Screen geometry is what the OpenXR runtime {used.get('runtime')!r} ({used.get('system')!r}) used: "
+                "each eye's swapchain size and its field of view (xrLocateViews), not the protocol's profile "
+                f"{profile.name!r}. ")
+        changed = used.get("fov_frames_changed")
+        if isinstance(changed, int) and changed:
+            note += (f"The runtime changed the field of view in {changed} frames (largest tangent change "
+                     f"{used.get('fov_max_change_tan')}); the first frame's is given. ")
+        canted = [eye for eye, e in (used.get("eyes") or {}).items() if isinstance(e, Mapping)
+                  and e.get("orientation_wxyz") not in (None, [1.0, 0.0, 0.0, 0.0])]
+        if canted:
+            note += (f"The runtime's views of {', '.join(canted)} are canted (session.json display_used "
+                     "orientation_wxyz); pixel coordinates are on an uncanted image. ")
+        rate_source = "the runtime's predicted display times (1 / median interval)"
+    else:
+        note = (f"Screen resolution is each eye's image as the window presented it (the profile {profile.name!r}'s "
+                "field of view, rendered at the window scale). ")
+        rate_source = "the window's flip timestamps (1 / median interval)"
+    if measured_rate:
+        return note + f"ScreenRefreshRate is measured from {rate_source}."
+    return note + (f"ScreenRefreshRate is the profile's {profile.refresh_hz:g} Hz: too few frames to measure it from "
+                   f"{rate_source}.")

@@ -51,6 +51,9 @@ class MemoryLog:
     def update_metadata(self, **fields: Any) -> None:  # Any: session.json values (JSON)
         self.metadata.update(fields)
 
+    def update_run(self, **fields: Any) -> None:  # Any: a run's session.json values (JSON)
+        return None  # one run, no session.json: nothing reads a replication's display record
+
     def close(self) -> None:
         return None
 

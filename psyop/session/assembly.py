@@ -13,10 +13,12 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject
+from psyop.optics.display import DisplayProfile
 from psyop.errors import UserError
 from psyop.session.backends import BackendContext, build
 from psyop.session.clock import Clock
@@ -26,7 +28,10 @@ from psyop.session.gaze.sample import GazeSource
 from psyop.session.pose import PoseSource
 from psyop.session.responses.base import ResponseSource
 
-__all__ = ["Backends", "assemble", "open_markers"]
+if TYPE_CHECKING:
+    from psyop.devices.window import GlfwWindow
+
+__all__ = ["Backends", "assemble", "display_used", "open_markers"]
 
 
 @dataclass
@@ -44,6 +49,8 @@ class Backends:
     events: tuple[EventSink, ...]
     stack: contextlib.ExitStack = field(default_factory=contextlib.ExitStack)
     after_tracker_closed: Callable[[], None] = lambda: None
+    #: a window display's framebuffer as the window system made it (read while the window is open)
+    framebuffer_px: tuple[int, int] | None = None
 
     def __enter__(self) -> Backends:
         return self
@@ -86,7 +93,7 @@ def assemble(specs: dict[str, str], context: BackendContext, markers: EventSink 
         responses = build("responses", specs["responses"], context)
         built.pop_all()
     events = ((markers,) if markers is not None else ()) + tuple(context.event_sinks)
-    bundle = Backends(display, gaze, pose, responses, events)
+    bundle = Backends(display, gaze, pose, responses, events, framebuffer_px=_framebuffer_px(display))
     stack = bundle.stack
     stack.callback(display.close)
     for sink in reversed(events):
@@ -97,3 +104,61 @@ def assemble(specs: dict[str, str], context: BackendContext, markers: EventSink 
     stack.callback(gaze.close)
     stack.callback(responses.close)
     return bundle
+
+
+def _framebuffer_px(display: Display) -> tuple[int, int] | None:
+    if display.name != "window":
+        return None
+    from psyop.devices.window import GlfwWindow
+
+    return display.framebuffer_size_px() if isinstance(display, GlfwWindow) else None
+
+
+def display_used(bundle: Backends, profile: DisplayProfile, eyes: Sequence[str], window_scale: float) -> JsonObject:
+    """session.json's ``display_used`` block of this run (docs/data.md): the display as it really was.
+
+    A headset: the runtime's swapchain size, field of view per eye and the rate measured from its predicted
+    display times (:mod:`psyop.devices.xr.views_used`). A window: its framebuffer, each eye's image as
+    presented (the profile's field of view at ``window_scale``) and the rate measured from the flip
+    timestamps. Headless: the protocol's profile, nothing measured (no screen). Readable after the
+    backends are closed."""
+    display = bundle.display
+    if display.name == "openxr":
+        from psyop.devices.xr.display import OpenXRDisplay
+
+        if isinstance(display, OpenXRDisplay):
+            return {**display.views_used(), "profile": profile.name}
+    if display.name == "window":
+        from psyop.devices.window import GlfwWindow
+
+        if isinstance(display, GlfwWindow):
+            return _window_used(display, bundle.framebuffer_px, profile, eyes, window_scale)
+    return {"display": display.name, "measured": False, "profile": profile.name,
+            "source": "no screen: the protocol's display profile",
+            "eyes": {eye: _profile_eye(profile, eye, profile.width_px, profile.height_px) for eye in eyes},
+            "refresh_hz": float(profile.refresh_hz)}
+
+
+def _profile_eye(profile: DisplayProfile, eye: str, width_px: int, height_px: int) -> JsonObject:
+    tangents = profile.frustum_tangents(eye)
+    return {"width_px": int(width_px), "height_px": int(height_px),
+            **dict(zip(("tan_left", "tan_right", "tan_bottom", "tan_top"), tangents))}
+
+
+def _window_used(window: GlfwWindow, framebuffer_px: tuple[int, int] | None, profile: DisplayProfile,
+                 eyes: Sequence[str], window_scale: float) -> JsonObject:
+    import numpy as np
+
+    # each eye's image as SceneRenderer renders it for the window (texel = screen pixel when presented)
+    width_px, height_px = max(16, round(profile.width_px * window_scale)), max(16, round(profile.height_px * window_scale))
+    steps = np.diff(np.asarray(window.flips.times_s, dtype=np.float64))
+    steps = steps[steps > 0]
+    interval = float(np.median(steps)) if len(steps) else None
+    return {"display": "window", "measured": True, "profile": profile.name,
+            "source": "the window system's framebuffer; each eye's image as presented (the profile's field of "
+                      f"view, rendered at --window-scale {window_scale:g}); rate from the flip timestamps (the last "
+                      f"{window.flips.capacity} flips)",
+            "framebuffer_px": list(framebuffer_px) if framebuffer_px is not None else None,
+            "eyes": {eye: _profile_eye(profile, eye, width_px, height_px) for eye in eyes},
+            "refresh_hz": 1.0 / interval if interval else None, "flip_interval_median_s": interval,
+            "flip_intervals_measured": int(len(steps))}

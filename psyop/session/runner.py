@@ -23,7 +23,7 @@ from psyop.session.rows import JsonObject
 from psyop.atomic import io_error
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
-from psyop.session.assembly import Backends, assemble, open_markers
+from psyop.session.assembly import Backends, assemble, display_used, open_markers
 from psyop.session.backends import BackendContext, is_real_time
 from psyop.session.clock import Clock, RealClock, VirtualClock
 from psyop.session.frames import CameraRenderer, Display, FrameRenderer
@@ -91,10 +91,19 @@ class SessionOptions:
     @property
     def simulated(self) -> bool:
         """Not a person's data: the gaze is simulated or replayed (it drove the rendering, whoever answered:
-        ``--tracker sim --responses openxr`` included), or the simulated observer answered. A simulated or
-        replayed head pose alone is listed in :attr:`simulated_sources` but does not decide: a desktop
-        session has no head tracker to take it from."""
-        return any(source.startswith(("tracker:", "responses:")) for source in self.simulated_sources)
+        ``--tracker sim --responses openxr`` included), or the simulated observer answered, or a simulated or
+        replayed head pose stood in for a headset's own (``--display openxr --pose sim``: it placed the head
+        the images were rendered for). On a desktop display a simulated head pose alone is listed in
+        :attr:`simulated_sources` but does not decide: there is no head tracker to take it from (a reach
+        answered from its hand does: :meth:`simulated_for`)."""
+        if any(source.startswith(("tracker:", "responses:")) for source in self.simulated_sources):
+            return True
+        return self.display.startswith("openxr") and any(s.startswith("pose:") for s in self.simulated_sources)
+
+    def simulated_for(self, reach: bool) -> bool:
+        """:attr:`simulated`, and a session whose responses are reaches (``reach``) measured on a simulated or
+        replayed hand: the distance each trial records is not a person's."""
+        return self.simulated or (reach and any(s.startswith("pose:") for s in self.simulated_sources))
 
 
 def package_versions() -> dict[str, str]:
@@ -243,7 +252,8 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
     source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
     return {
         "study": opened.plan.study, "participant": options.participant, "session": options.session,
-        "seed": opened.seed, "simulated": options.simulated, "simulated_sources": list(options.simulated_sources),
+        "seed": opened.seed, "simulated": _simulated(options, opened.plan),
+        "simulated_sources": list(options.simulated_sources),
         "protocol_sha256": protocol_sha256,
         "protocol_file_sha256": protocol.source_sha256,
         "protocol_text": protocol.source_text, "protocol_file": protocol.source_name,
@@ -256,6 +266,13 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
         "display_mode": options.display, "clock": options.clock,
         "pose": options.pose, "meshes": protocol_mesh_records(protocol, source, opened.mesh_files),
     }
+
+
+def _simulated(options: SessionOptions, plan: SessionPlan) -> bool:
+    """session.json's ``simulated`` (:meth:`SessionOptions.simulated_for` the plan's response kind)."""
+    from psyop.session.responses.base import ResponseKind
+
+    return options.simulated_for(plan.kind is ResponseKind.REACH)
 
 
 def _announcer(plan: SessionPlan, responses_spec: str) -> Callable[[str], None] | None:
@@ -323,10 +340,13 @@ def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: Sessi
     summary["display"] = display_summary
     if loop.display_interruptions:
         summary["display_interruptions"] = loop.display_interruptions
+    # the display as it really was, per run (a resume may run on another headset): docs/data.md
+    opened.store.update_run(display_used=display_used(bundle, opened.plan.display, opened.plan.rig.eyes,
+                                                      options.window_scale))
     opened.store.finalise(status="complete" if outcome.status == "complete" else "incomplete", summary=summary)
     if options.write_description:
         try:
-            write_dataset_description(options.data_root, simulated=options.simulated)
+            write_dataset_description(options.data_root, simulated=_simulated(options, opened.plan))
         except OSError as exc:
             raise io_error(exc, fix=f"the session itself is finalised ({outcome.message}); free space, then run "
                            f"`psyop recover {options.data_root}` to write the dataset description") from exc

@@ -26,6 +26,23 @@ def test_simulated_sources(tracker: str, responses: str, pose: str, simulated: b
     assert options.simulated is simulated and list(options.simulated_sources) == sources
 
 
+@pytest.mark.parametrize(("display", "pose", "reach", "simulated"), [
+    ("openxr", "sim", False, True),  # a simulated head pose placed the head the headset's images were rendered for
+    ("openxr:xlib", "replay:old/ses-1", False, True),
+    ("openxr", "openxr:right", True, False),
+    ("window", "sim", False, False),  # a desktop has no head tracker to take the head pose from
+    ("window", "sim", True, True),  # but a reach measured on the simulated hand is not a person's
+    ("headless", "replay-by-condition:old/ses-1", True, True),
+])
+def test_a_simulated_pose_decides_where_it_stood_in_for_a_tracker_or_measured_the_answer(
+        display: str, pose: str, reach: bool, simulated: bool) -> None:
+    tracker = responses = "openxr" if display.startswith("openxr") else "keyboard"
+    options = SessionOptions("P1", tracker="pupil:127.0.0.1:50020" if tracker == "keyboard" else tracker,
+                             responses=responses, pose=pose, display=display)
+    assert options.simulated_for(reach) is simulated, options.simulated_sources
+    assert options.simulated_for(reach) is (options.simulated or reach and pose != "openxr:right")
+
+
 def test_a_replayed_gaze_session_is_recorded_simulated(tmp_path: Path) -> None:
     protocol = small_protocol(tmp_path, "ordinal", 1)
     data = tmp_path / "data"
@@ -36,3 +53,14 @@ def test_a_replayed_gaze_session_is_recorded_simulated(tmp_path: Path) -> None:
     meta = json.loads(next(data.glob("*/sub-B1/ses-1/session.json")).read_text())
     assert meta["simulated"] is True, meta["simulated_sources"]
     assert meta["simulated_sources"] == [f"tracker:replay:{original}", "responses:sim", "pose:sim"]
+
+
+def test_session_json_marks_a_reach_study_answered_on_a_simulated_hand() -> None:
+    from psyop.protocol import load_protocol
+    from psyop.session.plan import compile_plan
+    from psyop.session.runner import _simulated
+
+    root = Path(__file__).resolve().parents[2] / "protocols"
+    options = SessionOptions("P1", tracker="pupil:127.0.0.1:50020", responses="keyboard", pose="sim", display="window")
+    assert _simulated(options, compile_plan(load_protocol(root / "egocentric.yaml"))) is True  # reach: the hand's
+    assert _simulated(options, compile_plan(load_protocol(root / "ordinal.yaml"))) is False

@@ -30,6 +30,7 @@ from psyop.session.rows import JsonObject
 from psyop.optics.camera import ViewGeometry
 from psyop.session.frames import DisplayInterrupted, FrameRequest, RenderTarget
 from psyop.devices.xr.binding import XrObject, choose_binding, create_context
+from psyop.devices.xr.views_used import ViewsSeen
 from psyop.devices.xr.runtime import (
     FOCUS_TIMEOUT_S,
     XrPose,
@@ -114,6 +115,7 @@ class OpenXRDisplay:
         self.frames_not_rendered = 0
         self.frames_missed = 0
         self.wait_frame_s = 0.0  # time blocked in xrWaitFrame (the runtime pacing the loop)
+        self.views_seen = ViewsSeen()  # what the runtime really showed (session.json's display_used)
         try:
             self._offset_ns = self.runtime.xr_time_now_ns()
             self._swapchains = self._create_swapchains()
@@ -244,6 +246,7 @@ class OpenXRDisplay:
             missed = max(0, int(round((t_ns - self._last_display_ns) / period_ns)) - 1)
         self._last_display_ns = t_ns
         self.frames_missed += missed
+        self.views_seen.add_frame(t_ns, period_ns)
         rt.sync_actions()
         self.frame_time_ns = t_ns
         self.head_pose = rt.locate(rt.head, rt.world, t_ns)
@@ -257,7 +260,9 @@ class OpenXRDisplay:
                 view_configuration_type=rt.view_config, display_time=t_ns, space=rt.head))
             _, in_world = xr.locate_views(rt.session, xr.ViewLocateInfo(
                 view_configuration_type=rt.view_config, display_time=t_ns, space=rt.world))
-            views = self._plan.rig.place_views(tuple(_view_geometry(eye, v) for eye, v in zip(("left", "right"), in_head)))
+            located = tuple(_view_geometry(eye, v) for eye, v in zip(("left", "right"), in_head))
+            self.views_seen.add_views(located)
+            views = self._plan.rig.place_views(located)
             layer_views = tuple(in_world)
             for eye, chain in self._swapchains.items():
                 index = xr.acquire_swapchain_image(chain.handle, xr.SwapchainImageAcquireInfo())
@@ -297,6 +302,11 @@ class OpenXRDisplay:
                                                  environment_blend_mode=xr.EnvironmentBlendMode.OPAQUE, layers=layers))
         self._frame = None
         return self._clock.now_s()
+
+    def views_used(self) -> JsonObject:
+        """The run's ``display_used`` block: the runtime's swapchain sizes, fields of view and measured rate."""
+        facts = self.runtime.facts
+        return self.views_seen.record(facts.recommended_sizes_px, facts.runtime, facts.system)
 
     def summary(self) -> JsonObject:
         facts = self.runtime.facts

@@ -48,6 +48,7 @@ class SessionLog(Protocol):
     def append_trial(self, row: TrialRow, frames: pa.Table | None, gaze: pa.Table | None = None) -> None: ...
     def append_gaze(self, gaze: pa.Table, key: int = -1) -> None: ...
     def update_metadata(self, **fields: Any) -> None: ...  # Any: session.json fields, JSON values
+    def update_run(self, **fields: Any) -> None: ...  # Any: this run's fields in session.json's runs, JSON values
     def close(self) -> None: ...
     def finalise(self, *, status: str, summary: JsonMapping | None = None) -> tuple[pd.DataFrame, pd.DataFrame]: ...
 
@@ -190,6 +191,14 @@ class SessionStore:
             raise io_error(exc, self.paths.metadata,
                            "every recorded trial is safely in the log; free space (or fix the disk), then rerun "
                            "the same command to resume the session") from exc
+
+    def update_run(self, **fields: Any) -> None:  # Any: this run's session.json fields, JSON values
+        """Add ``fields`` to this run's entry of session.json's ``runs`` (e.g. the display it used); a
+        write error as :meth:`update_metadata`."""
+        runs = self.metadata.get("runs") or []
+        if runs:
+            runs[-1].update(fields)
+            self.update_metadata()
 
     def close(self) -> None:
         try:
