@@ -8,6 +8,7 @@ response kind (psyop.statistics.studies), never by name:
   (figures/<study>_thresholds.png: thresholds by condition with an rm-ANOVA; with the linear fit
   of analysis/fig_discrimination_thresholds.py for sessions of the paper's discrimination protocol,
   identified by its hash) and every psychometric function (figures/supp_psychometric_<study>.png);
+- adaptive two-interval runs (staircase, QUEST+) also: figures/<study>_tracks.png (analysis/adaptive_tracks.py);
 - left/right nearer: figures/<study>_depth.png; reach: figures/<study>_reach.png;
   pairwise preference: figures/<study>_preferences.png; with/against (NC calibration):
   figures/<study>_pss.png.
@@ -62,9 +63,10 @@ def make_escaped(path: Path) -> str:
     return text
 
 
-def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "") -> list[Target]:
+def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "", adaptive: bool = False) -> list[Target]:
     """The analysis of one study, by its response kind; ``trials`` is its sessions' trials.parquet
-    files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces).
+    files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces); ``adaptive``
+    (a two-interval study whose levels a staircase or QUEST+ placed) adds its track plot.
 
     Examples
     --------
@@ -80,7 +82,10 @@ def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "") -> li
                        f"{common} --n-jobs $(JOBS)", kind="fits"),
                 Target(f"{study}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}"),
                 Target(f"supp_psychometric_{study}.png", "analysis/supp_psychometric_functions.py",
-                       f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}")]
+                       f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}")] + ([
+                Target(f"{study}_tracks.png", "analysis/adaptive_tracks.py",
+                       f"{fits} {trials} $(DRAW_SRC) psyop/figures/adaptive_figures.py", f"{common} --fits {fits}")]
+                if adaptive else [])
     figure = {"near_side": ("depth", "analysis/fig_ordinal_depth.py"), "reach": ("reach", "analysis/fig_egocentric_reach.py"),
               "preference": ("preferences", "analysis/fig_realism.py"),
               "with_against": ("pss", "analysis/nc_calibration.py")}[kind]
@@ -125,7 +130,8 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
     for facts, sessions in analysis_units(data, pool_protocols):
         uses_linear = bool(facts.protocol_sha256) and set(facts.protocol_sha256) <= linear
         prerequisites = " ".join(make_escaped(p) for p in sessions)
-        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites) + [Target(  # issue 27: gaze quality
+        adaptive = facts.kind == "2afc_interval" and _adaptive(sessions)
+        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive) + [Target(  # issue 27
             f"{facts.name}_gaze_quality.png", "analysis/gaze_quality.py", f"{prerequisites} $(QUALITY_SRC)",
             f'--study {facts.name} --data "$(DATA)" --results "$(RESULTS)"')]
         figures = [t for t in targets if t.kind == "figure"]
@@ -139,6 +145,19 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
         said.append(f"{facts.name} ({KIND_NAMES[facts.kind]}{_versions_note(facts, len(sessions))}): "
                     + ", ".join(t.output for t in figures))
     return "\n".join(rules) + "\n", said
+
+
+def _adaptive(sessions: list[Path]) -> bool:
+    """Whether any session logged an adaptive procedure's columns (``adaptive_procedure``: staircase, QUEST+)."""
+    import pyarrow.parquet as pq
+
+    for path in sessions:
+        try:
+            if "adaptive_procedure" in pq.read_schema(path).names:
+                return True
+        except Exception:  # noqa: BLE001 - an unreadable log is refused by name when its analysis loads it
+            continue
+    return False
 
 
 def _versions_note(facts: StudyFacts, n_sessions: int) -> str:
