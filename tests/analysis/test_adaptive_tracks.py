@@ -72,3 +72,6 @@ def test_held_out_staircase_with_censored_fits_gets_tracks_and_keeps_every_parti
     c = thresholds["censored"]
     assert c["n_censored_below"] + c["n_censored_above"] == thresholds["n_left_out"], "every censored fit is in the model"
     assert "censored thresholds" in thresholds["summary"]
+    anova = {k: v for k, v in thresholds["summary"].items() if "rm-ANOVA" in k}
+    assert anova and all("LOW DF" in v or v.startswith(("not computed", "same as above")) for v in anova.values()), \
+        anova  # 2 participants: an F with 2 error df or fewer is flagged, never reported bare
