@@ -17,7 +17,7 @@ export PYTHONHASHSEED := 0
 help:
 	@echo "make figures  - simulate sessions if data/ is empty, say which sessions are used, rebuild every figure and table"
 	@echo "                (MIX=1: allow a study to pool simulated and real sessions;"
-	@echo "                 POOL=1: allow a study to pool sessions of different protocol versions)"
+	@echo "                 POOL=1: pool a study's protocol versions; default: each analysed apart as <study>@<hash12>)"
 	@echo "make resimulate - delete the simulated sessions in data/ (refused if any is real), then make figures"
 	@echo "make test     - run make lint, then the whole test suite"
 	@echo "make lint     - ruff and mypy over psyop/ (and lint-imports once pyproject.toml has a contract)"

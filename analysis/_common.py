@@ -71,18 +71,23 @@ def provenance(facts, analysis: str, pool_protocols: bool = False) -> dict:
     """The keys every results JSON starts with: which study, its response kind, which analysis
     wrote it and the protocol hashes its sessions ran (psyop.statistics.studies.StudyFacts).
 
-    Sessions under more than one protocol hash are refused (a UserError naming the hashes) unless
-    ``pool_protocols`` (``--pool-protocols``, ``make figures POOL=1``); pooled, the JSON says so."""
+    Sessions under more than one protocol hash are refused (a UserError naming the hashes and each
+    version's ``--study <study>@<hash12>``, which `make figures` runs) unless ``pool_protocols``
+    (``--pool-protocols``, ``make figures POOL=1``); pooled, the JSON says so. One version of several
+    (``--study <study>@<hash12>``) records the folder's versions under ``study_protocol_versions``."""
+    from psyop.statistics.protocol_versions import unit_name
+
     hashes = list(facts.protocol_sha256)
     if len(hashes) > 1 and not pool_protocols:
         from psyop.errors import UserError
 
         raise UserError(f"study {facts.name!r}: its sessions ran {len(hashes)} protocol versions (sha256 "
-                        f"{', '.join(h[:12] for h in hashes)}); analyse each version apart (keep each version's sessions "
-                        "under its own study.name or data root) or pool them on purpose with --pool-protocols "
-                        "(`make figures POOL=1`)", facts.name)
+                        f"{', '.join(h[:12] for h in hashes)}); analyse each version apart with --study "
+                        f"{' / '.join(unit_name(facts.name, h) for h in hashes)} (as `make figures` does) or pool "
+                        "them on purpose with --pool-protocols (`make figures POOL=1`)", facts.name)
     return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind, "protocol_sha256": hashes,
-            "protocols_pooled": len(hashes) > 1}
+            "protocols_pooled": len(hashes) > 1, "study_folder": facts.folder,
+            "study_protocol_versions": list(facts.folder_protocol_sha256)}
 
 
 def require_kind(facts, kind: str, script: str) -> None:

@@ -80,6 +80,11 @@ def write_study_summaries(others: list[tuple[Path, dict]], results: Path) -> lis
                  "protocols: these numbers are not compared with the paper).", ""]
         if len(hashes) > 1:
             lines += [f"**{len(hashes)} protocol versions pooled on purpose** (--pool-protocols / POOL=1).", ""]
+        versions = payloads[0].get("study_protocol_versions") or []
+        if len(hashes) == 1 and len(versions) > 1:
+            others = ", ".join(h[:12] for h in versions if h != hashes[0])
+            lines += [f"**One protocol version ({hashes[0][:12]}) of study {payloads[0].get('study_folder', study)}**, "
+                      f"analysed apart from its other version(s) ({others}); `make figures POOL=1` pools them.", ""]
         if any(p.get("simulated") for p in payloads):
             lines += ["**Simulated data**.", ""]
         for payload in payloads:
@@ -89,6 +94,25 @@ def write_study_summaries(others: list[tuple[Path, dict]], results: Path) -> lis
         write_text(path, "\n".join(lines) + "\n")
         written.append(path)
     return written
+
+
+def versions_lines(payloads: list[dict]) -> list[str]:
+    """What was done with studies whose sessions ran several protocol versions: each version analysed
+    apart (``<study>@<hash12>``, the default) or pooled on purpose; [] when every study ran one."""
+    apart: dict[str, set[str]] = {}
+    pooled = set()
+    for p in payloads:
+        versions = p.get("study_protocol_versions") or []
+        if len(p.get("protocol_sha256", [])) > 1:
+            pooled.add(f"{p['study']} ({len(p['protocol_sha256'])} versions: "
+                       f"{', '.join(h[:12] for h in p['protocol_sha256'])})")
+        elif len(versions) > 1:
+            apart.setdefault(str(p.get("study_folder", p["study"])), set()).add(str(p["study"]))
+    lines = [f"- study {folder}: its sessions ran {len(units)} protocol versions, analysed apart as "
+             f"{', '.join(sorted(units))} (one results set each; `make figures POOL=1` pools them)"
+             for folder, units in sorted(apart.items())]
+    lines += [f"- study {name}: protocol versions pooled on purpose (--pool-protocols / POOL=1)" for name in sorted(pooled)]
+    return ["## Protocol versions", "", *lines, ""] if lines else []
 
 
 def quality_lines(results: Path, studies: list[str]) -> list[str]:
@@ -156,6 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {r['study'].split('_')[0]} | {r['statistic']} | {r['paper']} | {r['psyop']} | {r['agrees']} "
                      f"| {r['criteria']} |")
     lines.append("")
+    lines += versions_lines([p for _, p in found])
     lines += _methods(studies)
     lines += quality_lines(args.results, sorted({str(s.get("study")) for s in studies.values()}))
     lines += ["## Every statistic psyop computed", ""]

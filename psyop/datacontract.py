@@ -9,6 +9,7 @@ changes in one place. docs/architecture.md ("session -> data/") describes the sa
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -57,16 +58,10 @@ RESPONSE = "response"
 CORRECT = "correct"
 REACH_M = "reach_m"
 CHOSEN_MODE = "chosen_mode"
-#: What the session measured per trial (``correct``: 2AFC and left/right; ``reach_m``: reach;
-#: ``chosen_mode``: preference).
-MEASURED_COLUMNS: tuple[str, ...] = (RESPONSE, CORRECT, REACH_M, CHOSEN_MODE, "trial_start_s", "trial_end_s")
-#: Every column dataset_description.json lists as measured (schedule + identity + measured).
-DESCRIBED_COLUMNS: tuple[str, ...] = SCHEDULE_COLUMNS + IDENTITY_COLUMNS + MEASURED_COLUMNS
 
 #: ``response`` of a trial whose response phase timed out (protocol ``timeout_s``); its
 #: ``correct``, ``reach_m`` and ``chosen_mode`` are null.
 TIMEOUT_RESPONSE = "timeout"
-
 
 #: The typed form of ``response``: ``response_value`` is the response as a number where it is one
 #: (the interval chosen, 1 or 2; a reach in metres), else null; ``outcome`` is what happened to the
@@ -74,6 +69,39 @@ TIMEOUT_RESPONSE = "timeout"
 RESPONSE_VALUE = "response_value"
 OUTCOME = "outcome"
 OUTCOMES: tuple[str, ...] = ("answered", TIMEOUT_RESPONSE)
+
+
+@dataclass(frozen=True)
+class MeasuredColumn:
+    """A measured trial column as dataset_description.json describes it: its trials.parquet type
+    (the Arrow type name, psyop.session.log.schema.TRIAL_LOG_FIELDS), unit (None: none) and meaning."""
+
+    name: str
+    type: str
+    unit: str | None
+    description: str
+
+
+#: What the session measured per trial (``correct``: 2AFC and left/right; ``reach_m``: reach;
+#: ``chosen_mode``: preference; ``response_value`` / ``outcome``: the typed ``response``).
+MEASURED: tuple[MeasuredColumn, ...] = (
+    MeasuredColumn(RESPONSE, "string", None, "the response as logged: '1'/'2' (interval chosen), a reach in metres, "
+                   f"'left'/'right', a mode name, 'with'/'against', or {TIMEOUT_RESPONSE!r}"),
+    MeasuredColumn(CORRECT, "bool", None, "the response was correct (2AFC, left/right); null: no correct answer or "
+                   "timed out"),
+    MeasuredColumn(REACH_M, "double", "m", "the reach: the hand's distance from the eyes' mid-point along the "
+                   "horizontal eye-to-target direction (reach studies)"),
+    MeasuredColumn(CHOSEN_MODE, "string", None, "the rendering mode chosen (preference studies)"),
+    MeasuredColumn("trial_start_s", "double", "s", "trial start on the session clock"),
+    MeasuredColumn("trial_end_s", "double", "s", "end of the trial's response phase on the session clock"),
+    MeasuredColumn(RESPONSE_VALUE, "double", "m for a reach; none for the interval chosen (1 or 2)",
+                   "the response as a number where it is one (the interval chosen, 1 or 2; a reach in metres); null "
+                   "otherwise (left/right, a mode name, a timeout)"),
+    MeasuredColumn(OUTCOME, "string", None, f"what happened to the response phase: one of {', '.join(OUTCOMES)}"),
+)
+MEASURED_COLUMNS: tuple[str, ...] = tuple(c.name for c in MEASURED)
+#: Every column dataset_description.json lists as measured (schedule + identity + measured).
+DESCRIBED_COLUMNS: tuple[str, ...] = SCHEDULE_COLUMNS + IDENTITY_COLUMNS + MEASURED_COLUMNS
 
 
 def typed_response(response: object) -> dict[str, object]:
@@ -163,4 +191,7 @@ def dataset_description(*, simulated: bool, studies: list[str], n_simulated: int
         "n_sessions_real": int(n_real),
         "studies": sorted(studies),
         "variableMeasured": list(DESCRIBED_COLUMNS),
+        # the measured columns' types and units (schema.org PropertyValue; unitText only where there is a unit)
+        "measuredColumns": [{"@type": "PropertyValue", "name": c.name, "valueType": c.type, "description": c.description,
+                             **({"unitText": c.unit} if c.unit else {})} for c in MEASURED],
     }

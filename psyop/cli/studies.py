@@ -8,17 +8,28 @@ response kind (psyop.statistics.studies), never by name:
   (figures/<study>_thresholds.png: thresholds by condition with an rm-ANOVA; with the linear fit
   of analysis/fig_discrimination_thresholds.py for sessions of the paper's discrimination protocol,
   identified by its hash) and every psychometric function (figures/supp_psychometric_<study>.png);
+- adaptive two-interval runs (staircase, QUEST+) also: figures/<study>_tracks.png (analysis/adaptive_tracks.py);
 - left/right nearer: figures/<study>_depth.png; reach: figures/<study>_reach.png;
   pairwise preference: figures/<study>_preferences.png; with/against (NC calibration):
   figures/<study>_pss.png.
+
+A study whose sessions ran more than one protocol version (distinct ``protocol_sha256``) is analysed
+per version: each is the study ``<study>@<hash12>`` (psyop.statistics.protocol_versions), with its own
+outputs (results/<study>@<hash12>_<what>.json, figures/<study>@<hash12>_<what>.png) from its sessions
+only, unless ``--pool-protocols`` (``make figures POOL=1``) pools them on purpose.
 """
 
 from __future__ import annotations
 
 import argparse
 import hashlib
+import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from psyop.statistics.studies import StudyFacts
 
 #: Sessions of this shipped protocol (by hash) get the linear-fit thresholds figure.
 LINEAR_FIT_PROTOCOLS = ("discrimination.yaml",)
@@ -52,9 +63,10 @@ def make_escaped(path: Path) -> str:
     return text
 
 
-def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "") -> list[Target]:
+def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "", adaptive: bool = False) -> list[Target]:
     """The analysis of one study, by its response kind; ``trials`` is its sessions' trials.parquet
-    files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces).
+    files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces); ``adaptive``
+    (a two-interval study whose levels a staircase or QUEST+ placed) adds its track plot.
 
     Examples
     --------
@@ -70,29 +82,56 @@ def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "") -> li
                        f"{common} --n-jobs $(JOBS)", kind="fits"),
                 Target(f"{study}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}"),
                 Target(f"supp_psychometric_{study}.png", "analysis/supp_psychometric_functions.py",
-                       f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}")]
+                       f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}")] + ([
+                Target(f"{study}_tracks.png", "analysis/adaptive_tracks.py",
+                       f"{fits} {trials} $(DRAW_SRC) psyop/figures/adaptive_figures.py", f"{common} --fits {fits}")]
+                if adaptive else [])
     figure = {"near_side": ("depth", "analysis/fig_ordinal_depth.py"), "reach": ("reach", "analysis/fig_egocentric_reach.py"),
               "preference": ("preferences", "analysis/fig_realism.py"),
               "with_against": ("pss", "analysis/nc_calibration.py")}[kind]
     return [Target(f"{study}_{figure[0]}.png", figure[1], f"{trials} $(DRAW_SRC)", common)]
 
 
-def make_rules(data: Path, protocols: Path) -> tuple[str, list[str]]:
-    """(the make fragment, one line per study saying what it builds)."""
-    from psyop.statistics.studies import studies_in
+def analysis_units(data: Path, pool_protocols: bool) -> list[tuple[StudyFacts, list[Path]]]:
+    """Each study of ``data`` with its sessions, or, for a study whose sessions ran several protocol
+    versions and ``pool_protocols`` is off, each version apart (``<study>@<hash12>``,
+    psyop.statistics.protocol_versions). A session without a recorded hash in such a study could
+    belong to either version: a UserError naming it (pool on purpose, or give it its session.json)."""
+    from psyop.errors import UserError
+    from psyop.statistics.dataset import session_files
+    from psyop.statistics.protocol_versions import session_hash, unit_name
+    from psyop.statistics.studies import study_facts, studies_in
 
+    units = []
+    for facts in studies_in(data):
+        if len(facts.protocol_sha256) < 2 or pool_protocols:
+            units.append((facts, session_files(data, facts.name)))
+            continue
+        unknown = [f for f in session_files(data, facts.name) if session_hash(f) is None]
+        if unknown:
+            raise UserError(f"study {facts.name!r} ran {len(facts.protocol_sha256)} protocol versions and this session "
+                            "records none (no session.json or no protocol_sha256), so it cannot be analysed with its "
+                            "version; pool the versions on purpose (`make figures POOL=1`)", str(unknown[0]))
+        for sha in facts.protocol_sha256:
+            name = unit_name(facts.name, sha)
+            units.append((study_facts(data, name), session_files(data, name)))
+    return units
+
+
+def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tuple[str, list[str]]:
+    """(the make fragment, one line per study, or per protocol version of one, saying what it builds)."""
     linear = set()
     for name in LINEAR_FIT_PROTOCOLS:
         path = protocols / name
         if path.is_file():
             linear.add(hashlib.sha256(path.read_bytes().decode("utf-8").encode("utf-8")).hexdigest())
-    rules = ["# written by `psyop studies --make-rules`: one block per study in the data root", ""]
+    rules = ["# written by `psyop studies --make-rules`: one block per study (per protocol version unless pooled)", ""]
     said = []
-    for facts in studies_in(data):
+    for facts, sessions in analysis_units(data, pool_protocols):
         uses_linear = bool(facts.protocol_sha256) and set(facts.protocol_sha256) <= linear
-        sessions = sorted((data / facts.name).glob("sub-*/ses-*/trials.parquet"))
         prerequisites = " ".join(make_escaped(p) for p in sessions)
-        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites) + [Target(  # issue 27: gaze quality
+        adaptive = facts.kind == "2afc_interval" and _adaptive(sessions)
+        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive) + [Target(  # issue 27
             f"{facts.name}_gaze_quality.png", "analysis/gaze_quality.py", f"{prerequisites} $(QUALITY_SRC)",
             f'--study {facts.name} --data "$(DATA)" --results "$(RESULTS)"')]
         figures = [t for t in targets if t.kind == "figure"]
@@ -103,8 +142,33 @@ def make_rules(data: Path, protocols: Path) -> tuple[str, list[str]]:
                 f"{facts.name} ({KIND_NAMES[facts.kind]}): $@"
             rules += [f"{where}/{t.output}: {t.script} {t.prerequisites}", f"\t@mkdir -p {where}",
                       f"\t@echo \"[psyop] {label}\"", f"\t@$(ANALYSE) $< {t.arguments} --out $@", ""]
-        said.append(f"{facts.name} ({KIND_NAMES[facts.kind]}): " + ", ".join(t.output for t in figures))
+        said.append(f"{facts.name} ({KIND_NAMES[facts.kind]}{_versions_note(facts, len(sessions))}): "
+                    + ", ".join(t.output for t in figures))
     return "\n".join(rules) + "\n", said
+
+
+def _adaptive(sessions: list[Path]) -> bool:
+    """Whether any session logged an adaptive procedure's columns (``adaptive_procedure``: staircase, QUEST+)."""
+    import pyarrow.parquet as pq
+
+    for path in sessions:
+        try:
+            if "adaptive_procedure" in pq.read_schema(path).names:
+                return True
+        except Exception:  # noqa: BLE001 - an unreadable log is refused by name when its analysis loads it
+            continue
+    return False
+
+
+def _versions_note(facts: StudyFacts, n_sessions: int) -> str:
+    """'; protocol version 1 of 2, 3 sessions, analysed apart' / '; 2 protocol versions pooled on purpose' / ''."""
+    versions = facts.folder_protocol_sha256
+    if len(facts.protocol_sha256) > 1:
+        return f"; {len(facts.protocol_sha256)} protocol versions pooled on purpose (POOL=1)"
+    if len(versions) > 1 and facts.protocol_sha256:
+        place = versions.index(facts.protocol_sha256[0]) + 1
+        return f"; protocol version {place} of {len(versions)}, {n_sessions} sessions, analysed apart (POOL=1 pools them)"
+    return ""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -116,11 +180,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--make-rules", type=Path, default=None, help="write the make rules to this file "
                         "(rewritten only when they change)")
     parser.add_argument("--protocols", type=Path, default=Path("protocols"), help="the paper's protocols")
+    parser.add_argument("--pool-protocols", action="store_true", default=os.environ.get("PSYOP_POOL_PROTOCOLS") == "1",
+                        help="one analysis per study even when its sessions ran different protocol versions (default: "
+                        "one per version, <study>@<hash12>; `make figures POOL=1` sets PSYOP_POOL_PROTOCOLS=1)")
     parser.set_defaults(func=main)
 
 
 def main(args: argparse.Namespace) -> int:
-    text, said = make_rules(args.data, args.protocols)
+    text, said = make_rules(args.data, args.protocols, args.pool_protocols)
     for line in said:
         print(f"[psyop] study {line}")
     if not said:

@@ -219,6 +219,12 @@ def _write_events(stem: Path, trials: pd.DataFrame, used: RunDisplay, eyes: Sequ
         "correct": {"Description": "correctness of the response (1 correct, 0 wrong, n/a: no correct answer or timed out)",
                     "Levels": {"1": "correct", "0": "wrong"}},
         "response_time": {"Description": "response time from the start of the response phase", "Units": "s"},
+        dc.RESPONSE_VALUE: {"Description": "the response as a number where it is one (the interval chosen, 1 or 2; a "
+                                           "reach in metres); n/a otherwise (left/right, a mode name, a timeout)",
+                            **({"Units": "m"} if meta.get("response_kind") == "reach" else {})},
+        dc.OUTCOME: {"Description": "what happened to the trial's response phase",
+                     "Levels": {"answered": "a response was given",
+                                dc.TIMEOUT_RESPONSE: "the response phase timed out (protocol timeout_s)"}},
     }
     sidecar: JsonObject = {
         "TaskName": study,

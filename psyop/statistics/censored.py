@@ -48,6 +48,8 @@ class TobitFit:
     df_resid: int
     converged: bool
     model: str
+    #: the maximised log-likelihood (normal densities of observed values, probabilities of censored ones)
+    loglik: float = float("nan")
 
     def get(self, name: str) -> tuple[float, float, float]:
         """(estimate, CI low, CI high) of one coefficient."""
@@ -85,16 +87,46 @@ def _negloglik(params: np.ndarray, y: np.ndarray, X: np.ndarray, side: np.ndarra
     return float(-ll.sum())
 
 
-def _hessian(f, x: np.ndarray, step: float = 1e-4) -> np.ndarray:
-    """Central finite-difference Hessian of a scalar function."""
-    k = len(x)
-    h = np.zeros((k, k))
-    eye = np.eye(k) * step
-    for i in range(k):
-        for j in range(i, k):
-            h[i, j] = h[j, i] = (f(x + eye[i] + eye[j]) - f(x + eye[i] - eye[j])
-                                 - f(x - eye[i] + eye[j]) + f(x - eye[i] - eye[j])) / (4 * step * step)
-    return h
+def _negloglik_derivatives(params: np.ndarray, y: np.ndarray, X: np.ndarray,
+                           side: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Analytic gradient and Hessian of :func:`_negloglik` in (beta, log sigma).
+
+    Each row's log-likelihood is g(z) (minus log sigma when observed), z = (y - x beta) / sigma:
+    g = -z^2/2 (observed), log Phi(z) (below), log Phi(-z) (above); with dz/dbeta = -x/sigma,
+    dz/dlog sigma = -z, d2z/dbeta dlog sigma = x/sigma, d2z/dlog sigma^2 = z."""
+    beta, sigma = params[:-1], float(np.exp(params[-1]))
+    z = (y - X @ beta) / sigma
+    below = np.exp(stats.norm.logpdf(z) - stats.norm.logcdf(z))  # phi / Phi
+    above = np.exp(stats.norm.logpdf(z) - stats.norm.logsf(z))   # phi / (1 - Phi)
+    g1 = np.where(side == 0, -z, np.where(side < 0, below, -above))
+    g2 = np.where(side == 0, -1.0, np.where(side < 0, -below * (z + below), -above * (above - z)))
+    dz = np.column_stack([-X / sigma, -z])
+    grad = dz.T @ g1 + np.r_[np.zeros(X.shape[1]), -float((side == 0).sum())]
+    hess = (dz * g2[:, None]).T @ dz
+    hess[:-1, -1] += X.T @ g1 / sigma
+    hess[-1, :-1] = hess[:-1, -1]
+    hess[-1, -1] += float(g1 @ z)
+    return -grad, -hess
+
+
+def _newton_polish(x: np.ndarray, y: np.ndarray, X: np.ndarray, side: np.ndarray,
+                   steps: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Newton steps from BFGS's optimum with the analytic derivatives, while the gradient shrinks:
+    near the maximum the log-likelihood no longer changes in double precision (so BFGS stops about
+    1e-8 short), its gradient still does. Returns (parameters, gradient, Hessian) at the end."""
+    grad, hess = _negloglik_derivatives(x, y, X, side)
+    for _ in range(steps):
+        if np.max(np.abs(grad)) < 1e-13:
+            break
+        try:
+            trial = x - np.linalg.solve(hess, grad)
+        except np.linalg.LinAlgError:
+            break
+        grad_t, hess_t = _negloglik_derivatives(trial, y, X, side)
+        if not np.max(np.abs(grad_t)) < np.max(np.abs(grad)):
+            break
+        x, grad, hess = trial, grad_t, hess_t
+    return x, grad, hess
 
 
 def tobit_fit(y: np.ndarray, X: np.ndarray, side: np.ndarray, names: tuple[str, ...],
@@ -115,19 +147,20 @@ def tobit_fit(y: np.ndarray, X: np.ndarray, side: np.ndarray, names: tuple[str, 
                          f"{int((side == 0).sum())} of {n}")
     beta0 = np.linalg.lstsq(X, y, rcond=None)[0]
     start = np.r_[beta0, np.log(max(float(np.std(y - X @ beta0)), 1e-6))]
-    fun = lambda p: _negloglik(p, y, X, side)  # noqa: E731
-    res = optimize.minimize(fun, start, method="BFGS", options={"gtol": 1e-8})
-    cov = np.linalg.pinv(_hessian(fun, res.x))
+    res = optimize.minimize(_negloglik, start, args=(y, X, side), method="BFGS",
+                            jac=lambda p, *a: _negloglik_derivatives(p, *a)[0], options={"gtol": 1e-9})
+    x, grad, hess = _newton_polish(res.x, y, X, side)
+    cov = np.linalg.pinv(hess)
     se = np.sqrt(np.clip(np.diag(cov)[:k], 0, None))
     df = max(n - k, 1)
     half = stats.t.ppf(0.5 + ci_level / 2, df) * se
-    coef = res.x[:k]
+    coef = x[:k]
     n_below, n_above = int((side < 0).sum()), int((side > 0).sum())
     return TobitFit(
         names=tuple(names), coef=tuple(map(float, coef)), se=tuple(map(float, se)),
         ci_low=tuple(map(float, coef - half)), ci_high=tuple(map(float, coef + half)),
-        sigma=float(np.exp(res.x[-1])), n=n, n_below=n_below, n_above=n_above, df_resid=n - k,
-        converged=bool(res.success or np.linalg.norm(res.jac) < 1e-4),
+        sigma=float(np.exp(x[-1])), n=n, n_below=n_below, n_above=n_above, df_resid=n - k,
+        converged=bool(np.max(np.abs(grad)) < 1e-6), loglik=-_negloglik(x, y, X, side),
         model=(f"censored-normal (Tobit) ML over {n} fits, {n_below} censored below and {n_above} above "
                "the tested levels entered at their bounds as censored; fits treated as independent"))
 

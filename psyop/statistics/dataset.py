@@ -17,6 +17,7 @@ from psyop.errors import UserError
 from psyop.finalised import record_finalised, verify_session
 from psyop.input_files import MAX_LOG_TABLE_BYTES, InputFile
 from psyop.quality.included import include as include_quality
+from psyop.statistics.protocol_versions import unit_trials_files
 
 
 class LowGazeWarning(UserWarning):
@@ -92,8 +93,9 @@ def _read_trials(files: list[Path]) -> tuple[list[pd.DataFrame], list[bool | Non
 
 
 def session_files(data_root: Path, study: str) -> list[Path]:
-    """Sorted paths of every session log of ``study``."""
-    return dc.trials_files(data_root, study)
+    """Sorted paths of every session log of ``study``; of one protocol version for ``study@<hash12>``
+    (psyop.statistics.protocol_versions)."""
+    return unit_trials_files(data_root, study)
 
 
 def load_trials(data_root: Path, study: str, include_practice: bool = False) -> pd.DataFrame:

@@ -19,6 +19,7 @@ import yaml
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
+from psyop.statistics.protocol_versions import session_hash, split_unit, unit_trials_files
 
 #: The response kinds (session.json ``response_kind``; psyop.session.responses.base.ResponseKind).
 TWO_INTERVAL, NEAR_SIDE, PREFERENCE, REACH = "2afc_interval", "near_side", "preference", "reach"
@@ -76,6 +77,14 @@ class StudyFacts:
     factors: dict[str, FactorFacts] = field(default_factory=dict)
     level_factor: str | None = None
     response_fields: dict[str, str] = field(default_factory=dict)
+    #: the protocol hashes of every session in the study's folder (more than ``protocol_sha256`` when
+    #: this is one version of it, ``study@<hash12>``: psyop.statistics.protocol_versions)
+    folder_protocol_sha256: tuple[str, ...] = ()
+
+    @property
+    def folder(self) -> str:
+        """The study folder (``data/<folder>``): the name without its ``@<hash12>``."""
+        return split_unit(self.name)[0]
 
     def response_column(self, key: str, default: str) -> str:
         """The column a response field names (``separation_factor``, ``rendering_factor``, ...), else ``default``."""
@@ -161,7 +170,7 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
     >>> study_facts(root, "s").kind
     'preference'
     """
-    files = dc.trials_files(data_root, study)
+    files = unit_trials_files(data_root, study)
     if not files:
         raise UserError(f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
                         str(Path(data_root)))
@@ -185,7 +194,10 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
     factors, level, fields = _protocol_factors(text) if text else ({}, None, {})
     if kind == TWO_INTERVAL and level is None:
         level = "level_D"
-    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields)
+    folder = split_unit(study)[0]
+    everything = tuple(sorted(hashes)) if folder == study else \
+        tuple(sorted({h for f in dc.trials_files(data_root, folder) if (h := session_hash(f))}))
+    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields, everything)
 
 
 def studies_in(data_root: Path) -> list[StudyFacts]:

@@ -61,9 +61,17 @@ def test_held_out_staircase_with_censored_fits_gets_tracks_and_keeps_every_parti
     finally:
         sys.path.remove(str(REPO / "analysis"))
     assert (tmp_path / "tracks.png").stat().st_size > 10_000
+    from psyop.cli.studies import make_rules
+
+    rules, said = make_rules(data, REPO / "protocols")  # `make figures` draws the tracks of an adaptive study
+    assert "$(FIGDIR)/stair_test_tracks.png: analysis/adaptive_tracks.py" in rules
+    assert "stair_test_tracks.png" in said[0]
     tracks = json.loads((res / "stair_test_adaptive.json").read_text())["tracks"]
     assert len(tracks) == 2 * 3 and all(t["n_trials"] == 20 for t in tracks)
     thresholds = json.loads((res / "stair_test_thresholds.json").read_text())
     c = thresholds["censored"]
     assert c["n_censored_below"] + c["n_censored_above"] == thresholds["n_left_out"], "every censored fit is in the model"
     assert "censored thresholds" in thresholds["summary"]
+    anova = {k: v for k, v in thresholds["summary"].items() if "rm-ANOVA" in k}
+    assert anova and all("LOW DF" in v or v.startswith(("not computed", "same as above")) for v in anova.values()), \
+        anova  # 2 participants: an F with 2 error df or fewer is flagged, never reported bare
