@@ -24,6 +24,7 @@ offset and duration are null there too, and ``P_frames`` counts the frames drawn
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -178,3 +179,71 @@ def with_timing_fields(schema: pa.Schema, phases: Sequence[PhaseSpec]) -> pa.Sch
         raise ValueError(f"schedule column(s) {', '.join(taken)} clash with the measured-timing columns of the "
                          "trial log (docs/sessions.md \"Timing\"): rename the factor(s)")
     return pa.schema([*schema, *timing_fields(phases)])
+
+
+@dataclass(frozen=True)
+class PhaseReport:
+    """One timed phase over a session's trials: nominal duration, measured durations and dropped frames."""
+
+    label: str
+    kind: str
+    nominal_s: float
+    measured_s: tuple[float, ...]  # one per trial that showed the phase (trial order)
+    dropped_frames: int
+
+
+@dataclass(frozen=True)
+class TimingReport:
+    """What ``psyop timing`` prints and draws for one finalised session (psyop.cli.timing)."""
+
+    session: str
+    clock: str
+    simulated: bool
+    summary: JsonObject  # :func:`frames_summary` of every run's frames
+    intervals_s: tuple[float, ...]  # successive display times within a trial
+    trials: tuple[int, ...]
+    dropped_per_trial: tuple[int, ...]  # over every timed phase of the trial
+    phases: tuple[PhaseReport, ...]
+
+    def lines(self) -> list[str]:
+        """The summary, one line each (units in the words)."""
+        s = self.summary
+        ms = {k: (f"{float(v) * 1e3:.2f} ms" if v is not None else "n/a") for k, v in s.items() if k.endswith("_s")}
+        kinds = ", ".join(f"{k} {v}" for k, v in dict(s["dropped_frames_by_kind"]).items()) or "none"
+        out = [f"{self.clock} clock{', simulated' if self.simulated else ''}: {s['n_frames']} frames; refresh period "
+               f"{ms['refresh_period_s']}; frame interval median {ms['frame_interval_median_s']}, p99 "
+               f"{ms['frame_interval_p99_s']}, max {ms['frame_interval_max_s']}",
+               f"dropped frames: {s['dropped_frames']} ({kinds}); trials with any: "
+               f"{sum(d > 0 for d in self.dropped_per_trial)} of {len(self.trials)}"]
+        for p in self.phases:
+            got = np.asarray(p.measured_s, dtype=np.float64)
+            measured = (f"measured median {np.median(got) * 1e3:.1f} ms (min {got.min() * 1e3:.1f}, max "
+                        f"{got.max() * 1e3:.1f}) over {got.size} trials" if got.size else "not measured (no frames)")
+            out.append(f"{p.label} ({p.kind}): nominal {p.nominal_s * 1e3:.1f} ms, {measured}; "
+                       f"{p.dropped_frames} dropped frames")
+        return out
+
+
+def session_report(directory: str, meta: JsonObject, trials: pd.DataFrame, frames: pd.DataFrame) -> TimingReport:
+    """The :class:`TimingReport` of a finalised session (its session.json, trials.parquet and frames.parquet)."""
+    known = {f.name for f in dataclasses.fields(PhaseSpec)}
+    phases = [PhaseSpec(**{k: (tuple(v) if k == "primitives" and v is not None else v) for k, v in p.items()
+                           if k in known}) for p in meta.get("phases") or []]
+    display = meta.get("display") or {}
+    period_s = 1.0 / float(display["refresh_hz"]) if display.get("refresh_hz") else float("nan")
+    summary = frames_summary(frames, {p.name: p.show for p in phases}, period_s)
+    ordered = frames.sort_values(["trial", "frame"], kind="stable") if len(frames) else frames
+    intervals = (ordered.groupby("trial", sort=False)["display_time_s"].diff().dropna().to_numpy(dtype=np.float64)
+                 if len(ordered) else np.zeros(0))
+    trials = trials.sort_values("trial")
+    reports, dropped = [], np.zeros(len(trials), dtype=np.int64)
+    for phase, label in zip(phases, phase_labels(phases)):
+        if label is None or f"{label}_dropped_frames" not in trials:
+            continue
+        counts = trials[f"{label}_dropped_frames"].fillna(0).astype(np.int64).to_numpy()
+        dropped += counts
+        measured = trials[f"{label}_duration_s"].dropna().astype(float)
+        reports.append(PhaseReport(label, phase.show, phase.duration_s, tuple(measured), int(counts.sum())))
+    return TimingReport(directory, str(meta.get("clock", "?")), bool(meta.get("simulated")), summary,
+                        tuple(float(v) for v in intervals), tuple(int(t) for t in trials["trial"]),
+                        tuple(int(d) for d in dropped), tuple(reports))
