@@ -24,7 +24,6 @@ offset and duration are null there too, and ``P_frames`` counts the frames drawn
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -224,11 +223,19 @@ class TimingReport:
         return out
 
 
+def _recorded_phase(p: Mapping[str, object]) -> PhaseSpec:
+    """A timed phase as session.json ``phases`` records it (psyop.session.plan.SessionPlan.metadata)."""
+    primitives = p.get("primitives")
+    return PhaseSpec(str(p["name"]), float(str(p["duration_s"])), str(p["show"]), str(p.get("gaze", "none")),
+                     mode_column=None if p.get("mode_column") is None else str(p["mode_column"]),
+                     mode=str(p.get("mode", "conventional")),
+                     primitives=tuple(str(x) for x in primitives) if isinstance(primitives, list) else None,
+                     interval=int(str(p.get("interval", 0))), target_size_deg=float(str(p.get("target_size_deg", 1.0))))
+
+
 def session_report(directory: str, meta: JsonObject, trials: pd.DataFrame, frames: pd.DataFrame) -> TimingReport:
     """The :class:`TimingReport` of a finalised session (its session.json, trials.parquet and frames.parquet)."""
-    known = {f.name for f in dataclasses.fields(PhaseSpec)}
-    phases = [PhaseSpec(**{k: (tuple(v) if k == "primitives" and v is not None else v) for k, v in p.items()
-                           if k in known}) for p in meta.get("phases") or []]
+    phases = [_recorded_phase(p) for p in meta.get("phases") or []]
     display = meta.get("display") or {}
     period_s = 1.0 / float(display["refresh_hz"]) if display.get("refresh_hz") else float("nan")
     summary = frames_summary(frames, {p.name: p.show for p in phases}, period_s)
