@@ -39,6 +39,7 @@ from psyop.export.gaze import (FRAME_LOG, display_from_metadata, gaze_on_image_p
 from psyop.finalised import FINALISED_KEY, read_session_meta, verify_session
 from psyop.optics.display import DisplayProfile
 from psyop.records import JsonMapping, JsonObject
+from psyop.session.timing import timing_column_description
 
 #: The BIDS version the export follows (the schema bundled with bids-validator-deno 3.0.2).
 BIDS_VERSION = "1.11.1"
@@ -225,9 +226,10 @@ def _write_events(stem: Path, trials: pd.DataFrame, display: DisplayProfile, eye
         "StimulusPresentation": _stimulus_presentation(display, eyes[0]),
         "StimulusPresentationNote": _screen_note(display),
     }
+    phase_names = [str(p.get("name")) for p in meta.get("phases") or []]
     for column in events.columns:
-        sidecar[column] = described.get(column, {"Description": f"schedule column {column!r} of psyop's "
-                                                                "trials.parquet (see sourcedata/)"})
+        sidecar[column] = described.get(column) or timing_column_description(column, phase_names) or {
+            "Description": f"schedule column {column!r} of psyop's trials.parquet (see sourcedata/)"}
     _write_json(stem.with_suffix(".json"), sidecar)
 
 

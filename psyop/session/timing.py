@@ -24,6 +24,7 @@ offset and duration are null there too, and ``P_frames`` counts the frames drawn
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -254,3 +255,23 @@ def session_report(directory: str, meta: JsonObject, trials: pd.DataFrame, frame
     return TimingReport(directory, str(meta.get("clock", "?")), bool(meta.get("simulated")), summary,
                         tuple(float(v) for v in intervals), tuple(int(t) for t in trials["trial"]),
                         tuple(int(d) for d in dropped), tuple(reports))
+
+
+_DESCRIPTIONS = {"onset_s": ("display time of the phase's first frame (session clock)", "s"),
+                 "offset_s": ("display time of the phase's last frame (session clock)", "s"),
+                 "duration_s": ("the phase's measured duration: first frame's display time to the next frame shown", "s"),
+                 "frames": ("frames shown in the phase", None),
+                 "dropped_frames": ("display periods skipped before the phase's frames", None)}
+
+
+def timing_column_description(name: str, phase_names: Sequence[str]) -> JsonObject | None:
+    """A sidecar description of a measured-timing column (BIDS events.json), None for any other column;
+    ``phase_names``: session.json ``phases`` names (the column prefixes, repeats with ``_2`` ...)."""
+    if name == TIMING_OK:
+        return {"Description": "the trial's stimulus phases dropped no more display frames than the protocol's "
+                               "timing.max_dropped_frames (n/a: no timing: rule)"}
+    for suffix, (text, units) in _DESCRIPTIONS.items():
+        prefix = name.removesuffix(f"_{suffix}")
+        if prefix != name and re.sub(r"_[0-9]+$", "", prefix) in phase_names:
+            return {"Description": f"{prefix}: {text} (psyop measured timing)", **({"Units": units} if units else {})}
+    return None
