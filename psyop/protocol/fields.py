@@ -13,7 +13,7 @@ Every field of every protocol model is listed here with the part of psyop that r
 - ``refused``: validated structurally, then refused with its file:line (not available yet);
 - ``adaptive``: the session's adaptive levels (psyop.adaptive.session builds each procedure);
 - ``quality``: the exclusion rules at analysis time (psyop.quality.rules);
-- ``timing``: the session loop's dropped-frame rule (psyop.session.loop, psyop.session.timing);
+- ``timing``: the session loop's dropped-frame rule (psyop.session.loop, psyop.protocol.timing);
 - ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``).
 
 tests/protocol/test_protocol_fields.py walks the pydantic schema and checks that every field is
@@ -36,7 +36,7 @@ USERS: dict[str, tuple[str, ...]] = {
     "adaptive": ("psyop/adaptive/session.py",),
     "tracker": ("psyop/session/gaze/simulated.py",),
     "quality": ("psyop/quality/rules.py", "psyop/protocol/quality.py"),
-    "timing": ("psyop/session/timing.py",),
+    "timing": ("psyop/session/loop.py", "psyop/protocol/timing.py"),
 }
 
 _SCENE_COMMON = {"id": "stimulus", "kind": "validation"}

@@ -184,7 +184,8 @@ class TrialLoop:
 
     # session -------------------------------------------------------------------------
     def run(self, schedule: pd.DataFrame, completed: set[int]) -> SessionOutcome:
-        rows = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
+        # a trial the timing rule re-runs goes back in the queue, at the end of its block
+        queue = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
         n_total = len(schedule)
         n_done = len(completed)
         recorded = set(completed)
@@ -194,15 +195,13 @@ class TrialLoop:
         n_stopped = self._record_stops(schedule, recorded, -1)
         record: TrialRecord = {"trial": -1}
         try:
-            queue = list(rows)  # a trial the timing rule re-runs goes back in, at the end of its block
             while queue:
                 planned = row = queue.pop(0)
                 bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
-                if self.adaptive is not None:
-                    if self.adaptive.stopped(row):  # its condition met the stop rule: not run, not logged
-                        bar.update(1)
-                        continue
-                    row = self.adaptive.fill(row)
+                if self.adaptive is not None and self.adaptive.stopped(row):  # met the stop rule: not run, not logged
+                    bar.update(1)
+                    continue
+                row = self.adaptive.fill(row) if self.adaptive is not None else row
                 self.current_trial = int(row["trial"])
                 record, frames = self._run_trial_on_display(row)
                 if self._rerun_for_timing(planned, record, queue):
@@ -214,14 +213,7 @@ class TrialLoop:
                     self._store_trial(record, frames)
                     recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
                     n_done += 1
-                self.current_trial = -1
-                self._emit("trial_end", record, float(record["trial_end_s"]),
-                           duration_s=float(record["trial_end_s"]) - float(record["trial_start_s"]))
-                if self.adaptive is not None:
-                    self.adaptive.commit(record)
-                    if self.adaptive.state(str(record["condition"])).finished:
-                        n_stopped = self._record_stops(schedule, recorded, n_stopped)
-                self.state = TrialState.DONE
+                n_stopped = self._recorded(record, schedule, recorded, n_stopped)
                 bar.update(1)
             if n_done < n_total:
                 message = (f"{n_done} of {n_total} trials recorded; the other {n_total - n_done} were not run: "
@@ -246,6 +238,19 @@ class TrialLoop:
         latency = latency_summary(np.array(self._ages), self.frame_period_s)
         latency["n_frames_held"] = self._n_held
         return SessionOutcome(status, n_done, n_total, message, latency)
+
+    def _recorded(self, record: TrialRecord, schedule: pd.DataFrame, recorded: set[int], n_stopped: int) -> int:
+        """After a trial is durable: its ``trial_end`` event, the adaptive procedure told (and any condition it
+        stopped recorded); the number of stopped conditions."""
+        self.current_trial = -1
+        self._emit("trial_end", record, float(record["trial_end_s"]),
+                   duration_s=float(record["trial_end_s"]) - float(record["trial_start_s"]))
+        if self.adaptive is not None:
+            self.adaptive.commit(record)
+            if self.adaptive.state(str(record["condition"])).finished:
+                n_stopped = self._record_stops(schedule, recorded, n_stopped)
+        self.state = TrialState.DONE
+        return n_stopped
 
     def _store_trial(self, record: TrialRecord, frames: FrameRecorder) -> None:
         """Append one trial to the log: its row, frames and raw gaze (a log of rows only: the row)."""
