@@ -66,14 +66,27 @@ def check_session(session: Path, calls: list[tuple[int, str, float, float]] | No
     frames = pd.read_parquet(session / "frames.parquet").sort_values(["trial", "frame"])
     phases = [p for p in meta["phases"]]
     assert len(trials) and len(frames)
+    strict = 0
     for _, trial in trials.iterrows():
         starts = nominal_starts(trial, phases)
+        own = frames[frames["trial"] == trial["trial"]]
+        t = own["display_time_s"].to_numpy()
         for phase in phases:
             name = phase["name"]
-            # every phase lasts its nominal duration within one refresh period, and starts within one of its start
-            assert abs(trial[f"{name}_duration_s"] - phase["duration_s"]) <= PERIOD_S + 1e-6, (trial["trial"], name)
-            assert -1e-6 <= trial[f"{name}_onset_s"] - starts[name] <= PERIOD_S + 1e-6, (trial["trial"], name)
-            shown = frames[(frames["trial"] == trial["trial"]) & (frames["phase"] == name)]
+            start, end = starts[name], starts[name] + phase["duration_s"]
+            # the frames around each boundary: the phase's onset is the first frame shown at or after its start, the
+            # next frame shown at or after its end ends it; each is late by less than the gap to the frame before
+            first, after = int(np.searchsorted(t, start - 1e-6)), int(np.searchsorted(t, end - 1e-6))
+            gaps = [t[i] - t[i - 1] for i in (first, after) if 0 < i < len(t)]
+            late_start = trial[f"{name}_onset_s"] - start
+            assert -1e-6 <= late_start and all(late <= gap - PERIOD_S + 1e-6 for late, gap in zip([late_start], gaps))
+            if all(gap <= 2 * PERIOD_S + 1e-6 for gap in gaps):  # no frame at either boundary took over two periods:
+                strict += 1  # the phase lasts its nominal duration within one refresh period
+                assert abs(trial[f"{name}_duration_s"] - phase["duration_s"]) <= PERIOD_S + 1e-6, (trial["trial"], name)
+                assert late_start <= PERIOD_S + 1e-6, (trial["trial"], name)
+            else:  # a frame took longer (a loaded machine): within the longest gap at its boundaries less a period
+                assert abs(trial[f"{name}_duration_s"] - phase["duration_s"]) <= max(gaps) - PERIOD_S + 1e-6
+            shown = own[own["phase"] == name]
             assert trial[f"{name}_frames"] == len(shown)
             assert trial[f"{name}_dropped_frames"] == shown["display_missed_frames"].sum()
             assert trial[f"{name}_onset_s"] == shown["display_time_s"].iloc[0]
@@ -82,15 +95,15 @@ def check_session(session: Path, calls: list[tuple[int, str, float, float]] | No
             assert (shown["display_time_s"] >= starts[name] - 1e-6).all()
             assert (shown["display_time_s"] < starts[name] + phase["duration_s"] - 1e-6).all()
         # the dropped counts are what the display times imply: the periods between successive frames, less one
-        own = frames[frames["trial"] == trial["trial"]]
-        t = own["display_time_s"].to_numpy()
         implied = np.concatenate([[np.rint((t[0] - trial["trial_start_s"]) / PERIOD_S)],
                                   np.rint(np.diff(t) / PERIOD_S) - 1]).astype(int)
         assert (own["display_missed_frames"].to_numpy() == implied).all(), trial["trial"]
     # the stimulus follows the display clock: a frame is rendered within its display period (plus the frame's own
-    # software path); the clock behind real time by seconds was issue 31's bug
+    # software path before rendering); the stimulus clock behind real time by seconds was issue 31's bug
     behind = frames["render_start_s"] - frames["display_time_s"]
-    assert behind.min() >= -1e-6 and behind.max() < 2 * PERIOD_S
+    assert behind.min() >= -1e-6 and behind.median() < PERIOD_S  # (with the old pacing the lag grew past a second)
+    assert behind.max() < 8 * PERIOD_S  # a loaded machine may hold one frame's software path back, never for long
+    assert strict >= len(trials) * len(phases) // 2, "too few phases without a frame of over two periods to check"
     dropped = int(frames["display_missed_frames"].sum())
     timing = meta["summary"]["frame_timing"]
     assert timing["dropped_frames"] == dropped
