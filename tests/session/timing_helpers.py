@@ -101,7 +101,9 @@ def check_session(session: Path, calls: list[tuple[int, str, float, float]] | No
     # the stimulus follows the display clock: a frame is rendered within its display period (plus the frame's own
     # software path before rendering); the stimulus clock behind real time by seconds was issue 31's bug
     behind = frames["render_start_s"] - frames["display_time_s"]
-    assert behind.min() >= -1e-6 and behind.median() < PERIOD_S  # (with the old pacing the lag grew past a second)
+    # nine frames in ten are rendered inside their own slot (the old pacing drew the frames after a slow one for slots
+    # already past, in a burst, and with every frame slow fell behind by seconds)
+    assert behind.min() >= -1e-6 and behind.quantile(0.9) < PERIOD_S + 0.005
     assert behind.max() < 8 * PERIOD_S  # a loaded machine may hold one frame's software path back, never for long
     assert strict >= len(trials) * len(phases) // 2, "too few phases without a frame of over two periods to check"
     dropped = int(frames["display_missed_frames"].sum())
