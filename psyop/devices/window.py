@@ -12,8 +12,8 @@ On a real clock the window hands out the frame due when it is asked (as the head
 :func:`psyop.session.frames.due_slot`): a loop that comes late, because the last frame's rendering or
 its flip (a swap that waited for a later vertical blank) took longer than a period, gets the refresh
 slot current at the clock's time, and the slots it skipped are counted (``missed_frames``); the flip
-timestamps give ``display_flip_period_s`` and the flips that came more than half a period late
-(``flips_late``).
+timestamps give ``display_flip_period_s`` and the flips that came more than half a period after
+their frame's slot ended (``flips_late``).
 """
 
 from __future__ import annotations
