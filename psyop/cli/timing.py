@@ -53,8 +53,12 @@ def main(args: argparse.Namespace) -> int:
         frames_file = session / "frames.parquet"
         if not frames_file.is_file():
             raise UserError("no frames.parquet: the session is not finalised; run `psyop recover` on it", str(session))
-        report = session_report(str(session), meta, pd.read_parquet(session / dc.TRIALS_FILE),
-                                pd.read_parquet(frames_file))
+        frames = pd.read_parquet(frames_file)
+        missing = sorted({"trial", "frame", "phase", "display_time_s", "display_missed_frames"} - set(frames.columns))
+        if missing:
+            raise UserError(f"frames.parquet has no {', '.join(missing)}: recorded by a psyop that did not log display "
+                            "times, so its timing cannot be measured", str(frames_file))
+        report = session_report(str(session), meta, pd.read_parquet(session / dc.TRIALS_FILE), frames)
         print(f"{session}:")
         for line in report.lines():
             print(f"  {line}")
