@@ -53,6 +53,8 @@ endif
 figures: $(STAMP) $(SYSDEPS_STAMP)
 	@$(MAKE) --no-print-directory figures-data
 	@$(MAKE) --no-print-directory figures-build
+	@# the measured timing of real (not simulated) sessions: psyop timing's summary and a figure each (docs/sessions.md "Timing")
+	@$(PY) -m psyop timing "$(DATA)" --skip-simulated --out "$(FIGDIR)"
 	@echo "[psyop] figures in $(FIGDIR)/, statistics in $(RESULTS)/ (summary: $(RESULTS)/summary.md)"
 
 # Simulate only when no session has been logged yet; real data is never overwritten.

@@ -7,6 +7,13 @@ stereo protocol (left eye on the left), at the render resolution: ``scale`` 1
 (``psyop run --window-scale 1``) shows the display profile's full resolution per eye. Before any
 image the screen is flat grey. Flip times are recorded (:class:`~psyop.session.clock.FlipSync`),
 which estimates the display's refresh period for session.json.
+
+On a real clock the window hands out the frame due when it is asked (as the headless display does:
+:func:`psyop.session.frames.due_slot`): a loop that comes late, because the last frame's rendering or
+its flip (a swap that waited for a later vertical blank) took longer than a period, gets the refresh
+slot current at the clock's time, and the slots it skipped are counted (``missed_frames``); the flip
+timestamps give ``display_flip_period_s`` and the flips that came more than half a period after
+their frame's slot ended (``flips_late``).
 """
 
 from __future__ import annotations
@@ -16,7 +23,7 @@ from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject
 from psyop.session.clock import FlipSync
-from psyop.session.frames import FrameRequest
+from psyop.session.frames import FrameRequest, due_slot
 
 if TYPE_CHECKING:
     import moderngl
@@ -55,6 +62,8 @@ class GlfwWindow:
         self.scale = scale
         self.flips = FlipSync()
         self._index = 0
+        self.frames_missed = 0  # slots skipped (real clock): the sum of every frame's missed_frames
+        self.flips_late = 0  # flips more than half a period after the display time they were drawn for
 
     @property
     def gl_context(self) -> moderngl.Context | None:
@@ -89,10 +98,15 @@ class GlfwWindow:
         return None
 
     def begin_frame(self, not_before_s: float) -> FrameRequest:
-        """Wait on the session clock until ``not_before_s``; the frame is shown at the next flip
-        (predicted from the flips so far once there are enough of them)."""
+        """Wait on the session clock until ``not_before_s``. Real clock: the frame due now (module
+        docstring); virtual clock: the frame is shown at the next flip (predicted from the flips so far
+        once there are enough of them)."""
         self._clock.sleep_until(not_before_s)
         self._index += 1
+        if not self._clock.virtual:
+            shown_s, missed = due_slot(float(not_before_s), self._clock.now_s(), self._period_s)
+            self.frames_missed += missed
+            return FrameRequest(self._index - 1, shown_s, self._period_s, missed_frames=missed)
         shown_s = float(not_before_s)
         if len(self.flips.times_s) >= 8:
             shown_s = max(shown_s, self.flips.next_flip_s(self._clock.now_s(), self._period_s))
@@ -109,6 +123,8 @@ class GlfwWindow:
             self._glfw.swap_buffers(self._window.handle)
         t_s = self._clock.now_s()
         self.flips.add(t_s)
+        if t_s > frame.display_time_s + frame.period_s * 1.5:  # shown after the slot following its own
+            self.flips_late += 1
         return t_s
 
     def framebuffer_size_px(self) -> tuple[int, int]:
@@ -117,7 +133,8 @@ class GlfwWindow:
         return int(width), int(height)
 
     def summary(self) -> JsonObject:
-        out: JsonObject = {"display": self.name, "frames": self._index}
+        out: JsonObject = {"display": self.name, "frames": self._index, "frames_missed": self.frames_missed,
+                           "flips_late": self.flips_late}
         if len(self.flips.times_s) >= 8:  # from the flip timestamps (least squares)
             out["display_flip_period_s"] = self.flips.estimate(self._period_s)[0]
         return out

@@ -39,6 +39,7 @@ from psyop.export.gaze import (FRAME_LOG, RunDisplay, display_from_metadata, gaz
 from psyop.finalised import FINALISED_KEY, read_session_meta, verify_session
 from psyop.optics.display import DisplayProfile
 from psyop.records import JsonMapping, JsonObject
+from psyop.session.timing import timing_column_description
 
 #: The BIDS version the export follows (the schema bundled with bids-validator-deno 3.0.2).
 BIDS_VERSION = "1.11.1"
@@ -232,9 +233,10 @@ def _write_events(stem: Path, trials: pd.DataFrame, used: RunDisplay, eyes: Sequ
         "StimulusPresentation": _stimulus_presentation(used.eyes[eyes[0]], eyes[0]),
         "StimulusPresentationNote": f"{_screen_note(used.eyes[eyes[0]])} {used.note}",
     }
+    phase_names = [str(p.get("name")) for p in meta.get("phases") or []]
     for column in events.columns:
-        sidecar[column] = described.get(column, {"Description": f"schedule column {column!r} of psyop's "
-                                                                "trials.parquet (see sourcedata/)"})
+        sidecar[column] = described.get(column) or timing_column_description(column, phase_names) or {
+            "Description": f"schedule column {column!r} of psyop's trials.parquet (see sourcedata/)"}
     _write_json(stem.with_suffix(".json"), sidecar)
 
 

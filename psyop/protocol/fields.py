@@ -13,6 +13,7 @@ Every field of every protocol model is listed here with the part of psyop that r
 - ``refused``: validated structurally, then refused with its file:line (not available yet);
 - ``adaptive``: the session's adaptive levels (psyop.adaptive.session builds each procedure);
 - ``quality``: the exclusion rules at analysis time (psyop.quality.rules);
+- ``timing``: the session loop's dropped-frame rule (psyop.session.loop, psyop.protocol.timing);
 - ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``).
 
 tests/protocol/test_protocol_fields.py walks the pydantic schema and checks that every field is
@@ -35,6 +36,7 @@ USERS: dict[str, tuple[str, ...]] = {
     "adaptive": ("psyop/adaptive/session.py",),
     "tracker": ("psyop/session/gaze/simulated.py",),
     "quality": ("psyop/quality/rules.py", "psyop/protocol/quality.py"),
+    "timing": ("psyop/session/loop.py", "psyop/protocol/timing.py"),
 }
 
 _SCENE_COMMON = {"id": "stimulus", "kind": "validation"}
@@ -47,7 +49,7 @@ def _scene(**fields: str) -> dict[str, str]:
 FIELD_USERS: dict[str, dict[str, str]] = {
     "Protocol": {"psyop_protocol": "validation", "study": "plan", "display": "plan", "eyes": "plan", "scene": "stimulus",
                  "trial": "plan", "design": "schedule", "response": "plan", "observer": "plan",
-                 "quality": "quality"},
+                 "quality": "quality", "timing": "timing"},
     "StudyInfo": {"name": "plan", "title": "summary", "citation": "summary", "description": "summary"},
     "DisplaySpec": {"profile": "display", "eye_model": "display", "ipd": "plan", "rendering_nc": "display"},
     "RenderingNc": {"mm": "display", "scale": "display", "signed": "display"},
@@ -129,6 +131,7 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "QualitySection": {"trials": "quality", "participants": "quality", "min_included_trials": "quality",
                        "min_included_trials_reason": "quality"},
     "QualityRule": {"measure": "quality", "max": "quality", "min": "quality", "reason": "quality"},
+    "TimingSection": {"max_dropped_frames": "timing", "on_violation": "timing", "max_reruns": "timing"},
     "EyeOverride": {k: "tracker" for k in ("precision_deg", "pursuit_gain", "pursuit_lag_s", "blink_rate_hz",
                                            "dropout_rate_hz", "dropout_s", "nan_burst_rate_hz")},
     "SimulatedEye": {k: "tracker" for k in ("precision_deg", "pursuit_gain", "pursuit_lag_s", "blink_rate_hz",

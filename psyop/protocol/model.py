@@ -13,6 +13,7 @@ from psyop.protocol.observer import Observer
 from psyop.protocol.quality import QualitySection
 from psyop.protocol.response import Response
 from psyop.protocol.scene import Primitive
+from psyop.protocol.timing import TimingSection
 from psyop.protocol.trial import TrialSpec
 
 
@@ -41,6 +42,7 @@ class Protocol(StrictModel):
     response: Response
     observer: Observer | None = None
     quality: QualitySection | None = None  # gaze-based exclusions at analysis time (psyop.protocol.quality)
+    timing: TimingSection | None = None  # dropped-frame rule of a trial's intervals (psyop.protocol.timing)
 
     _source_text: str = PrivateAttr(default="")
     _source_name: str = PrivateAttr(default="")

@@ -7,7 +7,11 @@ OpenXR headset):
 1. ``request = display.begin_frame(not_before_s)``: the display paces the loop (a headless display
    waits on the session clock until ``not_before_s``; a headset runtime blocks in ``xrWaitFrame``
    until it wants the next frame) and says when the frame will be shown (``display_time_s``,
-   session clock), the display period, whether to render at all, and, for a headset, each eye's
+   session clock; never before ``not_before_s``). It hands out the frame that is due when it is
+   asked: a loop that comes late (the last frame took longer than a period) gets a frame for the
+   display's current time, not for the slot it asked for, and ``missed_frames`` counts the display
+   periods skipped in between (the stimulus follows the display clock: durations and motion stay
+   right), the display period, whether to render at all, and, for a headset, each eye's
    view (centre, orientation, field of view: :class:`psyop.optics.camera.ViewGeometry`) and the
    render target (a swapchain image) each eye must be drawn into;
 2. the renderer draws the eyes for that request (into the targets it was handed, if any);
@@ -72,8 +76,9 @@ class FrameRequest:
 
     ``views`` (per eye, in head space) is empty when the protocol's display profile and eye rig
     place the cameras (headless, window); ``targets`` is empty when the images stay in the
-    renderer's own buffers. ``missed_frames``: display periods the display skipped before this
-    frame (0 when it cannot tell)."""
+    renderer's own buffers. ``missed_frames``: display periods skipped before this frame: for the
+    headless display and a window, the periods between the slot the loop asked for and this frame's
+    display time; for a headset, from the runtime's successive predicted display times."""
 
     index: int
     display_time_s: float
@@ -170,9 +175,26 @@ class CameraRenderer:
         return None
 
 
+def due_slot(asked_s: float, now_s: float, period_s: float) -> tuple[float, int]:
+    """(display time, slots skipped) of the frame due at ``now_s`` on refresh slots ``asked_s + k * period_s``:
+    the slot current at ``now_s`` (``asked_s`` itself while the clock is within its period).
+
+    >>> due_slot(1.0, 1.005, 0.01)
+    (1.0, 0)
+    >>> due_slot(1.0, 1.0351, 0.01)
+    (1.03, 3)
+    """
+    missed = max(0, math.floor((now_s - asked_s) / period_s))
+    return (asked_s + missed * period_s if missed else asked_s), missed
+
+
 class HeadlessDisplay:
     """No screen: the loop is paced by the session clock (a virtual clock jumps, a real one
-    sleeps) and a frame is 'submitted' when the renderer returns."""
+    sleeps) and a frame is 'submitted' when the renderer returns.
+
+    On a real clock its refresh slots are ``not_before_s + k * period``: a loop that asks late (the
+    clock already past ``not_before_s + period``) gets the slot current at the clock's time, the ``k``
+    slots skipped counted in ``missed_frames``. On a virtual clock every frame is on time."""
 
     name = "headless"
     paced = False
@@ -181,6 +203,7 @@ class HeadlessDisplay:
         self._clock = clock
         self._period_s = 1.0 / float(refresh_hz)
         self._index = 0
+        self.frames_missed = 0
 
     @property
     def gl_context(self) -> moderngl.Context | None:
@@ -192,13 +215,20 @@ class HeadlessDisplay:
     def begin_frame(self, not_before_s: float) -> FrameRequest:
         self._clock.sleep_until(not_before_s)
         self._index += 1
-        return FrameRequest(self._index - 1, float(not_before_s), self._period_s)
+        display_s, missed = float(not_before_s), 0
+        if not self._clock.virtual:  # the slot due now (the clock may be far past the one asked for)
+            display_s, missed = due_slot(display_s, self._clock.now_s(), self._period_s)
+            self.frames_missed += missed
+        return FrameRequest(self._index - 1, display_s, self._period_s, missed_frames=missed)
 
     def end_frame(self, frame: FrameRequest, images: Sequence[moderngl.Texture]) -> float:
         return self._clock.now_s()
 
     def summary(self) -> JsonObject:
-        return {"display": self.name, "frames": self._index}
+        out: JsonObject = {"display": self.name, "frames": self._index}
+        if not self._clock.virtual:
+            out["frames_missed"] = self.frames_missed
+        return out
 
     def close(self) -> None:
         return None

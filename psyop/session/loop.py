@@ -43,6 +43,8 @@ from psyop.session.signals import interrupts_deferred
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.reach import horizontal_reach_m
 from psyop.session.phases import PhaseSpec, mode_for
+from psyop.session.timing import SessionTiming, TrialTiming
+from psyop.protocol.timing import TimingSection
 from psyop.schedule.rows import interval_values
 from psyop.datacontract import typed_response
 from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, ResponsePlan, SessionPlan
@@ -74,12 +76,14 @@ class LoopFacts:
     fixation_distance_m: float = 1.0
     hand_last_n: int = 10  # reach = mean of the last N hand samples (protocol response.average_last_samples)
     min_valid_gaze_share: float = 0.5  # protocol trial.min_valid_gaze_share: below it gaze_ok is False
+    timing: TimingSection | None = None  # protocol timing: the dropped-frame rule of a trial's intervals
 
     @classmethod
     def of_plan(cls, plan: SessionPlan) -> LoopFacts:
-        """The facts of ``plan``: its display's refresh, its moving target, its response and gaze rules."""
+        """The facts of ``plan``: its display's refresh, its moving target, its response, gaze and timing rules."""
         return cls(refresh_hz=float(plan.display.refresh_hz), **pursuit_fields(plan.fixation),
-                   hand_last_n=plan.response.average_last_samples, min_valid_gaze_share=plan.min_valid_gaze_share)
+                   hand_last_n=plan.response.average_last_samples, min_valid_gaze_share=plan.min_valid_gaze_share,
+                   timing=plan.protocol.timing)
 
 
 @dataclass(frozen=True)
@@ -167,14 +171,21 @@ class TrialLoop:
         self._ages: list[float] = []  # sample age at submit, frames with fresh valid gaze
         self._n_held = 0
         self._phase_start_s = 0.0
+        self._phase_index = -1  # the timed phase in progress (index into ``phases``; -1: the response phase)
+        self._pending: FrameRequest | None = None  # a frame begun for a later phase than the one it was asked in
         self.state = TrialState.DONE
         #: trials the display interrupted (discarded; re-run when ``rerun``), as session.json records them
         self.display_interruptions: list[JsonObject] = []
         self.current_trial = -1  # the trial in progress (-1: none); tags the raw gaze samples
+        self._timing = TrialTiming()  # the trial in progress's shown frames (psyop.session.timing)
+        self.session_timing = SessionTiming(self.frame_period_s)  # this run's recorded trials: summary.frame_timing
+        #: attempts discarded by the protocol's timing rule (re-run at the end of their block), as session.json records them
+        self.timing_reruns: list[JsonObject] = []
 
     # session -------------------------------------------------------------------------
     def run(self, schedule: pd.DataFrame, completed: set[int]) -> SessionOutcome:
-        rows = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
+        # a trial the timing rule re-runs goes back in the queue, at the end of its block
+        queue = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
         n_total = len(schedule)
         n_done = len(completed)
         recorded = set(completed)
@@ -184,15 +195,17 @@ class TrialLoop:
         n_stopped = self._record_stops(schedule, recorded, -1)
         record: TrialRecord = {"trial": -1}
         try:
-            for row in rows:
+            while queue:
+                planned = row = queue.pop(0)
                 bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
-                if self.adaptive is not None:
-                    if self.adaptive.stopped(row):  # its condition met the stop rule: not run, not logged
-                        bar.update(1)
-                        continue
-                    row = self.adaptive.fill(row)
+                if self.adaptive is not None and self.adaptive.stopped(row):  # met the stop rule: not run, not logged
+                    bar.update(1)
+                    continue
+                row = self.adaptive.fill(row) if self.adaptive is not None else row
                 self.current_trial = int(row["trial"])
                 record, frames = self._run_trial_on_display(row)
+                if self._rerun_for_timing(planned, record, queue):
+                    continue
                 if self.adaptive is not None:
                     record = self.adaptive.complete(record)
                 self.state = TrialState.RECORD
@@ -200,14 +213,7 @@ class TrialLoop:
                     self._store_trial(record, frames)
                     recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
                     n_done += 1
-                self.current_trial = -1
-                self._emit("trial_end", record, float(record["trial_end_s"]),
-                           duration_s=float(record["trial_end_s"]) - float(record["trial_start_s"]))
-                if self.adaptive is not None:
-                    self.adaptive.commit(record)
-                    if self.adaptive.state(str(record["condition"])).finished:
-                        n_stopped = self._record_stops(schedule, recorded, n_stopped)
-                self.state = TrialState.DONE
+                n_stopped = self._recorded(record, schedule, recorded, n_stopped)
                 bar.update(1)
             if n_done < n_total:
                 message = (f"{n_done} of {n_total} trials recorded; the other {n_total - n_done} were not run: "
@@ -233,8 +239,22 @@ class TrialLoop:
         latency["n_frames_held"] = self._n_held
         return SessionOutcome(status, n_done, n_total, message, latency)
 
+    def _recorded(self, record: TrialRecord, schedule: pd.DataFrame, recorded: set[int], n_stopped: int) -> int:
+        """After a trial is durable: its ``trial_end`` event, the adaptive procedure told (and any condition it
+        stopped recorded); the number of stopped conditions."""
+        self.current_trial = -1
+        self._emit("trial_end", record, float(record["trial_end_s"]),
+                   duration_s=float(record["trial_end_s"]) - float(record["trial_start_s"]))
+        if self.adaptive is not None:
+            self.adaptive.commit(record)
+            if self.adaptive.state(str(record["condition"])).finished:
+                n_stopped = self._record_stops(schedule, recorded, n_stopped)
+        self.state = TrialState.DONE
+        return n_stopped
+
     def _store_trial(self, record: TrialRecord, frames: FrameRecorder) -> None:
         """Append one trial to the log: its row, frames and raw gaze (a log of rows only: the row)."""
+        self.session_timing.add(self._timing, self.phases)
         if self.store.keeps_samples:
             self.store.append_trial(record, frames.table() if len(frames) else None,
                                     self.raw_gaze(int(record["trial"])))
@@ -258,6 +278,29 @@ class TrialLoop:
                 if not exc.rerun:
                     raise
 
+    def _rerun_for_timing(self, planned: TrialRow, record: TrialRecord, queue: list[TrialRecord]) -> bool:
+        """Whether the protocol's ``timing: {on_violation: rerun}`` discards this attempt: its intervals dropped
+        more frames than allowed and the trial has reruns left. Then the attempt is recorded in session.json
+        (``timing_reruns``: trial, dropped frames, why), announced (a ``timing_rerun`` event), its raw gaze
+        kept (gaze.parquet, like any discarded trial's) and the trial queued again at the end of its block."""
+        rule, trial = self.config.timing, int(record["trial"])
+        if rule is None or rule.on_violation != "rerun" or record.get("timing_ok") is not False:
+            return False
+        if sum(r["trial"] == trial for r in self.timing_reruns) >= rule.max_reruns:
+            return False  # kept, flagged (timing_ok false)
+        dropped = self._timing.stimulus_dropped(self.phases)
+        reason = rule.describe(dropped)
+        self.timing_reruns.append({"trial": trial, "dropped_frames": dropped, "reason": reason,
+                                   "at_s": self.clock.now_s(), "run": self.store.run_index})
+        self.store.update_metadata(timing_reruns=list(self.timing_reruns))
+        self._emit("timing_rerun", record, self.clock.now_s(), reason)
+        if self.store.keeps_samples:
+            self.store.append_gaze(self.raw_gaze(trial), key=trial)
+        block = planned.get("block", 0)
+        at = max((i + 1 for i, r in enumerate(queue) if r.get("block", 0) == block), default=0)
+        queue.insert(at, dict(planned))
+        return True
+
     def _record_stops(self, schedule: pd.DataFrame, recorded: set[int], n_stopped: int) -> int:
         """Write session.json's ``adaptive_stop`` whenever another condition has stopped (so the
         completeness check of `psyop recover` counts its trials as not to be run); the number of
@@ -276,25 +319,8 @@ class TrialLoop:
         sampled = (trial in self.config.sampled_trials) or (trial % max(1, self.config.sample_every_n_trials) == 0)
         start_s = self.clock.now_s()
         self._emit("trial_start", row, start_s)
-        drift_deg = math.nan
-        valid = total = 0
-        for phase in self.phases:
-            self.state = TrialState.RECALIBRATE if phase.gaze == "cross" else TrialState.PRESENT
-            phase_start = self._phase_start_s = self.clock.now_s()
-            self._emit("phase", row, phase_start, phase.name)
-            self._set_plan(phase, row, phase_start)
-            if self.config.phase_delay_s > 0:
-                time.sleep(self.config.phase_delay_s)
-            end_s = phase_start + phase.duration_s
-            if self.config.every_frame:
-                v, n = self._frames_until(end_s, row, phase, frames)
-            else:
-                v, n = self._sampled_frame(phase_start + 0.5 * phase.duration_s, row, phase, frames) if sampled and phase.renders else (0, 0)
-                self.clock.sleep_until(end_s)
-            valid, total = valid + v, total + n
-            if self.state is TrialState.RECALIBRATE:
-                sample = self._fresh(self.gaze.latest(self.clock.now_s()))
-                drift_deg = self.conditioner.recalibrate(sample, np.array([0.0, 0.0, -1.0]))
+        self._timing, self._pending = TrialTiming(), None
+        valid, total, drift_deg = self._present(row, frames, start_s, sampled)
         self.state = TrialState.RESPONSE
         response = self._await_response(row, frames)
         end = self.clock.now_s()
@@ -310,10 +336,42 @@ class TrialLoop:
             gaze_ok=gaze_ok(valid, total, self.config.min_valid_gaze_share),
             run=self.store.run_index,
         )
+        # measured timing (psyop.session.timing); the sampled regime shows no phase whole
+        record.update(self._timing.columns(self.phases, self.config.timing, measured=self.config.every_frame))
         record.update(dict(response.extras))
         record.update(typed_response(response.response))  # response_value (a number where it is one), outcome
         record.update(hand_columns)
         return record, frames
+
+    def _present(self, row: TrialRow, frames: FrameRecorder, start_s: float, sampled: bool) -> tuple[int, int, float]:
+        """The timed phases of a trial from ``start_s``: (frames with valid gaze, frames, drift correction).
+
+        Each phase begins at the nominal end of the one before (on a real clock too: a late frame never
+        pushes the phases after it) and lasts its duration; a frame the display will show after the phase's
+        end is the next phase's first (``_pending``)."""
+        drift_deg = math.nan
+        valid = total = 0
+        phase_start = start_s
+        for index, phase in enumerate(self.phases):
+            self.state = TrialState.RECALIBRATE if phase.gaze == "cross" else TrialState.PRESENT
+            self._phase_start_s, self._phase_index = phase_start, index
+            self._emit("phase", row, phase_start, phase.name)
+            self._set_plan(phase, row, phase_start)
+            if self.config.phase_delay_s > 0:
+                time.sleep(self.config.phase_delay_s)
+            end_s = phase_start + phase.duration_s
+            if self.config.every_frame:
+                v, n = self._frames_until(end_s, row, phase, frames)
+            else:
+                v, n = self._sampled_frame(phase_start + 0.5 * phase.duration_s, row, phase, frames) if sampled and phase.renders else (0, 0)
+                self.clock.sleep_until(end_s)
+            valid, total = valid + v, total + n
+            if self.state is TrialState.RECALIBRATE:
+                sample = self._fresh(self.gaze.latest(self.clock.now_s()))
+                drift_deg = self.conditioner.recalibrate(sample, np.array([0.0, 0.0, -1.0]))
+            phase_start = end_s
+        self._phase_index = -1  # the response phase
+        return valid, total, drift_deg
 
     def _track_reach(self, row: TrialRow, response: Response, end_s: float) -> tuple[Response, TrialRecord]:
         """A reach: take the pose source's last N hand samples (hold last valid), recompute
@@ -372,6 +430,7 @@ class TrialLoop:
                                          frame=request)
         images = self.renderer.eye_textures() if self.renderer is not None else []
         submit = self.display.end_frame(request, images)
+        self._timing.add(self._phase_index, request.display_time_s, request.period_s, request.missed_frames)
         age = submit - gaze.sample_t_s if math.isfinite(gaze.sample_t_s) else math.nan
         if gaze.valid and math.isfinite(age):
             self._ages.append(age)
@@ -394,11 +453,22 @@ class TrialLoop:
 
     def _frames_until(self, end_s: float, row: TrialRow, phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
         """Frames until the phase ends: the display paces them (begin_frame) and says when each is
-        shown; a frame is drawn while the next one would still be shown before ``end_s``."""
+        shown; a frame is drawn while the next one would still be shown before ``end_s``. The display
+        returns the frame due when it is asked (a late frame is drawn for the display's current time, the
+        periods it skipped counted: FrameRequest.missed_frames), so the stimulus follows the display clock;
+        a frame it will show at or after ``end_s`` is kept for the next phase (``_pending``)."""
         valid = total = 0
-        t = self.clock.now_s()
-        while t < end_s - 1e-9:
-            request = self.display.begin_frame(t)
+        t = self._phase_start_s
+        while True:
+            if self._pending is not None:
+                request, self._pending = self._pending, None
+            elif t < end_s - 1e-9:
+                request = self.display.begin_frame(t)
+            else:
+                break
+            if request.display_time_s >= end_s - 1e-9:  # shown after this phase: the next one's first frame
+                self._pending = request
+                return valid, total
             v, n = self._frame(row, phase, frames, request)
             valid, total = valid + v, total + n
             t = min(max(t + self.frame_period_s, request.display_time_s + request.period_s), end_s)
@@ -416,6 +486,11 @@ class TrialLoop:
             self.announce(plan.prompt)
         start_s = self.clock.now_s()
         self._emit("phase", row, start_s, prompt.name)
+        slot_s = start_s  # real clock: the display slot the next response frame is asked for
+        if self._pending is not None:  # begun during the last timed phase, due in this one
+            request, self._pending = self._pending, None
+            self._frame(row, prompt, frames, request)
+            slot_s = request.display_time_s + request.period_s
         while True:
             response = self.responses.collect(row, self.clock.now_s())
             if response is not None:
@@ -424,8 +499,12 @@ class TrialLoop:
                 self.responses.timed_out()
                 return Response(TIMEOUT_RESPONSE, correct=None, response_time_s=math.nan)
             if self.config.every_frame:
-                self._frame(row, prompt, frames, self.display.begin_frame(self.clock.now_s()))
-                wake_s = self.clock.now_s() + self.frame_period_s
+                # virtual clock: one frame per period from now (as ever); real clock: the next display slot (a
+                # late frame is drawn for the display's current time, like a timed phase's)
+                request = self.display.begin_frame(self.clock.now_s() if self.clock.virtual else slot_s)
+                self._frame(row, prompt, frames, request)
+                slot_s = request.display_time_s + request.period_s
+                wake_s = self.clock.now_s() + self.frame_period_s if self.clock.virtual else slot_s
                 if self.display.paced:  # the next begin_frame waits for the display itself
                     continue
             else:

@@ -37,6 +37,7 @@ from psyop.session.loop import LoopConfig, LoopFacts, LoopOptions, SessionOutcom
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.resume import accept_protocol_change, check_free, check_options, resolve_seed
+from psyop.session.timing import with_timing_fields
 
 if TYPE_CHECKING:
     from psyop.mesh.load import MeshFiles
@@ -233,8 +234,12 @@ def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], opt
         clock = RealClock()
     else:
         raise UserError(f"unknown clock {options.clock!r}; use virtual or real", "--clock")
-    store = (SessionStore(paths, trial_schema(schedule), fsync=options.fsync) if store_factory is None
-             else store_factory(paths, trial_schema(schedule)))
+    try:  # the schedule's columns, the log's, then the measured timing of each drawn phase (psyop.session.timing)
+        schema = with_timing_fields(trial_schema(schedule), plan.phases)
+    except ValueError as exc:
+        raise UserError(str(exc), protocol.source_name or plan.study) from exc
+    store = (SessionStore(paths, schema, fsync=options.fsync) if store_factory is None
+             else store_factory(paths, schema))
     source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
     mesh_files = options.mesh_files if options.mesh_files is not None else MeshFiles(source or Path.cwd())
     opened = _Opened(plan, paths, seed, schedule, clock, store, mesh_files=mesh_files)
@@ -338,6 +343,8 @@ def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: Sessi
     if "display_flip_period_s" in display_summary:  # from the flip timestamps (least squares)
         summary["display_flip_period_s"] = display_summary["display_flip_period_s"]
     summary["display"] = display_summary
+    summary["frame_timing"] = {**loop.session_timing.summary(), "clock": options.clock,
+                               "scope": "the trials this run recorded (psyop timing: the whole session)"}
     if loop.display_interruptions:
         summary["display_interruptions"] = loop.display_interruptions
     # the display as it really was, per run (a resume may run on another headset): docs/data.md

@@ -26,6 +26,9 @@ from kill_helpers import kill_once, run_args
 from session_helpers import small_protocol
 
 SEED = 7
+#: a trial segment this long holds a trial: its header (the trial schema, ~8.3 kB for the small detection protocol
+#: since the measured-timing columns of issue 31) is shorter, header plus one trial (~12.5 kB) longer
+TRIAL_RECORDED_BYTES = 10000
 
 
 def _comparable(trials: pd.DataFrame) -> pd.DataFrame:
@@ -81,7 +84,7 @@ def test_sigkill_of_the_psyop_command_then_recover_and_resume(detection_small: P
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:  # kill once a few trials are durably in the stream
         segment = paths.trial_segment(0)
-        if segment.exists() and segment.stat().st_size > 6000:
+        if segment.exists() and segment.stat().st_size > TRIAL_RECORDED_BYTES:
             break
         time.sleep(0.05)
     process.send_signal(signal.SIGKILL)
@@ -110,7 +113,7 @@ def test_ctrl_c_discards_the_current_trial_and_finalises(detection_small: Path, 
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         segment = paths.trial_segment(0)
-        if segment.exists() and segment.stat().st_size > 6000:
+        if segment.exists() and segment.stat().st_size > TRIAL_RECORDED_BYTES:
             break
         time.sleep(0.05)
     process.send_signal(signal.SIGINT)

@@ -35,6 +35,9 @@ import pytest
 
 from psyop.datacontract import typed_response
 from psyop.session.simulate import plan_jobs, run_job
+from psyop.protocol import load_protocol
+from psyop.session.plan import compile_plan
+from psyop.session.timing import TIMING_OK, timing_column_names
 
 ROOT = Path(__file__).resolve().parents[2]
 GOLDENS = Path(__file__).with_name("refactor_goldens.json")
@@ -43,6 +46,17 @@ TIMING = ("trial_start_s", "trial_end_s")
 #: columns added on purpose after the goldens (issue 29's typed responses): left out of the digest, and
 #: checked instead to be exactly what datacontract.typed_response derives from ``response``
 ADDED_AFTER = ("response_value", "outcome")
+#: issue 31's measured timing, added after the goldens and left out of the digests (and nothing else): the
+#: trial columns of psyop.session.timing (``<phase>_onset_s`` ... ``timing_ok``) and session.json's
+#: ``summary.frame_timing`` block; checked instead to be what the virtual clock implies (every frame on time)
+TIMING_SUMMARY = "frame_timing"
+
+
+def _measured_timing_columns(study: str) -> tuple[str, ...]:
+    """The measured-timing columns of ``study``'s trials.parquet: exactly psyop.session.timing's for its phases."""
+    return tuple(timing_column_names(compile_plan(load_protocol(ROOT / "protocols" / f"{study}.yaml")).phases))
+
+
 SESSION_JSON_EXCLUDED = ("finalised", "runs", "host", "python", "packages", "finalised_files", "rendering",
                          # inputs, not outputs: where the protocol lies (a machine path) and its text and hash
                          # (protocols may change on purpose, e.g. egocentric's quality: rules); checked below to be
@@ -60,8 +74,11 @@ def _table_digest(path: Path, include: tuple[str, ...] | None = None, exclude: t
 def _digests(session: Path) -> dict[str, str]:
     meta = json.loads((session / "session.json").read_text())
     kept = {k: v for k, v in meta.items() if k not in SESSION_JSON_EXCLUDED}
+    if isinstance(kept.get("summary"), dict):
+        kept["summary"] = {k: v for k, v in kept["summary"].items() if k != TIMING_SUMMARY}
+    measured = _measured_timing_columns(session.parent.parent.name)
     return {
-        "trials": _table_digest(session / "trials.parquet", exclude=TIMING + ADDED_AFTER),
+        "trials": _table_digest(session / "trials.parquet", exclude=TIMING + ADDED_AFTER + measured),
         "trials_timing": _table_digest(session / "trials.parquet", include=TIMING),
         "frames": _table_digest(session / "frames.parquet"),
         "gaze": _table_digest(session / "gaze.parquet"),
@@ -117,6 +134,11 @@ def test_simulated_session_unchanged(tmp_path: Path, study: str) -> None:
     trials = pq.read_table(tmp_path / study / "sub-S01" / "ses-1" / "trials.parquet").to_pylist()
     assert [{k: row[k] for k in ADDED_AFTER} for row in trials] == [
         typed_response(row["response"]) for row in trials], f"{study}: typed response columns"
+    columns = _measured_timing_columns(study)
+    measured = [{k: row[k] for k in columns} for row in trials]
+    assert all(v == 0 for row in measured for k, v in row.items() if k.endswith("_dropped_frames")), \
+        f"{study}: the virtual clock dropped a frame"
+    assert all(row[TIMING_OK] is None for row in measured), f"{study}: timing_ok without a timing: rule"
     meta = json.loads((tmp_path / study / "sub-S01" / "ses-1" / "session.json").read_text())
     protocol = ROOT / "protocols" / f"{study}.yaml"
     assert meta["protocol_text"] == protocol.read_text()

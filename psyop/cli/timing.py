@@ -1,0 +1,71 @@
+"""``psyop timing PATH``: the measured timing of a session, or of every session under a data root.
+
+Prints each session's summary (frame intervals against the refresh period, dropped frames in total and
+per phase kind, each phase's measured against its nominal duration) and draws its figure (frame-interval
+histogram with the refresh period marked, dropped frames per trial, measured against nominal phase
+durations) into ``--out`` as ``timing_<study>_sub-<ID>_ses-<N>.png`` (and .pdf). Reads the sessions,
+changes nothing (docs/sessions.md "Timing").
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from psyop.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "timing", help="measured frame timing of sessions: intervals, dropped frames, phase durations; a figure each",
+        description="Prints the measured timing of a session (or of every session under a data root): frame "
+        "intervals against the refresh period, dropped frames in total and per phase kind, each phase's measured "
+        "against its nominal duration; and writes a figure per session. Reads the sessions, changes nothing.")
+    parser.add_argument("path", type=Path, help="a session directory (data/<study>/sub-<ID>/ses-<N>) or a data root")
+    parser.add_argument("--out", type=Path, default=Path("figures"),
+                        help="folder for the figures, timing_<study>_sub-<ID>_ses-<N>.png/.pdf (default: figures)")
+    parser.add_argument("--skip-simulated", action="store_true",
+                        help="only real sessions (session.json simulated: false): what `make figures` draws")
+    parser.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    import pandas as pd
+
+    from psyop import datacontract as dc
+    from psyop.finalised import read_session_meta
+    from psyop.figures.timing_figures import timing_figure
+    from psyop.session.timing import session_report
+
+    path: Path = args.path
+    if not path.exists():
+        raise UserError("no such session directory or data root", str(path))
+    sessions = [path] if (path / dc.TRIALS_FILE).is_file() else sorted(p.parent for p in path.rglob(dc.TRIALS_FILE))
+    if not sessions:
+        raise UserError("no sessions here (expected <study>/sub-<ID>/ses-<N>/trials.parquet)", str(path))
+    drawn = 0
+    for session in sessions:
+        meta = read_session_meta(session)
+        if meta is None:
+            raise UserError("no session.json beside trials.parquet: run `psyop recover` on this session", str(session))
+        if args.skip_simulated and meta.get("simulated", True):
+            continue
+        frames_file = session / "frames.parquet"
+        if not frames_file.is_file():
+            raise UserError("no frames.parquet: the session is not finalised; run `psyop recover` on it", str(session))
+        frames = pd.read_parquet(frames_file)
+        missing = sorted({"trial", "frame", "phase", "display_time_s", "display_missed_frames"} - set(frames.columns))
+        if missing:
+            raise UserError(f"frames.parquet has no {', '.join(missing)}: recorded by a psyop that did not log display "
+                            "times, so its timing cannot be measured", str(frames_file))
+        report = session_report(str(session), meta, pd.read_parquet(session / dc.TRIALS_FILE), frames)
+        print(f"{session}:")
+        for line in report.lines():
+            print(f"  {line}")
+        name = f"timing_{meta.get('study', session.parent.parent.name)}_{session.parent.name}_{session.name}.png"
+        for written in timing_figure(report, args.out / name)[:1]:
+            print(f"  figure: {written}")
+        drawn += 1
+    if not drawn:
+        print(f"psyop timing: no real sessions under {path} (simulated ones are skipped): no timing figure")
+    return 0
