@@ -25,9 +25,9 @@ monocular protocol rendered stereo (``eyes: stereo``: what a headset's stereo fr
 costs), detection with more disc items (8, 64 and 128 primitives, stereo) for the cost per primitive,
 and detection stereo with the head not tracked (the identity pose: the scene passes through).
 
-Before: the former path, kept callable: ``SceneRenderer(frame_cache=False)`` (the whole scene built
-for each eye, every frame, and moved into head space one primitive at a time:
-``scene_in_head_per_primitive``) with ``RenderSettings.frame_caches=False`` (reuse bounds after every
+Before: the former path, kept callable in benchmarks/former.py: ``FormerSceneRenderer`` (the whole scene
+built for each eye, every frame, and moved into head space one primitive at a time:
+``scene_in_head_per_primitive``) drawn by ``FormerRenderer`` (reuse bounds after every
 draw, one primitive at a time; primitive table and uniforms rewritten every frame; the former screen
 bounds), and a simulated
 tracker that draws its per-plan error offset with a new numpy Generator per sample
@@ -150,8 +150,10 @@ def _setup(protocol: Any, ctx: Any, scale: float, before: bool, seed: int,
     phase = next(p for p in plan.phases if p.show == "stimulus")
     rows = [r for r in schedule.to_dict("records") if mode_for(phase, r) == "ocular"] or schedule.to_dict("records")
     row = rows[0]
-    renderer = SceneRenderer(plan, scale=scale, ctx=ctx, owns_ctx=False, check_every=WATCHED_CHECK_EVERY,
-                             frame_cache=not before)
+    from benchmarks.former import FormerSceneRenderer
+
+    renderer = (FormerSceneRenderer if before else SceneRenderer)(plan, scale=scale, ctx=ctx, owns_ctx=False,
+                                                                  check_every=WATCHED_CHECK_EVERY)
     gaze = former_tracker(seed) if before else SimulatedTracker(seed)
     # the loop's own plan for the phase (pursuit of the circling target, free viewing)
     planner = TrialLoop.__new__(TrialLoop)
@@ -267,8 +269,8 @@ def run(out_dir: Path, quick: bool) -> str:
         f"SceneRenderer.render of every eye, stimulus time advancing 1/90 s per frame (moving fixation target), "
         f"the head moving; {size} px per eye "
         f"(the CPU path should not depend on it: full-resolution row below); median over {shipped[0][1]['frames']} "
-        f"frames each, before and after interleaved in blocks of {block}. Before: SceneRenderer(frame_cache=False), "
-        "RenderSettings(frame_caches=False), the per-primitive head transform, the former simulated tracker; "
+        f"frames each, before and after interleaved in blocks of {block}. Before: benchmarks/former.py's FormerSceneRenderer "
+        "and FormerRenderer, the per-primitive head transform, the former simulated tracker; "
         "after: the defaults (benchmarks/bench_frame_cpu.py docstring). Full-resolution row: the same frames at the "
         "display's own size, to compare with the reduced size (the GPU work is not timed).",
         "",

@@ -68,7 +68,7 @@ def _session_vs_bare(scale: float, n: int) -> dict[str, float]:
         renderer = session._renderer  # noqa: SLF001 - the same renderer, context and eye
         eye = session.eyes[0]
         # the session's own scenes at each frame's time (built here, so the bare render only uploads them)
-        scenes = [session._scene(row, phase, t, eye, None) for t in TIMES_S]  # noqa: SLF001
+        scenes = [session._scene(row, phase, t, eye) for t in TIMES_S]  # noqa: SLF001
         cams = [session.rig.camera(session.display, eye, f, "ocular") for f in MOVING]
 
         def bare(k: int) -> None:
@@ -147,7 +147,7 @@ def _room_costs(size: tuple[int, int], n: int) -> dict[str, float]:
     protocol = load_protocol(REPO / "protocols" / "egocentric.yaml")
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
     centre = np.array([0.032, 0.0, 0.0])
-    scene = build_scene(protocol, row, 0.0, centre, interval=1)
+    scene = build_scene(protocol, row, 0.0, centre, interval=1, base_dir=REPO / "protocols")  # the room's model
     cam = make_eye_camera(VIVE_PRO, "right", (0.03, -0.15, -0.6), 0.064, 0.0076916, "ocular")
     if size != (VIVE_PRO.width_px, VIVE_PRO.height_px):
         cam = crop_camera(cam, (VIVE_PRO.width_px - size[0]) // 2, (VIVE_PRO.height_px - size[1]) // 2, *size)

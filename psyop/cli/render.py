@@ -195,7 +195,7 @@ def _view(args: argparse.Namespace, protocol: Protocol, row: dict, mode: str, az
 
     from psyop.optics.camera import make_eye_camera
     from psyop.protocol import resolve_display_profile, resolve_eye_model
-    from psyop.protocol.display import rendering_nc_rule
+    from psyop.protocol.display import FixedIpd, rendering_nc_rule
     from psyop.rendering.builders import direction_from_angles
     from psyop.schedule import interval_values
 
@@ -203,7 +203,7 @@ def _view(args: argparse.Namespace, protocol: Protocol, row: dict, mode: str, az
     display = resolve_display_profile(protocol.display)
     eye_model = resolve_eye_model(protocol.display)
     ipd_spec = protocol.display.ipd
-    ipd_m = float(ipd_spec.mm) / 1000.0 if hasattr(ipd_spec, "mm") else args.ipd_mm / 1000.0
+    ipd_m = float(ipd_spec.mm) / 1000.0 if isinstance(ipd_spec, FixedIpd) else args.ipd_mm / 1000.0
     centre = np.array([ipd_m / 2.0 if eye == "right" else -ipd_m / 2.0, 0.0, 0.0])
     fixation = centre + direction_from_angles(az, el) * args.fixation_m
     nc_rule = rendering_nc_rule(protocol.display)

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path as FsPath
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypeGuard, assert_never
 
 from pydantic import BaseModel
 
@@ -22,10 +22,13 @@ from psyop.optics.ranges import DEPTH_D
 from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
+from psyop.protocol.observer import OrdinalAccuracy, PairwisePreference, Psychometric2afc, Reach
 from psyop.protocol.primitive_count import primitive_count
-from psyop.protocol.response import INTERVALS_NEEDED, ModeFromFactor
+from psyop.protocol.response import (LeftRightNearerResponse, ModeFromFactor, PairwisePreferenceResponse,
+                                     ReachResponse, TwoIntervalResponse, WithAgainstResponse)
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, LevelRef, Mesh,
-                                  PinkNoiseSurface, ReachMesh, ReachTarget, Room, SinusoidalBorder, TargetField,
+                                  PinkNoiseSurface, ReachMesh, ReachTarget, RenderingMode, Room, SinusoidalBorder,
+                                  TargetField,
                                   centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
 from psyop.records import JsonObject, Loc
@@ -45,11 +48,16 @@ ADAPTIVE_PROCEDURES: frozenset[str] = frozenset({"quest_plus", "staircase"})
 
 
 
+#: Where an issue is: a :data:`~psyop.records.Loc`, whose keys may also be numbers (a ``levels_by`` key is
+#: the parent factor's level, a YAML number; the loader finds it in the file as written).
+IssuePath = tuple[str | int | float, ...]
+
+
 @dataclass(frozen=True)
 class Issue:
     """One problem: where (key path) and what to do."""
 
-    path: Loc
+    path: IssuePath
     message: str
 
 
@@ -68,7 +76,7 @@ class _Checker:
         # mesh item id -> triangles of each (file, node) it can show (read by check_mesh)
         self.mesh_triangles: dict[str, dict[tuple[str, str | None], int]] = {}
 
-    def add(self, path: Loc, message: str) -> None:
+    def add(self, path: IssuePath, message: str) -> None:
         self.issues.append(Issue(path, message))
 
     # -- factors ------------------------------------------------------------------------------
@@ -222,14 +230,11 @@ class _Checker:
         """Every set of factor values a scene is built from: each condition, each interval's ``set:``
         overrides of it, and an adaptive factor at both ends of its range."""
         adaptive = {n: f.adaptive for n, f in self.factors.items() if f.adaptive is not None}
-        overrides = [{}]
-        response = self.p.response
-        for role in ("test", "reference"):
-            spec = getattr(response, role, None)
-            if spec is not None and getattr(spec, "set", None):
-                overrides.append(dict(spec.set))
+        overrides: list[dict[str, float]] = [{}]
+        overrides += [dict(spec.set) for spec in self.p.response.interval_specs() if spec.set]
         for condition in conditions:
-            ends = [{}] + [{n: float(a.min)} for n, a in adaptive.items()] + [{n: float(a.max)} for n, a in adaptive.items()]
+            ends: list[dict[str, float]] = [{}] + [{n: float(a.min)} for n, a in adaptive.items()] + \
+                [{n: float(a.max)} for n, a in adaptive.items()]
             for end in ends:
                 for override in overrides:
                     yield {**condition, **end, **override}
@@ -400,53 +405,67 @@ class _Checker:
     def check_response(self) -> None:
         self.check_phase_order()
         response = self.p.response
-        needed = INTERVALS_NEEDED[response.kind]
+        needed = response.intervals_needed
         intervals = len(self.p.trial.intervals)
         if intervals != needed:
             self.add(("trial", "phases"), f"a {response.kind} response needs {needed} interval phase(s), "
                                           f"but trial.phases has {intervals}; add or remove '- kind: interval'")
-        path = ("response",)
-        if response.kind == "two_interval":
-            self.factor_exists(response.level_factor, path + ("level_factor",), numeric=True)
-            for role in ("test", "reference"):
-                spec = getattr(response, role)
-                for key in spec.set:
-                    self.factor_exists(key, path + (role, "set", key), numeric=True)
-                if isinstance(spec.mode, ModeFromFactor):
-                    self.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
-        elif response.kind == "left_right_nearer":
-            if isinstance(response.mode, ModeFromFactor):
-                self.mode_factor(response.mode.factor, path + ("mode", "factor"))
-            self.factor_exists(response.separation_factor, path + ("separation_factor",), numeric=True)
-        elif response.kind == "pairwise_preference":
-            if self.factor_exists(response.pair_factor, path + ("pair_factor",), numeric=False):
-                for level in self.factors[response.pair_factor].all_levels():
-                    parts = str(level).split("|")
-                    if len(parts) != 2 or parts[0] == parts[1] or not set(parts) <= set(RENDERING_MODES):
-                        self.add(("design", "factors", response.pair_factor, "levels"),
-                                 f"pair level '{level}' must be two different modes written 'a|b' with modes from "
-                                 f"{', '.join(RENDERING_MODES)}")
-        elif response.kind == "reach":
-            if self.factor_exists(response.rendering_factor, path + ("rendering_factor",), numeric=False):
-                for level in self.factors[response.rendering_factor].all_levels():
-                    if level not in response.modes:
-                        self.add(path + ("modes",), f"rendering level '{level}' has no mode; add '{level}: ocular' "
-                                                    "(or conventional/reversed) under modes")
-            self.factor_exists(response.target_factor, path + ("target_factor",), numeric=True)
-        elif response.kind == "with_against":
-            self.check_with_against(response, path)
+        path: Loc = ("response",)
+        match response:  # one arm per kind (psyop.protocol.response); mypy names a missing one
+            case TwoIntervalResponse():
+                self.check_two_interval(response, path)
+            case LeftRightNearerResponse():
+                if isinstance(response.mode, ModeFromFactor):
+                    self.mode_factor(response.mode.factor, path + ("mode", "factor"))
+                self.factor_exists(response.separation_factor, path + ("separation_factor",), numeric=True)
+            case PairwisePreferenceResponse():
+                self.check_pairwise_preference(response, path)
+            case ReachResponse():
+                self.check_reach(response, path)
+            case WithAgainstResponse():
+                self.check_with_against(response, path)
+            case _:
+                assert_never(response)
         if response.kind != "with_against" and self.p.display.rendering_nc is not None \
                 and self.p.display.rendering_nc.signed:
             self.add(("display", "rendering_nc", "signed"), "a signed rendering NC sets each trial's mode from its "
                                                            "sign: only a with_against response reads it; remove signed")
 
-    def check_with_against(self, response: Any, path: Loc) -> None:  # Any: narrowed by kind (item 4's dispatch)
+    def check_two_interval(self, response: TwoIntervalResponse, path: Loc) -> None:
+        """The level factor and every factor an interval sets are numeric factors; a mode factor names modes."""
+        self.factor_exists(response.level_factor, path + ("level_factor",), numeric=True)
+        for role, spec in (("test", response.test), ("reference", response.reference)):
+            for key in spec.set:
+                self.factor_exists(key, path + (role, "set", key), numeric=True)
+            if isinstance(spec.mode, ModeFromFactor):
+                self.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
+
+    def check_pairwise_preference(self, response: PairwisePreferenceResponse, path: Loc) -> None:
+        """Every pair level is two different rendering modes written ``a|b``."""
+        if self.factor_exists(response.pair_factor, path + ("pair_factor",), numeric=False):
+            for level in self.factors[response.pair_factor].all_levels():
+                parts = str(level).split("|")
+                if len(parts) != 2 or parts[0] == parts[1] or not set(parts) <= set(RENDERING_MODES):
+                    self.add(("design", "factors", response.pair_factor, "levels"),
+                             f"pair level '{level}' must be two different modes written 'a|b' with modes from "
+                             f"{', '.join(RENDERING_MODES)}")
+
+    def check_reach(self, response: ReachResponse, path: Loc) -> None:
+        """Every level of the rendering factor has a mode; the target factor is numeric."""
+        if self.factor_exists(response.rendering_factor, path + ("rendering_factor",), numeric=False):
+            for level in self.factors[response.rendering_factor].all_levels():
+                if level not in response.modes:
+                    self.add(path + ("modes",), f"rendering level '{level}' has no mode; add '{level}: ocular' "
+                                                "(or conventional/reversed) under modes")
+        self.factor_exists(response.target_factor, path + ("target_factor",), numeric=True)
+
+    def check_with_against(self, response: WithAgainstResponse, path: Loc) -> None:
         """NC nulling: the response's ``nc_factor`` is the signed factor ``display.rendering_nc`` reads."""
         if not self.factor_exists(response.nc_factor, path + ("nc_factor",), numeric=True):
             return
         nc = self.p.display.rendering_nc
         value = None if nc is None else (nc.mm if nc.mm is not None else nc.scale)
-        if not isinstance(value, FactorRef) or value.factor != response.nc_factor or not nc.signed:
+        if nc is None or not isinstance(value, FactorRef) or value.factor != response.nc_factor or not nc.signed:
             self.add(path + ("nc_factor",), f"a with_against response renders each trial with the signed NC of "
                                             f"'{response.nc_factor}': set display.rendering_nc: {{mm: {{factor: "
                                             f"{response.nc_factor}}}, signed: true}}")
@@ -477,7 +496,7 @@ class _Checker:
         for index, level in enumerate(factor.all_levels()):
             parts = frozenset(str(level).split("|"))
             if parts in seen:
-                path = ("design", "factors", response.pair_factor, "levels")
+                path: Loc = ("design", "factors", response.pair_factor, "levels")
                 if isinstance(factor.levels, list):
                     path += (index,)
                 self.add(path, f"pair '{level}' is '{seen[parts]}' written in the other order: both are one "
@@ -491,18 +510,7 @@ class _Checker:
         used: set[str] = set()
         for item in self.p.scene:
             used |= _factor_refs(item)
-        response = self.p.response
-        for key in ("level_factor", "separation_factor", "pair_factor", "rendering_factor", "target_factor",
-                    "nc_factor"):
-            value = getattr(response, key, None)
-            if isinstance(value, str):
-                used.add(value)
-        for role in ("test", "reference", "mode"):
-            spec = getattr(response, role, None)
-            mode = getattr(spec, "mode", spec)
-            if isinstance(mode, ModeFromFactor):
-                used.add(mode.factor)
-            used |= set(getattr(spec, "set", {}) or {})
+        used |= self.p.response.factors_read()
         used |= {f.depends_on for f in self.factors.values() if f.depends_on}
         nc = self.p.display.rendering_nc
         for value in (nc.mm, nc.scale) if nc is not None else ():
@@ -531,10 +539,8 @@ class _Checker:
                 self.add(path + ("factor",), f"rendering_nc.mm reads millimetres: name the factor '{value.factor}' with "
                                              "_mm (e.g. nc_mm), or use rendering_nc: {scale: {factor: ...}}")
                 return
-            response = self.p.response
-            for role in ("test", "reference"):
-                spec = getattr(response, role, None)
-                if spec is not None and value.factor in (getattr(spec, "set", None) or {}):
+            for role, spec in zip(("test", "reference"), self.p.response.interval_specs()):
+                if value.factor in spec.set:
                     self.add(("response", role, "set", value.factor),
                              f"the rendered NC is the trial's level of '{value.factor}'; an interval cannot override "
                              "it. Remove it from set:")
@@ -547,7 +553,7 @@ class _Checker:
             except (TypeError, ValueError):
                 continue
             if math.isnan(level_f):  # adaptive: known at run time; its range is checked below
-                a = self.factors[value.factor].adaptive
+                a = self.factors[value.factor].adaptive if isinstance(value, FactorRef) else None
                 candidates = [float(a.min), float(a.max)] if a is not None else []
             else:
                 candidates = [level_f]
@@ -584,42 +590,38 @@ class _Checker:
         observer = self.p.observer
         if observer is None:
             return
-        path = ("observer",)
-        response_kind = self.p.response.kind
-        fits = {"psychometric_2afc": "two_interval", "ordinal_accuracy": "left_right_nearer",
-                "pairwise_preference": "pairwise_preference", "reach": "reach", "nc_nulling": "with_against"}
-        if fits[observer.kind] != response_kind:
-            self.add(path + ("kind",), f"a {observer.kind} observer cannot answer a {response_kind} response; use "
-                                       f"kind: {next(k for k, v in fits.items() if v == response_kind)}")
+        path: Loc = ("observer",)
+        response = self.p.response
+        if observer.kind != response.observer_kind:
+            self.add(path + ("kind",), f"a {observer.kind} observer cannot answer a {response.kind} response; use "
+                                       f"kind: {response.observer_kind}")
             return
-        if observer.kind == "psychometric_2afc":
-            level = self.p.response.level_factor
+        # the kinds fit (checked above), so each observer arm sees its own response kind
+        if isinstance(observer, Psychometric2afc) and isinstance(response, TwoIntervalResponse):
+            level_factor = response.level_factor
             if self.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
-                    observer.level_column != level:
+                    observer.level_column != level_factor:
                 self.add(path + ("level_column",), f"the observer reads '{observer.level_column}' as its level, but "
-                                                   f"the response's level factor is '{level}'; set level_column: {level}")
+                                                   f"the response's level factor is '{level_factor}'; set level_column: "
+                                                   f"{level_factor}")
             if observer.threshold_offset_column is not None:
                 self.factor_exists(observer.threshold_offset_column, path + ("threshold_offset_column",), numeric=True)
-        elif observer.kind == "ordinal_accuracy":
-            self.check_ordinal_observer(observer, path)
-        elif observer.kind == "pairwise_preference":
-            response = self.p.response
+        elif isinstance(observer, OrdinalAccuracy) and isinstance(response, LeftRightNearerResponse):
+            self.check_ordinal_observer(observer, response, path)
+        elif isinstance(observer, PairwisePreference) and isinstance(response, PairwisePreferenceResponse):
             if response.pair_factor in self.factors:
                 modes = {m for level in self.factors[response.pair_factor].all_levels() for m in str(level).split("|")}
                 for mode in sorted(modes - set(observer.strength)):
                     self.add(path + ("strength",), f"no strength for mode '{mode}'; add '{mode}: 1.0' under strength")
-        elif observer.kind == "reach":
-            response = self.p.response
+        elif isinstance(observer, Reach) and isinstance(response, ReachResponse):
             if response.rendering_factor in self.factors:
                 levels = self.factors[response.rendering_factor].all_levels()
                 for level in levels:
                     if level not in observer.by_condition:
                         self.add(path + ("by_condition",), f"no reach model for rendering '{level}'; add it")
 
-
-    def check_ordinal_observer(self, observer: Any, path: Loc) -> None:  # Any: narrowed by kind
+    def check_ordinal_observer(self, observer: OrdinalAccuracy, response: LeftRightNearerResponse, path: Loc) -> None:
         """p_correct must give a probability for every (mode, separation) a trial can have."""
-        response = self.p.response
         if isinstance(response.mode, ModeFromFactor):
             if response.mode.factor not in self.factors:
                 return
@@ -630,7 +632,7 @@ class _Checker:
             return
         separations = self.factors[response.separation_factor].all_levels()
         for mode in modes:
-            given = observer.p_correct.get(mode)
+            given = observer.p_correct.get(mode) if _is_mode(mode) else None  # else: reported by mode_factor
             if given is None:
                 self.add(path + ("p_correct",), f"no p_correct for mode '{mode}'; add '{mode}: {{separation: p}}'")
                 continue
@@ -638,6 +640,11 @@ class _Checker:
                 if not any(_same(separation, key) for key in given):
                     self.add(path + ("p_correct", mode), f"no p_correct for {response.separation_factor} = "
                                                          f"{separation} in mode '{mode}'; add '{separation}: p'")
+
+
+def _is_mode(name: str) -> TypeGuard[RenderingMode]:
+    """``name`` is a rendering mode (a mode factor's level, checked by ``mode_factor``)."""
+    return name in RENDERING_MODES
 
 
 def _in_order(sub: Loc, loc: Loc) -> bool:

@@ -30,7 +30,7 @@ from psyop.rendering.shaders import (
     edge_pass_shader,
     fragment_shader,
 )
-from psyop.rendering.screen_bounds import screen_bounds_px, screen_bounds_px_former
+from psyop.rendering.screen_bounds import screen_bounds_px
 from psyop.rendering.textures import pack_layers, texture_pixels
 
 if TYPE_CHECKING:
@@ -57,12 +57,6 @@ class RenderSettings:
     # Two-pass only: the first pass skips primitives whose conservative screen box misses the
     # pixel's 4x4 block (same image; kept switchable to measure what it saves).
     adaptive_cull: bool = True
-    # Per-frame CPU work only where the frame needs it (same images, same reuse decisions): the reuse
-    # bounds (Scene.depth_range_m, vectorised) computed only when a frame may be reused, each primitive's
-    # table row packed once while the primitive object stays in the scene, constant uniforms written once.
-    # False: the former path (bounds after every draw, one primitive at a time; table and uniforms
-    # rewritten each frame), kept for the side-by-side benchmark (benchmarks/bench_frame_cpu.py).
-    frame_caches: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "antialiasing", AntiAliasing(self.antialiasing))
@@ -132,7 +126,24 @@ def _row_norms(x: np.ndarray) -> np.ndarray:
 
 def create_headless_context() -> moderngl.Context:
     """A standalone OpenGL context via EGL (no display needed)."""
-    return moderngl.create_standalone_context(backend="egl")
+    settings: dict[str, Any] = {"backend": "egl"}  # Any: moderngl's stub types each setting as a dict
+    return moderngl.create_standalone_context(**settings)
+
+
+def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
+    """The program's uniform ``name`` (moderngl types a member lookup as any kind of member)."""
+    member = prog[name]
+    if not isinstance(member, moderngl.Uniform):
+        raise TypeError(f"the shader's '{name}' is a {type(member).__name__}, not a uniform")
+    return member
+
+
+def _block(prog: moderngl.Program, name: str) -> moderngl.UniformBlock:
+    """The program's uniform block ``name``."""
+    member = prog[name]
+    if not isinstance(member, moderngl.UniformBlock):
+        raise TypeError(f"the shader's '{name}' is a {type(member).__name__}, not a uniform block")
+    return member
 
 
 class Renderer:
@@ -150,15 +161,17 @@ class Renderer:
                                                                       self.settings.adaptive_cull))
         self._vao = self.ctx.vertex_array(self._prog, [])
         self._centres = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
-        self._edge_prog = self._edge_vao = self._bounds = None
+        self._edge_prog: moderngl.Program | None = None
+        self._edge_vao: moderngl.VertexArray | None = None
+        self._bounds: moderngl.Buffer | None = None
         if self._two_pass:
             self._edge_prog = self.ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=edge_pass_shader())
             self._edge_vao = self.ctx.vertex_array(self._edge_prog, [])
             self._bounds = self.ctx.buffer(reserve=MAX_PRIMITIVES * 16)
-        self._prims_tex = None
-        self._layers_tex = None
-        self._packed: dict[int, tuple[Primitive, int | None, np.ndarray]] = {}  # id(primitive) -> (it, layer, row)
-        self._texture_keys: tuple = ()
+        self._prims_tex: moderngl.Texture | None = None
+        self._layers_tex: moderngl.TextureArray | None = None
+        self._packed: dict[int, tuple[Primitive, int | None, list[float]]] = {}  # id(primitive) -> (it, layer, row)
+        self._texture_keys: tuple[NoiseTexture | tuple[str, str], ...] = ()
         self._texture_sizes: list[tuple[int, int]] = []
         self._scene: Scene | None = None
         self._uniform_values: dict[str, Any] = {}  # Any: GL uniform value; last written per uniform
@@ -168,20 +181,19 @@ class Renderer:
             False: (self._prog, self._edge_prog, self._vao, self._edge_vao)}
         self._with_meshes = False
         self._mesh_pass: MeshPass | None = None
-        if self.settings.frame_caches:  # uniforms no frame changes: written once
-            self._set_constant_uniforms()
+        self._set_constant_uniforms()  # uniforms no frame changes: written once
         self.set_scene(scene)
 
     def _set_constant_uniforms(self) -> None:
         for prog in self._programs():
-            prog["Centres"].binding = 0
-            prog["u_prims"].value = 0
-            prog["u_textures"].value = 1
-            prog["u_aperture"].value = 2
-        if self._two_pass:
-            self._edge_prog["Bounds"].binding = 1
+            _block(prog, "Centres").binding = 0
+            _uniform(prog, "u_prims").value = 0
+            _uniform(prog, "u_textures").value = 1
+            _uniform(prog, "u_aperture").value = 2
+        if self._edge_prog is not None:  # two-pass
+            _block(self._edge_prog, "Bounds").binding = 1
             if "Bounds" in self._members(self._prog):
-                self._prog["Bounds"].binding = 1
+                _block(self._prog, "Bounds").binding = 1
 
     # -- scene upload (once per scene) ----------------------------------------------------------
     def set_scene(self, scene: Scene) -> None:
@@ -236,8 +248,9 @@ class Renderer:
             if self._layers_tex is not None:
                 self._layers_tex.release()
             side = layers.shape[1]
-            self._layers_tex = self.ctx.texture_array((side, side, layers.shape[0]), 4, layers.tobytes(), dtype="f4")
-            self._layers_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            layers_tex = self.ctx.texture_array((side, side, layers.shape[0]), 4, layers.tobytes(), dtype="f4")
+            layers_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._layers_tex = layers_tex
             self._texture_keys, self._texture_sizes = texture_keys, sizes
         return layer_of
 
@@ -258,21 +271,22 @@ class Renderer:
             m = p.material
             layer = layer_of[m if isinstance(m, NoiseTexture) else ("image", m.key)] \
                 if isinstance(m, (NoiseTexture, ImageTexture)) else None
-            entry = self._packed.get(id(p)) if self.settings.frame_caches else None
+            entry = self._packed.get(id(p))
             if entry is None or entry[0] is not p or entry[1] != layer:
                 entry = (p, layer, self._pack(p, layer, sizes))
             packed[id(p)] = entry  # only the current scene's primitives stay cached
             rows.append(entry[2])
         if rows:
             data[:n] = np.array(rows, dtype=np.float32).reshape(n, TEXELS_PER_PRIMITIVE, 4)
-        self._packed = packed if self.settings.frame_caches else {}
+        self._packed = packed
         if self._prims_tex is not None and self._prims_tex.size == (TEXELS_PER_PRIMITIVE, data.shape[0]):
             self._prims_tex.write(data.tobytes())
         else:
             if self._prims_tex is not None:
                 self._prims_tex.release()
-            self._prims_tex = self.ctx.texture((TEXELS_PER_PRIMITIVE, data.shape[0]), 4, data.tobytes(), dtype="f4")
-            self._prims_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            prims_tex = self.ctx.texture((TEXELS_PER_PRIMITIVE, data.shape[0]), 4, data.tobytes(), dtype="f4")
+            prims_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._prims_tex = prims_tex
 
     def _use_variant(self, meshes: bool) -> None:
         """Switch to the ray-cast programs with (or without) the mesh layer: a scene without meshes runs exactly
@@ -292,12 +306,11 @@ class Renderer:
         self._prog, self._edge_prog, self._vao, self._edge_vao = self._variants[meshes]
         self._with_meshes = meshes
         self._uniform_values = {}  # the other programs hold other values: every scene uniform is written again
-        if self.settings.frame_caches:
-            self._set_constant_uniforms()
+        self._set_constant_uniforms()
         if meshes:
             for prog in self._programs():
-                prog["u_mesh_colour"].value = 3
-                prog["u_mesh_inv_distance"].value = 4
+                _uniform(prog, "u_mesh_colour").value = 3
+                _uniform(prog, "u_mesh_inv_distance").value = 4
 
     def _draw_meshes(self, state: _EyeState, camera: EyeCamera) -> None:
         """The mesh pass for this eye (before the ray-cast, which composites its target per ray sample)."""
@@ -308,7 +321,7 @@ class Renderer:
         state.mesh_target.colour.use(3)
         state.mesh_target.inv_distance.use(4)
         for prog in self._programs():
-            prog["u_mesh_samples"].value = self._mesh_pass.samples
+            _uniform(prog, "u_mesh_samples").value = self._mesh_pass.samples
 
     def _pack(self, p: Primitive, layer: int | None, sizes: list[tuple[int, int]]) -> list[float]:
         """One primitive's rows of the primitive table, flat (TEXELS_PER_PRIMITIVE x 4: axes and shape,
@@ -338,18 +351,15 @@ class Renderer:
         return [p for p in (self._prog, self._edge_prog) if p is not None]
 
     def _set_if_present(self, name: str, value: Any) -> None:  # Any: a GL uniform value
-        if self.settings.frame_caches:  # a uniform is written when its value changes
-            if self._uniform_values.get(name) == value:
-                return
-            self._uniform_values[name] = value
+        if self._uniform_values.get(name) == value:  # a uniform is written when its value changes
+            return
+        self._uniform_values[name] = value
         for prog in self._programs():
             if name in self._members(prog):
-                prog[name].value = value
+                _uniform(prog, name).value = value
 
-    def _members(self, prog: moderngl.Program) -> moderngl.Program | frozenset[str]:
+    def _members(self, prog: moderngl.Program) -> moderngl.Program | frozenset[str]:  # Program: benchmarks/former.py
         """The names a program declares (``name in prog`` walks them all: looked up once per program)."""
-        if not self.settings.frame_caches:
-            return prog
         names = self._member_names.get(id(prog))
         if names is None:
             names = self._member_names[id(prog)] = frozenset(prog)
@@ -450,7 +460,8 @@ class Renderer:
             state.depth_range_m = state.rendered_scene.depth_range_m(state.depth_centre_m)
         return state.depth_range_m
 
-    def _draw(self, state: _EyeState, camera: EyeCamera) -> None:
+    def _draw(self, state: _EyeState, camera: EyeCamera | None) -> None:
+        """Draw the eye's image from ``camera`` (None: no valid camera yet, the background)."""
         if state.aperture is None and camera is not None:
             mask = self._aperture_mask(camera)
             state.aperture = self.ctx.texture((state.width_px, state.height_px), 1, mask.tobytes(), dtype="f4")
@@ -476,18 +487,13 @@ class Renderer:
             near, far = near_far_m(camera)
             far = max(far, self._scene_far_m + float(np.linalg.norm(cop)))  # never clip a scene primitive
             ray = np.asarray(camera.pixel_to_ray, dtype=np.float32).T.tobytes()
-            constant = not self.settings.frame_caches
             for prog in self._programs():
-                if constant:
-                    prog["Centres"].binding = 0
-                prog["u_ray"].write(ray)
-                prog["u_size_px"].value = (float(state.width_px), float(state.height_px))
-                prog["u_near_m"].value = near
-                prog["u_far_m"].value = min(far, 3.0e38)
-                if constant:
-                    prog["u_prims"].value = 0
-                    prog["u_textures"].value = 1
-                    prog["u_aperture"].value = 2
+                _uniform(prog, "u_ray").write(ray)
+                _uniform(prog, "u_size_px").value = (float(state.width_px), float(state.height_px))
+                _uniform(prog, "u_near_m").value = near
+                _uniform(prog, "u_far_m").value = min(far, 3.0e38)
+            assert self._prims_tex is not None and self._layers_tex is not None  # set_scene uploaded both
+            assert state.aperture is not None  # made above from the first camera
             self._prims_tex.use(0)
             self._layers_tex.use(1)
             state.aperture.use(2)
@@ -497,26 +503,27 @@ class Renderer:
                 self._vao.render(moderngl.TRIANGLES, vertices=3)
             state.last_rendered_camera = camera
             state.rendered_scene = self._scene
-            if self.settings.frame_caches:  # the bounds wait until a frame may reuse this one
-                state.depth_range_m, state.depth_centre_m = None, cop
-            else:
-                state.depth_range_m = self.scene.depth_range_per_primitive_m(cop)
+            self._keep_depth_centre(state, cop)
         if state.msaa_fbo is not None:
             self.ctx.copy_framebuffer(state.fbo, state.msaa_fbo)
+
+    def _keep_depth_centre(self, state: _EyeState, cop: np.ndarray) -> None:
+        """After a draw: the reuse bounds wait until a frame may reuse this image (:meth:`_depth_range_m`)."""
+        state.depth_range_m, state.depth_centre_m = None, cop
+
+    def _screen_bounds_px(self, rel_m: np.ndarray, camera: EyeCamera, state: _EyeState) -> np.ndarray:
+        """Each primitive's conservative screen box for the two-pass cull (psyop.rendering.screen_bounds)."""
+        return screen_bounds_px(rel_m, self._half_axes_m[0], self._half_axes_m[1], camera.pixel_to_ray,
+                                state.width_px, state.height_px)
 
     def _draw_two_pass(self, state: _EyeState, camera: EyeCamera, rel_m: np.ndarray) -> None:
         """Adaptive sampling in two passes: one ray everywhere (edge pixels get depth 0), then
         the SxS grid only where the depth test (GREATER than 0) lets a fragment through."""
         bounds = np.zeros((MAX_PRIMITIVES, 4), dtype=np.float32)
-        bounds_of = screen_bounds_px if self.settings.frame_caches else screen_bounds_px_former
-        bounds[: len(rel_m)] = bounds_of(rel_m, self._half_axes_m[0], self._half_axes_m[1],
-                                                camera.pixel_to_ray, state.width_px, state.height_px)
+        assert self._bounds is not None and self._edge_vao is not None  # built with the two-pass programs
+        bounds[: len(rel_m)] = self._screen_bounds_px(rel_m, camera, state)
         self._bounds.write(bounds.tobytes())
         self._bounds.bind_to_uniform_block(1)
-        if not self.settings.frame_caches:
-            self._edge_prog["Bounds"].binding = 1
-            if "Bounds" in self._prog:
-                self._prog["Bounds"].binding = 1
         self.ctx.enable(moderngl.DEPTH_TEST)
         try:
             self.ctx.depth_func = "1"  # always: the first pass writes every pixel's edge mark

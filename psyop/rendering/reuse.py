@@ -52,7 +52,7 @@ def shift_bound_px(
 
 
 def decide_reuse(
-    last_camera: EyeCamera,
+    last_camera: EyeCamera | None,
     new_camera: EyeCamera,
     depth_range_m: tuple[float, float] | Callable[[], tuple[float, float]],
     tolerance_px: float = 0.01,

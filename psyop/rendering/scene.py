@@ -290,7 +290,7 @@ class Scene:
 
         Vectorised over the primitives, with the same float64 operations in the same order as
         :meth:`Primitive.closest_distance_m` and :meth:`Primitive.farthest_distance_m`, so the result
-        equals :meth:`depth_range_per_primitive_m` bit for bit (tests/rendering/test_renderer_cache_equality.py).
+        equals the per-primitive form (benchmarks/former.py) bit for bit (tests/rendering/test_renderer_cache_equality.py).
 
         Examples
         --------
@@ -325,15 +325,6 @@ class Scene:
             distance = float(np.linalg.norm(centre - point))
             near = min(near, max(0.0, distance - radius))
             far = max(far, distance + radius)  # inf without finite primitives: a wider range, still a bound
-        return (near, far)
-
-    def depth_range_per_primitive_m(self, point_m: np.ndarray) -> tuple[float, float]:
-        """:meth:`depth_range_m` one primitive at a time (the former per-frame path, kept as the reference the
-        vectorised form is tested against and for benchmarks/bench_frame_cpu.py's "before" column)."""
-        if not self.primitives:
-            return (float("inf"), float("inf"))
-        near = min(p.closest_distance_m(point_m) for p in self.primitives)
-        far = max(p.farthest_distance_m(point_m) for p in self.primitives)
         return (near, far)
 
 

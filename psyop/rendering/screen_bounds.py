@@ -51,25 +51,3 @@ def screen_bounds_px(centres_rel_m: np.ndarray, half_u_m: np.ndarray, half_v_m: 
     finite = in_front & (np.abs(boxes) < UNBOUNDED_PX).all(axis=1)
     boxes[~finite] = _UNBOUNDED_BOX
     return boxes
-
-
-def screen_bounds_px_former(centres_rel_m: np.ndarray, half_u_m: np.ndarray, half_v_m: np.ndarray,
-                            pixel_to_ray: np.ndarray, width_px: int, height_px: int) -> np.ndarray:
-    """:func:`screen_bounds_px` as first written (more numpy calls, the same boxes bit for bit): the reference
-    tests/rendering/test_renderer_cache_equality.py holds it to, and the renderer's ``frame_caches=False`` path."""
-    c = np.asarray(centres_rel_m, dtype=np.float64).reshape(-1, 3)
-    hu = np.asarray(half_u_m, dtype=np.float64).reshape(-1, 3)
-    hv = np.asarray(half_v_m, dtype=np.float64).reshape(-1, 3)
-    signs = np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0]])
-    corners = c[:, None, :] + signs[None, :, :1] * hu[:, None, :] + signs[None, :, 1:] * hv[:, None, :]
-    inv = np.linalg.inv(np.asarray(pixel_to_ray, dtype=np.float64))
-    uvw = corners @ inv.T
-    w = uvw[..., 2]
-    in_front = np.all(w > 1e-12 * np.linalg.norm(corners, axis=-1), axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = uvw[..., 0] / w * width_px
-        y = uvw[..., 1] / w * height_px
-    boxes = np.stack([x.min(axis=1), y.min(axis=1), x.max(axis=1), y.max(axis=1)], axis=-1)
-    finite = in_front & np.all(np.isfinite(boxes), axis=1) & np.all(np.abs(boxes) < UNBOUNDED_PX, axis=1)
-    boxes[~finite] = (-UNBOUNDED_PX, -UNBOUNDED_PX, UNBOUNDED_PX, UNBOUNDED_PX)
-    return boxes

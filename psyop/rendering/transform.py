@@ -34,7 +34,7 @@ def scene_in_head(scene: Scene, head_position_m: Sequence[float], head_orientati
 
     The identity pose returns ``scene`` itself, so a still head keeps frame reuse and
     uploads nothing new. Runs every frame of a head-tracked session, so every primitive is moved in
-    one numpy product (the same numbers as :func:`scene_in_head_per_primitive`, bit for bit:
+    one numpy product (the same numbers as the per-primitive form in benchmarks/former.py, bit for bit:
     tests/rendering/test_renderer_cache_equality.py).
 
     Examples
@@ -72,23 +72,3 @@ def _moved_meshes(scene: Scene, head_position_m: np.ndarray, head_orientation_wx
     head_from_world[:3, :3] = r_t
     head_from_world[:3, 3] = -(r_t @ np.asarray(head_position_m, dtype=np.float64))
     return tuple(m.moved(head_from_world, r_t) for m in scene.meshes)
-
-
-def scene_in_head_per_primitive(scene: Scene, head_position_m: Sequence[float],
-                                head_orientation_wxyz: Sequence[float]) -> Scene:
-    """:func:`scene_in_head` one primitive at a time (the former per-frame path, kept as the reference the
-    vectorised form is tested against and for benchmarks/bench_frame_cpu.py's "before" column)."""
-    t = np.asarray(head_position_m, dtype=np.float64)
-    if not np.any(t) and tuple(float(c) for c in head_orientation_wxyz) == IDENTITY_WXYZ:
-        return scene
-    r_t = rotation_matrix(head_orientation_wxyz).T
-    primitives = tuple(
-        dataclasses.replace(
-            p,
-            centre_m=tuple(rotate_rows(r_t, (np.asarray(p.centre_m) - (0.0 if p.at_infinity else t))[None])[0].tolist()),
-            half_u_m=tuple(rotate_rows(r_t, np.asarray(p.half_u_m)[None])[0].tolist()),
-            half_v_m=tuple(rotate_rows(r_t, np.asarray(p.half_v_m)[None])[0].tolist()),
-        )
-        for p in scene.primitives
-    )
-    return dataclasses.replace(scene, primitives=primitives, meshes=_moved_meshes(scene, t, head_orientation_wxyz))

@@ -9,6 +9,7 @@ Columns are described in docs/architecture.md ("the trial table") and docs/proto
 
 from __future__ import annotations
 
+from typing import assert_never
 
 import numpy as np
 import pandas as pd
@@ -49,16 +50,6 @@ def _balanced_binary(cond_index: np.ndarray, rep_index: np.ndarray, n_conditions
         table[:, -1] = rng.integers(0, 2, size=n_conditions, dtype=np.int8)
     table = rng.permuted(table, axis=1)
     return table[cond_index, rep_index]
-
-
-def _counterbalance(protocol: Protocol) -> str:
-    """How the response's binary choice (interval order, near side, pair order) is assigned."""
-    response = protocol.response
-    if isinstance(response, (TwoIntervalResponse, PairwisePreferenceResponse)):
-        return response.order
-    if isinstance(response, LeftRightNearerResponse):
-        return response.near_side
-    return "balanced"  # reach, with_against: unused
 
 
 def _order(protocol: Protocol, conditions: list[JsonObject], cond_index: np.ndarray, rep_index: np.ndarray,
@@ -118,7 +109,7 @@ def compile_schedule(protocol: Protocol, seed: int, participant_index: int | Non
     order, block_main = _order(protocol, conditions, cond_main, rep_main, _rng(seed, _STREAM_ORDER),
                                participant_index)
     counterbalance_rng = _rng(seed, _STREAM_COUNTERBALANCE)
-    if _counterbalance(protocol) == "balanced":
+    if protocol.response.counterbalance == "balanced":  # the binary choice: order, side or pair order
         binary_main = _balanced_binary(cond_main, rep_main, n_conditions, repetitions, counterbalance_rng)
     else:  # an independent fair coin per trial
         binary_main = counterbalance_rng.integers(0, 2, size=cond_main.size, dtype=np.int8)
@@ -154,47 +145,70 @@ def compile_schedule(protocol: Protocol, seed: int, participant_index: int | Non
 
 def _response_columns(protocol: Protocol, columns: dict[str, np.ndarray], binary: np.ndarray, n: int
                       ) -> dict[str, np.ndarray]:
+    """The response kind's columns (psyop.protocol.response); ``binary``: the counterbalanced choice."""
     response = protocol.response
+    match response:  # one arm per kind (psyop.protocol.response); mypy names a missing one
+        case TwoIntervalResponse():
+            return _two_interval_columns(response, columns, binary, n)
+        case LeftRightNearerResponse():
+            mode = _mode_values(response.mode, columns, n)
+            return {"mode": mode, "mode_interval1": mode, "near_side": np.where(binary, "right", "left").astype(object)}
+        case PairwisePreferenceResponse():
+            return _pairwise_preference_columns(response, columns, binary)
+        case ReachResponse():
+            return _reach_columns(response, columns)
+        case WithAgainstResponse():
+            return with_against_columns(protocol, columns[response.nc_factor])
+        case _:
+            assert_never(response)
+
+
+def _two_interval_columns(response: TwoIntervalResponse, columns: dict[str, np.ndarray], binary: np.ndarray, n: int
+                          ) -> dict[str, np.ndarray]:
+    """Each interval's mode, the correct interval and the factors an interval overrides, per interval."""
     out: dict[str, np.ndarray] = {}
-    if isinstance(response, TwoIntervalResponse):
-        # binary False: the test stimulus comes first
-        test_first = ~binary
-        test_mode = _mode_values(response.test.mode, columns, n)
-        reference_mode = _mode_values(response.reference.mode, columns, n)
-        out["mode_interval1"] = np.where(test_first, test_mode, reference_mode)
-        out["mode_interval2"] = np.where(test_first, reference_mode, test_mode)
-        out["correct_interval"] = np.where(test_first, 1, 2).astype(np.int64)
-        for name in sorted(set(response.test.set) | set(response.reference.set)):
-            test_value = np.full(n, response.test.set[name]) if name in response.test.set else columns[name]
-            ref_value = np.full(n, response.reference.set[name]) if name in response.reference.set else columns[name]
-            out[f"{name}_interval1"] = np.where(test_first, test_value, ref_value).astype(np.float64)
-            out[f"{name}_interval2"] = np.where(test_first, ref_value, test_value).astype(np.float64)
-    elif isinstance(response, LeftRightNearerResponse):
-        mode = _mode_values(response.mode, columns, n)
-        out["mode"] = mode
-        out["mode_interval1"] = mode
-        out["near_side"] = np.where(binary, "right", "left").astype(object)
-    elif isinstance(response, PairwisePreferenceResponse):
-        pairs = columns[response.pair_factor]
-        first = np.array([p.split("|")[0] for p in pairs], dtype=object)
-        second = np.array([p.split("|")[1] for p in pairs], dtype=object)
-        out["mode_a"] = np.where(binary, second, first)
-        out["mode_b"] = np.where(binary, first, second)
-        if response.pair_factor != "pair":
-            out["pair"] = pairs
-        out["mode_interval1"] = out["mode_a"]
-        out["mode_interval2"] = out["mode_b"]
-    elif isinstance(response, ReachResponse):
-        rendering = columns[response.rendering_factor]
-        mode = np.array([response.modes[str(r)] for r in rendering], dtype=object)
-        out["mode"] = mode
-        out["mode_interval1"] = mode
-        if response.rendering_factor != "rendering":
-            out["rendering"] = rendering
-        if response.target_factor != "target_fraction":
-            out["target_fraction"] = columns[response.target_factor]
-    elif isinstance(response, WithAgainstResponse):
-        out.update(with_against_columns(protocol, columns[response.nc_factor]))
+    # binary False: the test stimulus comes first
+    test_first = ~binary
+    test_mode = _mode_values(response.test.mode, columns, n)
+    reference_mode = _mode_values(response.reference.mode, columns, n)
+    out["mode_interval1"] = np.where(test_first, test_mode, reference_mode)
+    out["mode_interval2"] = np.where(test_first, reference_mode, test_mode)
+    out["correct_interval"] = np.where(test_first, 1, 2).astype(np.int64)
+    for name in sorted(set(response.test.set) | set(response.reference.set)):
+        test_value = np.full(n, response.test.set[name]) if name in response.test.set else columns[name]
+        ref_value = np.full(n, response.reference.set[name]) if name in response.reference.set else columns[name]
+        out[f"{name}_interval1"] = np.where(test_first, test_value, ref_value).astype(np.float64)
+        out[f"{name}_interval2"] = np.where(test_first, ref_value, test_value).astype(np.float64)
+    return out
+
+
+def _pairwise_preference_columns(response: PairwisePreferenceResponse, columns: dict[str, np.ndarray],
+                                 binary: np.ndarray) -> dict[str, np.ndarray]:
+    """The two modes in shown order (``binary`` True: the pair's second mode first)."""
+    out: dict[str, np.ndarray] = {}
+    pairs = columns[response.pair_factor]
+    first = np.array([p.split("|")[0] for p in pairs], dtype=object)
+    second = np.array([p.split("|")[1] for p in pairs], dtype=object)
+    out["mode_a"] = np.where(binary, second, first)
+    out["mode_b"] = np.where(binary, first, second)
+    if response.pair_factor != "pair":
+        out["pair"] = pairs
+    out["mode_interval1"] = out["mode_a"]
+    out["mode_interval2"] = out["mode_b"]
+    return out
+
+
+def _reach_columns(response: ReachResponse, columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The mode of each trial's rendering level, and the rendering/target columns under their standard names."""
+    out: dict[str, np.ndarray] = {}
+    rendering = columns[response.rendering_factor]
+    mode = np.array([response.modes[str(r)] for r in rendering], dtype=object)
+    out["mode"] = mode
+    out["mode_interval1"] = mode
+    if response.rendering_factor != "rendering":
+        out["rendering"] = rendering
+    if response.target_factor != "target_fraction":
+        out["target_fraction"] = columns[response.target_factor]
     return out
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, assert_never
 
 from psyop.adaptive.session import AdaptivePlan, adaptive_plan
 from psyop.datacontract import TIMEOUT_RESPONSE
@@ -30,7 +30,8 @@ from psyop.optics.rig import EyeRig
 from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
-from psyop.protocol.response import LeftRightNearerResponse, ReachResponse, TwoIntervalResponse
+from psyop.protocol.response import (LeftRightNearerResponse, PairwisePreferenceResponse, ReachResponse, ResponseModel,
+                                     TwoIntervalResponse, WithAgainstResponse)
 from psyop.protocol.scene import FixationTarget
 from psyop.protocol.trial import Blank, DriftRecalibration, Interval, ResponsePhase
 from psyop.schedule.rows import mode_column
@@ -41,18 +42,26 @@ from psyop.stimulus.placement import centre_angles_deg
 #: ipd used when the protocol says ``ipd: tracker`` and the tracker reports none (recorded as such).
 DEFAULT_IPD_M = 0.063
 
-__all__ = ["DEFAULT_IPD_M", "RESPONSE_KINDS", "TIMEOUT_RESPONSE", "FixationPath", "ResponsePlan", "SessionPlan",
-           "compile_phases", "compile_plan", "fixation_path", "fixation_path_of"]
+__all__ = ["DEFAULT_IPD_M", "TIMEOUT_RESPONSE", "FixationPath", "ResponsePlan", "SessionPlan",
+           "compile_phases", "compile_plan", "fixation_path", "fixation_path_of",
+           "session_response_kind"]
 
-#: The protocol's response kind -> the session's response kind.
-RESPONSE_KINDS: dict[str, ResponseKind] = {
-    "two_interval": ResponseKind.TWO_INTERVAL,
-    "left_right_nearer": ResponseKind.NEAR_SIDE,
-    "pairwise_preference": ResponseKind.PREFERENCE,
-    "reach": ResponseKind.REACH,
-    "with_against": ResponseKind.WITH_AGAINST,
-}
 
+def session_response_kind(response: ResponseModel) -> ResponseKind:
+    """The session's response kind (what the response sources and the log read) of the protocol's response."""
+    match response:  # one arm per kind (psyop.protocol.response); mypy names a missing one
+        case TwoIntervalResponse():
+            return ResponseKind.TWO_INTERVAL
+        case LeftRightNearerResponse():
+            return ResponseKind.NEAR_SIDE
+        case PairwisePreferenceResponse():
+            return ResponseKind.PREFERENCE
+        case ReachResponse():
+            return ResponseKind.REACH
+        case WithAgainstResponse():
+            return ResponseKind.WITH_AGAINST
+        case _:
+            assert_never(response)
 
 
 @dataclass(frozen=True)
@@ -284,7 +293,7 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
     r = protocol.response
     display_off = bool(response_phase.display_off) if response_phase is not None else False
     response = ResponsePlan(
-        kind=RESPONSE_KINDS[r.kind],
+        kind=session_response_kind(r),
         protocol_kind=r.kind,
         question=r.question,
         prompt=response_phase.prompt if response_phase is not None else None,

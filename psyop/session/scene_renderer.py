@@ -55,17 +55,18 @@ class SceneRenderer:
     headless sampled checks (``max_images`` set) render interval frames only. Other phases
     compute cameras only. Cameras and eye centres come from the plan's eye rig.
 
-    Per frame only what changes is built (``frame_cache``, default): eyes that share a scene origin
-    (both eyes of a stereo protocol, :func:`psyop.stimulus.scene_origin_m`) share one scene, and the
-    scene items that do not depend on time (:func:`psyop.stimulus.build.depends_on_time`: all but a
-    moving fixation target) are built once per trial and phase, so a scene without a moving item is
-    the same object every frame. ``frame_cache=False``: the former path (the whole scene built for
-    each eye, every frame), kept for the side-by-side benchmark (benchmarks/bench_frame_cpu.py) and
-    the equality tests (tests/session/test_frame_cpu_equality.py: same scenes, same images).
+    Per frame only what changes is built: eyes that share a scene origin (both eyes of a stereo
+    protocol, :func:`psyop.stimulus.scene_origin_m`) share one scene, and the scene items that do not
+    depend on time (:func:`psyop.stimulus.build.depends_on_time`: all but a moving fixation target) are
+    built once per trial and phase, so a scene without a moving item is the same object every frame.
+    The former path (the whole scene built for each eye, every frame) lives in benchmarks/former.py
+    (``FormerSceneRenderer``), for the side-by-side benchmark (benchmarks/bench_frame_cpu.py) and the
+    equality tests (tests/session/test_frame_cpu_equality.py: same scenes, same images).
+    :meth:`_make_renderer` builds the ray-caster (psyop.rendering.Renderer) on the first drawn frame.
     """
 
     def __init__(self, plan: SessionPlan, *, scale: float = 1.0, ctx: moderngl.Context | None = None, max_images: int | None = None,
-                 owns_ctx: bool = True, check_every: int | None = None, frame_cache: bool = True,
+                 owns_ctx: bool = True, check_every: int | None = None,
                  mesh_files: MeshFiles | None = None) -> None:
         self.plan = plan
         self.protocol = plan.protocol
@@ -107,18 +108,14 @@ class SceneRenderer:
 
         # a check of finiteness and content needs no anti-aliasing; a watched session gets the default
         self.settings = RenderSettings(antialiasing=AntiAliasing.NONE) if max_images is not None else RenderSettings()
-        self.frame_cache = frame_cache
-        if not frame_cache:  # the former path throughout, the renderer's per-frame work included
-            self.settings = dataclasses.replace(self.settings, frame_caches=False)
         # the time-independent parts of the current trial's scenes: per (phase, eye centre) either the whole
         # scene (nothing in it moves) or each shown item's primitives (None: the item moves, built per frame)
         self._parts_row: TrialRecord | None = None
         self._parts: dict[tuple[PhaseSpec, tuple[float, ...]], StaticParts] = {}
 
-    def _scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str,
-               head_pose: HeadPose | None) -> Scene | None:
-        """The scene this eye sees in this phase, or None when nothing is drawn (cameras only)."""
-        from psyop.rendering.transform import scene_in_head_per_primitive as scene_in_head  # the former path
+    def _scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str) -> Scene | None:
+        """The scene this eye sees in this phase (head-fixed, or world-fixed before a head pose moves it),
+        or None when nothing is drawn (cameras only)."""
         from psyop.stimulus import blank_scene, build_scene, recalibration_cross_scene, scene_origin_m, text_scene
 
         centre = self.rig.centre_m(eye)
@@ -134,17 +131,14 @@ class SceneRenderer:
             return None
         if phase.show not in ("stimulus", "blank"):
             return None
-        scene = build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
-                            base_dir=self._base_dir, show=phase.primitives, images=self._images, meshes=self._meshes)
-        return scene_in_head(scene, *head_pose) if head_pose is not None else scene
+        return build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
+                           base_dir=self._base_dir, show=phase.primitives, images=self._images, meshes=self._meshes)
 
     def _frame_scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str,
                      head_pose: HeadPose | None, frame_scenes: dict[tuple[float, ...], Scene | None]) -> Scene | None:
         """:meth:`_scene` for this frame, each scene built once for the eyes that share it and only its moving
         items rebuilt (see the class docstring); ``frame_scenes``: this frame's scenes so far, by eye centre or
         scene origin."""
-        if not self.frame_cache:
-            return self._scene(row, phase, t_in_phase_s, eye, head_pose)
         from psyop.rendering.transform import scene_in_head
         from psyop.stimulus import scene_origin_m
 
@@ -198,7 +192,7 @@ class SceneRenderer:
         from psyop.stimulus import build_scene, interval_phases
         from psyop.stimulus.build import depends_on_time
 
-        whole = self._scene(row, phase, 0.0, eye, None)
+        whole = self._scene(row, phase, 0.0, eye)
         if whole is None or phase.show not in ("stimulus", "blank") or self._head_fixed(phase):
             return (whole,)  # the cross, the text, an empty blank, nothing drawn: never move
         interval = max(1, phase.interval)
@@ -214,6 +208,12 @@ class SceneRenderer:
                  build_scene(self.protocol, row, 0.0, centre, interval=interval, base_dir=self._base_dir,
                              show=(item.id,), images=self._images, meshes=self._meshes))
                 for item in shown]
+
+    def _make_renderer(self, scene: Scene) -> Renderer:
+        """The session's ray-caster, built on its first drawn frame (benchmarks/former.py builds the former one)."""
+        from psyop.rendering import Renderer
+
+        return Renderer(scene, settings=self.settings, ctx=self._ctx)
 
     def _camera(self, eye: str, fixation_m: tuple[float, float, float], mode: str, frame: FrameRequest | None,
                 row: TrialRow | None = None) -> EyeCamera:
@@ -238,8 +238,6 @@ class SceneRenderer:
         ``head_pose`` (tracked, head -> world) moves the eyes through the world-fixed stimulus;
         the recalibration cross stays head-fixed. ``frame``: the display's request; each eye is
         drawn from its view and copied into its target where the request has them."""
-        from psyop.rendering import Renderer
-
         cameras_ok = True
         ok = True
         images = checked = 0
@@ -256,7 +254,7 @@ class SceneRenderer:
                     target.framebuffer.clear(*self._background(), 1.0)
                 continue
             if self._renderer is None:
-                self._renderer = Renderer(scene, settings=self.settings, ctx=self._ctx)
+                self._renderer = self._make_renderer(scene)
             else:
                 self._renderer.set_scene(scene)
             result = self._renderer.render(camera)

@@ -1,7 +1,7 @@
 """The per-frame CPU savings of issue 21 change no number (timing: benchmarks/bench_frame_cpu.py):
 the vectorised depth range and screen bounds equal the former per-primitive forms bit for bit, and a
 renderer with its frame caches renders the same images and makes the same reuse decisions as the
-former path."""
+former path (benchmarks/former.py's FormerRenderer)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,14 @@ import math
 import numpy as np
 import pytest
 
+from benchmarks.former import (FormerRenderer, depth_range_per_primitive_m, scene_in_head_per_primitive,
+                               screen_bounds_px_former)
 from psyop.optics import VIVE_PRO, make_eye_camera
 from psyop.rendering import Renderer, RenderSettings, Scene, Solid
 from psyop.rendering.camera_math import crop_camera
 from psyop.rendering.renderer import create_headless_context
 from psyop.rendering.scene import GridMaterial, NoiseTexture, Primitive, Shape, SineBorder
-from psyop.rendering.screen_bounds import screen_bounds_px, screen_bounds_px_former
+from psyop.rendering.screen_bounds import screen_bounds_px
 
 IPD_M, NC_M = 0.064, 0.0076916
 
@@ -40,8 +42,8 @@ def test_vectorised_depth_range_equals_the_per_primitive_one_bit_for_bit(with_in
         scene = _random_scene(rng, n, with_infinity)
         for _ in range(20):
             point = rng.normal(size=3) * rng.choice([0.01, 1.0, 5.0])
-            assert scene.depth_range_m(point) == scene.depth_range_per_primitive_m(point)
-    assert Scene(()).depth_range_m(np.zeros(3)) == Scene(()).depth_range_per_primitive_m(np.zeros(3))
+            assert scene.depth_range_m(point) == depth_range_per_primitive_m(scene, point)
+    assert Scene(()).depth_range_m(np.zeros(3)) == depth_range_per_primitive_m(Scene(()), np.zeros(3))
 
 
 def test_lean_screen_bounds_equal_the_former_ones_bit_for_bit() -> None:
@@ -75,7 +77,8 @@ def _moving_scene(k: int) -> Scene:
 
 def test_frame_caches_render_the_same_images_and_reuse_decisions() -> None:
     ctx = create_headless_context()
-    renderers = {flag: Renderer(_moving_scene(0), RenderSettings(frame_caches=flag), ctx=ctx) for flag in (True, False)}
+    renderers = {flag: (Renderer if flag else FormerRenderer)(_moving_scene(0), RenderSettings(), ctx=ctx)
+                 for flag in (True, False)}
     try:
         statics = _moving_scene(0).primitives[:3]
         for k in range(24):
@@ -104,7 +107,7 @@ def test_frame_caches_render_the_same_images_and_reuse_decisions() -> None:
 
 
 def test_vectorised_scene_in_head_equals_the_per_primitive_one_bit_for_bit() -> None:
-    from psyop.rendering.transform import scene_in_head, scene_in_head_per_primitive
+    from psyop.rendering.transform import scene_in_head
 
     rng = np.random.default_rng(8)
     for n in (1, 5, 64):

@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 
 from benchmarks.bench_frame_cpu import PROTOCOLS, former_tracker, protocol_text
+from benchmarks.former import FormerSceneRenderer
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session import scene_renderer
@@ -58,8 +59,9 @@ def test_cached_scenes_give_the_same_scenes_images_and_checks(tmp_path: Path, na
     from psyop.rendering.renderer import create_headless_context
 
     ctx = create_headless_context()
-    renderers = {flag: SceneRenderer(plan, scale=0.05, ctx=ctx, owns_ctx=False, check_every=WATCHED_CHECK_EVERY,
-                                     frame_cache=flag) for flag in (True, False)}
+    renderers = {flag: (SceneRenderer if flag else FormerSceneRenderer)(plan, scale=0.05, ctx=ctx, owns_ctx=False,
+                                                                        check_every=WATCHED_CHECK_EVERY)
+                 for flag in (True, False)}
     for r in renderers.values():  # 8x8 samples at edges, not 32x32: the same for both, and affordable on llvmpipe
         r.settings = dataclasses.replace(r.settings, samples_per_axis=8)
     try:
@@ -118,10 +120,10 @@ def test_a_stereo_frame_builds_its_scene_once_for_both_eyes(tmp_path: Path, monk
 
 
 def _session_tables(root: Path, protocol_path: Path, former: bool, monkeypatch: pytest.MonkeyPatch) -> dict[str, pd.DataFrame]:
-    class Small(SceneRenderer):  # both runs at 72x80 px (a watched session renders full size: minutes on llvmpipe)
-        def __init__(self, plan, **kwargs) -> None:
+    class Small(FormerSceneRenderer if former else SceneRenderer):  # both runs at 72x80 px
+        def __init__(self, plan, **kwargs) -> None:  # (a watched session renders full size: minutes on llvmpipe)
             kwargs["scale"] = 0.05
-            super().__init__(plan, **kwargs, frame_cache=not former)
+            super().__init__(plan, **kwargs)
 
     with monkeypatch.context() as patch:
         patch.setattr(scene_renderer, "SceneRenderer", Small)

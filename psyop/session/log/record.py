@@ -1,7 +1,7 @@
 """session.json as a typed record, read once per run and passed on.
 
-:func:`read_record` reads the file (through :func:`psyop.session.log.store.read_metadata`, which refuses a
-damaged or oversized one with a located UserError) into a :class:`SessionRecord`: the fields a run
+:func:`read_record` reads the file (through :func:`read_metadata`, which refuses a damaged or oversized
+one with a located UserError; psyop.session.log.store re-exports it) into a :class:`SessionRecord`: the fields a run
 decides by (seed, participant index, protocol hash and text, status, runs), typed, beside the raw mapping
 (``raw``), which the log merges and writes back unchanged. The runner reads it once before the backends
 are built and hands it to :mod:`psyop.session.resume`; the store reads session.json again under the
@@ -10,16 +10,19 @@ session lock, by design (another process may have written it in between).
 
 from __future__ import annotations
 
+import json
+import os
+import stat
 from collections.abc import Mapping
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, field_validator
 
-from psyop.session.rows import JsonObject
+from psyop.session.rows import JsonMapping, JsonObject
 from psyop.errors import UserError
 from psyop.session.log.layout import SessionPaths
 
-__all__ = ["SessionRecord", "read_record"]
+__all__ = ["MAX_METADATA_BYTES", "SessionRecord", "read_metadata", "read_record", "record_of"]
 
 
 class SessionRecord(BaseModel):
@@ -59,15 +62,55 @@ class SessionRecord(BaseModel):
         return [r for r in value if isinstance(r, dict)] if isinstance(value, list) else []
 
 
+#: session.json holds the protocol text and per-run records: a few hundred kB at most
+MAX_METADATA_BYTES = 64 << 20
+
+
+def read_metadata(paths: SessionPaths) -> JsonObject | None:
+    """session.json as a dict, None if absent; a damaged file is a located UserError.
+
+    It must be a regular file of at most :data:`MAX_METADATA_BYTES` (never a FIFO or device)."""
+    try:
+        info = os.stat(paths.metadata)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise UserError(f"cannot read session.json: {exc.strerror or exc}", str(paths.metadata)) from exc
+    if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_METADATA_BYTES:
+        raise UserError(f"session.json is not a regular file of at most {MAX_METADATA_BYTES} bytes; "
+                        "restore it, or delete it to rebuild it from the log", str(paths.metadata))
+    try:
+        text = paths.metadata.read_text()
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read session.json: {exc}", str(paths.metadata)) from exc
+    try:
+        meta = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise UserError(
+            f"session.json is damaged ({exc.msg}); restore it from a backup, or delete it: "
+            "`psyop recover` / `psyop run` then rebuild it from the checksummed log",
+            f"{paths.metadata}:{exc.lineno}:{exc.colno}") from exc
+    if not isinstance(meta, dict):
+        raise UserError("session.json is not a JSON object", str(paths.metadata))
+    return meta
+
+
 def read_record(paths: SessionPaths) -> SessionRecord | None:
     """The session's session.json as a :class:`SessionRecord`; None if there is none.
 
     A recorded seed that is not an integer is a UserError naming session.json."""
-    from psyop.session.log.store import read_metadata
-
     meta = read_metadata(paths)
     if meta is None:
         return None
+    return record_of(meta, paths)
+
+
+def record_of(meta: JsonMapping, paths: SessionPaths) -> SessionRecord:
+    """``meta`` (session.json as read, or rebuilt from the log) as a :class:`SessionRecord`.
+
+    A recorded seed that is not an integer is a UserError naming session.json."""
     try:
         return SessionRecord.model_validate({**meta, "raw": meta})
     except ValidationError as exc:

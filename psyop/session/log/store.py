@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import os
-import stat
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +20,7 @@ from psyop.finalised import record_finalised
 from psyop.session.lock import SessionLock
 from psyop.atomic import io_error, write_atomic
 from psyop.session.log.layout import SessionPaths, stale_temp_files, write_json_atomic
+from psyop.session.log.record import MAX_METADATA_BYTES as MAX_METADATA_BYTES, read_metadata, record_of
 from psyop.session.log.schema import FRAME_SCHEMA, GAZE_SCHEMA
 from psyop.session.signals import interrupts_deferred
 from psyop.session.log.stream import DurableStreamWriter, is_legacy_ipc, read_segment, read_stream_tolerant
@@ -101,11 +100,12 @@ class SessionStore:
                         f"({existing.get(key)!r} there, {metadata[key]!r} now); use another --session",
                         str(meta_path),
                     )
-            if existing.get("status") == "complete":
+            record = record_of(existing, self.paths)  # the typed fields a resume decides by
+            if record.status == "complete":
                 raise SessionComplete("session is already complete; use another --session", str(meta_path))
             completed = set(completed_trials(self.paths))
             self.metadata = {**metadata, **existing}
-            self.metadata["runs"] = list(existing.get("runs", []))
+            self.metadata["runs"] = list(record.runs)
         else:
             self.metadata = dict(metadata)
             self.metadata["runs"] = []
@@ -236,41 +236,6 @@ class SessionStore:
                                     expected_trials=expected_trial_count(self.metadata), lock=self.lock)
         finally:
             self.lock.release()
-
-
-#: session.json holds the protocol text and per-run records: a few hundred kB at most
-MAX_METADATA_BYTES = 64 << 20
-
-
-def read_metadata(paths: SessionPaths) -> JsonObject | None:
-    """session.json as a dict, None if absent; a damaged file is a located UserError.
-
-    It must be a regular file of at most :data:`MAX_METADATA_BYTES` (never a FIFO or device)."""
-    try:
-        info = os.stat(paths.metadata)
-    except FileNotFoundError:
-        return None
-    except OSError as exc:
-        raise UserError(f"cannot read session.json: {exc.strerror or exc}", str(paths.metadata)) from exc
-    if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_METADATA_BYTES:
-        raise UserError(f"session.json is not a regular file of at most {MAX_METADATA_BYTES} bytes; "
-                        "restore it, or delete it to rebuild it from the log", str(paths.metadata))
-    try:
-        text = paths.metadata.read_text()
-    except FileNotFoundError:
-        return None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"cannot read session.json: {exc}", str(paths.metadata)) from exc
-    try:
-        meta = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise UserError(
-            f"session.json is damaged ({exc.msg}); restore it from a backup, or delete it: "
-            "`psyop recover` / `psyop run` then rebuild it from the checksummed log",
-            f"{paths.metadata}:{exc.lineno}:{exc.colno}") from exc
-    if not isinstance(meta, dict):
-        raise UserError("session.json is not a JSON object", str(paths.metadata))
-    return meta
 
 
 def log_identity(paths: SessionPaths) -> JsonObject:
