@@ -61,7 +61,7 @@ def test_generated_study_rules_quote_their_paths(tmp_path: Path) -> None:
 
 def test_an_interpreter_under_a_path_with_a_space_runs(tmp_path: Path) -> None:
     """figures-build runs `$(PY) -m psyop studies` even in a dry run: with PY under a folder with a space it
-    was `/tmp/.../with: No such file or directory`."""
+    was `.../with: No such file or directory` (the path cut at its space)."""
     bin_dir = tmp_path / "with a space" / "bin"
     bin_dir.mkdir(parents=True)
     python = bin_dir / "python"  # a wrapper, not a link: the venv's python finds its packages from its own path
