@@ -30,10 +30,10 @@ venv: $(STAMP)
 
 $(STAMP): pyproject.toml
 	@echo "[psyop] setting up $(VENV) (first run only)"
-	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	@$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
-	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test]'
-	@touch $@
+	@test -x "$(PY)" || "$(PYTHON)" -m venv "$(VENV)"
+	@"$(PY)" -m pip install -q --disable-pip-version-check --upgrade pip
+	@"$(PY)" -m pip install -q --disable-pip-version-check -e '.[test]'
+	@touch "$@"
 
 # Debian packages: EGL/Mesa for headless rendering, Xvfb for the real-window test.
 # Installed only when missing and only when we can (root + apt-get).
@@ -52,22 +52,22 @@ $(SYSDEPS_STAMP): | $(STAMP)
 	      || { echo "[psyop] error: apt-get failed (the apt/dpkg lock still held after $(APT_LOCK_WAIT_S) s, or no network); rerun make once it is free"; exit 2; }; \
 	  else echo "[psyop] warning: missing Debian packages ($$missing); install them with apt-get"; fi; \
 	fi
-	@touch $@
+	@touch "$@"
 
 # ruff, mypy (cache in .mypy_cache, so a rerun checks only what changed) and the import-layering
 # contract when pyproject.toml declares one; any finding fails make test (docs/architecture.md,
 # "Types and lint").
 lint: $(STAMP)
-	$(VENV)/bin/ruff check psyop
-	$(VENV)/bin/mypy
-	@if grep -q '^\[tool.importlinter\]' pyproject.toml; then $(VENV)/bin/lint-imports; fi
+	"$(VENV)/bin/ruff" check psyop
+	"$(VENV)/bin/mypy"
+	@if grep -q '^\[tool.importlinter\]' pyproject.toml; then "$(VENV)/bin/lint-imports"; fi
 
 test: lint $(STAMP) $(SYSDEPS_STAMP)
-	$(PY) -m pytest -n $(JOBS) -q
+	"$(PY)" -m pytest -n $(JOBS) -q
 
 bench: $(STAMP) $(SYSDEPS_STAMP)
 	@mkdir -p bench
-	$(PY) -m benchmarks --out bench
+	"$(PY)" -m benchmarks --out bench
 
 # Power curves of the five shipped studies (psyop power: whole simulated studies through compile ->
 # session -> analysis). Too slow for `make figures` (docs/adaptive.md says how long), so a target
@@ -79,13 +79,13 @@ POWER_REPLICATIONS ?= 40
 POWER_SIZES := detection:4,6,12 discrimination:4,6,12 ordinal:6,12,19 egocentric:6,13,19 realism:6,12,19
 
 power: $(STAMP) $(SYSDEPS_STAMP)
-	@$(MAKE) --no-print-directory power-run
+	@"$(MAKE)" --no-print-directory power-run
 
 power-run:
 	@i=0; for spec in $(POWER_SIZES); do \
 	  i=$$((i + 1)); name=$${spec%%:*}; sizes=$${spec#*:}; mkdir -p "$(POWER)/$$name"; \
 	  echo "[psyop] power $$i/5: protocols/$$name.yaml, $$sizes participants, $(POWER_REPLICATIONS) replications each"; \
-	  $(PY) -m psyop power protocols/$$name.yaml --participants $$sizes --replications $(POWER_REPLICATIONS) \
+	  "$(PY)" -m psyop power protocols/$$name.yaml --participants $$sizes --replications $(POWER_REPLICATIONS) \
 	    --seed 0 --jobs $(JOBS) --out "$(POWER)/$$name" | tee "$(POWER)/$$name/.power.txt.tmp"; \
 	  test $${PIPESTATUS[0]} -eq 0 -a $${PIPESTATUS[1]} -eq 0 || { rm -f "$(POWER)/$$name/.power.txt.tmp"; exit 1; }; \
 	  mv -f "$(POWER)/$$name/.power.txt.tmp" "$(POWER)/$$name/power.txt"; \
@@ -94,4 +94,4 @@ power-run:
 include figures.mk
 
 clean:
-	rm -rf figures results bench power demo .psyop-power $(VENV) build *.egg-info .pytest_cache .hypothesis .mypy_cache .ruff_cache
+	rm -rf figures results bench power demo .psyop-power "$(VENV)" build *.egg-info .pytest_cache .hypothesis .mypy_cache .ruff_cache

@@ -51,10 +51,10 @@ endif
 .PHONY: figures figures-data figures-build figures-all resimulate
 
 figures: $(STAMP) $(SYSDEPS_STAMP)
-	@$(MAKE) --no-print-directory figures-data
-	@$(MAKE) --no-print-directory figures-build
+	@"$(MAKE)" --no-print-directory figures-data
+	@"$(MAKE)" --no-print-directory figures-build
 	@# the measured timing of real (not simulated) sessions: psyop timing's summary and a figure each (docs/sessions.md "Timing")
-	@$(PY) -m psyop timing "$(DATA)" --skip-simulated --out "$(FIGDIR)"
+	@"$(PY)" -m psyop timing "$(DATA)" --skip-simulated --out "$(FIGDIR)"
 	@echo "[psyop] figures in $(FIGDIR)/, statistics in $(RESULTS)/ (summary: $(RESULTS)/summary.md)"
 
 # Simulate only when no session has been logged yet; real data is never overwritten.
@@ -65,45 +65,45 @@ figures-data: $(STAMP)
 	  echo "[psyop] using the sessions in $(DATA)/"; \
 	else \
 	  echo "[psyop] $(DATA)/ holds no sessions: simulating all five studies (marked simulated)"; \
-	  $(PY) -m psyop simulate --data "$(DATA)" --protocols protocols --jobs $(JOBS); \
+	  "$(PY)" -m psyop simulate --data "$(DATA)" --protocols protocols --jobs $(JOBS); \
 	fi
-	@$(PY) -m psyop sessions "$(DATA)" $(if $(filter 1,$(MIX)),--allow-mixed) | sed 's/^/[psyop] /'; \
+	@"$(PY)" -m psyop sessions "$(DATA)" $(if $(filter 1,$(MIX)),--allow-mixed) | sed 's/^/[psyop] /'; \
 	  test $${PIPESTATUS[0]} -eq 0
 
 # Re-simulate from scratch: only when every session in $(DATA)/ is simulated (real data is
 # never deleted), remove them with the results and figures, then `make figures`.
 resimulate: $(STAMP)
-	@$(PY) -m psyop sessions "$(DATA)" --require-simulated --allow-mixed >/dev/null
+	@"$(PY)" -m psyop sessions "$(DATA)" --require-simulated --allow-mixed >/dev/null
 	@echo "[psyop] removing the simulated sessions in $(DATA)/, $(RESULTS)/ and $(FIGDIR)/"
 	@find "$(DATA)" -mindepth 1 -maxdepth 1 ! -name README.md -exec rm -rf {} + 2>/dev/null || true
 	@rm -rf "$(RESULTS)" "$(FIGDIR)"
-	@$(MAKE) --no-print-directory figures
+	@"$(MAKE)" --no-print-directory figures
 
 # The study rules depend on what data/ holds, so they are written first (psyop studies), then a
 # second make reads them: its dry run lists what is out of date and analysis/batch.py runs that in
 # one process. `+` runs both under `make -n` too, so a dry run shows the real graph.
 figures-build:
-	+@$(PY) -m psyop studies "$(DATA)" --protocols protocols --make-rules $(RESULTS)/.studies.mk
+	+@"$(PY)" -m psyop studies "$(DATA)" --protocols protocols --make-rules "$(RESULTS)/.studies.mk"
 ifeq ($(DRY_RUN),)
-	+@$(PY) analysis/batch.py $(MAKE) -n -s --no-print-directory figures-all STUDIES_MK=$(RESULTS)/.studies.mk
+	+@"$(PY)" analysis/batch.py "$(MAKE)" -n -s --no-print-directory figures-all STUDIES_MK="$(RESULTS)/.studies.mk"
 else
-	+@$(MAKE) --no-print-directory figures-all STUDIES_MK=$(RESULTS)/.studies.mk
+	+@"$(MAKE)" --no-print-directory figures-all STUDIES_MK="$(RESULTS)/.studies.mk"
 endif
 
 figures-all: $(MODEL_FIGURES) $(STUDY_FIGURES) $(TABLES)
 
 $(FIGDIR)/fig03_parallax_vs_eccentricity.png: analysis/fig03_parallax_vs_eccentricity.py $(OPTICS_SRC)
-	@mkdir -p $(FIGDIR)
+	@mkdir -p "$(FIGDIR)"
 	@echo "[psyop] $@"
-	@$(ANALYSE) $< --out $@
+	@"$(ANALYSE)" "$<" --out "$@"
 
 $(FIGDIR)/supp_linearity.png: analysis/supp_linearity.py $(OPTICS_SRC)
-	@mkdir -p $(FIGDIR)
+	@mkdir -p "$(FIGDIR)"
 	@echo "[psyop] $@"
-	@$(ANALYSE) $< --out $@
+	@"$(ANALYSE)" "$<" --out "$@"
 
 # The results table collects the JSON each figure script writes beside its figure: the paper's rows
 # from the paper's protocols (by hash), every other study in results/<study>_summary.md.
 $(RESULTS)/summary.md: analysis/results_table.py analysis/paper_values.py $(STUDY_FIGURES) $(STATS_SRC) $(wildcard protocols/*.yaml)
 	@echo "[psyop] $@"
-	@$(ANALYSE) $< --data "$(DATA)" --results "$(RESULTS)" --protocols protocols --out $@
+	@"$(ANALYSE)" "$<" --data "$(DATA)" --results "$(RESULTS)" --protocols protocols --out "$@"

@@ -141,6 +141,22 @@ def check_finalised(meta: JsonMapping, directory: Path) -> list[FileProblem]:
     return problems
 
 
+#: session.json statuses of a session that never reached 'complete': a run in progress (or killed), a
+#: resumable one; its parquet files are rebuilt from the log by the next finalisation anyway
+UNFINISHED_STATUSES = ("running", "incomplete")
+
+
+def finalisation_interrupted(meta: JsonMapping, directory: Path) -> bool:
+    """True when a session's parquet files are not sealed because a finalisation did not finish:
+    the last run ended after the last finalisation (:func:`unfinished_finalisation`), or the session
+    never reached 'complete' (:data:`UNFINISHED_STATUSES`) and its parquet files do not match session.json (a run, or a `psyop
+    recover` of a killed run, killed between writing them and recording their SHA-256). Every recorded
+    trial is in the checksummed log either way, and `psyop recover` finishes the session."""
+    if unfinished_finalisation(meta):
+        return True
+    return meta.get("status") in UNFINISHED_STATUSES and bool(check_finalised(meta, directory))
+
+
 def unfinished_finalisation(meta: JsonMapping) -> bool:
     """True when session.json says the last run ended but its finalisation never finished (the
     process was killed while the parquet files were being written): ``runs[-1].ended`` is set and
@@ -219,7 +235,7 @@ def verify_session(directory: Path) -> None:
     problems = check_finalised(meta, directory)
     if not problems:
         return
-    if unfinished_finalisation(meta):
+    if unfinished_finalisation(meta) or meta.get("status") in UNFINISHED_STATUSES:  # finalisation_interrupted
         raise UserError(
             "this session's finalisation was interrupted before it finished (its parquet files are not all "
             f"written and sealed); every recorded trial is in its checksummed log: run `psyop recover {directory}` "

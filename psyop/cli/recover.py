@@ -23,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from psyop.adaptive.recorded_stop import rebuilt_stop_record
-    from psyop.finalised import check_finalised
+    from psyop.finalised import check_finalised, unfinished_finalisation
     from psyop.session.lock import SessionInUse
     from psyop.session.log.store import expected_trial_count, finalise_session, find_sessions, read_metadata, salvage
 
@@ -36,7 +36,8 @@ def main(args: argparse.Namespace) -> int:
     for paths in sessions:
         try:
             meta = read_metadata(paths) or {}
-            if meta.get("status") == "complete" and paths.trials_parquet.is_file() and paths.frames_parquet.is_file():
+            finalised = paths.trials_parquet.is_file() and paths.frames_parquet.is_file()
+            if meta.get("status") == "complete" and finalised and not unfinished_finalisation(meta):
                 problems = check_finalised(meta, paths.directory)
                 if problems:  # a damaged (or edited) file is not silently overwritten: the user decides
                     raise UserError(f"complete, but {problems[0].describe()}; left untouched: delete the damaged "

@@ -80,11 +80,11 @@ def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "", adapt
         script = "analysis/fig_discrimination_thresholds.py" if linear_fit else "analysis/fig_detection_thresholds.py"
         return [Target(f"{study}_fits.csv", "analysis/fit_psychometric.py", f"$(STATS_SRC) {trials}",
                        f"{common} --n-jobs $(JOBS)", kind="fits"),
-                Target(f"{study}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}"),
+                Target(f"{study}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"'),
                 Target(f"supp_psychometric_{study}.png", "analysis/supp_psychometric_functions.py",
-                       f"{fits} $(DRAW_SRC)", f"{common} --fits {fits}")] + ([
+                       f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"')] + ([
                 Target(f"{study}_tracks.png", "analysis/adaptive_tracks.py",
-                       f"{fits} {trials} $(DRAW_SRC) psyop/figures/adaptive_figures.py", f"{common} --fits {fits}")]
+                       f"{fits} {trials} $(DRAW_SRC) psyop/figures/adaptive_figures.py", f'{common} --fits "{fits}"')]
                 if adaptive else [])
     figure = {"near_side": ("depth", "analysis/fig_ordinal_depth.py"), "reach": ("reach", "analysis/fig_egocentric_reach.py"),
               "preference": ("preferences", "analysis/fig_realism.py"),
@@ -140,8 +140,8 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
             where = "$(RESULTS)" if t.kind == "fits" else "$(FIGDIR)"
             label = f"fitting psychometric functions: {facts.name}" if t.kind == "fits" else \
                 f"{facts.name} ({KIND_NAMES[facts.kind]}): $@"
-            rules += [f"{where}/{t.output}: {t.script} {t.prerequisites}", f"\t@mkdir -p {where}",
-                      f"\t@echo \"[psyop] {label}\"", f"\t@$(ANALYSE) $< {t.arguments} --out $@", ""]
+            rules += [f"{where}/{t.output}: {t.script} {t.prerequisites}", f'\t@mkdir -p "{where}"',
+                      f"\t@echo \"[psyop] {label}\"", f'\t@"$(ANALYSE)" "$<" {t.arguments} --out "$@"', ""]
         said.append(f"{facts.name} ({KIND_NAMES[facts.kind]}{_versions_note(facts, len(sessions))}): "
                     + ", ".join(t.output for t in figures))
     return "\n".join(rules) + "\n", said

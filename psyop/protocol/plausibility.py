@@ -11,7 +11,7 @@ import math
 
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
-from psyop.protocol.scene import Depth
+from psyop.protocol.scene import Depth, GridPlanes
 from psyop.protocol.source import read_yaml
 from psyop.records import JsonObject, Loc
 
@@ -36,7 +36,8 @@ def _nearest_D(depth: Depth, conditions: list[JsonObject]) -> float:
 
 
 def plausibility_warnings(protocol: Protocol) -> list[tuple[Loc, str]]:
-    """(key path, message) for every depth nearer than :data:`NEAREST_SEEN_D` in some condition.
+    """(key path, message) for every depth nearer than :data:`NEAREST_SEEN_D` in some condition (and
+    a grid's nearest plane nearer than 1 / :data:`NEAREST_SEEN_D` m).
 
     Examples
     --------
@@ -53,12 +54,27 @@ def plausibility_warnings(protocol: Protocol) -> list[tuple[Loc, str]]:
                 continue
             nearest = _nearest_D(depth, conditions)
             if nearest > NEAREST_SEEN_D:
-                metres = f"{{m: {depth.D:g}}}" if depth.D is not None and depth.factor is None else "{m: ...}"
-                found.append((("scene", index, name),
-                              f"this depth reaches {nearest:g} D ({100.0 / nearest:.1f} cm from the eyes), nearer than "
-                              f"an eye can focus or a headset shows; plausible depths are 0-{NEAREST_SEEN_D:g} D "
-                              f"(optical infinity to {100.0 / NEAREST_SEEN_D:g} cm); if you meant metres, write {metres}"))
+                found.append((("scene", index, name), _too_near(depth, nearest)))
+        near_m = getattr(item, "near_m", None) if isinstance(item, GridPlanes) else None
+        if near_m is not None and 0 < near_m < 1.0 / NEAREST_SEEN_D:
+            found.append((("scene", index, "near_m"),
+                          f"the nearest plane at {near_m:g} m ({1.0 / near_m:g} D) is nearer than an eye can focus or "
+                          f"a headset shows; plausible distances are {1.0 / NEAREST_SEEN_D:g} m and farther"))
     return found
+
+
+def _too_near(depth: Depth, nearest: float) -> str:
+    """The warning for a depth that reaches ``nearest`` dioptres, with the reading the author likely meant."""
+    if depth.m is not None:
+        meant = f"if you meant dioptres, write {{D: {depth.m:g}}}"
+    elif depth.factor is None and depth.D is not None:
+        meant = f"if you meant metres, write {{m: {depth.D:g}}}"
+    else:
+        names = ", ".join(depth.factor_names)
+        meant = f"check the levels of {names} (dioptres when a name ends in _D, metres in _m)"
+    return (f"this depth reaches {nearest:g} D ({100.0 / nearest:.1f} cm from the eyes), nearer than an eye can focus "
+            f"or a headset shows; plausible depths are 0-{NEAREST_SEEN_D:g} D (optical infinity to "
+            f"{100.0 / NEAREST_SEEN_D:g} cm); {meant}")
 
 
 def located_warnings(protocol: Protocol) -> list[str]:

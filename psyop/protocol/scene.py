@@ -22,6 +22,38 @@ RenderingMode = Literal["conventional", "ocular", "reversed"]
 RENDERING_MODES: tuple[str, ...] = ("conventional", "ocular", "reversed")
 
 
+def _bare_number(value: object) -> float | None:
+    """``1``, ``1.5`` or the text ``"1"``: a depth written without its unit (None: anything else)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, (int, float)):
+        return float(value)
+    if isinstance(value, str):
+        try:
+            number = float(value)
+        except ValueError:
+            return None
+        return number if math.isfinite(number) else None
+    return None
+
+
+#: keys people write for a depth's unit, and the one psyop reads (``{d: 2}``, ``{metres: 0.5}``, ``{cm: 50}``)
+_UNIT_KEYS = {"d": "D", "dioptre": "D", "dioptres": "D", "diopter": "D", "diopters": "D", "dpt": "D",
+              "M": "m", "metre": "m", "metres": "m", "meter": "m", "meters": "m"}
+_SUBMETRE = {"cm": 100.0, "mm": 1000.0}
+
+
+def _unit_key_hint(key: str, amount: object) -> str | None:
+    number = _bare_number(amount)
+    shown = f"{number:g}" if number is not None else "..."
+    if key in _UNIT_KEYS:
+        return f"write {{{_UNIT_KEYS[key]}: {shown}}}"
+    if key in _SUBMETRE:
+        metres = f"{number / _SUBMETRE[key]:g}" if number is not None else "..."
+        return f"write it in metres, {{m: {metres}}}, or in dioptres (D)"
+    return None
+
+
 class Depth(StrictModel):
     """A distance from the eyes with an explicit unit.
 
@@ -38,8 +70,17 @@ class Depth(StrictModel):
     @model_validator(mode="before")
     @classmethod
     def _a_unit_is_given(cls, value: Any) -> Any:  # Any: pydantic validator input
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            raise ValueError(f"a depth needs its unit: write {{D: {value:g}}} (dioptres) or {{m: {value:g}}} (metres)")
+        number = _bare_number(value)
+        if number is not None:
+            raise ValueError(f"a depth needs its unit: write {{D: {number:g}}} (dioptres) or {{m: {number:g}}} (metres)")
+        if isinstance(value, Mapping):
+            for key, amount in value.items():
+                hint = _unit_key_hint(str(key), amount)
+                if hint:
+                    raise ValueError(f"'{key}' is not a depth unit; {hint}")
+        elif not isinstance(value, Depth):
+            raise ValueError("a depth is a mapping with its unit: write {D: 2} (dioptres), {m: 0.5} (metres) or "
+                             "{factor: NAME}")
         return value
 
     @model_validator(mode="after")

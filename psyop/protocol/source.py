@@ -89,10 +89,7 @@ def _walk(loader: yaml.SafeLoader, node: yaml.Node, path: Path, doc: YamlDocumen
         for key_node, value_node in node.value:
             if key_node.tag == "tag:yaml.org,2002:merge":
                 continue  # `<<: *anchor`: merged keys may be overridden; their marks stay at the anchor
-            try:
-                key = loader.construct_object(key_node, deep=True)
-            except yaml.YAMLError as error:
-                raise UserError(f"cannot read this key: {error}", doc.location(_mark(key_node))) from None
+            key = _construct_key(loader, key_node, doc)
             try:
                 hash(key)
             except TypeError:
@@ -114,14 +111,38 @@ def _walk(loader: yaml.SafeLoader, node: yaml.Node, path: Path, doc: YamlDocumen
         _check_scalar(loader, node, doc)
 
 
+def _construct_key(loader: yaml.SafeLoader, key_node: yaml.Node, doc: YamlDocument) -> Any:  # Any: a YAML key
+    """The key's value; a tagged or unreadable key (``!!timestamp foo: 1``, ``!!set [1]: 1``) is
+    one located line, as a value is (the constructor's own message spans lines and names no file)."""
+    _check_tag(loader, key_node, doc)
+    if isinstance(key_node, yaml.ScalarNode):
+        _check_scalar(loader, key_node, doc)
+    try:
+        return loader.construct_object(key_node, deep=True)
+    except _CONSTRUCT_ERRORS as error:
+        problem = getattr(error, "problem", None) or str(error).splitlines()[0]
+        raise UserError(f"cannot read this key ({str(problem)[:160]}); a key is a plain word such as `size_deg:`",
+                        doc.location(_mark(key_node))) from None
+
+
 #: explicit tags a protocol may carry (``!!str 12`` keeps a number as text); any other explicit tag
 #: (``!!binary``, ``!!set``, ``!!omap``, ``!!timestamp``, ``!!python/...``, ``!foo``) makes a value
 #: no protocol field takes, so it is refused at the value with one line
 _PLAIN_TAGS = frozenset(f"tag:yaml.org,2002:{name}" for name in ("str", "int", "float", "bool", "null", "seq", "map"))
 
 
+#: the node kind each plain tag constructs (``!!str [1]`` is refused at the value, not as a syntax error)
+_TAG_NODES = {"seq": yaml.SequenceNode, "map": yaml.MappingNode}
+
+
 def _check_tag(loader: yaml.SafeLoader, node: yaml.Node, doc: YamlDocument) -> None:
     if node.tag in _PLAIN_TAGS:
+        name = str(node.tag).rsplit(":", 1)[-1]
+        wanted = _TAG_NODES.get(name, yaml.ScalarNode)
+        if not isinstance(node, wanted):
+            what = {"seq": "a list", "map": "a mapping"}.get(name, "a single value")
+            raise UserError(f"the YAML tag !!{name} makes {what}, but a {node.id} follows it; remove the tag",
+                            doc.location(_mark(node)))
         return
     value = node.value if isinstance(node, yaml.ScalarNode) else None
     if node.tag == loader.resolve(type(node), value, (True, False)):
@@ -151,6 +172,8 @@ def _value_error(node: yaml.Node, error: BaseException, location: str) -> UserEr
     value = str(node.value)
     shown = repr(value) if len(value) <= 40 else f"{value[:40]!r}... ({len(value)} characters)"
     detail = str(error) if isinstance(error, (ValueError, TypeError, OverflowError)) else type(error).__name__
+    if tag == "true/false":
+        detail = "write true or false"
     if "digits" in detail and "integer string conversion" in detail:
         detail = f"a number with {len(value)} digits is far too long"
     return UserError(f"cannot read {shown} as {tag} ({detail[:160]}); write a valid value or quote it as text",

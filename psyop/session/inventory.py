@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import stat
 import zlib
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ from pathlib import Path
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
-from psyop.finalised import unfinished_finalisation, verify_session
+from psyop.finalised import finalisation_interrupted, verify_session
 from psyop.input_files import MAX_LOG_TABLE_BYTES, MAX_SESSION_JSON_BYTES, InputFile
 
 #: the largest log segment header read to learn a session's identity (a schema record is a few kB)
@@ -63,8 +64,9 @@ class StudySessions:
         if self.undescribed:
             extra += f"; no record says simulated, counted as real: {', '.join(self.undescribed[:5])}"
         if self.unfinished:
-            extra += ("; finalisation interrupted (finish it with `psyop recover DIR`): "
-                      + ", ".join(str(d) for d in self.unfinished[:5]))
+            extra += ("; finalisation interrupted, nothing lost (finish it: "
+                      + "; ".join(f"`psyop recover {shlex.quote(str(d))}`" for d in self.unfinished[:5])
+                      + (f"; and {len(self.unfinished) - 5} more" if len(self.unfinished) > 5 else "") + ")")
         return f"{self.study}: {self.n_simulated + self.n_real} sessions ({', '.join(kinds)}{extra})"
 
 
@@ -77,7 +79,7 @@ class SessionRecord:
     simulated: bool | None  # None: no record says
     complete: bool
     sources: tuple[str, ...]  # which records decided ``simulated``
-    #: the last run ended but its finalisation did not finish (psyop.finalised.unfinished_finalisation)
+    #: a finalisation (of a run or a recover) did not finish (psyop.finalised.finalisation_interrupted)
     unfinished: bool = False
 
 
@@ -167,7 +169,7 @@ def session_record(directory: Path, data_root: Path) -> SessionRecord | None:
     if (value := _segment_simulated(log_dir)) is not None:
         said["log header"] = value
     simulated = None if not said else all(said.values())
-    unfinished = meta is not None and unfinished_finalisation(meta)
+    unfinished = meta is not None and finalisation_interrupted(meta, directory)
     complete = meta is not None and meta.get("status") == "complete" and not unfinished
     return SessionRecord(directory, directory.parent.name.removeprefix("sub-"), simulated, complete, tuple(said),
                          unfinished)

@@ -112,3 +112,51 @@ def test_model_figures_on_a_full_disk_are_one_line(tmp_path: Path, script: str) 
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
     assert "No space left on device" in done.stderr and not out.exists()
+
+
+#: the analysis/ files that are modules, not scripts (imported by the scripts, or make's runner)
+MODULES = {"_common.py", "_twoafc.py", "paper_values.py", "batch.py"}
+SCRIPTS = sorted(p.name for p in ANALYSIS.glob("*.py") if p.name not in MODULES)
+
+
+@pytest.mark.parametrize("name", SCRIPTS)
+def test_every_analysis_script_runs_through_common_run(name: str) -> None:
+    """Every script's entry point is `sys.exit(run(main))` (analysis/_common.run: a UserError or an
+    OSError is one line and exit 2): the two optics figures were not, so a full disk was a traceback."""
+    text = (ANALYSIS / name).read_text()
+    main_block = text.split('if __name__ == "__main__":', 1)
+    assert len(main_block) == 2, f"{name}: no __main__ block"
+    assert main_block[1].strip() == "sys.exit(run(main))", f"{name}: {main_block[1].strip()!r}"
+    assert "from _common import" in text and " run" in text.split("from _common import", 1)[1].split("\n", 1)[0]
+
+
+#: every script that writes without fitting anything slow, with the arguments that reach its writes
+#: (a study script needs the data fixture's sessions; {data}, {results}, {out} are filled in);
+#: results_table.py needs the others' results first and is covered by the static test above
+WRITERS = {
+    "fig03_parallax_vs_eccentricity.py": ["--out", "{out}.png"],
+    "supp_linearity.py": ["--out", "{out}.png"],
+    "fig_realism.py": ["--data", "{data}", "--results", "{results}", "--out", "{out}.png"],
+    "fit_psychometric.py": ["--data", "{data}", "--results", "{results}", "--out", "{out}.csv", "--n-jobs", "1",
+                            "--n-bootstrap", "20", "--grid-scale", "0.5"],
+}
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EROFS])
+@pytest.mark.parametrize("name", sorted(WRITERS))
+def test_a_failing_disk_is_one_line_in_every_writing_script(tmp_path: Path, data: Path, name: str,
+                                                            code: int) -> None:
+    out = tmp_path / "out dir" / name.removesuffix(".py")
+    args = [a.format(data=data, results=tmp_path / "results", out=out) for a in WRITERS[name]]
+    fault = ("import errno, os, runpy, sys\n"
+             f"def broken(*a):\n    raise OSError({code}, os.strerror({code}))\n"
+             "os.fsync = broken\n"
+             f"sys.argv = [{str(ANALYSIS / name)!r}, *{args!r}]\n"
+             f"sys.path.insert(0, {str(ANALYSIS)!r})\n"
+             "runpy.run_path(sys.argv[0], run_name='__main__')\n")
+    done = subprocess.run([sys.executable, "-c", fault], capture_output=True, text=True, cwd=ROOT, timeout=600,
+                          env=dict(os.environ, MPLBACKEND="Agg"))
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+    assert os.strerror(code) in done.stderr and name in done.stderr, done.stderr
+    assert not list(out.parent.glob(f"{out.name}*")) if out.parent.exists() else True

@@ -50,3 +50,41 @@ def test_a_depth_without_unit_suggests_both(tmp_path: Path, capsys: pytest.Captu
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{path}:{line}:" in err and "{D: 1}" in err and "{m: 1}" in err, err
+
+
+@pytest.mark.parametrize(("new", "words"), [
+    ('    depth: "1"', ["{D: 1}", "{m: 1}"]),  # a number quoted as text was "expected a mapping of keys (Depth)"
+    ("    depth: near", ["{D: 2}", "{m: 0.5}", "{factor: NAME}"]),
+    ("    depth: {d: 1}", ["{D: 1}"]),  # was "unknown key 'd'", no reading offered
+    ("    depth: {dioptres: 2}", ["{D: 2}"]),
+    ("    depth: {metres: 0.5}", ["{m: 0.5}"]),
+    ("    depth: {cm: 50}", ["{m: 0.5}"]),
+])
+def test_a_depth_without_its_unit_says_how_to_write_it(tmp_path: Path, capsys: pytest.CaptureFixture[str], new: str,
+                                                       words: list[str]) -> None:
+    path, line = _variant(tmp_path, new)
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{path}:{line}:" in err and all(w in err for w in words), err
+
+
+def test_a_metric_depth_too_near_suggests_dioptres_not_metres(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    # {m: 0.02} was told "if you meant metres, write {m: ...}": it is metres already
+    path, line = _variant(tmp_path, "    depth: {m: 0.02}")
+    assert main(["validate", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert f"{path}:{line}:" in err and "50 D (2.0 cm" in err and "{D: 0.02}" in err and "{m:" not in err, err
+
+
+def test_a_grid_nearer_than_an_eye_focuses_is_a_located_warning(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    text = (ROOT / "protocols" / "realism.yaml").read_text()
+    old = "    near_m: 0.2 "
+    assert old in text
+    path = tmp_path / "grid.yaml"
+    path.write_text(text.replace(old, "    near_m: 0.02 ", 1))
+    line = next(i for i, t in enumerate(path.read_text().splitlines(), 1) if "near_m: 0.02" in t)
+    assert main(["validate", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{path}:{line}:" in err and "0.02 m (50 D)" in err and "0.1 m" in err, err

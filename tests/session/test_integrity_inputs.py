@@ -323,3 +323,23 @@ def test_allow_protocol_change_still_refuses_changed_values(
     edited.write_text(text)
     capsys.readouterr()
     _fails_cleanly(capsys, [*_run(edited, data), "--allow-protocol-change"], "values changed", f"'{section}'")
+
+
+def test_recover_through_a_folder_linked_outside_the_data_root_is_refused(protocol: Path, tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """`psyop recover DATA/<study>/sub-L1/ses-1` with sub-L1 -> /elsewhere wrote trials.parquet there (recover
+    builds its session paths from the folders it finds, not through session_paths' check)."""
+    import shutil
+
+    data, elsewhere = tmp_path / "data", tmp_path / "elsewhere"
+    assert cli_main(_run(protocol, data, participant="L1")) == 0
+    capsys.readouterr()
+    participant = next(data.glob("*/sub-L1"))
+    elsewhere.mkdir()
+    shutil.move(str(participant), str(elsewhere / "sub-L1"))
+    participant.symlink_to(elsewhere / "sub-L1", target_is_directory=True)
+    (elsewhere / "sub-L1" / "ses-1" / "trials.parquet").unlink()
+    before = sorted(p.name for p in (elsewhere / "sub-L1" / "ses-1").iterdir())
+    err = _fails_cleanly(capsys, ["recover", str(participant / "ses-1")], "outside the data root", str(participant))
+    assert err.count("\n") == 1
+    assert sorted(p.name for p in (elsewhere / "sub-L1" / "ses-1").iterdir()) == before  # nothing written there

@@ -102,19 +102,19 @@ def session_paths(data_root: Path, study: str, participant: str, session: int) -
     if root.exists() and not root.is_dir():
         raise UserError("the data root is not a directory; point --data at a directory", str(root))
     paths = SessionPaths(root, study, participant, session)
-    _check_inside_root(paths)
+    check_inside_root(paths)
     return paths
 
 
-def _check_inside_root(paths: SessionPaths) -> None:
+def check_inside_root(paths: SessionPaths) -> None:
     """Every write stays inside the data root: a study, participant, session or log folder that is
     a symlink to somewhere else (``data/detection/sub-L1 -> /elsewhere``) is refused, not followed."""
     real_root = paths.data_root.resolve()
     for folder in (paths.data_root / paths.study, paths.directory.parent, paths.directory, paths.log_dir):
         if folder.is_symlink() and not folder.resolve().is_relative_to(real_root):
             raise UserError(f"{folder} is a link to {folder.resolve()}, outside the data root {real_root}; psyop "
-                            "writes only inside the data root: move the folder into it (or point --data at "
-                            "the folder that holds it)", str(folder))
+                            "writes only inside the data root: move the folder into it (or use the folder that holds it as "
+                            "the data root, --data)", str(folder))
 
 
 def _short(text: str, limit: int = 40) -> str:

@@ -19,7 +19,7 @@ from psyop.errors import UserError
 from psyop.finalised import record_finalised
 from psyop.session.lock import SessionLock
 from psyop.atomic import io_error, write_atomic
-from psyop.session.log.layout import SessionPaths, stale_temp_files, write_json_atomic
+from psyop.session.log.layout import SessionPaths, check_inside_root, stale_temp_files, write_json_atomic
 from psyop.session.log.record import MAX_METADATA_BYTES as MAX_METADATA_BYTES, read_metadata, record_of
 from psyop.session.log.schema import FRAME_SCHEMA, GAZE_SCHEMA
 from psyop.session.signals import interrupts_deferred
@@ -459,7 +459,9 @@ def find_sessions(root: Path) -> Sequence[SessionPaths]:
             continue
         participant = ses_dir.parent.name.removeprefix("sub-")
         study = ses_dir.parent.parent.name
-        found[ses_dir] = SessionPaths(ses_dir.parent.parent.parent, study, participant, session)
+        paths = SessionPaths(ses_dir.parent.parent.parent, study, participant, session)
+        check_inside_root(paths)  # `psyop recover DATA/s/sub-L1/ses-1` with sub-L1 -> /elsewhere wrote there
+        found[ses_dir] = paths
     return list(found.values())
 
 
