@@ -101,16 +101,16 @@ def test_new_detection_session_rebuilds_only_detection_and_summary(built_tree: P
     os.utime(new, (later, later))
     commands = [line for line in dry_run(built_tree).splitlines() if "analysis/" in line]
     scripts = " ".join(commands)
-    assert "fit_psychometric.py --study detection" in scripts
+    assert "fit_psychometric.py\" --study detection" in scripts
     assert "fig_detection_thresholds.py" in scripts
-    assert "supp_psychometric_functions.py --study detection" in scripts
+    assert "supp_psychometric_functions.py\" --study detection" in scripts
     assert "results_table.py" in scripts
     for other in ["--study discrimination", "fig_discrimination", "fig_ordinal", "fig_egocentric", "fig_realism",
                   "fig03_parallax", "supp_linearity"]:
         assert other not in scripts, f"{other} rebuilt for a detection session"
-    assert "gaze_quality.py --study detection" in scripts
+    assert "gaze_quality.py\" --study detection" in scripts
     assert len(commands) == 5
-    assert "fig_detection_thresholds.py --study detection" in scripts  # by kind, outputs named after the study
+    assert "fig_detection_thresholds.py\" --study detection" in scripts  # by kind, outputs named after the study
 
 
 def test_a_user_study_gets_its_own_rules_and_never_a_paper_figure(built_tree: Path) -> None:
@@ -124,7 +124,7 @@ def test_a_user_study_gets_its_own_rules_and_never_a_paper_figure(built_tree: Pa
     os.utime(f, (later, later))
     out = dry_run(built_tree)
     commands = " ".join(line for line in out.splitlines() if "analysis/" in line)
-    assert "fig_ordinal_depth.py --study stereo_blocks" in commands
+    assert "fig_ordinal_depth.py\" --study stereo_blocks" in commands
     assert "stereo_blocks_depth.png" in commands
     assert "[psyop] study stereo_blocks (left/right nearer): stereo_blocks_depth.png" in out
     for paper in ("--study ordinal ", "--study detection", "fig_realism", "fig_egocentric"):
