@@ -22,8 +22,12 @@ def parse_effects(specs: list[str]) -> tuple[tuple[str, object], ...]:
             raise UserError(f"--effect {spec!r}: write KEY=VALUE, e.g. threshold_slope=0.05", "--effect")
         try:
             parsed = yaml.safe_load(value)
-        except yaml.YAMLError as exc:
-            raise UserError(f"--effect {spec!r}: value is not valid YAML ({exc})", "--effect") from None
+        except (yaml.YAMLError, ValueError, TypeError, AttributeError, KeyError) as exc:
+            # an explicit tag with a bad value (!!timestamp foo, !!int x) fails inside yaml's constructors with
+            # plain Python errors, not YAMLError
+            detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise UserError(f"--effect {spec!r}: the value is not valid YAML ({detail}); write a number, "
+                            "e.g. threshold_slope=0.05", "--effect") from None
         out.append((key, parsed))
     return tuple(out)
 

@@ -141,7 +141,7 @@ def _kind_from_columns(path: Path) -> str:
 def _protocol_factors(text: str) -> tuple[dict[str, FactorFacts], str | None, dict[str, str]]:
     try:
         document = yaml.safe_load(text) or {}
-    except yaml.YAMLError:
+    except (yaml.YAMLError, ValueError, TypeError, AttributeError, KeyError):  # a bad explicit tag fails outside YAMLError
         return {}, None, {}
     design = document.get("design") if isinstance(document, dict) else None
     factors_in = design.get("factors") if isinstance(design, dict) else None
