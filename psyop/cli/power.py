@@ -6,6 +6,7 @@ import argparse
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from typing import TYPE_CHECKING
@@ -15,7 +16,7 @@ from psyop.errors import UserError
 if TYPE_CHECKING:
     import pandas as pd
 
-    from psyop.power.run import PowerRun
+    from psyop.power.run import PowerRun, Precision
     from psyop.power.target import TargetSearch
 
 
@@ -62,6 +63,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="search the number of participants each test needs for power P (e.g. 0.8): "
                         "bracketing n = MIN, 2 MIN, 4 MIN, ... MAX, then bisection on integers, --replications "
                         "per n; reports n and its interval (docs/adaptive.md)")
+    parser.add_argument("--precision", type=float, default=None, metavar="H",
+                        help="run as many replications per n as a 95 %% CI half-width of at most H on every test's "
+                        "power needs: --replications first, then doubled up to --max-replications (docs/adaptive.md)")
+    parser.add_argument("--max-replications", type=int, default=None, metavar="R",
+                        help="--precision: the most replications per n (default 1000); an n still less precise is "
+                        "flagged")
     parser.add_argument("--min-participants", type=int, default=2, metavar="MIN",
                         help="--target-power: the smallest n tried (default 2)")
     parser.add_argument("--max-participants", type=int, default=40, metavar="MAX",
@@ -86,29 +93,35 @@ def main(args: argparse.Namespace) -> int:
 
     checkpoint = None if args.no_checkpoint else (
         args.checkpoint or (args.out / "replications" if args.out is not None else DEFAULT_DIR))
-    search = _search(args)
+    search, precision = _search(args), _precision(args)
     run = PowerRun(protocol_path=args.protocol, participants=args.participants or (4, 6, 8, 12, 19), replications=args.replications,
                    seed=args.seed, effects=parse_effects(args.effect), alpha=args.alpha, scheduler=args.scheduler,
                    jobs=max(1, args.jobs), progress=not args.no_progress and sys.stderr.isatty(),
                    checkpoint=checkpoint, lost_after_s=args.lost_after_s)
     start = time.perf_counter()
     resumed: list[int] = []
+    short: list[str] = []
     try:
-        table, target, n_studies = _run(run, search, resumed)
+        table, target, n_studies = _run(run, search, resumed, precision, short)
     except KeyboardInterrupt:
         kept = f"; the finished ones are kept in {checkpoint}/: rerun the same command to resume" if checkpoint else ""
         print(f"psyop power: interrupted{kept}", file=sys.stderr)
         return 130
     where = args.scheduler or f"{run.jobs} local process(es)"
-    again = f", {resumed[0]} of them resumed from {checkpoint}/" if resumed and resumed[0] else ""
+    again = f", {sum(resumed)} of them resumed from {checkpoint}/" if sum(resumed) else ""
     print(f"psyop power: {args.protocol} -- SIMULATED, {n_studies} studies{again} on {where} in "
           f"{time.perf_counter() - start:.1f} s (seed {args.seed}, alpha {args.alpha:g})")
     print(format_table(table))
+    for line in short:
+        print(f"psyop power: flag: {line}", file=sys.stderr)
+    per_n = (f"{run.replications} replications per n" if precision is None else
+             f"replications per n from {run.replications}, doubled up to {precision.max_replications} until every "
+             f"95% CI half-width <= {precision.half_width:g}")
     if target is not None and search is not None:
         from psyop.power.target import format_target
 
         print(f"\ntarget power {search.target_power:g} (bracketing then bisection over n = "
-              f"{search.min_participants}..{search.max_participants}, {run.replications} replications per n):")
+              f"{search.min_participants}..{search.max_participants}, {per_n}):")
         print(format_target(target))
     if args.out is not None:
         from psyop.figures.output import save_figure
@@ -140,15 +153,34 @@ def _search(args: argparse.Namespace) -> TargetSearch | None:
     return TargetSearch(args.target_power, args.min_participants, args.max_participants)
 
 
-def _run(run: PowerRun, search: TargetSearch | None,
-         resumed: list[int]) -> tuple[pd.DataFrame, pd.DataFrame | None, int]:
+def _precision(args: argparse.Namespace) -> Precision | None:
+    """The --precision rule, validated; None without --precision."""
+    from psyop.power.run import Precision
+
+    if args.precision is None:
+        if args.max_replications is not None:
+            raise UserError("--max-replications needs --precision", "--max-replications")
+        return None
+    precision = Precision(args.precision, 1000 if args.max_replications is None else args.max_replications)
+    if precision.max_replications < args.replications:
+        raise UserError(f"--max-replications ({precision.max_replications}) must be >= --replications "
+                        f"({args.replications}), the first batch", "--max-replications")
+    return precision
+
+
+def _run(run: PowerRun, search: TargetSearch | None, resumed: list[int], precision: Precision | None,
+         short: list[str]) -> tuple[pd.DataFrame, pd.DataFrame | None, int]:
     """The power table, the target table (None without a search) and the number of studies simulated."""
-    from psyop.power.run import run_power
+    from psyop.power.run import precise_power, run_power
 
     if search is None:
-        table, results = run_power(run, resumed)
+        table, results = run_power(run, resumed) if precision is None else precise_power(run, precision, resumed, short)
         return table, None, len(results)
-    from psyop.power.target import search_target
+    from psyop.power.target import evaluate_power, search_target
 
-    table, target = search_target(run, search)
+    if precision is None:
+        table, target = search_target(run, search, evaluate_power)
+    else:
+        table, target = search_target(run, search, lambda r, ns: precise_power(replace(r, participants=ns),
+                                                                                precision, resumed, short)[0])
     return table, target, int(table.groupby("participants")["n_replications"].max().sum())

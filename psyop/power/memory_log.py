@@ -3,40 +3,51 @@
 A replication's sessions are throwaway: nobody resumes, recovers or reads them after the
 analysis. :class:`MemoryLog` is what ``run_session`` records into for them (its
 ``store_factory``): each trial row, converted with the session's own trial schema exactly as the
-durable :class:`~psyop.session.log.store.SessionStore` converts it, is kept in memory; frames and
-raw gaze samples are not built (``keeps_samples`` false) and nothing is written, fsynced or
-locked. :func:`analysis_trials` then hands the sessions' tables to the analysis as
-:func:`psyop.statistics.dataset.load_dataset` would have read them back from their
-trials.parquet files (same order, same types, practice and timed-out trials left out).
+durable :class:`~psyop.session.log.store.SessionStore` converts it, is kept in memory; frames are
+never kept, raw gaze samples only for a protocol with ``quality:`` rules (``keep_gaze``: the rules'
+measures read them; otherwise the loop does not even build them, ``keeps_samples`` false), and
+nothing is written, fsynced or locked. :func:`analysis_trials` then hands the sessions' tables to
+the analysis as :func:`psyop.statistics.dataset.load_dataset` would have read them back from their
+trials.parquet files (same order, same types, practice and timed-out trials left out, and what the
+protocol's ``quality:`` rules exclude left out, measured from the same raw gaze as
+psyop.quality.session.measure_session measures a finalised session).
 ``tests/power/test_memory_log.py`` holds the two to the same frame, column by column, and the
-whole power table byte for byte, for every shipped study.
+whole power table byte for byte, for every shipped study and a protocol whose rules exclude trials.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 import pyarrow as pa
 
 from psyop import datacontract as dc
 from psyop.session.log.layout import SessionPaths
+from psyop.session.log.schema import GAZE_SCHEMA
 from psyop.records import JsonMapping, JsonObject
+
+if TYPE_CHECKING:
+    from psyop.protocol.quality import QualitySection
+    from psyop.session.plan import SessionPlan
 
 
 class MemoryLog:
-    """A session log held in memory (see the module docstring); :attr:`trials` after finalise."""
+    """A session log held in memory (see the module docstring); :attr:`trials` (and :attr:`gaze`, the raw
+    gaze stream as gaze.parquet would hold it, with ``keep_gaze``) after finalise."""
 
-    keeps_samples = False
-
-    def __init__(self, paths: SessionPaths, trial_schema: pa.Schema) -> None:
+    def __init__(self, paths: SessionPaths, trial_schema: pa.Schema, keep_gaze: bool = False) -> None:
         self.paths = paths
         self.trial_schema = trial_schema
+        self.keeps_samples = keep_gaze  # the loop builds a trial's raw gaze table only for a log that keeps it
         self.run_index = 0
         self.metadata: JsonObject = {}
         self._rows: list[JsonObject] = []
+        self._gaze: list[pa.Table] = []
         self.trials: pd.DataFrame | None = None
+        self.gaze: pd.DataFrame | None = None
 
     def open(self, metadata: JsonMapping) -> set[int]:
         self.metadata = dict(metadata)
@@ -44,9 +55,12 @@ class MemoryLog:
 
     def append_trial(self, row: JsonMapping, frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
         self._rows.append({name: row.get(name) for name in self.trial_schema.names})
+        if self.keeps_samples and gaze is not None and gaze.num_rows:  # frames: nothing a replication reads
+            self._gaze.append(gaze)
 
     def append_gaze(self, gaze: pa.Table, key: int = -1) -> None:
-        return None  # raw gaze samples: no analysis of a replication reads them
+        if self.keeps_samples and gaze.num_rows:  # samples after the last trial, as the durable log keeps them
+            self._gaze.append(gaze)
 
     def update_metadata(self, **fields: Any) -> None:  # Any: session.json values (JSON)
         self.metadata.update(fields)
@@ -63,15 +77,19 @@ class MemoryLog:
         trials = pa.Table.from_pydict(columns, schema=self.trial_schema).to_pandas()
         trials = trials.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
         self.trials = trials.reset_index(drop=True)
+        if self.keeps_samples:  # the stream in arrival order, as the durable log's salvage concatenates it
+            self.gaze = (pa.concat_tables(self._gaze, promote_options="permissive").to_pandas() if self._gaze
+                         else GAZE_SCHEMA.empty_table().to_pandas())
         self.metadata["status"] = status
         return self.trials, pd.DataFrame()
 
 
-def analysis_trials(logs: Sequence[MemoryLog]) -> pd.DataFrame:
+def analysis_trials(logs: Sequence[MemoryLog], quality: QualitySection | None = None) -> pd.DataFrame:
     """The sessions' trials in one table, as ``load_dataset(data_root, study).trials`` returns them
     (sessions in the order of their trials.parquet paths; participant str, session int; practice
-    and timed-out trials left out). The low-gaze count and warning of load_dataset are not made:
-    the power analysis reads neither."""
+    and timed-out trials left out; with ``quality`` rules, the trials and participants they exclude
+    left out, :func:`included`). The low-gaze count and warning of load_dataset and its attrs are
+    not made: the power analysis reads none of them."""
     ordered = sorted(logs, key=lambda log: log.paths.trials_parquet)
     frames = []
     for log in ordered:
@@ -85,4 +103,48 @@ def analysis_trials(logs: Sequence[MemoryLog]) -> pd.DataFrame:
         trials["session"] = trials["session"].astype(int)
     if "practice" in trials:
         trials = trials[~trials["practice"].fillna(False).astype(bool)].reset_index(drop=True)
-    return dc.drop_timeouts(trials)
+    trials = dc.drop_timeouts(trials)
+    return trials if quality is None else included(trials, ordered, quality)
+
+
+def included(trials: pd.DataFrame, logs: Sequence[MemoryLog], quality: QualitySection) -> pd.DataFrame:
+    """``trials`` less what ``quality`` excludes, as psyop.quality.included.include leaves them in
+    load_dataset: every session measured (:func:`session_measures`), the rules applied, the
+    excluded (participant, session, trial) rows and participants dropped."""
+    from psyop.quality.rules import apply_rules, included_mask
+
+    plans: dict[tuple[object, object], SessionPlan] = {}
+    measures = pd.concat([session_measures(log, plans) for log in logs], ignore_index=True)
+    keep = included_mask(trials, apply_rules(measures, quality))
+    return trials[keep].reset_index(drop=True)
+
+
+def session_measures(log: MemoryLog, plans: dict[tuple[object, object], SessionPlan]) -> pd.DataFrame:
+    """The per-trial quality measures of one in-memory session, computed as
+    psyop.quality.session.measure_session computes them from the finalised files (the plan of the
+    recorded protocol text, the simulated tracker's nominal rate and stream, the same measure calls);
+    ``plans`` caches the compiled plan per protocol text."""
+    from psyop.quality.measures import trial_measures
+    from psyop.quality.samples import gaze_grid
+    from psyop.quality.session import recorded_protocol, requested_stream_measures
+    from psyop.session.gaze.simulated import tracker_config
+    from psyop.session.plan import compile_plan
+
+    if log.trials is None or log.gaze is None:
+        raise RuntimeError(f"{log.paths.directory}: the session was not finalised with its raw gaze kept")
+    meta = log.metadata
+    key = (meta.get("protocol_text"), meta.get("protocol_file"))
+    if key not in plans:
+        plans[key] = compile_plan(recorded_protocol(meta, Path(log.paths.directory) / dc.SESSION_METADATA_FILE))
+    plan = plans[key]
+    rate, stream = None, "every_sample"
+    if meta.get("tracker") == "sim":
+        config = tracker_config(plan.observer.eye if plan.observer is not None else None, str(meta.get("participant", "")))
+        rate, stream = config.rate_hz, config.raw_stream or "requested"
+    measures, _ = trial_measures(gaze_grid(log.gaze, rate), log.trials, plan)
+    if stream == "requested":
+        measures = requested_stream_measures(measures, log.gaze)
+    measures.insert(1, "raw_stream", stream)
+    measures.insert(0, "session", int(str(meta.get("session", 1))))
+    measures.insert(0, "participant", str(meta.get("participant", "")))
+    return measures

@@ -79,8 +79,9 @@ _NOWHERE = Path("psyop-power-in-memory")
 def replication_trials(task: ReplicationTask) -> tuple[Protocol, pd.DataFrame]:
     """The protocol of ``task`` and the trial table its analysis sees, as ``psyop power`` makes it:
     each participant's session through the real ``run_session`` loop into an in-memory log
-    (psyop.power.memory_log: no files, no fsync, no parquet round trip, no frame or raw gaze
-    tables), handed over as load_dataset would have read it back. Equal, frame for frame, to
+    (psyop.power.memory_log: no files, no fsync, no parquet round trip, no frame tables, raw gaze
+    only for the protocol's quality: rules), handed over as load_dataset would have read it back
+    (the rules' exclusions left out). Equal, frame for frame, to
     :func:`replication_trials_durable` (tests/power/test_memory_log.py)."""
     from psyop.power.memory_log import MemoryLog, analysis_trials
     from psyop.schedule import compile_schedule
@@ -90,12 +91,12 @@ def replication_trials(task: ReplicationTask) -> tuple[Protocol, pd.DataFrame]:
     logs: list[MemoryLog] = []
 
     def memory_log(paths: SessionPaths, schema: pa.Schema) -> MemoryLog:
-        logs.append(MemoryLog(paths, schema))
+        logs.append(MemoryLog(paths, schema, keep_gaze=protocol.quality is not None))  # the rules' measures read it
         return logs[-1]
 
     for session in options(_NOWHERE):
         run_session(protocol, compile_schedule, session, store_factory=memory_log)
-    return protocol, analysis_trials(logs)
+    return protocol, analysis_trials(logs, protocol.quality)
 
 
 def replication_trials_durable(task: ReplicationTask) -> tuple[Protocol, pd.DataFrame]:

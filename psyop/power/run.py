@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import pandas as pd
 
+from psyop.errors import UserError
 from psyop.power.checkpoint import Checkpoint
 from psyop.power.executors import run_dask, run_local
 from psyop.power.replicate import ReplicationResult, ReplicationTask, run_replication
@@ -29,6 +30,8 @@ class PowerRun:
     checkpoint: Path | None = None
     #: a cluster without any worker for this long is lost (exit 3)
     lost_after_s: float = 60.0
+    #: the replications run are ``first_replication .. replications - 1`` (precise_power adds batches)
+    first_replication: int = 0
 
 
 def plan_tasks(run: PowerRun) -> list[ReplicationTask]:
@@ -39,7 +42,7 @@ def plan_tasks(run: PowerRun) -> list[ReplicationTask]:
     apply_effects(protocol, run.effects)  # fail here, before any worker starts
     text = run.protocol_path.read_text()
     return [ReplicationTask(text, str(run.protocol_path), run.effects, n, r, run.seed)
-            for n in run.participants for r in range(run.replications)]
+            for n in run.participants for r in range(run.first_replication, run.replications)]
 
 
 def run_power(run: PowerRun, resumed: list[int] | None = None,
@@ -75,4 +78,53 @@ def run_power(run: PowerRun, resumed: list[int] | None = None,
     for i, result in zip(todo, fresh):
         kept[i] = result
     results = [r for r in kept if r is not None]
+    return power_table(results, run.alpha), results
+
+
+@dataclass(frozen=True)
+class Precision:
+    """``--precision``: the largest half-width of a power's 95 % Clopper-Pearson interval, and the
+    most replications per n spent reaching it (``--max-replications``)."""
+
+    half_width: float
+    max_replications: int
+
+    def __post_init__(self) -> None:
+        if not 0 < self.half_width < 0.5:
+            raise UserError(f"--precision must be in (0, 0.5) (a CI half-width on power), got {self.half_width:g}",
+                            "--precision")
+        if self.max_replications < 1:
+            raise UserError(f"--max-replications must be >= 1, got {self.max_replications}", "--max-replications")
+
+
+def half_width(table: pd.DataFrame) -> float:
+    """The widest half-width of the power intervals in ``table`` (0 for an empty table)."""
+    return float(((table["ci_high"] - table["ci_low"]) / 2.0).max()) if len(table) else 0.0
+
+
+def precise_power(run: PowerRun, precision: Precision, resumed: list[int] | None = None,
+                  short: list[str] | None = None,
+                  replicate: Callable[[ReplicationTask], ReplicationResult] = run_replication,
+                  ) -> tuple[pd.DataFrame, list[ReplicationResult]]:
+    """:func:`run_power` with as many replications per n as ``precision`` needs: at each n first
+    ``run.replications``, then doubled (2R, 4R, ..., capped at ``precision.max_replications``) until
+    every test's 95 % interval at that n is at most ``precision.half_width`` either side. Replication
+    r has the same seed as in any run (only more of them are run), so a batch resumes from the
+    checkpoint like a rerun. An n whose interval is still wider at the cap is described in ``short``."""
+    results: list[ReplicationResult] = []
+    for n in run.participants:
+        at_n: list[ReplicationResult] = []
+        done, want = 0, min(run.replications, precision.max_replications)
+        while True:
+            _, fresh = run_power(replace(run, participants=(n,), replications=want, first_replication=done), resumed,
+                                 replicate)
+            at_n += fresh
+            done, widest = want, half_width(power_table(at_n, run.alpha))
+            if widest <= precision.half_width or done >= precision.max_replications:
+                break
+            want = min(2 * done, precision.max_replications)
+        if widest > precision.half_width and short is not None:
+            short.append(f"n = {n}: a 95 % CI half-width is {widest:.3f} after --max-replications "
+                         f"{precision.max_replications}, wider than --precision {precision.half_width:g}")
+        results += at_n
     return power_table(results, run.alpha), results

@@ -69,3 +69,30 @@ def test_an_in_memory_replication_writes_nothing(tmp_path: Path, monkeypatch: py
     replication_trials(_task(ROOT / "protocols" / "discrimination.yaml"))
     assert os.listdir(tmp_path) == []
     assert set(scratch.glob("psyop-power-*")) <= before
+
+
+#: a trial rule that excludes every trial whose requested gaze sample was lost (a blink at the recalibration)
+QUALITY = """
+quality:
+  trials:
+    - measure: data_loss_share
+      max: 0.0
+      reason: gaze lost during the trial (test rule)
+"""
+
+
+def test_quality_rules_exclude_the_same_trials_on_both_paths(tmp_path: Path) -> None:
+    """issue 27: a power analysis of a protocol with quality: rules analyses the included data, as
+    load_dataset gives it to the real analysis (the rules measured from the raw gaze kept in memory)."""
+    path = tmp_path / "detection_quality.yaml"
+    path.write_text((ROOT / "protocols" / "detection.yaml").read_text() + QUALITY)
+    task = _task(path)
+    protocol, memory = replication_trials(task)
+    _, durable = replication_trials_durable(task)
+    assert protocol.quality is not None and durable.attrs["n_quality_excluded"] > 0  # the rule excludes trials
+    _, unruled = replication_trials(_task(ROOT / "protocols" / "detection.yaml"))
+    assert len(memory) == len(unruled) - durable.attrs["n_quality_excluded"]
+    pd.testing.assert_frame_equal(memory, durable, check_exact=True)
+    results = [ReplicationResult(2, 0, tuple(study_tests(protocol, t)), len(t)) for t in (memory, durable)]
+    assert repr(results[0]) == repr(results[1])
+    assert power_table([results[0]]).to_csv(index=False) == power_table([results[1]]).to_csv(index=False)
