@@ -46,7 +46,7 @@ class SlowRenderer(CameraRenderer):
         SlowRenderer.calls.append((int(row["trial"]), phase.name, t_in_phase_s,
                                    frame.display_time_s if frame is not None else math.nan))
         if len(SlowRenderer.calls) % 3 == 0:
-            time.sleep(self.slow_periods * PERIOD_S)
+            time.sleep(self.slow_periods * PERIOD_S)  # not a wait: the slow frame itself, whose length the test reads back from the log
         return super().render(row, phase, mode, t_in_phase_s, fixation_m, head_pose, frame)
 
 
