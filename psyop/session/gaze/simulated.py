@@ -145,8 +145,6 @@ class SimulatedTracker:
         self._error_dir = _unit2(rng)
         self._error_grow_dir = _unit2(rng)
         self._drift_dir = _unit2(rng)
-        self._grow_floats, self._drift_floats = tuple(self._error_grow_dir.tolist()), tuple(self._drift_dir.tolist())
-        self._offset_floats: tuple[float, ...] = (0.0, 0.0)  # the cached plan offset's values (_plan_offset)
         self._plans: list[FixationPlan] = [FixationPlan("cross", 0.0)]
         self._fixations: tuple[tuple[int, float], list[tuple[float, float, float]]] | None = None
         self._delivered = 0
@@ -272,18 +270,13 @@ class SimulatedTracker:
             return GazeSample(t_s, (math.nan, math.nan, math.nan), 0.0, False)
         plan = self._plan_at(t_s)
         az, el = self._eye_angles(plan, t_s)
-        n_az, n_el, n_conf = self._noise(tick).tolist()
-        # the numpy arithmetic this replaced, on Python floats operation for operation (IEEE doubles: the
-        # same numbers; tests/session/test_simulated_eye.py's digests hold it), without small-array overhead
-        scale = math.hypot(az, el) / 15.0
-        self._plan_offset(plan)
-        (o_az, o_el), (g_az, g_el), (d_az, d_el) = self._offset_floats, self._grow_floats, self._drift_floats
-        err_az, err_el = o_az + g_az * c.error_per_15deg * scale, o_el + g_el * c.error_per_15deg * scale
-        grown = c.drift_start_deg + c.drift_deg_per_min * t_s / 60.0
-        x, y, z = _direction(az + n_az + err_az + d_az * grown, el + n_el + err_el + d_el * grown)
-        d = plan.distance_m
-        confidence = min(max(0.95 + 0.02 * n_conf / c.precision_deg, 0.0), 1.0)
-        return GazeSample(t_s, (x * d, y * d, z * d), confidence, True)
+        noise = self._noise(tick)
+        ecc = math.hypot(az, el)
+        err = self._plan_offset(plan) + self._error_grow_dir * c.error_per_15deg * (ecc / 15.0)
+        drift = self._drift_dir * (c.drift_start_deg + c.drift_deg_per_min * t_s / 60.0)
+        f = angles_to_direction(az + noise[0] + err[0] + drift[0], el + noise[1] + err[1] + drift[1]) * plan.distance_m
+        confidence = float(np.clip(0.95 + 0.02 * noise[2] / c.precision_deg, 0.0, 1.0))
+        return GazeSample(t_s, (float(f[0]), float(f[1]), float(f[2])), confidence, True)
 
     def _plan_offset(self, plan: FixationPlan) -> np.ndarray:
         """Per-plan error offset; the difference of two has mean norm ``error_centre_deg``. Drawn once per
@@ -291,7 +284,6 @@ class SimulatedTracker:
         key = (int(round(plan.start_s * 1000.0)), plan.seed)
         if self._offset_cache is None or self._offset_cache[0] != key:
             self._offset_cache = (key, self._draw_plan_offset(*key))
-            self._offset_floats = tuple(self._offset_cache[1].tolist())
         return self._offset_cache[1]
 
     def _draw_plan_offset(self, start_ms: int, plan_seed: int) -> np.ndarray:
@@ -357,9 +349,7 @@ class SimulatedTracker:
         return one_by_one
 
     def _pursuit(self, plan: FixationPlan, t_rel_s: np.ndarray) -> np.ndarray:
-        # the saccades begun by the last time asked for are all eye_positions reads there (a later one has
-        # not begun: its segment is not reached), and catch_up_schedule's prefix does not depend on its horizon
-        saccades = self.catch_ups(plan, float(np.max(t_rel_s)))
+        saccades = self.catch_ups(plan, float(np.max(t_rel_s)) + 1.0)
         return eye_positions(self._positions(plan), self._pursuit_params(), saccades, t_rel_s)
 
     def _free_block(self, plan: FixationPlan, t_rel_s: np.ndarray) -> np.ndarray:
@@ -399,14 +389,6 @@ class SimulatedTracker:
             w = (t_rel_s - start) / c.saccade_s
             return paz + w * (az - paz), pel + w * (el - pel)
         return az, el
-
-
-def _direction(azimuth_deg: float, elevation_deg: float) -> tuple[float, float, float]:
-    """:func:`~psyop.session.gaze.sample.angles_to_direction` of one sample as floats: the same numpy ufuncs on
-    the same scalars (so the same numbers), without building, broadcasting and stacking arrays."""
-    az, el = np.radians(azimuth_deg), np.radians(elevation_deg)
-    cos_el = float(np.cos(el))
-    return (cos_el * float(np.sin(az)) + 0.0, float(np.sin(el)) + 0.0, -cos_el * float(np.cos(az)) + 0.0)
 
 
 def _unit2(rng: np.random.Generator) -> np.ndarray:
