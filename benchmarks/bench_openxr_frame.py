@@ -19,30 +19,15 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from benchmarks.openxr_runtime import NO_RUNTIME, default_runtime_json
+
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _default_runtime_json() -> str:
-    """The build script's install: PSYOP_MONADO_PREFIX, else the default ../shared/openxr/build-monado.sh
-    (or PSYOP_OPENXR_DIR's) names for it; the repository names no path outside itself."""
-    prefix = os.environ.get("PSYOP_MONADO_PREFIX")
-    if not prefix:
-        folder = Path(os.environ.get("PSYOP_OPENXR_DIR") or REPO.parent / "shared" / "openxr")
-        try:
-            match = re.search(r"PSYOP_MONADO_PREFIX:-([^}]*)}", (folder / "build-monado.sh").read_text())
-        except OSError:
-            match = None
-        prefix = match.group(1) if match else None
-    if not prefix:
-        return "(no PSYOP_MONADO_PREFIX, no ../shared/openxr/build-monado.sh)"
-    return str(Path(prefix) / "share" / "openxr" / "1" / "openxr_monado.json")
 
 
 def _child(n_frames: int, blocks: int) -> dict:
@@ -95,7 +80,7 @@ def _child(n_frames: int, blocks: int) -> dict:
 
 
 def run(out: Path, quick: bool) -> str:
-    runtime = os.environ.get("XR_RUNTIME_JSON") or _default_runtime_json()
+    runtime = os.environ.get("XR_RUNTIME_JSON") or default_runtime_json() or NO_RUNTIME
     head = "## OpenXR frame path over headless (bench_openxr_frame)\n\n"
     try:
         import xr  # noqa: F401

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from psyop.errors import UserError
+from psyop.cli._session_dirs import session_dirs
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,15 +19,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from psyop import datacontract as dc
     from psyop.quality.session import measure_session, summary_lines
 
-    path: Path = args.path
-    if not path.exists():
-        raise UserError("no such session directory or data root", str(path))
-    sessions = [path] if (path / dc.TRIALS_FILE).is_file() else sorted(p.parent for p in path.rglob(dc.TRIALS_FILE))
-    if not sessions:
-        raise UserError("no sessions here (expected <study>/sub-<ID>/ses-<N>/trials.parquet)", str(path))
+    sessions = session_dirs(args.path)
     for session in sessions:
         measures, _ = measure_session(session)
         print(f"{session}:")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from psyop.cli._session_dirs import session_dirs
 from psyop.errors import UserError
 
 
@@ -38,11 +39,7 @@ def main(args: argparse.Namespace) -> int:
     from psyop.session.timing import session_report
 
     path: Path = args.path
-    if not path.exists():
-        raise UserError("no such session directory or data root", str(path))
-    sessions = [path] if (path / dc.TRIALS_FILE).is_file() else sorted(p.parent for p in path.rglob(dc.TRIALS_FILE))
-    if not sessions:
-        raise UserError("no sessions here (expected <study>/sub-<ID>/ses-<N>/trials.parquet)", str(path))
+    sessions = session_dirs(path)
     drawn = 0
     for session in sessions:
         meta = read_session_meta(session)

@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 import socket
 import struct
 import time
@@ -22,30 +21,15 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks.openxr_runtime import NO_RUNTIME, default_runtime_json
+
 REPO = Path(__file__).resolve().parents[3]
-#: the manifest below the build script's install prefix
-MANIFEST = Path("share") / "openxr" / "1" / "openxr_monado.json"
-
-
-def default_runtime_json() -> str | None:
-    """Where the build script installs Monado: PSYOP_MONADO_PREFIX, else the default the script
-    itself names (``${PSYOP_MONADO_PREFIX:-...}``), read from ../shared/openxr/build-monado.sh (or
-    PSYOP_OPENXR_DIR): the repository names no path outside itself. None without either."""
-    prefix = os.environ.get("PSYOP_MONADO_PREFIX")
-    if not prefix:
-        folder = Path(os.environ.get("PSYOP_OPENXR_DIR") or REPO.parent / "shared" / "openxr")
-        try:
-            match = re.search(r"PSYOP_MONADO_PREFIX:-([^}]*)}", (folder / "build-monado.sh").read_text())
-        except OSError:
-            return None
-        prefix = match.group(1) if match else None
-    return str(Path(prefix) / MANIFEST) if prefix else None
 
 
 def runtime_json() -> str:
     """The runtime manifest, or a skip that says why there is none."""
     path = (os.environ.get("XR_RUNTIME_JSON") or os.environ.get("PSYOP_TEST_XR_RUNTIME_JSON")
-            or default_runtime_json() or "(no PSYOP_MONADO_PREFIX, no ../shared/openxr/build-monado.sh)")
+            or default_runtime_json() or NO_RUNTIME)
     if not Path(path).is_file():
         pytest.skip(f"no OpenXR runtime: {path} does not exist and XR_RUNTIME_JSON is unset; build the test runtime "
                     "with `bash ../shared/openxr/build-monado.sh` (.ci/run does this, cached)")
