@@ -21,6 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     from psyop import datacontract as dc
     from psyop.quality.session import measure_session, summary_lines
+    from psyop.quality.validation import read_validations, validation_summary_lines
 
     path: Path = args.path
     if not path.exists():
@@ -31,6 +32,6 @@ def main(args: argparse.Namespace) -> int:
     for session in sessions:
         measures, _ = measure_session(session)
         print(f"{session}:")
-        for line in summary_lines(measures):
+        for line in summary_lines(measures) + validation_summary_lines(read_validations(session)):
             print(f"  {line}")
     return 0
