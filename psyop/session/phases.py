@@ -21,8 +21,7 @@ class PhaseSpec:
     """One timed phase.
 
     ``show``: 'cross' (drift recalibration target) | 'stimulus' (an interval) | 'blank' | 'off'
-    (display off) | 'target' (a gaze validation target: a disc ``target_size_deg`` across at Fick angles
-    ``target_deg`` from the head origin, ``target_distance_m`` away; psyop.session.validation). ``gaze``: 'cross', 'pursuit', 'free' or 'none' (what the observer looks at;
+    (display off) | 'target' (a gaze validation target: psyop.session.validation.TargetPhase). ``gaze``: 'cross', 'pursuit', 'free' or 'none' (what the observer looks at;
     drives simulated gaze). The rendering mode is the trial row's ``mode_column`` when given
     (intervals: ``mode_interval<k>``), else the fixed ``mode``. ``primitives``: the scene ids
     drawn (None: all of them). ``interval``: which interval's factor values the scene uses
@@ -38,8 +37,6 @@ class PhaseSpec:
     primitives: tuple[str, ...] | None = None
     interval: int = 0
     target_size_deg: float = 1.0
-    target_deg: tuple[float, float] = (0.0, 0.0)
-    target_distance_m: float = 1.0
 
     def __post_init__(self) -> None:
         if self.show not in ("cross", "stimulus", "blank", "off", "target"):

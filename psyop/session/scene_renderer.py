@@ -123,9 +123,9 @@ class SceneRenderer:
         if phase.show == "cross":
             return recalibration_cross_scene(centre, arm_deg=phase.target_size_deg) if watched else None
         if phase.show == "target":  # a gaze validation target, head-fixed (psyop.session.validation)
-            from psyop.session.validation import validation_target_scene
+            from psyop.session.validation import TargetPhase, validation_target_scene
 
-            return validation_target_scene(phase) if watched else None
+            return validation_target_scene(phase) if watched and isinstance(phase, TargetPhase) else None
         text = self.plan.response.participant_text
         if phase == self.plan.response.phase and text is not None:  # head-fixed, like the cross
             return text_scene(self._texts.image(text), scene_origin_m(self.protocol, centre)) if watched else None

@@ -42,15 +42,24 @@ class ValidationStopped(Exception):
     """The protocol's ``require`` was not met in ``max_attempts`` validations: the session stops."""
 
 
-def validation_phase(validation: GazeValidation, index: int) -> PhaseSpec:
+@dataclass(frozen=True)
+class TargetPhase(PhaseSpec):
+    """A phase showing one validation target (``show`` 'target'): a disc ``target_size_deg`` across at Fick
+    angles ``target_deg`` from the head origin, ``target_distance_m`` away."""
+
+    target_deg: tuple[float, float] = (0.0, 0.0)
+    target_distance_m: float = 1.0
+
+
+def validation_phase(validation: GazeValidation, index: int) -> TargetPhase:
     """The phase that shows point ``index`` (the renderer draws :func:`validation_target_scene` for it)."""
     az, el = validation.points_deg[index]
-    return PhaseSpec(f"validation_{index}", validation.point_s, "target", "cross",
+    return TargetPhase(f"validation_{index}", validation.point_s, "target", "cross",
                      target_size_deg=float(validation.target_size_deg), target_deg=(float(az), float(el)),
                      target_distance_m=float(validation.distance_m))
 
 
-def validation_target_scene(phase: PhaseSpec) -> Scene:
+def validation_target_scene(phase: TargetPhase) -> Scene:
     """A white disc ``target_size_deg`` across with a black centre (0.3 of it), facing the head origin, at
     ``target_distance_m`` along Fick angles ``target_deg`` from it, on the grey background."""
     from psyop.rendering import builders
@@ -207,7 +216,7 @@ def gaze_validator(validation: GazeValidation | None, paths: SessionPaths, store
     return GazeValidator(validation, ValidationLog(paths, store.run_index) if store.keeps_samples else None)
 
 
-def hold_target(loop: TrialLoop, phase: PhaseSpec, start_s: float) -> None:
+def hold_target(loop: TrialLoop, phase: TargetPhase, start_s: float) -> None:
     """Show ``phase``'s target from ``start_s`` for its duration, asking the tracker for gaze each frame:
     every frame rendered (a person watches) or, on the virtual clock without images, one poll per frame
     period (so a simulated tracker's requested stream has the samples to measure)."""
