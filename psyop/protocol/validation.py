@@ -49,7 +49,7 @@ class GazeValidation(StrictModel):
 
     when: list[When] = Field(min_length=1, description="start, between_blocks and/or end of the session")
     points_deg: list[tuple[Number, Number]] = Field(
-        default_factory=lambda: [list(p) for p in NINE_POINTS_DEG], min_length=1, max_length=64,
+        default_factory=lambda: list(NINE_POINTS_DEG), min_length=1, max_length=64,
         description="[azimuth, elevation] Fick angles of each target from the midpoint between the eyes, deg")
     distance_m: Number = Field(default=1.0, ge=0.25, le=20, description="the targets' distance, m")
     target_size_deg: Number = Field(default=0.5, gt=0, le=5, description="the target disc's diameter, deg")

@@ -187,8 +187,8 @@ def test_the_rendered_frame_shows_the_target_where_the_point_is() -> None:
         check = renderer.render({"trial": -1}, phase, "conventional", 0.1, (0.0, 0.0, -1.0))
         assert check.checked and check.ok
         eye = renderer.last_eye
-        img = renderer._renderer.image(eye)  # noqa: SLF001
-        camera = renderer._camera(eye, (0.0, 0.0, -1.0), "conventional", None)  # noqa: SLF001
+        img = renderer._renderer.image(eye)
+        camera = renderer._camera(eye, (0.0, 0.0, -1.0), "conventional", None)
     finally:
         renderer.close()
     from psyop.optics.angles import fick_direction
