@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import pandas as pd
@@ -30,9 +30,35 @@ from psyop.session.phases import PhaseSpec
 
 if TYPE_CHECKING:
     from psyop.rendering.scene import Scene
+    from psyop.session.clock import Clock
+    from psyop.session.frames import Display, FrameRenderer
+    from psyop.session.gaze.sample import GazeSource
     from psyop.session.log.layout import SessionPaths
     from psyop.session.log.store import SessionLog
-    from psyop.session.loop import TrialLoop
+
+
+class _Regime(Protocol):
+    @property
+    def every_frame(self) -> bool: ...
+
+
+class ValidationHost(Protocol):
+    """What a validation uses of the trial loop (psyop.session.loop.TrialLoop), read only."""
+
+    @property
+    def clock(self) -> Clock: ...
+    @property
+    def gaze(self) -> GazeSource: ...
+    @property
+    def renderer(self) -> FrameRenderer | None: ...
+    @property
+    def display(self) -> Display: ...
+    @property
+    def store(self) -> SessionLog: ...
+    @property
+    def config(self) -> _Regime: ...
+    @property
+    def frame_period_s(self) -> float: ...
 
 #: a point with fewer valid samples than this has no accuracy or precision (NaN; an attempt then fails ``require``)
 MIN_VALID_SAMPLES = 3
@@ -156,7 +182,7 @@ class GazeValidator:
     def runs_at(self, when: str) -> bool:
         return when in self.validation.when
 
-    def run(self, when: str, loop: TrialLoop, before_trial: int) -> pd.DataFrame:
+    def run(self, when: str, loop: ValidationHost, before_trial: int) -> pd.DataFrame:
         """One validation (attempts until ``require`` is met); its last attempt's rows. Raises
         :class:`ValidationStopped` when no attempt met it."""
         requirement = self.validation.require
@@ -177,7 +203,7 @@ class GazeValidator:
             + "); the session stopped before the next trial: recalibrate the tracker, then rerun the same command "
               "to resume (validation.parquet has every attempt)")
 
-    def _attempt(self, loop: TrialLoop, when: str, attempt: int, before_trial: int) -> pd.DataFrame:
+    def _attempt(self, loop: ValidationHost, when: str, attempt: int, before_trial: int) -> pd.DataFrame:
         """Show every point, then make the attempt durable (raw samples, then its rows) and return its rows."""
         v = self.validation
         start_s = loop.clock.now_s()
@@ -216,7 +242,7 @@ def gaze_validator(validation: GazeValidation | None, paths: SessionPaths, store
     return GazeValidator(validation, ValidationLog(paths, store.run_index) if store.keeps_samples else None)
 
 
-def hold_target(loop: TrialLoop, phase: TargetPhase, start_s: float) -> None:
+def hold_target(loop: ValidationHost, phase: TargetPhase, start_s: float) -> None:
     """Show ``phase``'s target from ``start_s`` for its duration, asking the tracker for gaze each frame:
     every frame rendered (a person watches) or, on the virtual clock without images, one poll per frame
     period (so a simulated tracker's requested stream has the samples to measure)."""
