@@ -225,3 +225,27 @@ def test_a_bad_section_is_one_error_at_its_line(tmp_path: Path, block: str, need
     line = next(i for i, row in enumerate(text.splitlines(), 1) if needle in row and not row.startswith("#"))
     message = str(info.value)
     assert f"study.yaml:{line}" in message and words in message, message
+
+
+def test_per_eye_accuracy_where_the_tracker_gives_both_eyes() -> None:
+    """Each eye's error is the angle between its gaze normal and the line from its centre to the target:
+    normals aimed exactly at a target 1 m ahead, one of them turned 2 deg, give 0 and 2 deg."""
+    from psyop.optics.angles import fick_direction
+    from psyop.session.validation import point_measures
+
+    n = 20
+    target_m = fick_direction(10.0, 5.0)
+    rows = {"gaze_sample_t_s": np.linspace(0.0, 0.95, n), "gaze_valid": np.ones(n, dtype=bool)}
+    for axis, value in zip("xyz", target_m):
+        rows[f"fixation_{axis}_m"] = np.full(n, value)
+    for eye, x_m, turn_deg in (("left", -0.032, 0.0), ("right", 0.032, 2.0)):
+        to_target = target_m - np.array([x_m, 0.0, 0.0])
+        az, el = fick_angles_deg(to_target)
+        normal = fick_direction(float(az) + turn_deg, float(el))
+        for i, axis in enumerate("xyz"):
+            rows[f"eye_centre_{eye}_{axis}_m"] = np.full(n, [x_m, 0.0, 0.0][i])
+            rows[f"gaze_normal_{eye}_{axis}"] = np.full(n, normal[i])
+    out = point_measures(pd.DataFrame(rows), 0.0, 1.0, (10.0, 5.0), 1.0)
+    assert out["n_valid"] == n and out["mean_error_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert out["left_mean_error_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert out["right_mean_error_deg"] == pytest.approx(2.0 * math.cos(math.radians(float(el))), rel=1e-3)
