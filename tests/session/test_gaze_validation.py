@@ -249,3 +249,22 @@ def test_per_eye_accuracy_where_the_tracker_gives_both_eyes() -> None:
     assert out["n_valid"] == n and out["mean_error_deg"] == pytest.approx(0.0, abs=1e-6)
     assert out["left_mean_error_deg"] == pytest.approx(0.0, abs=1e-6)
     assert out["right_mean_error_deg"] == pytest.approx(2.0 * math.cos(math.radians(float(el))), rel=1e-3)
+
+
+def test_every_frame_the_display_paces_the_targets_and_gaze_is_asked_for_each_frame(tmp_path: Path) -> None:
+    """A watched session (every frame through the display and the renderer, here cameras only) validates the
+    same way: one gaze request per display frame, the frames counted by the display."""
+    from psyop.schedule import compile_schedule
+    from psyop.session.runner import SessionOptions, run_session
+
+    path = _protocol(tmp_path, "gaze_validation:\n  when: [start]\n  points_deg: [[0, 0], [-10, 10]]\n")
+    options = SessionOptions(participant="S01", seed=5, data_root=tmp_path / "data", progress=False,
+                             every_frame=True, render="cameras")
+    assert run_session(load_protocol(path), compile_schedule, options).status == "complete"
+    session = tmp_path / "data" / "ordval" / "sub-S01" / "ses-1"
+    table = pd.read_parquet(session / "validation.parquet")
+    points = table[table["point"] >= 0]
+    assert len(points) == 2 and np.all(points["n_samples"] >= 88)  # 90 Hz frames over the 1 s dwell
+    assert np.all(np.abs(points["mean_error_deg"] - math.sqrt(1.0 + 2 * 0.1 ** 2)) < 0.08)
+    meta = json.loads((session / "session.json").read_text())
+    assert meta["summary"]["display"]["frames"] >= 2 * 1.5 * 90 - 2  # the validation's frames went to the display
