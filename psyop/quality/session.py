@@ -87,6 +87,8 @@ def requested_stream_measures(measures: pd.DataFrame, gaze: pd.DataFrame) -> pd.
     that were invalid (NaN for a trial that requested none; not against the nominal rate, which such a stream never meets), accuracy comes from
     the valid ones, and :data:`NEEDS_EVERY_SAMPLE` are NaN (not measurable: no silent numbers)."""
     out = measures.copy()
+    if "trial" not in out:  # no trial recorded (e.g. a session its gaze validation stopped before the first)
+        return out
     by_trial = gaze.groupby("trial")["gaze_valid"] if not gaze.empty else None
     requested = out["trial"].map(by_trial.size() if by_trial is not None else {}).fillna(0).astype(int)
     valid = out["trial"].map(by_trial.sum() if by_trial is not None else {}).fillna(0).astype(int)

@@ -71,3 +71,23 @@ def validation_summary_lines(validations: pd.DataFrame | None) -> list[str]:
             f"{int(row['n_valid'])} of {int(row['n_samples'])} samples valid; "
             + ("passed" if bool(row["passed"]) else "FAILED the protocol's gaze_validation.require"))
     return lines
+
+
+def validation_sentence(session_dirs: list[Path]) -> str:
+    """The study's gaze validations the way a methods section states them ('' when no session has any):
+    points, the median and range over sessions of each session's mean accuracy (its validations' last
+    attempts), median precision, and how many validations met the protocol's bound at the first attempt."""
+    tables = [t for t in (read_validations(d) for d in session_dirs) if t is not None and not t.empty]
+    if not tables:
+        return ""
+    done = [final_attempts(t) for t in tables]
+    per_session = pd.Series([float(d["mean_error_deg"].mean()) for d in done])
+    last = pd.concat(done, ignore_index=True)
+    overall = pd.concat([t[t["point"] == -1] for t in tables], ignore_index=True)
+    first = overall[overall["attempt"] == 1]
+    n_points = int(tables[0]["point"].max()) + 1
+    return (f"Gaze validation ({n_points} points, {len(last)} validations in {len(tables)} sessions): mean accuracy "
+            f"{per_session.median():.2f} deg (median over sessions; range {per_session.min():.2f} to "
+            f"{per_session.max():.2f} deg), precision RMS-S2S {last['precision_rms_s2s_deg'].median():.3f} deg and SD "
+            f"{last['precision_sd_deg'].median():.3f} deg (medians); {int(first['passed'].sum())} of {len(first)} "
+            "validations met the protocol's bound at the first attempt (all do without a bound).")

@@ -79,6 +79,10 @@ def test_recovers_the_simulated_accuracy_and_precision(tmp_path: Path) -> None:
     measures, _ = measure_session(session)
     first = float(overall["mean_error_deg"].iloc[0])
     assert np.allclose(measures["validation_mean_error_deg"], first)
+    from psyop.quality.included import study_quality
+
+    sentence = study_quality([session], None).sentence  # results/<study>_quality.txt's methods sentence
+    assert "Gaze validation (9 points, 2 validations in 1 sessions): mean accuracy 1.0" in sentence
 
 
 def test_precision_is_pymovements_rms_s2s_and_std_rms() -> None:
@@ -144,6 +148,10 @@ def test_the_stop_rule_ends_the_session_with_one_line_exit_3_and_loses_nothing(t
     table = pd.read_parquet(session / "validation.parquet")
     assert list(table.loc[table["point"] == -1, "attempt"]) == [1, 2]
     gaze = pd.read_parquet(session / "gaze.parquet")
+    capsys.readouterr()
+    assert cli_main(["gaze", str(session)]) == 0  # psyop gaze reads a session stopped before its first trial
+    printed = capsys.readouterr().out
+    assert printed.count("FAILED the protocol's gaze_validation.require") == 2
     own = gaze[gaze["trial"] == -1]["gaze_sample_t_s"]
     for _, point in table[table["point"] >= 0].iterrows():  # every sample measured is in the raw stream
         # measured: the samples delivered by the attempt's end; the last one or two (the tracker's latency) arrive
