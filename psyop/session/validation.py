@@ -184,14 +184,15 @@ class GazeValidator:
 
     def run(self, when: str, loop: ValidationHost, before_trial: int) -> pd.DataFrame:
         """One validation (attempts until ``require`` is met); its last attempt's rows. Raises
-        :class:`ValidationStopped` when no attempt met it."""
+        :class:`ValidationStopped` when no attempt met it. At the ``end`` no trial waits for it: it runs once,
+        ``passed`` says whether it met the bound, and the session completes."""
         requirement = self.validation.require
-        attempts = requirement.max_attempts if requirement is not None else 1
+        attempts = requirement.max_attempts if requirement is not None and when != "end" else 1
         self.n_run += 1
         rows = pd.DataFrame()
         for attempt in range(1, attempts + 1):
             rows = self._attempt(loop, when, attempt, before_trial)
-            if bool(rows["passed"].iloc[-1]):
+            if bool(rows["passed"].iloc[-1]) or when == "end":
                 return rows
         assert requirement is not None  # without one every attempt passes
         last = rows.iloc[-1]

@@ -276,3 +276,14 @@ def test_every_frame_the_display_paces_the_targets_and_gaze_is_asked_for_each_fr
     assert np.all(np.abs(points["mean_error_deg"] - math.sqrt(1.0 + 2 * 0.1 ** 2)) < 0.08)
     meta = json.loads((session / "session.json").read_text())
     assert meta["summary"]["display"]["frames"] >= 2 * 1.5 * 90 - 2  # the validation's frames went to the display
+
+
+def test_the_end_validation_runs_once_and_records_a_miss_without_stopping(tmp_path: Path) -> None:
+    path = _protocol(tmp_path, "gaze_validation:\n  when: [end]\n  points_deg: [[0, 0]]\n"
+                     "  require: {max_mean_error_deg: 0.5, max_attempts: 3}\n")
+    status, session = _run(path, tmp_path / "data")
+    assert status == "complete"
+    overall = pd.read_parquet(session / "validation.parquet").query("point == -1")
+    assert list(overall["attempt"]) == [1] and list(overall["passed"]) == [False]
+    measures, _ = measure_session(session)  # trials before the only validation get it (the first after them)
+    assert np.allclose(measures["validation_mean_error_deg"], float(overall["mean_error_deg"].iloc[0]))
