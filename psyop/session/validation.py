@@ -10,6 +10,8 @@ With ``require``, an attempt over its bounds is run again, ``max_attempts`` in a
 :class:`ValidationStopped` ends the session (exit 3, finalised incomplete, resumable).
 
 A simulated tracker is told each target (a fixation plan on the point), so a headless session validates too.
+Each target's onset is a ``phase`` event (trial -1, condition ``gaze_validation``, value ``validation_<i>``)
+for the session's outside recorders (psyop.session.events).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import pandas as pd
 
 from psyop.optics.angles import angle_between_deg, fick_angles_deg, fick_direction
 from psyop.protocol.validation import GazeValidation, ValidationRequirement
+from psyop.session.events import SessionEvent
 from psyop.session.gaze.plan import FixationPlan
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.log.validation_log import VALIDATION_SCHEMA, ValidationLog
@@ -31,6 +34,7 @@ from psyop.session.phases import PhaseSpec
 if TYPE_CHECKING:
     from psyop.rendering.scene import Scene
     from psyop.session.clock import Clock
+    from psyop.session.events import EventSink
     from psyop.session.frames import Display, FrameRenderer
     from psyop.session.gaze.sample import GazeSource
     from psyop.session.log.layout import SessionPaths
@@ -59,6 +63,8 @@ class ValidationHost(Protocol):
     def config(self) -> _Regime: ...
     @property
     def frame_period_s(self) -> float: ...
+    @property
+    def events(self) -> tuple[EventSink, ...]: ...
 
 #: a point with fewer valid samples than this has no accuracy or precision (NaN; an attempt then fails ``require``)
 MIN_VALID_SAMPLES = 3
@@ -212,6 +218,8 @@ class GazeValidator:
         for index in range(len(v.points_deg)):
             phase = validation_phase(v, index)
             loop.gaze.set_plan(FixationPlan("cross", start_s, phase.target_distance_m, centre_deg=phase.target_deg))
+            for sink in loop.events:  # outside recorders (LSL markers) see each target's onset
+                sink.emit(SessionEvent("phase", -1, "gaze_validation", start_s, phase.name))
             hold_target(loop, phase, start_s)
             windows.append((start_s + float(v.settle_s), start_s + phase.duration_s, phase))
             start_s += phase.duration_s

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -287,3 +288,50 @@ def test_the_end_validation_runs_once_and_records_a_miss_without_stopping(tmp_pa
     assert list(overall["attempt"]) == [1] and list(overall["passed"]) == [False]
     measures, _ = measure_session(session)  # trials before the only validation get it (the first after them)
     assert np.allclose(measures["validation_mean_error_deg"], float(overall["mean_error_deg"].iloc[0]))
+
+
+class _Log:
+    keeps_samples = False
+    run_index = 0
+
+
+@dataclass
+class _Host:
+    """The parts of the trial loop a validation uses (psyop.session.validation.ValidationHost)."""
+
+    clock: object
+    gaze: object
+    events: tuple
+    renderer: None = None
+    display: None = None
+    store: _Log = field(default_factory=_Log)
+    config: object = field(default_factory=lambda: type("Regime", (), {"every_frame": False})())
+    frame_period_s: float = 1 / 90
+
+
+class _Sink:
+    def __init__(self) -> None:
+        self.events: list = []
+
+    def emit(self, event) -> None:  # type: ignore[no-untyped-def]
+        self.events.append(event)
+
+    def close(self) -> None:
+        return None
+
+
+def test_each_target_onset_is_a_phase_event_for_outside_recorders() -> None:
+    from psyop.protocol.validation import GazeValidation
+    from psyop.session.clock import VirtualClock
+    from psyop.session.gaze.simulated import SimulatedTracker
+    from psyop.session.validation import GazeValidator
+
+    sink = _Sink()
+    host = _Host(clock=VirtualClock(), gaze=SimulatedTracker(7), events=(sink,))
+    validation = GazeValidation(when=["start"], points_deg=[(0.0, 0.0), (5.0, 5.0), (-5.0, 0.0)], settle_s=0.2,
+                                dwell_s=0.5)
+    rows = GazeValidator(validation).run("start", host, 0)  # type: ignore[arg-type]
+    assert [(e.kind, e.trial, e.condition, e.value) for e in sink.events] == [
+        ("phase", -1, "gaze_validation", f"validation_{i}") for i in range(3)]
+    assert [e.t_s for e in sink.events] == pytest.approx([0.0, 0.7, 1.4])
+    assert list(rows["point"]) == [0, 1, 2, -1] and rows["n_valid"].iloc[:3].min() >= 40
