@@ -335,3 +335,28 @@ def test_each_target_onset_is_a_phase_event_for_outside_recorders() -> None:
         ("phase", -1, "gaze_validation", f"validation_{i}") for i in range(3)]
     assert [e.t_s for e in sink.events] == pytest.approx([0.0, 0.7, 1.4])
     assert list(rows["point"]) == [0, 1, 2, -1] and rows["n_valid"].iloc[:3].min() >= 40
+
+
+def test_a_stop_between_blocks_keeps_the_recorded_trials_and_rerunning_resumes(tmp_path: Path) -> None:
+    """Three blocks; a bound no tracker meets stops the session at each change of block. Each rerun of the
+    same command resumes after the last recorded trial (a resumed run's first trial has no block before it
+    in that run, so it is not held back), until every trial is recorded."""
+    from psyop.cli import main as cli_main
+
+    path = _protocol(tmp_path, "gaze_validation:\n  when: [between_blocks]\n  points_deg: [[0, 0]]\n"
+                     "  require: {max_mean_error_deg: 0.001, max_attempts: 1}\n",
+                     design=("randomisation: {kind: full}", "randomisation: {kind: blocked, by: [mode]}"))
+    command = ["run", str(path), "--participant", "S01", "--tracker", "sim", "--responses", "sim", "--clock",
+               "virtual", "--data", str(tmp_path / "data"), "--no-progress"]
+    session = tmp_path / "data" / "ordval" / "sub-S01" / "ses-1"
+    recorded = []
+    for _ in range(2):
+        assert cli_main(command) == 3
+        verify_session(session)
+        recorded.append(len(pd.read_parquet(session / "trials.parquet")))
+    assert cli_main(command) == 0
+    trials = pd.read_parquet(session / "trials.parquet")
+    assert recorded == [2, 4] and len(trials) == 6  # 2 trials per block: nothing recorded was lost
+    assert json.loads((session / "session.json").read_text())["status"] == "complete"
+    overall = pd.read_parquet(session / "validation.parquet").query("point == -1")
+    assert list(overall["run"]) == [0, 1] and not overall["passed"].any()
