@@ -27,6 +27,8 @@ SIMULATED_METADATA_KEY = "psyop.simulated"
 FRAMES_FILE = "frames.parquet"
 #: the raw gaze stream: every sample the tracker delivered (psyop.session.log.schema.GAZE_SCHEMA)
 GAZE_FILE = "gaze.parquet"
+#: the gaze validations of a session whose protocol has gaze_validation: (psyop.session.log.validation_log)
+VALIDATION_FILE = "validation.parquet"
 LOG_DIR = "log"
 #: Participant IDs are BIDS labels (psyop export --bids): letters and digits only.
 PARTICIPANT_PATTERN = re.compile(r"[A-Za-z0-9]{1,64}")  # use with fullmatch: "ab\n" is refused

@@ -20,11 +20,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from psyop.quality.session import measure_session, summary_lines
+    from psyop.quality.validation import read_validations, validation_summary_lines
 
     sessions = session_dirs(args.path)
     for session in sessions:
         measures, _ = measure_session(session)
         print(f"{session}:")
-        for line in summary_lines(measures):
+        for line in summary_lines(measures) + validation_summary_lines(read_validations(session)):
             print(f"  {line}")
     return 0

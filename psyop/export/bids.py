@@ -37,7 +37,9 @@ from psyop.errors import UserError
 from psyop.export.gaze import (FRAME_LOG, RunDisplay, display_from_metadata, gaze_on_image_px, image_geometry,
                                run_display, session_gaze)
 from psyop.finalised import FINALISED_KEY, read_session_meta, verify_session
+from psyop.optics.angles import fick_direction
 from psyop.optics.display import DisplayProfile
+from psyop.quality.validation import final_attempts, read_validations
 from psyop.records import JsonMapping, JsonObject
 from psyop.session.timing import timing_column_description
 
@@ -134,6 +136,7 @@ def _export_session(directory: Path, out: Path) -> ExportedSession:
     ipd_m = float(rig["ipd_m"])
     gaze = session_gaze(directory)
     measures = _session_measures(directory)
+    validations = read_validations(directory)  # the protocol's gaze validations (None: it has none)
     beh = out / f"sub-{participant}" / f"ses-{session}" / "beh"
     beh.mkdir(parents=True, exist_ok=True)
     runs = sorted(int(r) for r in trials["run"].dropna().unique()) if "run" in trials else [0]
@@ -147,8 +150,10 @@ def _export_session(directory: Path, out: Path) -> ExportedSession:
         samples = _run_samples(gaze.samples, run_trials, gaze.source)
         for index, eye in enumerate(eyes):
             recording = f"{stem}_recording-eye{index + 1}"
+            calibration = validation_fields(validations, run, used.eyes[eye], eye, ipd_m) if validations is not None \
+                else calibration_fields(measures, run_trials, phases)
             _write_physio(beh / f"{recording}_physio", samples, used, eye, ipd_m, gaze.source, gaze.file, meta,
-                          calibration_fields(measures, run_trials, phases))
+                          calibration)
             _write_physioevents(beh / f"{recording}_physioevents", run_trials, phases, study)
     _copy_sourcedata(directory, out / "sourcedata" / study / f"sub-{participant}" / f"ses-{session}", meta)
     return ExportedSession(study, participant, session, len(runs), gaze.source, eyes, len(gaze.samples))
@@ -280,6 +285,33 @@ def calibration_fields(measures: pd.DataFrame, run_trials: pd.DataFrame,
         return fields
     rows = measures[measures["trial"].isin(run_trials["trial"].astype(int))]
     mean, largest = rows["accuracy_fixation_mean_deg"].mean(), rows["accuracy_fixation_max_deg"].max()
+    if np.isfinite(mean) and np.isfinite(largest):
+        fields["AverageCalibrationError"], fields["MaximalCalibrationError"] = float(mean), float(largest)
+    return fields
+
+
+def validation_fields(validations: pd.DataFrame, run: int, display: DisplayProfile, eye: str,
+                      ipd_m: float) -> JsonObject:
+    """BIDS eye-tracking calibration fields of one run from its gaze validations (psyop.session.validation;
+    names, types and units as bids-validator-deno 3.0.2's schema): CalibrationCount the run's validation
+    attempts; AverageCalibrationError (degrees) the mean over the run's validations (each one's last attempt)
+    of the mean error over the points; MaximalCalibrationError (degrees) the largest sample error of those
+    attempts; CalibrationType ``HV<n>`` (n points); CalibrationPosition the points on ``eye``'s image in
+    pixels (CalibrationUnit ``pixel``). The run without a validation has the count 0 and no error fields."""
+    own = validations[validations["run"] == run]
+    points = own[own["point"] >= 0].drop_duplicates("point").sort_values("point")
+    fields: JsonObject = {"CalibrationCount": int((own["point"] == -1).sum())}
+    if points.empty:
+        return fields
+    target_m = points["distance_m"].to_numpy()[:, None] * fick_direction(points["target_az_deg"].to_numpy(),
+                                                                          points["target_el_deg"].to_numpy())
+    px = gaze_on_image_px(target_m, display, eye, ipd_m)
+    fields["CalibrationType"] = f"HV{len(points)}"
+    if np.isfinite(px).all():
+        fields["CalibrationPosition"] = [[float(x), float(y)] for x, y in px]
+        fields["CalibrationUnit"] = "pixel"
+    done = final_attempts(own)
+    mean, largest = done["mean_error_deg"].mean(), done["max_error_deg"].max()
     if np.isfinite(mean) and np.isfinite(largest):
         fields["AverageCalibrationError"], fields["MaximalCalibrationError"] = float(mean), float(largest)
     return fields

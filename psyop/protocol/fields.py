@@ -14,6 +14,7 @@ Every field of every protocol model is listed here with the part of psyop that r
 - ``adaptive``: the session's adaptive levels (psyop.adaptive.session builds each procedure);
 - ``quality``: the exclusion rules at analysis time (psyop.quality.rules);
 - ``timing``: the session loop's dropped-frame rule (psyop.session.loop, psyop.protocol.timing);
+- ``gaze_validation``: the session's gaze validations (psyop.session.validation);
 - ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``).
 
 tests/protocol/test_protocol_fields.py walks the pydantic schema and checks that every field is
@@ -37,6 +38,7 @@ USERS: dict[str, tuple[str, ...]] = {
     "tracker": ("psyop/session/gaze/simulated.py",),
     "quality": ("psyop/quality/rules.py", "psyop/protocol/quality.py"),
     "timing": ("psyop/session/loop.py", "psyop/protocol/timing.py"),
+    "gaze_validation": ("psyop/session/validation.py",),
 }
 
 _SCENE_COMMON = {"id": "stimulus", "kind": "validation"}
@@ -49,7 +51,11 @@ def _scene(**fields: str) -> dict[str, str]:
 FIELD_USERS: dict[str, dict[str, str]] = {
     "Protocol": {"psyop_protocol": "validation", "study": "plan", "display": "plan", "eyes": "plan", "scene": "stimulus",
                  "trial": "plan", "design": "schedule", "response": "plan", "observer": "plan",
-                 "quality": "quality", "timing": "timing"},
+                 "quality": "quality", "timing": "timing", "gaze_validation": "gaze_validation"},
+    "GazeValidation": {k: "gaze_validation" for k in ("when", "points_deg", "distance_m", "target_size_deg", "settle_s",
+                                                      "dwell_s", "require")},
+    "ValidationRequirement": {k: "gaze_validation" for k in ("max_mean_error_deg", "max_point_error_deg",
+                                                             "max_attempts")},
     "StudyInfo": {"name": "plan", "title": "summary", "citation": "summary", "description": "summary"},
     "DisplaySpec": {"profile": "display", "eye_model": "display", "ipd": "plan", "rendering_nc": "display"},
     "RenderingNc": {"mm": "display", "scale": "display", "signed": "display"},
@@ -133,12 +139,14 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "QualityRule": {"measure": "quality", "max": "quality", "min": "quality", "reason": "quality"},
     "TimingSection": {"max_dropped_frames": "timing", "on_violation": "timing", "max_reruns": "timing"},
     "EyeOverride": {k: "tracker" for k in ("precision_deg", "pursuit_gain", "pursuit_lag_s", "blink_rate_hz",
-                                           "dropout_rate_hz", "dropout_s", "nan_burst_rate_hz")},
+                                           "dropout_rate_hz", "dropout_s", "nan_burst_rate_hz", "error_centre_deg",
+                                           "error_per_15deg", "drift_start_deg", "drift_deg_per_min")},
     "SimulatedEye": {k: "tracker" for k in ("precision_deg", "pursuit_gain", "pursuit_lag_s", "blink_rate_hz",
                                             "dropout_rate_hz", "dropout_s", "nan_burst_rate_hz", "rate_hz", "latency_s",
                                             "catch_up_threshold_deg", "main_sequence_vmax_deg_s",
                                             "main_sequence_c_deg", "blink_s", "nan_burst_s", "raw_stream",
-                                            "participants")},
+                                            "participants", "error_centre_deg", "error_per_15deg", "drift_start_deg",
+                                            "drift_deg_per_min")},
 }
 for _observer in ("Psychometric2afc", "OrdinalAccuracy", "PairwisePreference", "Reach", "NcNulling"):
     FIELD_USERS[_observer]["eye"] = "tracker"  # observer: eye: (psyop.protocol.simulated_eye)

@@ -15,6 +15,7 @@ from psyop.protocol.response import Response
 from psyop.protocol.scene import Primitive
 from psyop.protocol.timing import TimingSection
 from psyop.protocol.trial import TrialSpec
+from psyop.protocol.validation import GazeValidation
 
 
 class StudyInfo(StrictModel):
@@ -43,6 +44,7 @@ class Protocol(StrictModel):
     observer: Observer | None = None
     quality: QualitySection | None = None  # gaze-based exclusions at analysis time (psyop.protocol.quality)
     timing: TimingSection | None = None  # dropped-frame rule of a trial's intervals (psyop.protocol.timing)
+    gaze_validation: GazeValidation | None = None  # multi-point gaze checks in the headset (psyop.protocol.validation)
 
     _source_text: str = PrivateAttr(default="")
     _source_name: str = PrivateAttr(default="")

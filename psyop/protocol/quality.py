@@ -14,6 +14,7 @@ import math
 from pydantic import Field, field_validator, model_validator
 
 from psyop.protocol.base import Number, StrictModel
+from psyop.protocol.validation import VALIDATION_MEASURES
 
 #: the measures a rule may name (equal to psyop.quality.measures.TRIAL_MEASURES' keys: tests/quality)
 QUALITY_MEASURES: tuple[str, ...] = (
@@ -21,7 +22,7 @@ QUALITY_MEASURES: tuple[str, ...] = (
     "accuracy_fixation_corrected_mean_deg", "accuracy_fixation_left_mean_deg", "accuracy_fixation_right_mean_deg",
     "accuracy_pursuit_mean_deg", "accuracy_pursuit_max_deg",
     "accuracy_pursuit_corrected_mean_deg", "precision_rms_s2s_deg", "precision_sd_deg", "pursuit_gain",
-    "pursuit_lag_s", "catch_up_saccades_per_s", "n_fixations", "n_saccades")
+    "pursuit_lag_s", "catch_up_saccades_per_s", "n_fixations", "n_saccades", *VALIDATION_MEASURES)
 
 
 class QualityRule(StrictModel):

@@ -586,6 +586,20 @@ class _Checker:
                              f"'{level}' is not a rendering mode.{_suggest(str(level), list(RENDERING_MODES))} "
                              f"Modes: {', '.join(RENDERING_MODES)}")
 
+    def check_validation(self) -> None:
+        """``gaze_validation:`` against the design and the ``quality:`` rules (psyop.protocol.validation)."""
+        from psyop.protocol.validation import validation_issues
+
+        quality = self.p.quality
+        rules: list[tuple[tuple[str | int, ...], str]] = []
+        if quality is not None:
+            rules += [(("quality", "trials", i, "measure"), rule.measure) for i, rule in enumerate(quality.trials)]
+            rules += [(("quality", "participants", i, "measure"), rule.measure)
+                      for i, rule in enumerate(quality.participants)]
+        for path, message in validation_issues(self.p.gaze_validation, self.p.design.randomisation.kind == "blocked",
+                                               rules):
+            self.add(path, message)
+
     def check_observer(self) -> None:
         observer = self.p.observer
         if observer is None:
@@ -694,4 +708,5 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
     checker.check_rendering_nc(conditions)
     checker.check_unused_factors()
     checker.check_observer()
+    checker.check_validation()
     return checker.issues

@@ -28,6 +28,12 @@ class EyeOverride(StrictModel):
     dropout_rate_hz: Rate | None = None
     dropout_s: Number | None = Field(default=None, gt=0, le=60)
     nan_burst_rate_hz: Rate | None = None
+    error_centre_deg: Number | None = Field(default=None, ge=0, le=10,
+                                            description="tracker error at the centre: a random offset per target")
+    error_per_15deg: Number | None = Field(default=None, ge=0, le=10,
+                                           description="tracker error growing with eccentricity, per 15 deg")
+    drift_start_deg: Number | None = Field(default=None, ge=0, le=10, description="the session's tracker drift at 0 s")
+    drift_deg_per_min: Number | None = Field(default=None, ge=0, le=10, description="how fast that drift grows")
 
 
 class SimulatedEye(EyeOverride):

@@ -11,6 +11,7 @@ import pandas as pd
 
 from psyop import datacontract as dc
 from psyop.protocol.quality import QualitySection
+from psyop.quality.validation import validation_sentence
 from psyop.quality.rules import (
     apply_rules,
     included_mask,
@@ -53,7 +54,7 @@ def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> Stu
     n_people = measures["participant"].nunique() if not measures.empty else 0
     sentence = methods_sentence(exclusions, n_people, len(measures)) if rules is not None else \
         "No quality: section in the protocol: no gaze-based exclusions."
-    extra = unmeasured_sentence(measures, rules)
+    extra = " ".join(part for part in (unmeasured_sentence(measures, rules), validation_sentence(session_dirs)) if part)
     return StudyQuality(measures, events, exclusions, sentence + (" " + extra if extra else ""))
 
 

@@ -47,6 +47,11 @@ TRIAL_MEASURES: dict[str, str] = {
     "catch_up_saccades_per_s": "saccades per second of pursuit",
     "n_fixations": "fixations (pymovements I-VT) in the trial",
     "n_saccades": "saccades (pymovements microsaccades detector) in the trial",
+    # the session's gaze validation that speaks for the trial (psyop.quality.validation; NaN: none)
+    "validation_mean_error_deg": "mean over the validation's points of their mean angular error (deg)",
+    "validation_max_error_deg": "largest angular error of any sample of the validation (deg)",
+    "validation_precision_rms_s2s_deg": "mean over the validation's points of RMS sample-to-sample (deg)",
+    "validation_precision_sd_deg": "mean over the validation's points of the samples' SD (deg)",
 }
 
 

@@ -12,7 +12,9 @@ from psyop import datacontract as dc
 from psyop.errors import UserError
 from psyop.finalised import verify_session
 from psyop.quality.measures import trial_measures
+from psyop.protocol.validation import VALIDATION_MEASURES
 from psyop.quality.samples import gaze_grid
+from psyop.quality.validation import read_validations, trial_validation_measures
 
 if TYPE_CHECKING:
     from psyop.session.plan import SessionPlan
@@ -66,6 +68,9 @@ def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     if stream == "requested":
         measures, events = requested_stream_measures(measures, gaze), events.iloc[0:0]
     measures.insert(1, "raw_stream", stream)
+    validation = trial_validation_measures(trials, read_validations(directory))  # NaN: no gaze_validation
+    for name in VALIDATION_MEASURES:
+        measures[name] = validation[name].to_numpy()
     for table in (measures, events):
         table.insert(0, "session", int(meta.get("session", 1)))
         table.insert(0, "participant", str(meta.get("participant", "")))
@@ -82,6 +87,8 @@ def requested_stream_measures(measures: pd.DataFrame, gaze: pd.DataFrame) -> pd.
     that were invalid (NaN for a trial that requested none; not against the nominal rate, which such a stream never meets), accuracy comes from
     the valid ones, and :data:`NEEDS_EVERY_SAMPLE` are NaN (not measurable: no silent numbers)."""
     out = measures.copy()
+    if "trial" not in out:  # no trial recorded (e.g. a session its gaze validation stopped before the first)
+        return out
     by_trial = gaze.groupby("trial")["gaze_valid"] if not gaze.empty else None
     requested = out["trial"].map(by_trial.size() if by_trial is not None else {}).fillna(0).astype(int)
     valid = out["trial"].map(by_trial.sum() if by_trial is not None else {}).fillna(0).astype(int)

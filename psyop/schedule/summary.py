@@ -60,6 +60,13 @@ def summarise(protocol: Protocol) -> str:
     lines.append(f"  order: {order}")
     lines.append(f"  expected duration: {_minutes(expected_duration_s(protocol))} "
                  "(fixed phases plus expected participant-paced phases; no breaks or calibration)")
+    validation = protocol.gaze_validation
+    if validation is not None:  # not in the expected duration above: how often it runs depends on its require
+        bound = "" if validation.require is None else (f"; trials wait for a mean error <= "
+                                                       f"{validation.require.max_mean_error_deg:g} deg "
+                                                       f"({validation.require.max_attempts} attempts, then stop)")
+        lines.append(f"  gaze validation: {len(validation.points_deg)} points at {validation.distance_m:g} m, "
+                     f"~{validation.expected_s():.1f} s each, at {', '.join(validation.when)}{bound}")
     if protocol.observer is not None:
         lines.append(f"  simulated observer: {protocol.observer.kind}")
     return "\n".join(lines)

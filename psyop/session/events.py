@@ -5,7 +5,9 @@ included), response and recorded trial end; each :class:`EventSink` passes it on
 outlet, Pupil Capture's annotation plugin). ``t_s`` is on the session clock; a sink maps it onto
 its own clock. A trial the session discards (interrupted, tracker lost) has a ``trial_start`` and
 no ``trial_end``: ``trial_end`` is emitted only once the trial is durable in the log. A trial the protocol's ``timing:``
-rule discards (psyop.protocol.timing) is told with a ``timing_rerun`` event, its value the reason.
+rule discards (psyop.protocol.timing) is told with a ``timing_rerun`` event, its value the reason. Each
+target of a gaze validation (psyop.session.validation) is a ``phase`` event of trial -1, condition
+``gaze_validation``.
 """
 
 from __future__ import annotations

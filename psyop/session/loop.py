@@ -44,6 +44,7 @@ from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, rea
 from psyop.session.reach import horizontal_reach_m
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.session.timing import SessionTiming, TrialTiming
+from psyop.session.validation import GazeValidator, ValidationStopped
 from psyop.protocol.timing import TimingSection
 from psyop.schedule.rows import interval_values
 from psyop.datacontract import typed_response
@@ -121,7 +122,7 @@ def gaze_ok(valid: int, total: int, min_share: float) -> bool | None:
 
 @dataclass
 class SessionOutcome:
-    status: str  # complete | interrupted | tracker_lost | device_error | display_lost
+    status: str  # complete | interrupted | tracker_lost | device_error | display_lost | validation_failed
     n_recorded: int
     n_scheduled: int
     message: str
@@ -152,6 +153,7 @@ class TrialLoop:
         announce: Callable[[str], None] | None = None,
         adaptive: AdaptiveLevels | None = None,
         events: tuple[EventSink, ...] = (),
+        validator: GazeValidator | None = None,
     ) -> None:
         self.identity = dict(identity)  # study, participant, session
         self.phases = phases
@@ -160,6 +162,8 @@ class TrialLoop:
         self.announce = announce  # where a live session shows the response prompt (experimenter console)
         self.adaptive = adaptive  # adaptive levels: chosen before each trial from the logged history
         self.events = events  # outside recorders told of trial starts, phases, responses, ends (events.py)
+        self.validator = validator  # the protocol's gaze validations (psyop.session.validation); None: none
+        self._last_block: int | None = None  # the block of the last trial this run ran (None: none yet)
         self.clock, self.gaze, self.responses = clock, gaze, responses
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
         self.conditioner = GazeConditioner(config.confidence_threshold)
@@ -202,6 +206,7 @@ class TrialLoop:
                     bar.update(1)
                     continue
                 row = self.adaptive.fill(row) if self.adaptive is not None else row
+                self._validate_before(row)
                 self.current_trial = int(row["trial"])
                 record, frames = self._run_trial_on_display(row)
                 if self._rerun_for_timing(planned, record, queue):
@@ -215,6 +220,7 @@ class TrialLoop:
                     n_done += 1
                 n_stopped = self._recorded(record, schedule, recorded, n_stopped)
                 bar.update(1)
+            self._validate("end", -1)
             if n_done < n_total:
                 message = (f"{n_done} of {n_total} trials recorded; the other {n_total - n_done} were not run: "
                            "their conditions met the adaptive stop rule (session.json adaptive_stop)")
@@ -233,11 +239,27 @@ class TrialLoop:
         except DisplayInterrupted as exc:
             status = "display_lost"
             message = f"{exc.reason}; the trial in progress was discarded, {n_done}/{n_total} recorded"
+        except ValidationStopped as exc:
+            status, message = "validation_failed", f"{exc}; {n_done}/{n_total} recorded"
         finally:
             bar.close()
         latency = latency_summary(np.array(self._ages), self.frame_period_s)
         latency["n_frames_held"] = self._n_held
         return SessionOutcome(status, n_done, n_total, message, latency)
+
+    def _validate_before(self, row: TrialRow) -> None:
+        """The protocol's validation before this trial: at the run's first trial (``start``) or when the
+        block changes (``between_blocks``); raises ValidationStopped when its requirement is not met."""
+        block = int(row.get("block", 0))
+        previous, self._last_block = self._last_block, block
+        if previous is None:
+            self._validate("start", int(row["trial"]))
+        elif block != previous:
+            self._validate("between_blocks", int(row["trial"]))
+
+    def _validate(self, when: str, before_trial: int) -> None:
+        if self.validator is not None and self.validator.runs_at(when):
+            self.validator.run(when, self, before_trial)
 
     def _recorded(self, record: TrialRecord, schedule: pd.DataFrame, recorded: set[int], n_stopped: int) -> int:
         """After a trial is durable: its ``trial_end`` event, the adaptive procedure told (and any condition it

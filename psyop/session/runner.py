@@ -33,6 +33,7 @@ from psyop.session.log.layout import SessionPaths, session_paths, write_dataset_
 from psyop.session.log.schema import trial_schema
 from psyop.adaptive.session import AdaptiveLevels, add_log_columns
 from psyop.session.log.store import SessionLog, SessionStore, recover_tables
+from psyop.session.validation import gaze_validator
 from psyop.session.loop import LoopConfig, LoopFacts, LoopOptions, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
@@ -326,7 +327,10 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
         phases=plan.phases, clock=clock, gaze=gaze, responses=bundle.responses,
         renderer=renderer, display=bundle.display, store=store, config=config, pose=bundle.pose,
         response=plan.response, announce=announce, adaptive=adaptive, events=bundle.events,
+        validator=gaze_validator(plan.protocol.gaze_validation, opened.paths, store),
     )
+    if loop.validator is not None:
+        bundle.stack.callback(loop.validator.close)
     bundle.after_tracker_closed = lambda: store.append_gaze(
         raw_gaze_table(gaze.drain_raw(), run=store.run_index, trial=loop.current_trial), key=loop.current_trial)
     return loop.run(opened.schedule, completed), loop

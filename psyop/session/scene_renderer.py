@@ -122,6 +122,10 @@ class SceneRenderer:
         watched = self.max_images is None
         if phase.show == "cross":
             return recalibration_cross_scene(centre, arm_deg=phase.target_size_deg) if watched else None
+        if phase.show == "target":  # a gaze validation target, head-fixed (psyop.session.validation)
+            from psyop.session.validation import TargetPhase, validation_target_scene
+
+            return validation_target_scene(phase) if watched and isinstance(phase, TargetPhase) else None
         text = self.plan.response.participant_text
         if phase == self.plan.response.phase and text is not None:  # head-fixed, like the cross
             return text_scene(self._texts.image(text), scene_origin_m(self.protocol, centre)) if watched else None
@@ -144,7 +148,8 @@ class SceneRenderer:
 
         centre = self.rig.centre_m(eye)
         # the cross is built around the eye's own centre; every other scene around the scene origin
-        where = centre if phase.show == "cross" else scene_origin_m(self.protocol, centre)
+        where = centre if phase.show == "cross" else (0.0, 0.0, 0.0) if phase.show == "target" else \
+            scene_origin_m(self.protocol, centre)
         key = tuple(float(c) for c in where)
         if key not in frame_scenes:
             scene = self._world_scene(row, phase, t_in_phase_s, eye)
@@ -157,7 +162,7 @@ class SceneRenderer:
         """Whether :meth:`_scene` draws this phase head-fixed (the cross, the response text, an empty blank),
         not as the world-fixed stimulus a tracked head moves through."""
         text = phase == self.plan.response.phase and self.plan.response.participant_text is not None
-        return phase.show == "cross" or text or (phase.show == "blank" and not phase.primitives)
+        return phase.show in ("cross", "target") or text or (phase.show == "blank" and not phase.primitives)
 
     def _world_scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str) -> Scene | None:
         """:meth:`_scene` without a head pose, from the trial's cached time-independent parts."""

@@ -410,7 +410,8 @@ def seed_for(*parts: object) -> int:
 #: the fields of ``observer: eye:`` (psyop.protocol.simulated_eye) that set a SimulatedTrackerConfig field
 _EYE_FIELDS = ("rate_hz", "latency_s", "precision_deg", "pursuit_gain", "pursuit_lag_s", "catch_up_threshold_deg",
                "main_sequence_vmax_deg_s", "main_sequence_c_deg", "blink_rate_hz", "blink_s", "dropout_rate_hz",
-               "dropout_s", "nan_burst_rate_hz", "nan_burst_s", "raw_stream")
+               "dropout_s", "nan_burst_rate_hz", "nan_burst_s", "raw_stream", "error_centre_deg", "error_per_15deg",
+               "drift_start_deg", "drift_deg_per_min")
 
 
 def tracker_config(eye: SimulatedEye | None, participant: str,

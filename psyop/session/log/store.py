@@ -14,7 +14,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from psyop.session.rows import JsonMapping, JsonObject, TrialRecord, TrialRow
-from psyop.datacontract import MIN_VALID_GAZE_SHARE, low_gaze_mask
+from psyop.datacontract import MIN_VALID_GAZE_SHARE, VALIDATION_FILE, low_gaze_mask
 from psyop.errors import UserError
 from psyop.finalised import record_finalised
 from psyop.session.lock import SessionLock
@@ -23,6 +23,7 @@ from psyop.session.log.layout import SessionPaths, check_inside_root, stale_temp
 from psyop.session.log.record import MAX_METADATA_BYTES as MAX_METADATA_BYTES, read_metadata, record_of
 from psyop.session.log.schema import FRAME_SCHEMA, GAZE_SCHEMA
 from psyop.session.signals import interrupts_deferred
+from psyop.session.log.validation_log import recorded_validations
 from psyop.session.log.stream import DurableStreamWriter, is_legacy_ipc, read_segment, read_stream_tolerant
 
 #: session.json keys that must match when a session is resumed (also written into the log).
@@ -424,8 +425,13 @@ def _finalise_locked(
         _write_parquet_atomic(frames, paths.frames_parquet)  # frames and gaze first: trials.parquet never stands alone
         _write_parquet_atomic(found.gaze if found.gaze is not None else GAZE_SCHEMA.empty_table().to_pandas(),
                               paths.gaze_parquet)
+        written = [paths.trials_parquet, paths.frames_parquet, paths.gaze_parquet]
+        validations = recorded_validations(paths)  # None: the protocol validates no gaze (no file, as before)
+        if validations is not None:
+            _write_parquet_atomic(validations, paths.directory / VALIDATION_FILE)
+            written.append(paths.directory / VALIDATION_FILE)
         _write_parquet_atomic(trials, paths.trials_parquet, {"simulated": meta.get("simulated")})
-        record_finalised(meta, paths.directory, [paths.trials_parquet, paths.frames_parquet, paths.gaze_parquet])
+        record_finalised(meta, paths.directory, written)
         meta["status"] = status
         meta["n_trials_recorded"] = int(len(trials))
         meta["finalised"] = _now()
