@@ -5,11 +5,8 @@ session; gaze placed on each eye's image exactly as the renderer's camera maps p
 from __future__ import annotations
 
 import gzip
-import importlib.util
 import json
 import shutil
-import subprocess
-import sys
 from collections import Counter
 from pathlib import Path
 
@@ -25,28 +22,10 @@ from psyop.finalised import FINALISED_KEY, record_finalised
 from psyop.optics.camera import make_eye_camera
 from psyop.optics.display import DisplayProfile, VIVE_PRO
 
+from tests.export.bids_validator import validate as _validate
+
 REPO = Path(__file__).resolve().parents[2]
 STUDIES = ("detection", "discrimination", "egocentric", "ordinal", "realism")
-
-
-def _validator() -> list[str]:
-    """The validator command, or a skip that says why it cannot run here."""
-    if importlib.util.find_spec("bids_validator_deno") is None:
-        pytest.skip("bids-validator-deno is not installed (pip install -e '.[test]' installs it)")
-    exe = Path(sys.executable).with_name("bids-validator-deno")
-    command = [str(exe)] if exe.exists() else [sys.executable, "-c", "from bids_validator_deno import cli; cli()"]
-    probe = subprocess.run([*command, "--version"], capture_output=True, text=True, timeout=120)
-    if probe.returncode != 0:
-        pytest.skip(f"bids-validator-deno cannot run here (exit {probe.returncode}): {probe.stderr.strip()[:200]}")
-    return command
-
-
-def _validate(root: Path) -> tuple[int, Counter]:
-    result = subprocess.run([*_validator(), str(root), "--format", "json", "--max-rows", "-1"],
-                            capture_output=True, text=True, timeout=600)
-    report = json.loads(result.stdout)
-    issues = Counter((i["severity"], i["code"]) for i in report["issues"]["issues"])
-    return result.returncode, issues
 
 
 def _errors(issues: Counter) -> dict:

@@ -5,10 +5,7 @@ the official validator."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -16,6 +13,7 @@ import pytest
 from psyop import datacontract as dc
 from psyop.cli import main as cli_main
 from psyop.session.log.schema import TRIAL_LOG_FIELDS
+from tests.export.bids_validator import validate
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -54,12 +52,6 @@ def test_the_reach_export_describes_the_typed_columns(reach_export):
 
 def test_the_reach_export_with_the_typed_columns_passes_the_bids_validator(reach_export):
     _, out = reach_export
-    if importlib.util.find_spec("bids_validator_deno") is None:
-        pytest.skip("bids-validator-deno is not installed (pip install -e '.[test]' installs it)")
-    exe = Path(sys.executable).with_name("bids-validator-deno")
-    command = [str(exe)] if exe.exists() else [sys.executable, "-c", "from bids_validator_deno import cli; cli()"]
-    result = subprocess.run([*command, str(out), "--format", "json", "--max-rows", "-1"], capture_output=True,
-                            text=True, timeout=600)
-    issues = json.loads(result.stdout)["issues"]["issues"]
-    errors = [i["code"] for i in issues if i["severity"] == "error"]
-    assert result.returncode == 0 and not errors, errors
+    code, issues = validate(out)
+    errors = [c for (severity, c) in issues if severity == "error"]
+    assert code == 0 and not errors, errors

@@ -4,11 +4,7 @@ official validator."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import subprocess
-import sys
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -19,19 +15,9 @@ from psyop.cli import main as cli_main
 from psyop.export.gaze import display_from_metadata, gaze_on_image_px
 from psyop.optics.angles import fick_direction
 
+from tests.export.bids_validator import validate
+
 REPO = Path(__file__).resolve().parents[2]
-
-
-def _validator() -> list[str]:
-    """The validator command, or a skip that says why it cannot run here (as tests/export/test_bids_export.py)."""
-    if importlib.util.find_spec("bids_validator_deno") is None:
-        pytest.skip("bids-validator-deno is not installed (pip install -e '.[test]' installs it)")
-    exe = Path(sys.executable).with_name("bids-validator-deno")
-    command = [str(exe)] if exe.exists() else [sys.executable, "-c", "from bids_validator_deno import cli; cli()"]
-    probe = subprocess.run([*command, "--version"], capture_output=True, text=True, timeout=120)
-    if probe.returncode != 0:
-        pytest.skip(f"bids-validator-deno cannot run here (exit {probe.returncode}): {probe.stderr.strip()[:200]}")
-    return command
 
 
 def test_validations_become_the_calibration_fields_and_the_export_validates(tmp_path: Path) -> None:
@@ -62,8 +48,6 @@ def test_validations_become_the_calibration_fields_and_the_export_validates(tmp_
     display = display_from_metadata(meta, "session.json")
     expected = gaze_on_image_px(target_m, display, eye, float(meta["rig"]["ipd_m"]))
     assert np.allclose(sidecar["CalibrationPosition"], expected)
-    result = subprocess.run([*_validator(), str(out), "--format", "json", "--max-rows", "-1"],
-                            capture_output=True, text=True, timeout=600)
-    issues = Counter((i["severity"], i["code"]) for i in json.loads(result.stdout)["issues"]["issues"])
+    code, issues = validate(out)
     errors = {code: n for (severity, code), n in issues.items() if severity == "error"}
-    assert result.returncode == 0 and not errors, f"validator exit {result.returncode}: {dict(issues)}"
+    assert code == 0 and not errors, f"validator exit {code}: {dict(issues)}"
