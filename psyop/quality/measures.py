@@ -139,10 +139,11 @@ class _Samples:
 
 
 def _cross_phase(parts: _TrialParts, grid: GazeGrid, s: _Samples, fplan: FixationPlan, p_end: float,
-                 in_saccade: np.ndarray) -> None:
-    """Add a cross phase's errors (binocular, drift corrected, per eye) and still samples to ``parts``."""
+                 in_saccade: np.ndarray, recalibration: bool = True) -> None:
+    """Add a cross (or static fixation target) phase's errors (binocular, drift corrected, per eye) and still
+    samples to ``parts``; only a drift recalibration (``recalibration``) measures the drift offset."""
     taz, tel = np.full(len(s.t), fplan.centre_deg[0]), np.full(len(s.t), fplan.centre_deg[1])
-    if parts.offset is None:
+    if parts.offset is None and recalibration:
         last = s.t >= p_end - 0.25
         parts.offset = (float(np.median(s.az[last] - taz[last])), float(np.median(s.el[last] - tel[last]))) \
             if last.any() else None
@@ -230,8 +231,8 @@ def _trial_row(session: _SessionGaze, row: TrialRow, plan: SessionPlan, config: 
         ev = (events["onset_s"] >= p.start_s) & (events["onset_s"] < p.end_s)
         events.loc[ev, "trial"], events.loc[ev, "phase"] = int(row["trial"]), p.phase.name
         s = _Samples(sel, grid.az_deg[sel], grid.el_deg[sel], grid.t_s[sel])
-        if p.phase.gaze == "cross" and len(s.t):
-            _cross_phase(parts, grid, s, p.fixation, p.end_s, session.in_saccade)
+        if p.phase.gaze in ("cross", "fixate") and len(s.t):
+            _cross_phase(parts, grid, s, p.fixation, p.end_s, session.in_saccade, p.phase.gaze == "cross")
         elif p.phase.gaze == "pursuit" and p.fixation.target is not None and len(s.t):
             _pursuit_phase(parts, s, p.fixation.target, p.start_s, session.velocity[sel], session.near_saccade[sel])
             parts.pursuit_s += p.phase.duration_s

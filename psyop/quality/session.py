@@ -106,7 +106,7 @@ def summary_lines(measures: pd.DataFrame) -> list[str]:
         m = rows.median(numeric_only=True)
         lines.append(
             f"sub-{participant} ses-{session}: {len(rows)} trials; data loss {100 * rows['data_loss_share'].mean():.1f} % "
-            f"(longest gap {rows['longest_gap_s'].max():.3f} s); accuracy on the cross {m['accuracy_fixation_mean_deg']:.2f} deg "
+            f"(longest gap {rows['longest_gap_s'].max():.3f} s); accuracy on the fixation targets {m['accuracy_fixation_mean_deg']:.2f} deg "
             f"({m['accuracy_fixation_corrected_mean_deg']:.2f} deg after drift correction); precision RMS-S2S "
             f"{m['precision_rms_s2s_deg']:.3f} deg, SD {m['precision_sd_deg']:.3f} deg; pursuit gain {m['pursuit_gain']:.2f}, "
             f"lag {1000 * m['pursuit_lag_s']:.0f} ms, {rows['catch_up_saccades_per_s'].mean():.2f} catch-up saccades/s "

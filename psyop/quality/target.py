@@ -31,7 +31,7 @@ class TrialPhase:
 
 def loop_config(plan: SessionPlan) -> LoopConfig:
     """The loop's fixation and pursuit settings of ``plan`` (as the session loop built them)."""
-    return LoopConfig(**pursuit_fields(plan.fixation))
+    return LoopConfig(**pursuit_fields(plan.fixation), fixate_point=plan.fixation_point)
 
 
 def trial_phases(plan: SessionPlan, row: TrialRow, config: LoopConfig) -> Iterator[TrialPhase]:
@@ -52,7 +52,7 @@ def target_positions_deg(target: Callable[[float], tuple[float, float]], t_rel_s
 
 def target_path_deg(plan: SessionPlan, trials: pd.DataFrame, t_s: np.ndarray) -> np.ndarray:
     """The target's Fick (az, el) in degrees at each of ``t_s`` (s, session clock), shape (n, 2), as
-    :func:`psyop.quality.measures.trial_measures` measures against it: the cross's centre in a cross phase,
+    :func:`psyop.quality.measures.trial_measures` measures against it: the cross's centre in a cross phase, the static target's in a fixate phase,
     the pursuit target's path in a pursuit phase; NaN in any other phase (free viewing, display off) and
     outside the trials of ``trials`` (columns ``trial_start_s``, ``trial_end_s`` and the trial row's)."""
     t_s = np.asarray(t_s, dtype=np.float64)
@@ -64,7 +64,7 @@ def target_path_deg(plan: SessionPlan, trials: pd.DataFrame, t_s: np.ndarray) ->
             sel = (t_s >= p.start_s) & (t_s < min(p.end_s, trial_end_s))
             if not sel.any():
                 continue
-            if p.phase.gaze == "cross":
+            if p.phase.gaze in ("cross", "fixate"):
                 out[sel] = p.fixation.centre_deg
             elif p.phase.gaze == "pursuit" and p.fixation.target is not None:
                 out[sel] = target_positions_deg(p.fixation.target, t_s[sel] - p.start_s)

@@ -48,7 +48,7 @@ from psyop.session.validation import GazeValidator, ValidationStopped
 from psyop.protocol.timing import TimingSection
 from psyop.schedule.rows import interval_values
 from psyop.datacontract import typed_response
-from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, ResponsePlan, SessionPlan
+from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, FixationPoint, ResponsePlan, SessionPlan
 from psyop.session.progress import session_progress
 from psyop.session.responses.base import Response, ResponseSource
 
@@ -73,6 +73,8 @@ class LoopFacts:
     pursuit_id: str = "fixation"  # the fixation target's id: schedule columns <id>_start_deg, <id>_direction
     #: plan.fixation: when given, each trial's pursuit follows its path (factor levels of centre, radius, speed)
     pursuit_path: FixationPath | None = None
+    #: plan.fixation_point: the static fixation target 'fixate' phases look at (its centre per trial)
+    fixate_point: FixationPoint | None = None
     free_radius_deg: float = 10.0
     fixation_distance_m: float = 1.0
     hand_last_n: int = 10  # reach = mean of the last N hand samples (protocol response.average_last_samples)
@@ -83,6 +85,7 @@ class LoopFacts:
     def of_plan(cls, plan: SessionPlan) -> LoopFacts:
         """The facts of ``plan``: its display's refresh, its moving target, its response, gaze and timing rules."""
         return cls(refresh_hz=float(plan.display.refresh_hz), **pursuit_fields(plan.fixation),
+                   fixate_point=plan.fixation_point,
                    hand_last_n=plan.response.average_last_samples, min_valid_gaze_share=plan.min_valid_gaze_share,
                    timing=plan.protocol.timing)
 
@@ -564,8 +567,8 @@ def pursuit_fields(path: FixationPath | None) -> JsonObject:
 
 def fixation_plan(c: LoopFacts, phase: PhaseSpec, row: TrialRow, start_s: float) -> FixationPlan:
     """Where the observer is asked to look in ``phase`` of trial ``row`` from ``start_s`` on: the pursuit
-    target's path (the schedule fixes where it starts and which way it turns), free viewing, or the
-    cross. The loop sets it on the gaze source; psyop.quality rebuilds the target from it."""
+    target's path (the schedule fixes where it starts and which way it turns), the static fixation target
+    (where this trial draws it), free viewing, or the cross. The loop sets it on the gaze source; psyop.quality rebuilds the target from it."""
     seed = int(row.get("trial_seed", 0)) & 0xFFFFFFFF
     if phase.gaze == "pursuit":
         phase_deg = float(row.get(f"{c.pursuit_id}_start_deg", seed_for("pursuit", seed) % 360))
@@ -576,6 +579,9 @@ def fixation_plan(c: LoopFacts, phase: PhaseSpec, row: TrialRow, start_s: float)
             ecc, speed, centre = path.eccentricity_deg, path.speed_deg_s, path.centre_deg
         return FixationPlan("pursuit", start_s, c.fixation_distance_m, centre_deg=centre,
                             target=circling_target(ecc, direction * speed, phase_deg, centre))
+    if phase.gaze == "fixate" and c.fixate_point is not None:  # the static target, where this trial draws it
+        centre = c.fixate_point.centre_for(interval_values(row, max(1, phase.interval)))
+        return FixationPlan("cross", start_s, c.fixation_distance_m, centre_deg=centre)
     if phase.gaze == "free":
         return FixationPlan("free", start_s, c.fixation_distance_m, radius_deg=c.free_radius_deg,
                             seed=seed_for(seed, phase.name))

@@ -21,7 +21,7 @@ class PhaseSpec:
     """One timed phase.
 
     ``show``: 'cross' (drift recalibration target) | 'stimulus' (an interval) | 'blank' | 'off'
-    (display off) | 'target' (a gaze validation target: psyop.session.validation.TargetPhase). ``gaze``: 'cross', 'pursuit', 'free' or 'none' (what the observer looks at;
+    (display off) | 'target' (a gaze validation target: psyop.session.validation.TargetPhase). ``gaze``: 'cross', 'pursuit', 'fixate' (a static fixation target), 'free' or 'none' (what the observer looks at;
     drives simulated gaze). The rendering mode is the trial row's ``mode_column`` when given
     (intervals: ``mode_interval<k>``), else the fixed ``mode``. ``primitives``: the scene ids
     drawn (None: all of them). ``interval``: which interval's factor values the scene uses

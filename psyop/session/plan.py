@@ -43,7 +43,8 @@ from psyop.stimulus.placement import centre_angles_deg
 DEFAULT_IPD_M = 0.063
 
 __all__ = ["DEFAULT_IPD_M", "TIMEOUT_RESPONSE", "FixationPath", "ResponsePlan", "SessionPlan",
-           "compile_phases", "compile_plan", "fixation_path", "fixation_path_of",
+           "compile_phases", "compile_plan", "fixation_path", "fixation_path_of", "FixationPoint", "fixation_point",
+           "fixation_point_of",
            "session_response_kind"]
 
 
@@ -119,6 +120,45 @@ class FixationPath:
 
 
 @dataclass(frozen=True)
+class FixationPoint:
+    """A static fixation target (a ``fixation_target`` without ``path``): the observer fixates it in every
+    phase that shows the scene (gaze ``'fixate'``), as it pursues a moving one.
+
+    ``centre_deg`` is its Fick (azimuth, elevation); when its centre is ``{factor: NAME}``, ``target``
+    holds the protocol's item and :meth:`centre_for` resolves each trial's (interval's) centre by the rule
+    the stimulus builder draws it with."""
+
+    centre_deg: tuple[float, float]
+    id: str
+    target: FixationTarget | None = None
+
+    def centre_for(self, values: Mapping[str, Any]) -> tuple[float, float]:  # Any: a trial row's factor values
+        """The target's centre in a trial (interval) whose factor levels are ``values``.
+
+        Examples
+        --------
+        >>> from psyop.protocol.scene import FixationTarget
+        >>> item = FixationTarget(id="dot", kind="fixation_target", size_deg=0.5, depth={"D": 1},
+        ...                       centre_deg=[{"factor": "x_deg"}, 0])
+        >>> fixation_point_of(item).centre_for({"x_deg": 5.0})
+        (5.0, 0.0)
+        """
+        if self.target is None:
+            return self.centre_deg
+        try:
+            item = resolve_factor_fields(self.target, values)
+        except ValueError as error:
+            raise UserError(f"fixation target '{self.id}': {error}") from None
+        return centre_angles_deg(item.centre_deg)
+
+    def as_dict(self) -> dict[str, Any]:  # Any: session.json values
+        """What session.json records: the centre, or ``{factor: NAME}`` where a factor sets it."""
+        centre: Any = list(self.centre_deg) if self.target is None else \
+            self.target.model_dump(mode="json")["centre_deg"]  # Any: numbers or {factor: NAME}
+        return {"centre_deg": centre, "id": self.id}
+
+
+@dataclass(frozen=True)
 class ResponsePlan:
     """What the participant answers and how the response phase runs.
 
@@ -170,6 +210,8 @@ class SessionPlan:
     rig: EyeRig
     fixation: FixationPath | None
     adaptive: AdaptivePlan | None = None  # the adaptive level factor's procedure (psyop.adaptive.session)
+    #: the static fixation target the observer fixates (None: a moving one, or none: free viewing)
+    fixation_point: FixationPoint | None = None
     #: protocol ``trial.min_valid_gaze_share``: a trial below it is logged with ``gaze_ok`` false
     min_valid_gaze_share: float = 0.5
 
@@ -213,7 +255,7 @@ class SessionPlan:
             "adaptive": None if self.adaptive is None else {"factor": self.adaptive.factor,
                                                             "procedure": type(self.adaptive.spec).__name__},
             "min_valid_gaze_share": self.min_valid_gaze_share,
-        }
+        } | ({} if self.fixation_point is None else {"fixation_point": self.fixation_point.as_dict()})
 
 
 def _duration_s(phase: Interval | Blank | DriftRecalibration) -> float:
@@ -234,6 +276,23 @@ def fixation_path(protocol: Protocol) -> FixationPath | None:
         if isinstance(item, FixationTarget) and item.path is not None:
             return fixation_path_of(item)
     return None
+
+
+def fixation_point(protocol: Protocol) -> FixationPoint | None:
+    """The static fixation target (no ``path``), if the scene has one and no moving one."""
+    if fixation_path(protocol) is not None:
+        return None
+    for item in protocol.scene:
+        if isinstance(item, FixationTarget):
+            return fixation_point_of(item)
+    return None
+
+
+def fixation_point_of(item: FixationTarget) -> FixationPoint:
+    """The point of a static fixation target; NaN centre and ``target`` set when its centre is ``{factor: NAME}``."""
+    if any(path[0] == "centre_deg" for path, _ in factor_fields(item)):
+        return FixationPoint((math.nan, math.nan), item.id, target=item)
+    return FixationPoint(centre_angles_deg(item.centre_deg), item.id)
 
 
 def fixation_path_of(item: FixationTarget) -> FixationPath:
@@ -288,8 +347,9 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
     else:
         ipd_m, source = DEFAULT_IPD_M, "default (ipd: tracker, none reported)"
     rig = EyeRig.for_protocol_eyes(protocol.eyes, resolve_eye_model(spec), ipd_m, source, rendering_nc_rule(spec))
-    path = fixation_path(protocol)
-    phases, response_phase = compile_phases(protocol, "pursuit" if path is not None else "free")
+    path, point = fixation_path(protocol), fixation_point(protocol)
+    phases, response_phase = compile_phases(protocol, "pursuit" if path is not None else
+                                            "fixate" if point is not None else "free")
     r = protocol.response
     display_off = bool(response_phase.display_off) if response_phase is not None else False
     response = ResponsePlan(
@@ -304,6 +364,6 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
         phase=PhaseSpec("response", 0.0, "off" if display_off else "blank", "none"),
     )
     return SessionPlan(study=protocol.study.name, protocol=protocol, phases=phases, response=response,
-                       observer=protocol.observer, display=resolve_display_profile(spec), rig=rig, fixation=path,
+                       observer=protocol.observer, display=resolve_display_profile(spec), rig=rig, fixation=path, fixation_point=point,
                        adaptive=adaptive_plan(protocol),
                        min_valid_gaze_share=float(protocol.trial.min_valid_gaze_share))
