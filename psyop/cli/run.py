@@ -99,3 +99,28 @@ def _print_integrity_warnings(data_root: Path, study: str, participant: str, ses
     meta = read_metadata(session_paths(data_root, study, participant, session)) or {}
     for line in describe_integrity(meta.get("integrity") or {}):
         print(f"  {line}", file=sys.stderr)
+    line = dropped_frames_warning((meta.get("summary") or {}).get("frame_timing") or {})
+    if line:
+        print(f"  {line}", file=sys.stderr)
+
+
+def dropped_frames_warning(frame_timing: dict) -> str:
+    """One line when a real-clock run skipped display periods (the display could not keep up: the stimuli
+    kept their durations, but fewer frames showed them); '' on the virtual clock or with none skipped.
+
+    Examples
+    --------
+    >>> dropped_frames_warning({"clock": "real", "n_frames": 300, "dropped_frames": 100,
+    ...                         "dropped_frames_by_kind": {"stimulus": 90, "blank": 10}})  # doctest: +ELLIPSIS
+    'warning: 100 display periods were skipped (25.0 % of 400; 90 in stimulus phases): ...'
+    >>> dropped_frames_warning({"clock": "virtual", "n_frames": 300, "dropped_frames": 0})
+    ''
+    """
+    dropped, shown = int(frame_timing.get("dropped_frames") or 0), int(frame_timing.get("n_frames") or 0)
+    if frame_timing.get("clock") != "real" or dropped <= 0:
+        return ""
+    stimulus = int((frame_timing.get("dropped_frames_by_kind") or {}).get("stimulus", 0))
+    return (f"warning: {dropped} display periods were skipped ({100.0 * dropped / (dropped + shown):.1f} % of "
+            f"{dropped + shown}; {stimulus} in stimulus phases): the renderer could not keep up with the display; "
+            "`psyop timing` on the session shows where, and a protocol `timing: max_dropped_frames` rule marks "
+            "the trials (timing_ok)")

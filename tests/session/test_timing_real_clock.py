@@ -30,7 +30,8 @@ pytestmark = pytest.mark.slow
 
 
 def test_headless_real_clock_keeps_real_time_when_frames_cannot_keep_up(tmp_path: Path,
-                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+                                                                        monkeypatch: pytest.MonkeyPatch,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setattr(runner, "CameraRenderer", SlowRenderer)
     SlowRenderer.calls = []
     outcome = run_session(load_protocol(timing_protocol(tmp_path)), compile_schedule, SessionOptions(
@@ -39,6 +40,13 @@ def test_headless_real_clock_keeps_real_time_when_frames_cannot_keep_up(tmp_path
     assert outcome.status == "complete", outcome.message
     dropped = check_session(tmp_path / "data" / "detection" / "sub-T1" / "ses-1", SlowRenderer.calls)
     assert dropped > 0  # the frames really could not keep up (else the test proves nothing)
+    # psyop run's closing lines say so (psyop.cli.run._print_integrity_warnings, after print_outcome)
+    from psyop.cli.run import _print_integrity_warnings
+
+    capsys.readouterr()
+    _print_integrity_warnings(tmp_path / "data", "detection", "T1", 1)
+    warning = capsys.readouterr().err
+    assert "display periods were skipped" in warning and "psyop timing" in warning, warning
 
 
 WINDOW_SCRIPT = textwrap.dedent(
