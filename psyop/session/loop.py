@@ -297,11 +297,16 @@ class TrialLoop:
                 self.display.wait_until_ready()
                 return self.run_trial(row)
             except DisplayInterrupted as exc:
-                self.display_interruptions.append({"trial": int(row["trial"]), "reason": exc.reason,
-                                                   "at_s": self.clock.now_s(), "rerun": exc.rerun})
-                self.store.update_metadata(display_interruptions=list(self.display_interruptions))
+                self.note_display_interruption(int(row["trial"]), exc)
                 if not exc.rerun:
                     raise
+
+    def note_display_interruption(self, trial: int, exc: DisplayInterrupted) -> None:
+        """Record in session.json (``display_interruptions``) that the display interrupted ``trial``
+        (-1: a gaze validation)."""
+        self.display_interruptions.append({"trial": trial, "reason": exc.reason, "at_s": self.clock.now_s(),
+                                           "rerun": exc.rerun})
+        self.store.update_metadata(display_interruptions=list(self.display_interruptions))
 
     def _rerun_for_timing(self, planned: TrialRow, record: TrialRecord, queue: list[TrialRecord]) -> bool:
         """Whether the protocol's ``timing: {on_violation: rerun}`` discards this attempt: its intervals dropped

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from psyop.rendering.scene import Scene
     from psyop.session.clock import Clock
     from psyop.session.events import EventSink
-    from psyop.session.frames import Display, FrameRenderer
+    from psyop.session.frames import Display, DisplayInterrupted, FrameRenderer
     from psyop.session.gaze.sample import GazeSource
     from psyop.session.log.layout import SessionPaths
     from psyop.session.log.store import SessionLog
@@ -65,6 +65,7 @@ class ValidationHost(Protocol):
     def frame_period_s(self) -> float: ...
     @property
     def events(self) -> tuple[EventSink, ...]: ...
+    def note_display_interruption(self, trial: int, exc: DisplayInterrupted) -> None: ...
 
 #: a point with fewer valid samples than this has no accuracy or precision (NaN; an attempt then fails ``require``)
 MIN_VALID_SAMPLES = 3
@@ -197,7 +198,7 @@ class GazeValidator:
         self.n_run += 1
         rows = pd.DataFrame()
         for attempt in range(1, attempts + 1):
-            rows = self._attempt(loop, when, attempt, before_trial)
+            rows = self._attempt_on_display(loop, when, attempt, before_trial)
             if bool(rows["passed"].iloc[-1]) or when == "end":
                 return rows
         assert requirement is not None  # without one every attempt passes
@@ -209,6 +210,25 @@ class GazeValidator:
             + (f", {requirement.max_point_error_deg:g} deg per point" if requirement.max_point_error_deg else "")
             + "); the session stopped before the next trial: recalibrate the tracker, then rerun the same command "
               "to resume (validation.parquet has every attempt)")
+
+    def _attempt_on_display(self, loop: ValidationHost, when: str, attempt: int, before_trial: int) -> pd.DataFrame:
+        """One attempt once the display can show it (a headset session is FOCUSED only some time after it
+        starts). An attempt the display interrupts (focus lost) is discarded, as an interrupted trial is: its
+        raw samples are kept in gaze.parquet (trial -1), the interruption is recorded in session.json, and the
+        attempt runs again once the display is ready; an interruption that ends the display ends the session."""
+        from psyop.session.frames import DisplayInterrupted
+
+        while True:
+            loop.display.wait_until_ready()
+            try:
+                return self._attempt(loop, when, attempt, before_trial)
+            except DisplayInterrupted as exc:
+                samples = raw_gaze_table(loop.gaze.drain_raw(), run=loop.store.run_index, trial=-1)
+                if loop.store.keeps_samples:
+                    loop.store.append_gaze(samples, key=-1)
+                loop.note_display_interruption(-1, exc)
+                if not exc.rerun:
+                    raise
 
     def _attempt(self, loop: ValidationHost, when: str, attempt: int, before_trial: int) -> pd.DataFrame:
         """Show every point, then make the attempt durable (raw samples, then its rows) and return its rows."""

@@ -91,6 +91,20 @@ def test_a_session_runs_to_completion_on_the_simulated_hmd(tmp_path):
     assert frames["image_ok"].dropna().all() and frames["image_checked"].any()
 
 
+def test_a_start_validation_waits_for_focus_and_the_session_completes(tmp_path):
+    """A gaze validation at the start runs only once the headset session is FOCUSED, as a trial does: it
+    ended the session at once with display_lost (focus 'lost' in state READY) before the fix."""
+    path = _protocol(tmp_path)
+    path.write_text(path.read_text() + "gaze_validation:\n  when: [start]\n  points_deg: [[0, 0], [10, 0]]\n"
+                    "  settle_s: 0.1\n  dwell_s: 0.2\n")
+    done = _psyop_run(tmp_path, path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    meta = json.loads((_session_dir(tmp_path) / "session.json").read_text())
+    assert meta["status"] == "complete" and not meta.get("display_interruptions")
+    points = pd.read_parquet(_session_dir(tmp_path) / "validation.parquet").query("point >= 0")
+    assert len(points) == 2 and (points["n_samples"] > 0).all()
+
+
 def _inject_and_probe(tmp_path: Path, state: RemoteState, n_frames: int = 40, press_after_s: float | None = None
                       ) -> dict:
     port = free_port()
