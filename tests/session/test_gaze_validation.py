@@ -315,7 +315,7 @@ class _Host:
     gaze: object
     events: tuple
     renderer: None = None
-    display: None = None
+    display: object = field(default_factory=lambda: type("Ready", (), {"wait_until_ready": lambda self: None})())
     store: _Log = field(default_factory=_Log)
     config: object = field(default_factory=lambda: type("Regime", (), {"every_frame": False})())
     frame_period_s: float = 1 / 90
