@@ -81,14 +81,7 @@ def main(args: argparse.Namespace) -> int:
     from psyop.power.run import PowerRun
     from psyop.power.summary import format_table
 
-    if not args.protocol.exists():
-        raise UserError("protocol file not found", str(args.protocol))
-    if args.replications < 1:
-        raise UserError("--replications must be >= 1", "--replications")
-    if not 0 < args.alpha < 1:
-        raise UserError("--alpha must be in (0, 1)", "--alpha")
-    if not args.lost_after_s > 0:
-        raise UserError("--lost-after-s must be > 0", "--lost-after-s")
+    _check_args(args)
     from psyop.power.checkpoint import DEFAULT_DIR
 
     checkpoint = None if args.no_checkpoint else (
@@ -124,19 +117,35 @@ def main(args: argparse.Namespace) -> int:
               f"{search.min_participants}..{search.max_participants}, {per_n}):")
         print(format_target(target))
     if args.out is not None:
-        from psyop.figures.output import save_figure
-        from psyop.power.figure import plot_power
-
-        args.out.mkdir(parents=True, exist_ok=True)
-        from psyop.atomic import write_atomic
-
-        write_atomic(args.out / "power.csv", table.to_csv(index=False))
-        if target is not None:
-            write_atomic(args.out / "target.csv", target.to_csv(index=False))
-        save_figure(plot_power(table, f"Power by simulation: {args.protocol.name}", target), args.out / "power.png")
-        extra = f", {args.out / 'target.csv'}" if target is not None else ""
-        print(f"wrote {args.out / 'power.csv'}{extra} and {args.out / 'power.png'}", file=sys.stderr)
+        _write_outputs(args.out, args.protocol, table, target)
     return 0
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """One line naming the option for a missing protocol or an option out of its range."""
+    if not args.protocol.exists():
+        raise UserError("protocol file not found", str(args.protocol))
+    if args.replications < 1:
+        raise UserError("--replications must be >= 1", "--replications")
+    if not 0 < args.alpha < 1:
+        raise UserError("--alpha must be in (0, 1)", "--alpha")
+    if not args.lost_after_s > 0:
+        raise UserError("--lost-after-s must be > 0", "--lost-after-s")
+
+
+def _write_outputs(out: Path, protocol: Path, table: pd.DataFrame, target: pd.DataFrame | None) -> None:
+    """power.csv, target.csv (with --target-power) and power.png in ``out``."""
+    from psyop.atomic import write_atomic
+    from psyop.figures.output import save_figure
+    from psyop.power.figure import plot_power
+
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "power.csv", table.to_csv(index=False))
+    if target is not None:
+        write_atomic(out / "target.csv", target.to_csv(index=False))
+    save_figure(plot_power(table, f"Power by simulation: {protocol.name}", target), out / "power.png")
+    extra = f", {out / 'target.csv'}" if target is not None else ""
+    print(f"wrote {out / 'power.csv'}{extra} and {out / 'power.png'}", file=sys.stderr)
 
 
 def _search(args: argparse.Namespace) -> TargetSearch | None:
