@@ -21,6 +21,9 @@ from psyop.optics.eye_models import EyeModel
 from psyop.optics.ranges import IPD_M, NC_M
 from psyop.records import TrialRow
 
+#: the interpupillary distance a session uses when neither the protocol nor the tracker gives one, m
+DEFAULT_IPD_M = 0.063
+
 EYE_NAMES: tuple[str, ...] = ("left", "right")
 
 

@@ -599,6 +599,27 @@ class _Checker:
         for path, message in validation_issues(self.p.gaze_validation, self.p.design.randomisation.kind == "blocked",
                                                rules):
             self.add(path, message)
+        self.check_validation_points()
+
+    def check_validation_points(self) -> None:
+        """Every validation point inside each seen eye's field of view (at the protocol's ipd, else the
+        sessions' default: a tracker's ipd is known only when the session starts)."""
+        from psyop.optics.rig import DEFAULT_IPD_M
+        from psyop.protocol.display import FixedIpd, resolve_display_profile
+        from psyop.protocol.validation import points_off_display
+
+        validation = self.p.gaze_validation
+        if validation is None:
+            return
+        try:
+            display = resolve_display_profile(self.p.display)
+        except (ValueError, KeyError):
+            return  # the display's own error is reported where it is checked
+        ipd = self.p.display.ipd
+        ipd_m = ipd.mm / 1000.0 if isinstance(ipd, FixedIpd) else DEFAULT_IPD_M
+        eyes = ("left", "right") if self.p.eyes == "stereo" else (self.p.eyes,)
+        for index, message in points_off_display(validation, display, eyes, ipd_m):
+            self.add(("gaze_validation", "points_deg", index), message)
 
     def check_observer(self) -> None:
         observer = self.p.observer

@@ -11,10 +11,13 @@ whose errors are small enough: it is run again up to ``max_attempts`` times, the
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 from pydantic import Field, field_validator
 
+from psyop.optics.angles import fick_direction
+from psyop.optics.display import DisplayProfile
 from psyop.protocol.base import Integer, Number, StrictModel
 
 #: the default point set: 9 points, a 3 x 3 grid over +-15 deg (centre first)
@@ -101,3 +104,41 @@ def validation_issues(validation: GazeValidation | None, blocked: bool,
                 issues.append((path, f"{measure} needs a gaze_validation: section (nothing measures it); "
                                      "add one or drop the rule"))
     return issues
+
+
+def points_off_display(validation: GazeValidation, display: DisplayProfile, eyes: tuple[str, ...],
+                       ipd_m: float) -> list[tuple[int, str]]:
+    """(point index, message) for every point whose target disc is not wholly inside the display's frustum of
+    each eye that sees it (from the eye's centre of rotation, ``ipd_m`` apart; the point at ``distance_m``
+    from their midpoint): a point the participant is never shown measures nothing.
+
+    Examples
+    --------
+    >>> narrow = DisplayProfile("narrow", 400, 400, 90.0, -0.27, 0.27, -0.27, 0.27)  # about +-15 deg
+    >>> v = GazeValidation(when=["start"], points_deg=[(0, 0), (10, 0), (20, 0)])
+    >>> [i for i, _ in points_off_display(v, narrow, ("left", "right"), 0.063)]
+    [2]
+    """
+    radius_deg = float(validation.target_size_deg) / 2
+    out: list[tuple[int, str]] = []
+    for index, (az_deg, el_deg) in enumerate(validation.points_deg):
+        target_m = fick_direction(float(az_deg), float(el_deg)) * float(validation.distance_m)
+        for eye in eyes:
+            x_m = target_m[0] - (-ipd_m / 2 if eye == "left" else ipd_m / 2)
+            forward_m = -float(target_m[2])
+            left, right, bottom, top = display.frustum_tangents(eye)
+            if forward_m <= 0:
+                inside = False
+            else:
+                h_deg = math.degrees(math.atan2(x_m, forward_m))
+                v_deg = math.degrees(math.atan2(float(target_m[1]), math.hypot(x_m, forward_m)))
+                inside = (math.degrees(math.atan(left)) <= h_deg - radius_deg and
+                          h_deg + radius_deg <= math.degrees(math.atan(right)) and
+                          math.degrees(math.atan(bottom)) <= v_deg - radius_deg and
+                          v_deg + radius_deg <= math.degrees(math.atan(top)))
+            if not inside:
+                out.append((index, f"point [{az_deg:g}, {el_deg:g}] at {float(validation.distance_m):g} m is not "
+                                   f"inside the {eye} eye's field of view of display '{display.name}' "
+                                   f"(ipd {ipd_m * 1000:g} mm): the participant would never see it; move it inward"))
+                break
+    return out

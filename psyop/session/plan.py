@@ -26,7 +26,7 @@ from psyop.datacontract import TIMEOUT_RESPONSE
 from psyop.errors import UserError
 from psyop.optics.display import DisplayProfile
 from psyop.optics.ranges import IPD_M
-from psyop.optics.rig import EyeRig
+from psyop.optics.rig import DEFAULT_IPD_M, EyeRig
 from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
@@ -40,7 +40,6 @@ from psyop.session.responses.base import ResponseKind
 from psyop.stimulus.placement import centre_angles_deg
 
 #: ipd used when the protocol says ``ipd: tracker`` and the tracker reports none (recorded as such).
-DEFAULT_IPD_M = 0.063
 
 __all__ = ["DEFAULT_IPD_M", "TIMEOUT_RESPONSE", "FixationPath", "ResponsePlan", "SessionPlan",
            "compile_phases", "compile_plan", "fixation_path", "fixation_path_of", "FixationPoint", "fixation_point",

@@ -230,6 +230,23 @@ def test_the_rendered_frame_shows_the_target_where_the_point_is() -> None:
     assert (float(az), float(el)) == pytest.approx((10.0, -5.0))
 
 
+def test_a_point_outside_the_displays_field_of_view_is_refused_at_its_line() -> None:
+    narrow = ORDINAL.replace("profile: vive_pro ",
+                             "profile: {name: narrow, width_px: 400, height_px: 400, refresh_hz: 90, "
+                             "horizontal_fov_deg: 30, vertical_fov_deg: 30} ")
+    assert narrow != ORDINAL
+    ok = narrow + "\ngaze_validation:\n  when: [start]\n  points_deg: [[0, 0], [10, 0], [0, -12]]\n"
+    parse_protocol(ok, "study.yaml")  # inside +-15 deg, less the disc and the eye's offset: shown
+    with pytest.raises(UserError) as info:
+        parse_protocol(narrow + "\ngaze_validation:\n  when: [start]\n  points_deg: [[0, 0], [20, 0]]\n",
+                       "study.yaml")
+    message = str(info.value)
+    assert "points_deg[1]" in message and "[20, 0]" in message and "never see it" in message, message
+    with pytest.raises(UserError) as info:  # the default 9 points reach +-15 deg: not wholly inside +-15
+        parse_protocol(narrow + "\ngaze_validation:\n  when: [start]\n", "study.yaml")
+    assert "never see it" in str(info.value)
+
+
 @pytest.mark.parametrize(("block", "needle", "words"), [
     ("gaze_validation:\n  when: [between_blocks]\n", "between_blocks", "needs blocks"),
     ("gaze_validation:\n  when: [start]\n  points_deg: [[0, 0], [50, 0]]\n", "points_deg", "outside +-40"),
