@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from psyop.cli._session_dirs import session_dirs
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,6 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from psyop.cli._session_dirs import session_dirs
     from psyop.quality.session import measure_session, summary_lines
     from psyop.quality.validation import read_validations, validation_summary_lines
 

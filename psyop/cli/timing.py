@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from psyop.cli._session_dirs import session_dirs
 from psyop.errors import UserError
 
 
@@ -31,6 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from psyop.cli._session_dirs import session_dirs
     import pandas as pd
 
     from psyop import datacontract as dc

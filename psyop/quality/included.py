@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 
 from psyop import datacontract as dc
+from psyop.protocol.model import Protocol
 from psyop.protocol.quality import QualitySection
 from psyop.quality.validation import validation_sentence
 from psyop.quality.rules import (
@@ -30,17 +31,31 @@ class StudyQuality:
     sentence: str
 
 
-def quality_rules(session_dirs: list[Path]) -> QualitySection | None:
-    """The ``quality:`` section of the protocol the first of ``session_dirs`` that recorded one has (None: no
-    rules; a session.json without its protocol text, as in hand-made test tables, has none)."""
+def _first_recorded_protocol(session_dirs: list[Path]) -> Protocol | None:
+    """The protocol the first of ``session_dirs`` that recorded one ran (None: none did; a session.json
+    without its protocol text, as in hand-made test tables)."""
     from psyop.quality.session import recorded_protocol
 
     for directory in session_dirs:
         meta_path = Path(directory) / dc.SESSION_METADATA_FILE
         meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
         if "protocol_text" in meta:
-            return recorded_protocol(meta, meta_path).quality
+            return recorded_protocol(meta, meta_path)
     return None
+
+
+def quality_rules(session_dirs: list[Path]) -> QualitySection | None:
+    """The ``quality:`` section of the protocol the first of ``session_dirs`` that recorded one has (None: no
+    rules)."""
+    protocol = _first_recorded_protocol(session_dirs)
+    return None if protocol is None else protocol.quality
+
+
+def validation_bounded(session_dirs: list[Path]) -> bool:
+    """Whether that protocol states ``gaze_validation.require`` (its validations can fail)."""
+    protocol = _first_recorded_protocol(session_dirs)
+    validation = None if protocol is None else protocol.gaze_validation
+    return validation is not None and validation.require is not None
 
 
 def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> StudyQuality:
@@ -54,7 +69,8 @@ def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> Stu
     n_people = measures["participant"].nunique() if not measures.empty else 0
     sentence = methods_sentence(exclusions, n_people, len(measures)) if rules is not None else \
         "No quality: section in the protocol: no gaze-based exclusions."
-    extra = " ".join(part for part in (unmeasured_sentence(measures, rules), validation_sentence(session_dirs)) if part)
+    validations = validation_sentence(session_dirs, validation_bounded(session_dirs))
+    extra = " ".join(part for part in (unmeasured_sentence(measures, rules), validations) if part)
     return StudyQuality(measures, events, exclusions, sentence + (" " + extra if extra else ""))
 
 

@@ -73,23 +73,7 @@ def validation_summary_lines(validations: pd.DataFrame | None) -> list[str]:
     return lines
 
 
-def validation_bounded(session_dirs: list[Path]) -> bool:
-    """Whether the protocol the first of ``session_dirs`` recorded states ``gaze_validation.require`` (a
-    session.json without its protocol text, as in hand-made test tables, states none)."""
-    import json
-
-    from psyop.quality.session import recorded_protocol
-
-    for directory in session_dirs:
-        meta_path = Path(directory) / dc.SESSION_METADATA_FILE
-        meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-        if "protocol_text" in meta:
-            validation = recorded_protocol(meta, meta_path).gaze_validation
-            return validation is not None and validation.require is not None
-    return False
-
-
-def validation_sentence(session_dirs: list[Path]) -> str:
+def validation_sentence(session_dirs: list[Path], bounded: bool) -> str:
     """The study's gaze validations the way a methods section states them ('' when no session has any):
     points, the median and range over sessions of each session's mean accuracy (its validations' last
     attempts), median precision, and how many validations met the protocol's bound at the first attempt."""
@@ -107,5 +91,5 @@ def validation_sentence(session_dirs: list[Path]) -> str:
             f"{per_session.max():.2f} deg), precision RMS-S2S {last['precision_rms_s2s_deg'].median():.3f} deg and SD "
             f"{last['precision_sd_deg'].median():.3f} deg (medians); "
             + (f"{int(first['passed'].sum())} of {len(first)} validations met the protocol's bound at the first "
-               "attempt." if validation_bounded(session_dirs) else
+               "attempt." if bounded else
                "the protocol states no bound (gaze_validation.require), so none was held back."))

@@ -129,17 +129,21 @@ def test_an_attempt_over_the_bound_is_run_again_and_the_next_one_lets_trials_go_
     assert list(overall["passed"]) == [False] * better[0] + [True]
     assert list(overall["mean_error_deg"]) == pytest.approx(errors[:better[0] + 1])
     assert len(pd.read_parquet(session / "trials.parquet")) == 6
+    from psyop.quality.included import validation_bounded
     from psyop.quality.validation import validation_sentence
-    assert "0 of 1 validations met the protocol's bound at the first attempt." in validation_sentence([session])
+    assert validation_bounded([session])
+    assert "0 of 1 validations met the protocol's bound at the first attempt." in validation_sentence([session], True)
 
 
 def test_without_a_bound_the_methods_sentence_counts_no_passes(tmp_path: Path) -> None:
+    from psyop.quality.included import validation_bounded
     from psyop.quality.validation import validation_sentence
 
     path = _protocol(tmp_path, "gaze_validation:\n  when: [start]\n  points_deg: [[0, 0]]\n")
     status, session = _run(path, tmp_path / "data")
     assert status == "complete"
-    sentence = validation_sentence([session])
+    assert not validation_bounded([session])
+    sentence = validation_sentence([session], False)
     assert "states no bound (gaze_validation.require)" in sentence and "met the protocol's bound" not in sentence
 
 
