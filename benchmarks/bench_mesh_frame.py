@@ -4,7 +4,9 @@ its area is the disc's times (n / 2 pi) sin(2 pi / n): 0.0007 % less at 1k trian
 analytic, mesh, ...), median of the per-pair ratios; and the slope: the mesh frame's median ms and the
 ratio, each fitted by least squares against the triangle count over the rows, per 100k triangles. And the
 CPU side of an egocentric frame with the dining-room mesh against the same frame with the former box room
-(bench_frame_cpu.measure).
+(bench_frame_cpu's frame, its 'after' path, the two rooms interleaved), with the part of the difference that is
+llvmpipe's GPU work on the frame thread (:class:`_Timed`) split from the rest. The room rows alone:
+``PYTHONPATH=$PWD python -m benchmarks.bench_mesh_frame --rooms``.
 
 Not measured here: stereo mesh-disc frames, and a GPU (none here: the 90 Hz budget a GPU must show is in
 docs/rendering.md). On llvmpipe
@@ -208,6 +210,19 @@ def run(out: Path, quick: bool = False) -> str:
         lines += _room_rows(ctx, quick)
     finally:
         ctx.release()
-    lines += ["", ("Not measured: stereo mesh-disc frames, a GPU's 90 Hz budget (issue 26 item 6, open). "
-                   "llvmpipe: ratios only, absolute times are context.")]
+    lines += ["", ("Not measured: stereo mesh-disc frames, and any GPU (none here; the 90 Hz budget a GPU must show: "
+                   "docs/rendering.md). llvmpipe: ratios only, absolute times are context.")]
     return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    import sys
+
+    if "--rooms" in sys.argv[1:]:  # the room rows alone (full size: 160 frames per room)
+        context = create_headless_context()
+        try:
+            print("\n".join(_room_rows(context, "--quick" in sys.argv[1:])))
+        finally:
+            context.release()
+    else:
+        print(run(Path("bench"), quick="--quick" in sys.argv[1:]))
