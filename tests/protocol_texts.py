@@ -29,6 +29,11 @@ EGOCENTRIC_MESH_ROOM = """  - id: room
     file: ../assets/dining_room.glb
     position_m: [0, -1.2, 0]            # assumed: the floor 1.2 m below the eyes (seated)
 """
+#: protocols/egocentric.yaml's reach target object, a mesh pencil (it replaced ``object: pencil``, the analytic one)
+EGOCENTRIC_MESH_PENCIL = """    object:                             # Sec. 6.2: the reach target is a pencil; assumed: this mesh (hexagonal,
+      file: ../assets/pencil.glb        # yellow, assets/README.md), lying across the view, point to the right
+      node: pencil
+"""
 EGOCENTRIC_BOX_ROOM = """  - id: room
     kind: room
     width_m: 4

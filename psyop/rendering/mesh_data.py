@@ -116,26 +116,24 @@ def prepare_mesh(asset: MeshAsset) -> PreparedMesh:
 
 def visible_parts(part_corners: np.ndarray, clip_from_model: np.ndarray) -> np.ndarray:
     """(n parts,) bool: whether a part's bounding box can reach the view frustum (conservative: a box is
-    culled only when all 8 corners lie outside one clip plane), one numpy product for all parts."""
+    culled only when all 8 corners lie outside one clip plane), one numpy product for all parts and two
+    reductions (the per-plane tests of x, y and z against w side by side)."""
     clip = part_corners @ clip_from_model.T  # (n, 8, 4)
-    x, y, z, w = clip[..., 0], clip[..., 1], clip[..., 2], clip[..., 3]
-    outside = ((x > w).all(-1) | (x < -w).all(-1) | (y > w).all(-1) | (y < -w).all(-1)
-               | (z < -w).all(-1) | (z > w).all(-1))
+    xyz, w = clip[..., :3], clip[..., 3:]
+    outside = ((xyz > w).all(axis=1) | (xyz < -w).all(axis=1)).any(axis=1)
     return ~outside
 
 
-def draw_ranges(batch: MeshBatch, visible: np.ndarray) -> list[tuple[int, int]]:
-    """(first, count) index ranges of ``batch`` to draw: one for the whole batch when all its parts are
-    visible, else one per run of consecutive visible parts."""
-    seen = visible[batch.part_index]
+def draw_ranges(batch: MeshBatch, seen: np.ndarray) -> list[tuple[int, int]]:
+    """(first, count) index ranges of ``batch`` to draw, ``seen`` (the batch's parts,) whether each part is
+    visible: one for the whole batch when all its parts are, else one per run of consecutive visible parts
+    (a batch's parts are consecutive in its index array: a run is one range), found with numpy, not part by part."""
     if seen.all():
         return [(0, int(batch.indices.size))]
-    ranges: list[tuple[int, int]] = []
-    for first, count, ok in zip(batch.part_first.tolist(), batch.part_count.tolist(), seen.tolist(), strict=True):
-        if not ok:
-            continue
-        if ranges and ranges[-1][0] + ranges[-1][1] == first:
-            ranges[-1] = (ranges[-1][0], ranges[-1][1] + count)
-        else:
-            ranges.append((first, count))
-    return ranges
+    if not seen.any():
+        return []
+    edges = np.diff(np.concatenate(([0], seen.astype(np.int8), [0])))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    first = batch.part_first[starts]
+    count = batch.part_first[stops] + batch.part_count[stops] - first
+    return list(zip(first.tolist(), count.tolist(), strict=True))

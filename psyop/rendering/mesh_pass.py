@@ -129,9 +129,13 @@ def mesh_projection(camera: EyeCamera, far_m: float) -> np.ndarray:
 
 def instance_far_m(instances: tuple[MeshInstance, ...], cop: np.ndarray) -> float:
     """A far plane beyond every instance's bounding sphere, seen from ``cop``."""
+    return spheres_far_m([inst.bounding_sphere_m() for inst in instances], cop)
+
+
+def spheres_far_m(spheres: list[tuple[np.ndarray, float]], cop: np.ndarray) -> float:
+    """:func:`instance_far_m` from the instances' bounding spheres (centre, radius), computed once per frame."""
     far = 0.0
-    for inst in instances:
-        centre, radius = inst.bounding_sphere_m()
+    for centre, radius in spheres:
         far = max(far, float(np.linalg.norm(centre - cop)) + radius)
     return 1.01 * far + 1e-3
 
@@ -142,12 +146,36 @@ class _GpuBatch:
     vao: moderngl.VertexArray
     buffers: list[moderngl.Buffer]
     texture: moderngl.Texture | None
+    #: the batch's material uniforms (name, value), fixed when it is uploaded
+    uniforms: tuple[tuple[str, object], ...] = ()
 
 
 @dataclass
 class _GpuMesh:
     prepared: PreparedMesh
     batches: list[_GpuBatch]
+    shift: np.ndarray  # (4, 4) float64: the batches' origin (PreparedMesh.origin_m) back into model units
+
+
+@dataclass
+class _FrameInstance:
+    """What the pass needs of one instance, computed once for the eyes of a frame that share its scene."""
+
+    instance: MeshInstance
+    gpu: _GpuMesh
+    model: np.ndarray  # (4, 4) float64
+    sphere: tuple[np.ndarray, float]  # MeshInstance.bounding_sphere_m
+
+
+def _material_uniforms(batch: MeshBatch) -> tuple[tuple[str, object], ...]:
+    """The uniforms of a batch's material state (written only when they differ from the program's)."""
+    values: list[tuple[str, object]] = [("u_alpha_mode", _ALPHA_CODE[batch.alpha_mode]),
+                                        ("u_alpha_cutoff", float(batch.alpha_cutoff)),
+                                        ("u_has_normals", bool(batch.has_normals)),
+                                        ("u_has_texture", batch.texture is not None)]
+    if batch.texture is not None:
+        values.append(("u_mirror", (int(batch.texture.wrap_s is Wrap.MIRROR), int(batch.texture.wrap_t is Wrap.MIRROR))))
+    return tuple(values)
 
 
 @dataclass
@@ -175,10 +203,23 @@ class MeshPass:
     meshes: dict[int, tuple[MeshAsset, _GpuMesh]] = field(default_factory=dict)
     textures: dict[str, moderngl.Texture] = field(default_factory=dict)
     draws: int = 0  # draw calls issued (tests and benchmarks)
+    _uniforms: dict[str, moderngl.Uniform] = field(default_factory=dict)  # the program's, looked up once
+    _written: dict[str, object] = field(default_factory=dict)  # the value each scalar uniform holds
+    _frame: tuple[tuple[MeshInstance, ...], list[_FrameInstance]] | None = None  # the last instances' data
 
     def __post_init__(self) -> None:
         self.program = self.ctx.program(vertex_shader=MESH_VERTEX_SHADER, fragment_shader=MESH_FRAGMENT_SHADER)
         _u(self.program, "u_texture").value = 5
+        for name in ("u_model_view", "u_projection", "u_normal_matrix", "u_alpha_mode", "u_alpha_cutoff",
+                     "u_has_normals", "u_has_texture", "u_mirror", "u_lambert", "u_light_eye", "u_ambient"):
+            if name in self.program:  # the GLSL compiler drops a uniform no output depends on
+                self._uniforms[name] = _u(self.program, name)
+
+    def _set(self, name: str, value: object) -> None:
+        """Write a scalar or vector uniform unless the program holds that value already."""
+        if self._written.get(name, self) != value:
+            self._uniforms[name].value = value
+            self._written[name] = value
 
     @property
     def samples(self) -> int:
@@ -218,65 +259,87 @@ class MeshPass:
             vao = self.ctx.vertex_array(self.program, [(vbo, "3f 3f 2f 4f", "in_position", "in_normal", "in_texcoord",
                                                         "in_colour")], index_buffer=ibo, index_element_size=4)
             texture = None if batch.texture is None else self._texture(batch.texture)
-            batches.append(_GpuBatch(batch, vao, [vbo, ibo], texture))
-        gpu = _GpuMesh(prepared, batches)
+            batches.append(_GpuBatch(batch, vao, [vbo, ibo], texture, _material_uniforms(batch)))
+        shift = np.eye(4)
+        shift[:3, 3] = prepared.origin_m
+        gpu = _GpuMesh(prepared, batches, shift)
         self.meshes[id(asset)] = (asset, gpu)  # the asset is kept alive with its buffers: ids stay unique
         return gpu
 
+    def _frame_instances(self, instances: tuple[MeshInstance, ...]) -> list[_FrameInstance]:
+        """Each instance's upload, model matrix and bounding sphere: computed once for the same instances
+        tuple (both eyes of a frame share their scene; a scene that does not move shares it across frames)."""
+        if self._frame is not None and self._frame[0] is instances:
+            return self._frame[1]
+        data = [_FrameInstance(inst, self._upload(inst.asset), inst.model, inst.bounding_sphere_m()) for inst in instances]
+        self._frame = (instances, data)
+        return data
+
     def draw(self, target: MeshTarget, camera: EyeCamera, instances: tuple[MeshInstance, ...]) -> int:
-        """Rasterise ``instances`` into ``target`` with ``camera``; returns how many parts were drawn."""
+        """Rasterise ``instances`` into ``target`` with ``camera``; returns how many parts were drawn.
+
+        Per eye this is numpy on 4x4 matrices and one frustum test per instance (all parts in one product),
+        then a few uniform writes and one draw per material batch (or per run of visible parts): no Python
+        loop over nodes or triangles."""
         ctx = self.ctx
         target.fbo.use()
         ctx.viewport = (0, 0, *target.size)
         target.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         view = np.asarray(camera.view, dtype=np.float64)
         cop = np.asarray(camera.centre_of_projection_m, dtype=np.float64)
-        proj = mesh_projection(camera, instance_far_m(instances, cop))
-        _u(self.program, "u_projection").write(proj.astype(np.float32).T.tobytes())
+        frame = self._frame_instances(instances)
+        proj = mesh_projection(camera, spheres_far_m([f.sphere for f in frame], cop))
+        self._uniforms["u_projection"].write(proj.astype(np.float32).T.tobytes())
         drawn = 0
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
         ctx.front_face = "ccw"
         try:
-            passes = (False, True)  # every instance's opaque and mask batches, then every BLEND batch
-            uploaded = [(inst, self._upload(inst.asset)) for inst in instances]
-            for blend_pass in passes:
-                for inst, gpu in uploaded:
-                    drawn += self._draw_instance(inst, gpu, view, proj, blend_pass)
+            visible = [self._visible(f, view, proj) for f in frame]
+            for blend_pass in (False, True):  # every instance's opaque and mask batches, then every BLEND batch
+                for f, (model_view, seen) in zip(frame, visible, strict=True):
+                    if seen is not None:
+                        drawn += self._draw_instance(f, model_view, seen, view, blend_pass)
         finally:
             ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
             ctx.fbo.depth_mask = True
         return drawn
 
-    def _draw_instance(self, inst: MeshInstance, gpu: _GpuMesh, view: np.ndarray, proj: np.ndarray,
+    @staticmethod
+    def _visible(f: _FrameInstance, view: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The instance's model-view matrix (float64: the centre of projection is subtracted here) and its
+        parts' visibility (None: no part reaches the eye's frustum)."""
+        model_view = view @ f.model @ f.gpu.shift
+        visible = visible_parts(f.gpu.prepared.part_corners, proj @ model_view)
+        return model_view, (visible if visible.any() else None)
+
+    def _instance_uniforms(self, f: _FrameInstance, model_view: np.ndarray, view: np.ndarray) -> None:
+        """The instance's matrices and shading; the normal matrix and light only where lambert shading reads them."""
+        inst = f.instance
+        self._uniforms["u_model_view"].write(model_view.astype(np.float32).T.tobytes())
+        lambert = inst.shading == "lambert"
+        self._set("u_lambert", lambert)
+        if lambert:
+            normal_matrix = np.linalg.inv(model_view[:3, :3]).T
+            self._uniforms["u_normal_matrix"].write(normal_matrix.astype(np.float32).T.tobytes())
+            light = view[:3, :3] @ np.asarray(inst.light_direction, dtype=np.float64)
+            self._set("u_light_eye", tuple(float(v) for v in light / np.linalg.norm(light)))
+            self._set("u_ambient", float(inst.ambient))
+
+    def _draw_instance(self, f: _FrameInstance, model_view: np.ndarray, visible: np.ndarray, view: np.ndarray,
                        blend_pass: bool) -> int:
         ctx = self.ctx
-        prog = self.program
-        shift = np.eye(4)
-        shift[:3, 3] = gpu.prepared.origin_m
-        model_view = view @ inst.model @ shift  # float64: the centre of projection is subtracted here
-        visible = visible_parts(gpu.prepared.part_corners, proj @ model_view)
-        if not visible.any():
+        batches = [gb for gb in f.gpu.batches if (gb.batch.alpha_mode is AlphaMode.BLEND) == blend_pass]
+        if not batches:
             return 0
-        linear = model_view[:3, :3]
-        normal_matrix = np.linalg.inv(linear).T
-        _u(prog, "u_model_view").write(model_view.astype(np.float32).T.tobytes())
-        _u(prog, "u_normal_matrix").write(normal_matrix.astype(np.float32).T.tobytes())
-        lambert = inst.shading == "lambert"
-        _u(prog, "u_lambert").value = lambert
-        if lambert:
-            light = view[:3, :3] @ np.asarray(inst.light_direction, dtype=np.float64)
-            _u(prog, "u_light_eye").value = tuple(float(v) for v in light / np.linalg.norm(light))
-            _u(prog, "u_ambient").value = float(inst.ambient)
+        self._instance_uniforms(f, model_view, view)
         drawn = 0
-        for gb in gpu.batches:
-            batch = gb.batch
-            if (batch.alpha_mode is AlphaMode.BLEND) != blend_pass:
-                continue
-            ranges = draw_ranges(batch, visible)
+        for gb in batches:
+            seen = visible[gb.batch.part_index]
+            ranges = draw_ranges(gb.batch, seen)
             if not ranges:
                 continue
-            if batch.double_sided:
+            if gb.batch.double_sided:
                 ctx.disable(moderngl.CULL_FACE)
             else:
                 ctx.enable(moderngl.CULL_FACE)
@@ -287,20 +350,16 @@ class MeshPass:
             else:
                 ctx.disable(moderngl.BLEND)
                 ctx.fbo.depth_mask = True
-            _u(prog, "u_alpha_mode").value = _ALPHA_CODE[batch.alpha_mode]
-            _u(prog, "u_alpha_cutoff").value = float(batch.alpha_cutoff)
-            _u(prog, "u_has_normals").value = bool(batch.has_normals)
-            _u(prog, "u_has_texture").value = gb.texture is not None
+            for name, value in gb.uniforms:
+                self._set(name, value)
             if gb.texture is not None:
-                tex = batch.texture
-                assert tex is not None
-                _u(prog, "u_mirror").value = (int(tex.wrap_s is Wrap.MIRROR), int(tex.wrap_t is Wrap.MIRROR))
                 gb.texture.use(5)
             for first, count in ranges:
                 gb.vao.render(moderngl.TRIANGLES, vertices=count, first=first)
                 self.draws += 1
-            drawn += int(visible[batch.part_index].sum())
+            drawn += int(seen.sum())
         return drawn
+
 
     def release(self) -> None:
         for _, gpu in self.meshes.values():

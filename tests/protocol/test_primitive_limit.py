@@ -20,7 +20,7 @@ from psyop.schedule import compile_schedule
 from psyop.stimulus import build_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
+from protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_PENCIL, EGOCENTRIC_MESH_ROOM
 
 PROTOCOLS = Path(__file__).resolve().parents[2] / "protocols"
 REALISM = (PROTOCOLS / "realism.yaml").read_text()
@@ -67,8 +67,9 @@ VARIANTS = [  # (protocol, old, new): every kind and every branch of primitive_c
     ("detection", "", ""), ("discrimination", "", ""), ("egocentric", "", ""), ("ordinal", "", ""),
     ("realism", "", ""),
     ("detection", "    kind: disc\n    size_deg: 2   ", "    kind: quad\n    width_deg: 2\n    height_deg: 1\n    # size_deg: 2 "),
-    ("egocentric", "object: pencil ", "object: sphere "),
-    ("egocentric", "object: pencil ", "object: cube "),
+    ("egocentric", EGOCENTRIC_MESH_PENCIL, "    object: pencil\n"),  # the analytic pencil the mesh one replaced
+    ("egocentric", EGOCENTRIC_MESH_PENCIL, "    object: sphere\n"),
+    ("egocentric", EGOCENTRIC_MESH_PENCIL, "    object: cube\n"),
     ("egocentric", EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM),
     ("egocentric", EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM.replace("    table_height_m: 0.75\n", "")),
 ]

@@ -24,7 +24,7 @@ from psyop.stimulus import build_scene
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests"))
-from protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
+from protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_PENCIL, EGOCENTRIC_MESH_ROOM
 
 
 @pytest.fixture(scope="module")
@@ -44,9 +44,10 @@ def test_straight_edge_error_of_each_sample_count_against_exact_coverage(ctx) ->
 
 def test_room_edges_take_few_samples_and_the_stimulus_keeps_the_full_grid(ctx) -> None:
     text = (REPO / "protocols" / "egocentric.yaml").read_text()
-    assert EGOCENTRIC_MESH_ROOM in text  # the egocentric study's room is a mesh now: its former box room here
-    protocol = parse_protocol(text.replace(EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM), "egocentric.yaml",
-                              base_dir=REPO / "protocols")
+    # the egocentric study's room and pencil are meshes now: its former box room and analytic pencil here
+    assert EGOCENTRIC_MESH_ROOM in text and EGOCENTRIC_MESH_PENCIL in text
+    text = text.replace(EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM).replace(EGOCENTRIC_MESH_PENCIL, "    object: pencil\n")
+    protocol = parse_protocol(text, "egocentric.yaml", base_dir=REPO / "protocols")
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
     scene = build_scene(protocol, row, 0.0, np.array([0.032, 0.0, 0.0]), interval=1)
     room = [p for p in scene.primitives if p.edge_samples_per_axis is not None]

@@ -25,17 +25,17 @@ from psyop.rendering.camera_math import crop_camera, project_points_px
 from psyop.rendering.measure import IPD_M, NC_M, RIGHT_CENTRE_M
 from psyop.rendering.mesh_exact import exact_coverage
 from psyop.stimulus import build_scene
+from tests.protocol_texts import EGOCENTRIC_MESH_PENCIL as PENCIL
 
 PROTOCOLS = Path(__file__).resolve().parents[2] / "protocols"
 EGOCENTRIC = PROTOCOLS / "egocentric.yaml"
-ANALYTIC = "    object: pencil                      # Sec. 6.2: the reach target is a pencil\n"
 
 
 def _text(obj: str = "{file: ../assets/pencil.glb, node: pencil, rotation_deg: [90, 0, 0]}",
           room: bool = True) -> str:
     text = EGOCENTRIC.read_text()
-    assert ANALYTIC in text
-    text = text.replace(ANALYTIC, f"    object: {obj}\n")
+    assert PENCIL in text
+    text = text.replace(PENCIL, f"    object: {obj}\n")
     if not room:
         text = text.replace("    file: ../assets/dining_room.glb\n", "    file: ../assets/teaser.glb\n    node: candle\n")
     return text
