@@ -576,11 +576,14 @@ def fixation_plan(c: LoopFacts, phase: PhaseSpec, row: TrialRow, start_s: float)
     (where this trial draws it), free viewing, or the cross. The loop sets it on the gaze source; psyop.quality rebuilds the target from it."""
     seed = int(row.get("trial_seed", 0)) & 0xFFFFFFFF
     if phase.gaze == "pursuit":
-        phase_deg = float(row.get(f"{c.pursuit_id}_start_deg", seed_for("pursuit", seed) % 360))
+        start_key = f"{c.pursuit_id}_start_deg"  # the default's hash only when the schedule has no start
+        phase_deg = float(row[start_key]) if start_key in row else float(seed_for("pursuit", seed) % 360)
         direction = -1.0 if float(row.get(f"{c.pursuit_id}_direction", 1)) < 0 else 1.0
         ecc, speed, centre = c.pursuit_eccentricity_deg, c.pursuit_speed_deg_s, c.pursuit_centre_deg
         if c.pursuit_path is not None:  # the trial's (interval's) levels, as the target is drawn
-            path = c.pursuit_path.for_values(interval_values(row, max(1, phase.interval)))
+            path = c.pursuit_path
+            if path.target is not None:  # a path without factors is its own for_values: no interval row built
+                path = path.for_values(interval_values(row, max(1, phase.interval)))
             ecc, speed, centre = path.eccentricity_deg, path.speed_deg_s, path.centre_deg
         return FixationPlan("pursuit", start_s, c.fixation_distance_m, centre_deg=centre,
                             target=circling_target(ecc, direction * speed, phase_deg, centre))

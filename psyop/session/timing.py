@@ -91,22 +91,22 @@ class TrialTiming:
         """The trial's measured-timing columns (module docstring); ``measured``: every frame was drawn
         (False: the sampled regime, no onset, offset or duration)."""
         out: JsonObject = {}
-        index = np.asarray(self.phase_index, dtype=np.int64)
         stimulus_dropped = 0
         for i, (phase, label) in enumerate(zip(phases, phase_labels(phases))):
             if label is None:
                 continue
-            rows = np.flatnonzero(index == i)
+            # plain lists (a trial has a few frames; np.flatnonzero per phase was most of this call)
+            rows = [r for r, p in enumerate(self.phase_index) if p == i]
             dropped = int(sum(self.missed[r] for r in rows))
-            if rows.size and measured:
-                last = int(rows[-1])
+            if rows and measured:
+                last = rows[-1]
                 onset, offset = self.display_time_s[rows[0]], self.display_time_s[last]
                 until = (self.display_time_s[last + 1] if last + 1 < len(self.display_time_s)
                          else offset + self.period_s[last])  # the next frame shown replaces the phase's last
                 out.update({f"{label}_onset_s": onset, f"{label}_offset_s": offset, f"{label}_duration_s": until - onset})
             else:
                 out.update({f"{label}_onset_s": None, f"{label}_offset_s": None, f"{label}_duration_s": None})
-            out.update({f"{label}_frames": int(rows.size), f"{label}_dropped_frames": dropped})
+            out.update({f"{label}_frames": len(rows), f"{label}_dropped_frames": dropped})
             stimulus_dropped += dropped if phase.show == "stimulus" else 0
         out[TIMING_OK] = None if rule is None else not rule.violated(stimulus_dropped)
         return out

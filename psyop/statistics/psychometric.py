@@ -492,6 +492,38 @@ def tabulate_priors(priors, bounds: dict[str, tuple[float, float]], points: int 
     return out
 
 
+#: (stimulus range, smallest level step, fixed parameters, configuration) -> (bounds, tabulated priors)
+_PRIORS_CACHE: dict[tuple, tuple[dict[str, tuple[float, float]], dict]] = {}
+
+
+def _bounds_and_priors(conf, levels: np.ndarray, fixed: dict[str, float] | None
+                       ) -> tuple[dict[str, tuple[float, float]], dict]:
+    """psignifit's parameter bounds (fixed parameters pinned) and its priors tabulated over them
+    (:func:`tabulate_priors`) for these levels. Both are a function of the levels' range and smallest
+    step and of ``conf`` alone, so they are computed once per distinct key and reused (a replication
+    fits the same levels for every participant and condition; the tabulation was ~45 % of a fit)."""
+    stimulus_range = (levels.min(), levels.max())
+    width_min = np.diff(np.unique(levels)).min()
+    key = (float(stimulus_range[0]), float(stimulus_range[1]), float(width_min), tuple(sorted((fixed or {}).items())),
+           conf.experiment_type, conf.experiment_choices, conf.width_alpha, conf.beta_prior, conf.thresh_PC)
+    cached = _PRIORS_CACHE.get(key)
+    if cached is None:
+        bounds = parameter_bounds(
+            min_width=width_min, experiment_type=conf.experiment_type, stimulus_range=stimulus_range,
+            alpha=conf.width_alpha, nafc_choices=conf.experiment_choices,
+        )
+        for name, value in (fixed or {}).items():
+            bounds[name] = (value, value)
+        priors = setup_priors(
+            custom_priors=None, bounds=bounds, stimulus_range=stimulus_range, width_min=width_min,
+            width_alpha=conf.width_alpha, beta_prior=conf.beta_prior, threshold_prop_correct=conf.thresh_PC,
+        )
+        if len(_PRIORS_CACHE) > 256:
+            _PRIORS_CACHE.clear()
+        cached = _PRIORS_CACHE[key] = (dict(bounds), tabulate_priors(priors, bounds))
+    return dict(cached[0]), dict(cached[1])
+
+
 def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> GridPosterior:
     """psignifit's pipeline up to the dense-grid posterior, then the refined posterior and MAP."""
     grid_spec = options.grid
@@ -503,20 +535,7 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
         confP=(options.ci_level,),
     )
     sigmoid = conf.make_sigmoid()
-    levels = data[:, 0]
-    stimulus_range = (levels.min(), levels.max())
-    width_min = np.diff(np.unique(levels)).min()
-    bounds = parameter_bounds(
-        min_width=width_min, experiment_type=conf.experiment_type, stimulus_range=stimulus_range,
-        alpha=conf.width_alpha, nafc_choices=conf.experiment_choices,
-    )
-    for name, value in (fixed or {}).items():
-        bounds[name] = (value, value)
-    priors = setup_priors(
-        custom_priors=None, bounds=bounds, stimulus_range=stimulus_range, width_min=width_min,
-        width_alpha=conf.width_alpha, beta_prior=conf.beta_prior, threshold_prop_correct=conf.thresh_PC,
-    )
-    priors = tabulate_priors(priors, bounds)
+    bounds, priors = _bounds_and_priors(conf, data[:, 0], fixed)
     sparse = parameter_grid(bounds, conf.steps_moving_bounds)
     post_sparse, _ = posterior_2afc(data, priors, sparse)
     tight = masked_parameter_bounds(sparse, post_sparse >= conf.max_bound_value)

@@ -17,7 +17,7 @@ import numpy as np
 
 from psyop.session.rows import JsonMapping, TrialRow
 from psyop.errors import UserError
-from psyop.session.gaze.simulated import seed_for
+from psyop.session.gaze.simulated import keyed_rng, seed_for
 from psyop.session.reach import HAND_HEIGHT_M
 from psyop.session.responses.base import Response, ResponseKind, score
 
@@ -45,10 +45,11 @@ class SimulatedObserver(ABC):
         self.params = dict(params)
         self.seed = int(seed)
         self.participant = participant
-        self._participant_rng = np.random.default_rng([seed_for("participant", participant), self.seed & 0xFFFFFFFF])
+        self._participant_rng = keyed_rng(seed_for("participant", participant), self.seed)
+        self._participant_key = seed_for(participant)  # the trial streams' second key, once
 
     def trial_rng(self, row: TrialRow) -> np.random.Generator:
-        return np.random.default_rng([self.seed & 0xFFFFFFFF, seed_for(self.participant), int(row["trial_seed"]) & 0xFFFFFFFF, 11])
+        return keyed_rng(self.seed, self._participant_key, int(row["trial_seed"]), 11)
 
     @abstractmethod
     def collect(self, row: TrialRow, now_s: float) -> Response:
