@@ -23,7 +23,7 @@ import pandas as pd
 from benchmarks.timing import median_s
 from psyop.export.bids import export_bids
 from psyop.finalised import verify_session
-from psyop.session.simulate import simulate_dataset
+from psyop.run.simulate import simulate_dataset
 
 REPO = Path(__file__).resolve().parents[1]
 

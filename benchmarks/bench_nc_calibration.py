@@ -42,7 +42,7 @@ def true_nc_mm(data_root: Path, study: str) -> dict[str, float]:
 
 
 def run(out_dir: Path, quick: bool = False) -> str:
-    from psyop.session.simulate import simulate_dataset
+    from psyop.run.simulate import simulate_dataset
 
     n = 3 if quick else 200
     with tempfile.TemporaryDirectory(prefix="psyop-bench-nc-") as tmp:

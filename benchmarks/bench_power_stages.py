@@ -62,7 +62,7 @@ def _patched(clock: StageClock) -> Iterator[None]:
     import psyop.schedule.compile as schedule
     from psyop import protocol
     from psyop.power import effects, memory_log, study_tests
-    from psyop.session import runner
+    from psyop.run import runner
     from psyop.session.log.store import SessionStore
     from psyop.session.loop import TrialLoop
     from psyop.statistics import dataset, psychometric

@@ -117,7 +117,7 @@ def run(out_dir: Path, quick: bool) -> str:
             ("fdatasync", 495): _append_ms(tmp, True, n_trials // 2, 495),
             ("no sync", 495): _append_ms(tmp, False, n_trials // 2, 495),
         }
-        from psyop.session.simulate import PAPER_PARTICIPANTS, simulate_dataset
+        from psyop.run.simulate import PAPER_PARTICIPANTS, simulate_dataset
 
         sizes = {k: 1 for k in PAPER_PARTICIPANTS} if quick else None
         start = time.perf_counter()

@@ -7,7 +7,7 @@ import signal
 from pathlib import Path
 
 from psyop.errors import UserError
-from psyop.session.backends import help_text
+from psyop.run.backends import help_text
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,7 +24,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="the participant's index for block_order: latin_square (row N mod the square's rows; "
                         "default: the number the participant ID ends in, e.g. S07 -> 7)")
     parser.add_argument("--seed", type=int, default=None, help="schedule/observer seed (default: from IDs, or the session's)")
-    # the backend options' help is generated from the registry (psyop.session.backends)
+    # the backend options' help is generated from the registry (psyop.run.backends)
     parser.add_argument("--tracker", default="sim", help=f"the gaze source: {help_text('tracker')}")
     parser.add_argument("--pose", default="sim", help=f"head/hand pose: {help_text('pose')}")
     parser.add_argument("--responses", default="sim", help=f"who answers: {help_text('responses')}")
@@ -59,7 +59,7 @@ def main(args: argparse.Namespace) -> int:
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
     from psyop.session.gaze.simulated import SimulatedTrackerConfig
-    from psyop.session.runner import SessionOptions, print_outcome, run_session
+    from psyop.run.runner import SessionOptions, print_outcome, run_session
     from psyop.session.signals import stop_signals_as_interrupt
 
     if not args.protocol.exists():

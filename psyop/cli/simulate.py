@@ -28,7 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from psyop.session.simulate import PAPER_PARTICIPANTS, simulate_dataset
+    from psyop.run.simulate import PAPER_PARTICIPANTS, simulate_dataset
 
     paths = sorted(args.protocols.glob("*.yaml")) if args.protocols.is_dir() else [args.protocols]
     if not paths or not all(p.exists() for p in paths):

@@ -174,7 +174,7 @@ class RunDisplay:
     """Each eye's display image in one psyop run, as the export describes it (``StimulusPresentation``, gaze
     pixel coordinates), and a note saying where it came from.
 
-    From the run's ``display_used`` (session.json ``runs``; psyop.session.assembly.display_used) when the run
+    From the run's ``display_used`` (session.json ``runs``; psyop.run.assembly.display_used) when the run
     measured its display: a headset's swapchain size, field of view and measured rate per eye, or a window's
     presented image size and measured flip rate. Otherwise (headless, or a session recorded before psyop
     recorded ``display_used``) the protocol's display profile, and the note says so."""

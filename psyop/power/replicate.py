@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
     from psyop.protocol.model import Protocol
     from psyop.session.log.layout import SessionPaths
-    from psyop.session.runner import SessionOptions
+    from psyop.run.runner import SessionOptions
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ def _sessions(task: ReplicationTask) -> tuple[Protocol, Callable[[Path], list[Se
     from psyop.power.effects import apply_effects
     from psyop.protocol import parse_protocol
     from psyop.session.gaze.simulated import SimulatedTrackerConfig
-    from psyop.session.runner import SessionOptions
+    from psyop.run.runner import SessionOptions
 
     protocol = apply_effects(parse_protocol(task.protocol_text, task.protocol_name), task.effects)
 
@@ -85,7 +85,7 @@ def replication_trials(task: ReplicationTask) -> tuple[Protocol, pd.DataFrame]:
     :func:`replication_trials_durable` (tests/power/test_memory_log.py)."""
     from psyop.power.memory_log import MemoryLog, analysis_trials
     from psyop.schedule import compile_schedule
-    from psyop.session.runner import run_session
+    from psyop.run.runner import run_session
 
     protocol, options = _sessions(task)
     logs: list[MemoryLog] = []
@@ -106,7 +106,7 @@ def replication_trials_durable(task: ReplicationTask) -> tuple[Protocol, pd.Data
     import warnings
 
     from psyop.schedule import compile_schedule
-    from psyop.session.runner import run_session
+    from psyop.run.runner import run_session
     from psyop.statistics.dataset import LowGazeWarning, load_dataset
 
     protocol, options = _sessions(task)

@@ -2,7 +2,7 @@
 sessions ran (by hash), and the factors' names, descriptions and units (for columns and axis labels).
 
 Read from each session's ``session.json`` (``response_kind``, ``protocol_sha256`` and the
-``protocol_text`` it ran, written by psyop.session.runner). The protocol text is read as plain
+``protocol_text`` it ran, written by psyop.run.runner). The protocol text is read as plain
 YAML, not re-validated: an old session stays analysable when validation grows stricter. A study
 written without session.json (psyop.statistics.dataset.write_dataset without hashes) has its kind
 read from its trial columns and no protocol hash.

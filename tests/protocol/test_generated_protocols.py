@@ -24,7 +24,7 @@ from psyop.errors import UserError
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.plan import compile_plan
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from psyop.statistics.dataset import load_dataset
 
 N_EXAMPLES = int(__import__("os").environ.get("PSYOP_GENERATED_EXAMPLES", "200"))

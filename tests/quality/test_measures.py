@@ -18,7 +18,7 @@ from psyop.quality.measures import trial_measures
 from psyop.quality.samples import gaze_grid
 from psyop.schedule import compile_schedule
 from psyop.session.plan import compile_plan
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from tests.session.session_helpers import small_protocol
 
 GAIN, LAG_S, PRECISION_DEG, NAN_RATE_HZ, NAN_S, THRESHOLD_DEG = 0.8, 0.05, 0.1, 1.0, 0.05, 1.5

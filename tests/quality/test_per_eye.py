@@ -16,7 +16,7 @@ from psyop.quality.samples import gaze_grid
 from psyop.schedule import compile_schedule
 from psyop.session.loop import LoopConfig, pursuit_fields
 from psyop.session.plan import compile_plan
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from tests.session.session_helpers import small_protocol
 
 ERROR_RIGHT_DEG = 1.0

@@ -17,7 +17,7 @@ from psyop.quality.measures import TRIAL_MEASURES
 from psyop.quality.rules import apply_rules, included_mask, methods_sentence
 from psyop.quality.session import measure_session
 from psyop.schedule import compile_schedule
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from tests.session.session_helpers import small_protocol
 
 QUALITY = """quality:

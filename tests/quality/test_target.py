@@ -15,7 +15,7 @@ from psyop.quality.samples import gaze_grid
 from psyop.quality.session import recorded_plan
 from psyop.quality.target import target_path_deg
 from psyop.schedule import compile_schedule
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from tests.session.session_helpers import small_protocol
 
 RATE_HZ = 120.0

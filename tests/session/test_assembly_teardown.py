@@ -1,4 +1,4 @@
-"""The session's backends are closed by one owner (psyop.session.assembly), in reverse order, whatever
+"""The session's backends are closed by one owner (psyop.run.assembly), in reverse order, whatever
 raises: a response source whose close raises still lets the tracker, the pose source and the display
 close, and the raw gaze no trial recorded is still flushed (issue 28 item 1)."""
 
@@ -15,7 +15,7 @@ from psyop.session.frames import HeadlessDisplay
 from psyop.session.gaze.simulated import SimulatedTracker
 from psyop.session.pose import SimulatedPose
 from psyop.session.responses.simulated import SimulatedObserver
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 
 def test_display_closed_when_responses_close_raises(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,4 +1,4 @@
-"""The backend registry: what `psyop run` lists, refuses and builds (psyop.session.backends)."""
+"""The backend registry: what `psyop run` lists, refuses and builds (psyop.run.backends)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,10 @@ from session_helpers import fast_protocol
 
 from psyop.cli import main as cli_main
 from psyop.errors import UserError
-from psyop.session import backends as registry
-from psyop.session import loop, runner
-from psyop.session.backends import BACKENDS, CATEGORIES, Backend, BackendContext, build, help_text, lookup
+from psyop.run import backends as registry
+from psyop.run import runner
+from psyop.session import loop
+from psyop.run.backends import BACKENDS, CATEGORIES, Backend, BackendContext, build, help_text, lookup
 
 
 def test_every_category_has_backends_and_every_backend_is_well_formed() -> None:

@@ -17,7 +17,7 @@ import pytest
 from psyop.cli import main as cli_main
 from psyop.errors import UserError
 from psyop.finalised import FINALISED_KEY, RESEALS_KEY, sha256_file
-from psyop.session.simulate import simulate_dataset
+from psyop.run.simulate import simulate_dataset
 from psyop.statistics.dataset import load_dataset
 
 from session_helpers import small_protocol

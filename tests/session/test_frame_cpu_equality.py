@@ -23,7 +23,7 @@ from psyop.session.gaze.plan import FixationPlan, circling_target
 from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig
 from psyop.session.phases import mode_for
 from psyop.session.plan import compile_plan
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
 from tests.session.session_helpers import fast_protocol
 

@@ -19,7 +19,7 @@ from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.gaze.simulated import SimulatedTrackerConfig
 from psyop.session.plan import compile_plan
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from psyop.statistics.dataset import LowGazeWarning, load_dataset
 
 #: Poisson 1 s dropouts at 0.5 Hz over 2 s trials: some trials lose most of their gaze, some none
@@ -89,7 +89,7 @@ def test_protocol_threshold_changes_which_trials_are_marked(tmp_path: Path) -> N
 
 
 def test_run_and_recover_warn_with_the_protocol_threshold(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    import psyop.session.runner  # noqa: F401 - before capsys swaps sys.stderr
+    import psyop.run.runner  # noqa: F401 - before capsys swaps sys.stderr
     from psyop.cli import main as cli_main
 
     protocol = _protocol(tmp_path, 0.9)

@@ -22,7 +22,7 @@ from psyop.quality.rules import apply_rules
 from psyop.quality.session import measure_session
 from psyop.session.plan import compile_plan
 from psyop.session.scene_renderer import SceneRenderer
-from psyop.session.simulate import plan_jobs, run_job
+from psyop.run.simulate import plan_jobs, run_job
 from psyop.session.validation import _precision_deg, validation_phase
 
 REPO = Path(__file__).resolve().parents[2]
@@ -297,7 +297,7 @@ def test_every_frame_the_display_paces_the_targets_and_gaze_is_asked_for_each_fr
     """A watched session (every frame through the display and the renderer, here cameras only) validates the
     same way: one gaze request per display frame, the frames counted by the display."""
     from psyop.schedule import compile_schedule
-    from psyop.session.runner import SessionOptions, run_session
+    from psyop.run.runner import SessionOptions, run_session
 
     path = _protocol(tmp_path, "gaze_validation:\n  when: [start]\n  points_deg: [[0, 0], [-10, 10]]\n")
     options = SessionOptions(participant="S01", seed=5, data_root=tmp_path / "data", progress=False,

@@ -110,7 +110,7 @@ def test_deleting_session_json_does_not_turn_a_real_session_simulated(data: Path
     session.json (then its finalised tables too) leaves the log and the tables saying real."""
     from session_helpers import small_protocol
 
-    from psyop.session.runner import SessionOptions
+    from psyop.run.runner import SessionOptions
 
     assert _sessions(data).returncode == 0
     monkeypatch.setattr(SessionOptions, "simulated", property(lambda self: False))

@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-import psyop.session.runner  # noqa: F401 - imported before capsys swaps sys.stderr (print_outcome's default)
+import psyop.run.runner  # noqa: F401 - imported before capsys swaps sys.stderr (print_outcome's default)
 from psyop.cli import main as cli_main
 from psyop.protocol.design import count_conditions
 from psyop.protocol.loader import MAX_PROTOCOL_BYTES

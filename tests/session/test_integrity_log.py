@@ -19,7 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import psyop.session.runner  # noqa: F401 - imported before capsys swaps sys.stderr (print_outcome's default)
+import psyop.run.runner  # noqa: F401 - imported before capsys swaps sys.stderr (print_outcome's default)
 from psyop.cli import main as cli_main
 from psyop.session.log.layout import SessionPaths
 from psyop.session.log.schema import TIMING_COLUMNS

@@ -23,7 +23,7 @@ from psyop.devices.gaze.pupil import world_mm_to_head_m, world_to_head_direction
 from psyop.session.gaze.sample import TrackerLost
 from psyop.session.log.layout import session_paths
 from psyop.session.log.store import SessionStore
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 pytestmark = pytest.mark.timeout(180)
 

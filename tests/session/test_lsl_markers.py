@@ -19,7 +19,7 @@ from psyop.schedule import compile_schedule
 from psyop.session.log.layout import session_paths
 from psyop.devices.lsl_markers import CHANNELS, STREAM_NAME
 from psyop.session.plan import compile_plan
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 pytestmark = pytest.mark.timeout(180)
 

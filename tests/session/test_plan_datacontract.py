@@ -13,7 +13,7 @@ from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.log import layout
 from psyop.session.log.schema import TRIAL_LOG_FIELDS
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from psyop.statistics import dataset
 from psyop.statistics.anova import cell_means, rm_anova
 

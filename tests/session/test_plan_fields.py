@@ -23,7 +23,7 @@ from psyop.session.clock import VirtualClock
 from psyop.session.frames import HeadlessDisplay
 from psyop.session.loop import LoopConfig, TrialLoop
 from psyop.session.plan import TIMEOUT_RESPONSE, compile_plan
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from tests.protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_ROOM
 
 STRAIGHT_AHEAD_M = (0.0315, 0.0, -1.0)

@@ -26,7 +26,7 @@ from psyop.session.pose import (
 )
 from psyop.session.reach import horizontal_reach_m
 from psyop.session.responses.base import Response
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 HEAD = ["head_x_m", "head_y_m", "head_z_m", "head_qw", "head_qx", "head_qy", "head_qz"]
 

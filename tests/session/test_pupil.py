@@ -17,7 +17,7 @@ from psyop.session.clock import RealClock
 from psyop.devices.gaze.pupil import PupilClient, fit_clock_sync, world_mm_to_head_m
 from psyop.session.gaze.sample import TrackerLost
 from psyop.session.log.store import SessionStore
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 
 def test_fit_clock_sync_recovers_offset_and_drift() -> None:

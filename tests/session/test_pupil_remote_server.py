@@ -94,7 +94,7 @@ def test_session_calibrates_records_and_annotates_every_trial(tmp_path) -> None:
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
     from psyop.session.log.layout import session_paths
-    from psyop.session.runner import SessionOptions, run_session
+    from psyop.run.runner import SessionOptions, run_session
 
     server = FakePupilCapture()
     try:

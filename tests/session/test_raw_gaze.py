@@ -22,7 +22,7 @@ from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.log.schema import GAZE_SCHEMA
 from psyop.session.log.stream import read_segment
 from psyop.session.loop import TrialLoop
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 from psyop.statistics.dataset import load_gaze
 
 

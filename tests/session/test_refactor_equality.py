@@ -2,7 +2,7 @@
 (issue 28, "Done when": byte-identical trials.parquet, timing columns aside, checked by a test).
 
 One participant (S01, ``psyop simulate``'s seed for base seed 2020) of each protocols/*.yaml is run headless
-on the virtual clock exactly as ``psyop simulate`` runs it (:func:`psyop.session.simulate.run_job`), and a
+on the virtual clock exactly as ``psyop simulate`` runs it (:func:`psyop.run.simulate.run_job`), and a
 SHA-256 of each table's *content* is compared with goldens recorded from the tree before the refactor
 (26cd3cb). Content, not file bytes: the parquet bytes carry the writer's pyarrow version.
 
@@ -34,7 +34,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from psyop.datacontract import typed_response
-from psyop.session.simulate import plan_jobs, run_job
+from psyop.run.simulate import plan_jobs, run_job
 from psyop.protocol import load_protocol
 from psyop.session.plan import compile_plan
 from psyop.session.timing import TIMING_OK, timing_column_names

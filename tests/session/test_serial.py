@@ -19,7 +19,7 @@ from psyop.session.clock import RealClock
 from psyop.devices.gaze.serial_source import SerialGazeSource, parse_gaze_line
 from psyop.session.responses.base import ResponseKind
 from psyop.devices.responses.serial_box import SerialResponseBox
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 GARBAGE = [b"\xff\xfe\x00garbage\x81\n", b"G 0.1 nan\n", b"G a b c d\n", b"\x00" * 300, b"XYZ 1 2 3 4\n", b"G 0.1 0.0 -1.0\n"]
 

@@ -19,7 +19,7 @@ SCRIPT = textwrap.dedent(
     from session_helpers import fast_protocol
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
-    from psyop.session.runner import SessionOptions, run_session
+    from psyop.run.runner import SessionOptions, run_session
     import psyop.devices.window as window
 
     typed = window.GlfwWindow.poll

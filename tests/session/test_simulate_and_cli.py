@@ -12,7 +12,7 @@ from session_helpers import PROTOCOLS, fast_protocol
 from psyop.cli import main as cli_main
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 
 def test_simulate_all_five_studies_reduced(tmp_path: Path) -> None:

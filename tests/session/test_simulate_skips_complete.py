@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from psyop.errors import UserError
-from psyop.session.simulate import SimulatedJob, run_job
+from psyop.run.simulate import SimulatedJob, run_job
 
 
 def _write_meta(root: Path, text: str) -> None:

@@ -19,7 +19,7 @@ from psyop.protocol import load_protocol
 from psyop.session.gaze.plan import FixationPlan, circling_target
 from psyop.session.gaze.pursuit import main_sequence_peak_deg_s
 from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, tracker_config
-from psyop.session.simulate import plan_jobs, run_job
+from psyop.run.simulate import plan_jobs, run_job
 from psyop.protocol import load_protocol
 from psyop.session.plan import compile_plan
 from psyop.session.timing import timing_column_names

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from psyop.cli import main
-from psyop.session.runner import SessionOptions
+from psyop.run.runner import SessionOptions
 from session_helpers import small_protocol
 
 
@@ -58,7 +58,7 @@ def test_a_replayed_gaze_session_is_recorded_simulated(tmp_path: Path) -> None:
 def test_session_json_marks_a_reach_study_answered_on_a_simulated_hand() -> None:
     from psyop.protocol import load_protocol
     from psyop.session.plan import compile_plan
-    from psyop.session.runner import _simulated
+    from psyop.run.runner import _simulated
 
     root = Path(__file__).resolve().parents[2] / "protocols"
     options = SessionOptions("P1", tracker="pupil:127.0.0.1:50020", responses="keyboard", pose="sim", display="window")

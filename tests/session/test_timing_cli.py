@@ -9,7 +9,7 @@ from pathlib import Path
 
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 from timing_helpers import timing_protocol
 

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 
-import psyop.session.runner as runner
+import psyop.run.runner as runner
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 from timing_helpers import SlowRenderer, check_session, timing_protocol
 
@@ -55,10 +55,10 @@ WINDOW_SCRIPT = textwrap.dedent(
     from pathlib import Path
     sys.path.insert(0, {helpers!r})
     from timing_helpers import SlowRenderer, timing_protocol
-    import psyop.session.runner as runner
+    import psyop.run.runner as runner
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
-    from psyop.session.runner import SessionOptions, run_session
+    from psyop.run.runner import SessionOptions, run_session
 
     runner.CameraRenderer = SlowRenderer
     outcome = run_session(load_protocol(timing_protocol(Path({tmp!r}))), compile_schedule, SessionOptions(

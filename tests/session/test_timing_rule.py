@@ -13,10 +13,10 @@ import pandas as pd
 import pytest
 
 import psyop.session.loop as loop
-import psyop.session.runner as runner
+import psyop.run.runner as runner
 from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 from timing_helpers import SlowRenderer, check_session, timing_protocol
 

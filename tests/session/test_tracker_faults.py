@@ -15,7 +15,7 @@ from psyop.session.gaze.filter import GazeConditioner
 from psyop.session.gaze.plan import FixationPlan
 from psyop.session.gaze.sample import GazeSample
 from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, angular_error_deg
-from psyop.session.runner import SessionOptions, run_session
+from psyop.run.runner import SessionOptions, run_session
 
 
 def test_conditioner_holds_last_valid_gaze_and_flags_it() -> None:

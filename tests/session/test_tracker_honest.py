@@ -231,7 +231,7 @@ def test_trials_with_little_valid_gaze_are_listed_and_warned(tmp_path: Path, cap
     """A Pupil clock fault left trials with 0 % valid gaze and no warning."""
     import json
 
-    import psyop.session.runner  # noqa: F401 - before capsys swaps sys.stderr
+    import psyop.run.runner  # noqa: F401 - before capsys swaps sys.stderr
     from psyop.cli import main as cli_main
 
     protocol = fast_protocol(tmp_path, "detection", 1, 0.03)

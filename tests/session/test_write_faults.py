@@ -189,7 +189,7 @@ def test_each_session_write_fails_in_one_line_and_heals(tmp_path: Path, detectio
 def test_dataset_description_after_a_complete_session(tmp_path: Path, detection_small: Path,
                                                       monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
-    from psyop.session import runner
+    from psyop.run import runner
 
     data = tmp_path / "data"
     _fail_during(monkeypatch, runner, "write_dataset_description", errno.ENOSPC)

@@ -4,7 +4,7 @@
 one with a located UserError; psyop.session.log.store re-exports it) into a :class:`SessionRecord`: the fields a run
 decides by (seed, participant index, protocol hash and text, status, runs), typed, beside the raw mapping
 (``raw``), which the log merges and writes back unchanged. The runner reads it once before the backends
-are built and hands it to :mod:`psyop.session.resume`; the store reads session.json again under the
+are built and hands it to :mod:`psyop.run.resume`; the store reads session.json again under the
 session lock, by design (another process may have written it in between).
 """
 

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 from psyop.session.rows import JsonObject
 from psyop.optics.display import DisplayProfile
 from psyop.errors import UserError
-from psyop.session.backends import BackendContext, build
+from psyop.run.backends import BackendContext, build
 from psyop.session.clock import Clock
 from psyop.session.events import EventSink
 from psyop.session.frames import Display

@@ -60,7 +60,7 @@ def run_job(job: SimulatedJob, data_root: Path, mesh_files: MeshFiles | None = N
     from psyop.mesh.load import MeshFiles
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
-    from psyop.session.runner import SessionOptions, run_session
+    from psyop.run.runner import SessionOptions, run_session
 
     from psyop.session.log.layout import SessionPaths
     from psyop.session.log.record import read_record

@@ -28,7 +28,7 @@ from pathlib import Path
 
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
-from psyop.session.backends import OPTION, Category, is_real_time, lookup
+from psyop.run.backends import OPTION, Category, is_real_time, lookup
 from psyop.session.lock import SessionLock
 from psyop.session.log.layout import SessionPaths
 from psyop.session.log.record import SessionRecord
@@ -37,7 +37,7 @@ from psyop.session.log.store import log_identity
 def check_options(*, clock: str, responses: str, tracker: str, pose: str = "sim", display: str = "headless") -> None:
     """Refuse a live device on the virtual clock (exit code 2, naming the option).
 
-    Which backends are live is the registry's ``real_time`` (:mod:`psyop.session.backends`);
+    Which backends are live is the registry's ``real_time`` (:mod:`psyop.run.backends`);
     an unknown backend name is refused here too, before anything is written."""
     chosen: dict[Category, str] = {"display": display, "tracker": tracker, "pose": pose, "responses": responses}
     for category, spec in chosen.items():

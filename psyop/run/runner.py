@@ -23,8 +23,8 @@ from psyop.session.rows import JsonObject
 from psyop.atomic import io_error
 from psyop.errors import UserError
 from psyop.protocol.model import Protocol
-from psyop.session.assembly import Backends, assemble, display_used, open_markers
-from psyop.session.backends import BackendContext, is_real_time
+from psyop.run.assembly import Backends, assemble, display_used, open_markers
+from psyop.run.backends import BackendContext, is_real_time
 from psyop.session.clock import Clock, RealClock, VirtualClock
 from psyop.session.frames import CameraRenderer, Display, FrameRenderer
 from psyop.session.gaze.simulated import SimulatedTrackerConfig, seed_for
@@ -37,7 +37,7 @@ from psyop.session.validation import gaze_validator
 from psyop.session.loop import LoopConfig, LoopFacts, LoopOptions, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
-from psyop.session.resume import accept_protocol_change, check_free, check_options, resolve_seed
+from psyop.run.resume import accept_protocol_change, check_free, check_options, resolve_seed
 from psyop.session.timing import with_timing_fields
 
 if TYPE_CHECKING:
@@ -192,7 +192,7 @@ def run_session(
     The protocol is compiled into a :class:`~psyop.session.plan.SessionPlan` first; everything
     below runs from the plan. ``store_factory``: where the trials are recorded (None: the durable
     session log under ``options.data_root``, with ``options.fsync``). Three steps: open (options,
-    seed, schedule, clock, log, metadata), run (the backends assembled by :mod:`psyop.session.assembly`,
+    seed, schedule, clock, log, metadata), run (the backends assembled by :mod:`psyop.run.assembly`,
     closed by it whatever raises) and finalise (the summary, the finalised session.json)."""
     opened = _open(protocol, compile_schedule, options, store_factory)
     markers = open_markers(opened.metadata, opened.clock, options.lsl_wait_s) if options.lsl_markers else None
