@@ -129,3 +129,24 @@ def test_a_user_study_gets_its_own_rules_and_never_a_paper_figure(built_tree: Pa
     assert "[psyop] study stereo_blocks (left/right nearer): stereo_blocks_depth.png" in out
     for paper in ("--study ordinal ", "--study detection", "fig_realism", "fig_egocentric"):
         assert paper not in commands
+
+
+def test_a_session_json_with_an_unknown_response_kind_is_one_line_naming_it(tmp_path) -> None:
+    """The analysis dispatches on psyop's closed set of response kinds (psyop.session.responses.base
+    .ResponseKind, one match per consumer); a kind it does not know is refused naming the file."""
+    import json
+
+    import pytest
+
+    from psyop.errors import UserError
+    from psyop.statistics.studies import study_facts
+
+    session = tmp_path / "data" / "mine" / "sub-S01" / "ses-1"
+    session.mkdir(parents=True)
+    import pandas as pd
+
+    pd.DataFrame({"participant": ["S01"], "mode_a": ["a"], "mode_b": ["b"]}).to_parquet(session / "trials.parquet")
+    (session / "session.json").write_text(json.dumps({"response_kind": "magnitude_estimate"}))
+    with pytest.raises(UserError) as info:
+        study_facts(tmp_path / "data", "mine")
+    assert "magnitude_estimate" in info.value.message and "session.json" in str(info.value)

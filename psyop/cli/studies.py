@@ -26,15 +26,30 @@ import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, assert_never
+
+from psyop.session.responses.base import ResponseKind
 
 if TYPE_CHECKING:
     from psyop.statistics.studies import StudyFacts
 
 #: Sessions of this shipped protocol (by hash) get the linear-fit thresholds figure.
 LINEAR_FIT_PROTOCOLS = ("discrimination.yaml",)
-KIND_NAMES = {"2afc_interval": "two-interval", "near_side": "left/right nearer", "preference": "pairwise preference",
-              "reach": "reach", "with_against": "with/against (NC calibration)"}
+def kind_name(kind: ResponseKind) -> str:
+    """How ``psyop studies`` and make's progress lines name a response kind."""
+    match kind:
+        case ResponseKind.TWO_INTERVAL:
+            return "two-interval"
+        case ResponseKind.NEAR_SIDE:
+            return "left/right nearer"
+        case ResponseKind.PREFERENCE:
+            return "pairwise preference"
+        case ResponseKind.REACH:
+            return "reach"
+        case ResponseKind.WITH_AGAINST:
+            return "with/against (NC calibration)"
+        case _:
+            assert_never(kind)
 
 
 @dataclass(frozen=True)
@@ -63,22 +78,39 @@ def make_escaped(path: Path) -> str:
     return text
 
 
-def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "", adaptive: bool = False) -> list[Target]:
+def targets_for(study: str, kind: ResponseKind, linear_fit: bool, trials: str = "", adaptive: bool = False) -> list[Target]:
     """The analysis of one study, by its response kind; ``trials`` is its sessions' trials.parquet
     files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces); ``adaptive``
     (a two-interval study whose levels a staircase or QUEST+ placed) adds its track plot.
 
     Examples
     --------
-    >>> [t.output for t in targets_for("mine", "near_side", False)]
+    >>> [t.output for t in targets_for("mine", ResponseKind.NEAR_SIDE, False)]
     ['mine_depth.png']
     """
+    common = f'--study {study} --data "$(DATA)" --results "$(RESULTS)"'
+    match kind:
+        case ResponseKind.TWO_INTERVAL:
+            return _two_interval_targets(study, linear_fit, trials, adaptive)
+        case ResponseKind.NEAR_SIDE:
+            figure = ("depth", "analysis/fig_ordinal_depth.py")
+        case ResponseKind.REACH:
+            figure = ("reach", "analysis/fig_egocentric_reach.py")
+        case ResponseKind.PREFERENCE:
+            figure = ("preferences", "analysis/fig_realism.py")
+        case ResponseKind.WITH_AGAINST:
+            figure = ("pss", "analysis/nc_calibration.py")
+        case _:
+            assert_never(kind)
+    return [Target(f"{study}_{figure[0]}.png", figure[1], f"{trials} $(DRAW_SRC)", common)]
+
+
+def _two_interval_targets(study: str, linear_fit: bool, trials: str, adaptive: bool) -> list[Target]:
+    """A two-interval study's fits, threshold figure, psychometric panels and (adaptive) track plot."""
     fits = f"$(RESULTS)/{study}_fits.csv"
     common = f'--study {study} --data "$(DATA)" --results "$(RESULTS)"'
-
-    if kind == "2afc_interval":
-        script = "analysis/fig_discrimination_thresholds.py" if linear_fit else "analysis/fig_detection_thresholds.py"
-        return [Target(f"{study}_fits.csv", "analysis/fit_psychometric.py", f"$(STATS_SRC) {trials}",
+    script = "analysis/fig_discrimination_thresholds.py" if linear_fit else "analysis/fig_detection_thresholds.py"
+    return [Target(f"{study}_fits.csv", "analysis/fit_psychometric.py", f"$(STATS_SRC) {trials}",
                        f"{common} --n-jobs $(JOBS)", kind="fits"),
                 Target(f"{study}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"'),
                 Target(f"supp_psychometric_{study}.png", "analysis/supp_psychometric_functions.py",
@@ -86,10 +118,6 @@ def targets_for(study: str, kind: str, linear_fit: bool, trials: str = "", adapt
                 Target(f"{study}_tracks.png", "analysis/adaptive_tracks.py",
                        f"{fits} {trials} $(DRAW_SRC) psyop/figures/adaptive_figures.py", f'{common} --fits "{fits}"')]
                 if adaptive else [])
-    figure = {"near_side": ("depth", "analysis/fig_ordinal_depth.py"), "reach": ("reach", "analysis/fig_egocentric_reach.py"),
-              "preference": ("preferences", "analysis/fig_realism.py"),
-              "with_against": ("pss", "analysis/nc_calibration.py")}[kind]
-    return [Target(f"{study}_{figure[0]}.png", figure[1], f"{trials} $(DRAW_SRC)", common)]
 
 
 def analysis_units(data: Path, pool_protocols: bool) -> list[tuple[StudyFacts, list[Path]]]:
@@ -130,7 +158,7 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
     for facts, sessions in analysis_units(data, pool_protocols):
         uses_linear = bool(facts.protocol_sha256) and set(facts.protocol_sha256) <= linear
         prerequisites = " ".join(make_escaped(p) for p in sessions)
-        adaptive = facts.kind == "2afc_interval" and _adaptive(sessions)
+        adaptive = facts.kind is ResponseKind.TWO_INTERVAL and _adaptive(sessions)
         targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive) + [Target(  # issue 27
             f"{facts.name}_gaze_quality.png", "analysis/gaze_quality.py", f"{prerequisites} $(QUALITY_SRC)",
             f'--study {facts.name} --data "$(DATA)" --results "$(RESULTS)"')]
@@ -139,10 +167,10 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
         for t in targets:
             where = "$(RESULTS)" if t.kind == "fits" else "$(FIGDIR)"
             label = f"fitting psychometric functions: {facts.name}" if t.kind == "fits" else \
-                f"{facts.name} ({KIND_NAMES[facts.kind]}): $@"
+                f"{facts.name} ({kind_name(facts.kind)}): $@"
             rules += [f"{where}/{t.output}: {t.script} {t.prerequisites}", f'\t@mkdir -p "{where}"',
                       f"\t@echo \"[psyop] {label}\"", f'\t@"$(ANALYSE)" "$<" {t.arguments} --out "$@"', ""]
-        said.append(f"{facts.name} ({KIND_NAMES[facts.kind]}{_versions_note(facts, len(sessions))}): "
+        said.append(f"{facts.name} ({kind_name(facts.kind)}{_versions_note(facts, len(sessions))}): "
                     + ", ".join(t.output for t in figures))
     return "\n".join(rules) + "\n", said
 

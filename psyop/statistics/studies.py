@@ -19,11 +19,9 @@ import yaml
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
+from psyop.session.responses.base import ResponseKind
 from psyop.statistics.protocol_versions import session_hash, split_unit, unit_trials_files
 
-#: The response kinds (session.json ``response_kind``; psyop.session.responses.base.ResponseKind).
-TWO_INTERVAL, NEAR_SIDE, PREFERENCE, REACH = "2afc_interval", "near_side", "preference", "reach"
-WITH_AGAINST = "with_against"
 #: Units by factor-name suffix (docs/protocols.md: a numeric factor says its unit in its name).
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (("_deg", "deg"), ("_arcmin", "arcmin"), ("_mm", "mm"), ("_m", "m"),
                                               ("_D", "D"), ("_s", "s"), ("_hz", "Hz"), ("_px", "px"),
@@ -72,7 +70,7 @@ class StudyFacts:
     ``level_factor``: the 2AFC level factor (None for other kinds)."""
 
     name: str
-    kind: str
+    kind: ResponseKind
     protocol_sha256: tuple[str, ...] = ()
     factors: dict[str, FactorFacts] = field(default_factory=dict)
     level_factor: str | None = None
@@ -120,7 +118,7 @@ def unit_of(name: str) -> str | None:
     return None
 
 
-def _kind_from_columns(path: Path) -> str:
+def _kind_from_columns(path: Path) -> ResponseKind:
     from psyop.session.responses.base import response_kind
 
     try:
@@ -128,14 +126,26 @@ def _kind_from_columns(path: Path) -> str:
     except Exception as exc:  # any unreadable parquet is bad input here (re-raised as UserError)
         raise UserError(f"unreadable trial log ({exc})", str(path)) from exc
     try:
-        return response_kind(columns).value
+        return response_kind(columns)
     except Exception as exc:  # re-raised as UserError below
         # tables without the schedule's columns (psyop.statistics.simulate): a 2AFC level, or a mode, and correct
         if "correct" in columns and "level_D" in columns:
-            return TWO_INTERVAL
+            return ResponseKind.TWO_INTERVAL
         if "correct" in columns and "mode" in columns:
-            return NEAR_SIDE
+            return ResponseKind.NEAR_SIDE
         raise UserError(f"no response kind in its columns ({exc})", str(path)) from exc
+
+
+def _recorded_kind(value: object, meta_path: Path) -> ResponseKind | None:
+    """session.json's ``response_kind`` (None: not recorded); a UserError naming the file for a kind psyop
+    does not know."""
+    if value is None:
+        return None
+    try:
+        return ResponseKind(value)
+    except ValueError:
+        known = ", ".join(k.value for k in ResponseKind)
+        raise UserError(f"response_kind {value!r} is not one psyop analyses ({known})", str(meta_path)) from None
 
 
 def _protocol_factors(text: str) -> tuple[dict[str, FactorFacts], str | None, dict[str, str]]:
@@ -168,14 +178,14 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
     >>> _ = write_dataset(root, {"s": pd.DataFrame({"participant": ["1"], "session": [1], "pair": ["a|b"],
     ...                                              "mode_a": ["a"], "mode_b": ["b"]})}, simulated=True)
     >>> study_facts(root, "s").kind
-    'preference'
+    <ResponseKind.PREFERENCE: 'preference'>
     """
     files = unit_trials_files(data_root, study)
     if not files:
         raise UserError(f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
                         str(Path(data_root)))
     hashes: list[str] = []
-    kind: str | None = None
+    kind: ResponseKind | None = None
     text: str | None = None
     for trials in files:
         meta_path = trials.parent / dc.SESSION_METADATA_FILE
@@ -188,11 +198,11 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
         sha = meta.get("protocol_sha256")
         if isinstance(sha, str) and sha and sha not in hashes:
             hashes.append(sha)
-        kind = kind or meta.get("response_kind")
+        kind = kind or _recorded_kind(meta.get("response_kind"), meta_path)
         text = text or meta.get("protocol_text")
     kind = kind or _kind_from_columns(files[0])
     factors, level, fields = _protocol_factors(text) if text else ({}, None, {})
-    if kind == TWO_INTERVAL and level is None:
+    if kind is ResponseKind.TWO_INTERVAL and level is None:
         level = "level_D"
     folder = split_unit(study)[0]
     everything = tuple(sorted(hashes)) if folder == study else \
