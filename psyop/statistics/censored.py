@@ -13,8 +13,14 @@ probability of lying beyond its bound (Tobin 1958; the model of R's ``AER::tobit
   standard errors from the observed information, intervals from t with n - k df.
 - :func:`tobit_mean`: the one-column case (a group mean).
 
-Fits are treated as independent observations (no participant random effect); with repeated fits per
-participant the standard error is optimistic, which the result's ``model`` text says.
+Fits of one participant are not independent (one observer's thresholds at several conditions). Given
+``clusters`` (the participant of each fit, as :func:`censored_report` passes them), the standard errors
+are participant-clustered: the sandwich of the observed information and the per-participant score sums
+(R's ``survreg(..., cluster = participant)`` robust variance), times G / (G - 1) for G participants,
+with t intervals on G - 1 df (the convention of Stata's clustered errors), flagged ``LOW DF`` below
+:data:`psyop.statistics.small_sample.MIN_RELIABLE_DF`. Without clusters (one fit per participant, or
+the caller's choice) fits are independent observations with t on n - k df; the ``model`` text says
+which.
 """
 
 from __future__ import annotations
@@ -50,6 +56,19 @@ class TobitFit:
     model: str
     #: the maximised log-likelihood (normal densities of observed values, probabilities of censored ones)
     loglik: float = float("nan")
+    #: participants (clusters) behind a participant-clustered sandwich; 0: fits treated as independent
+    n_clusters: int = 0
+    #: the df of the t intervals: n - k (independent fits) or G - 1 (participant-clustered)
+    df_interval: int = 0
+    #: the sandwich before the G / (G - 1) factor (R's survreg robust variance), SEs of every coefficient
+    se_sandwich: tuple[float, ...] = ()
+
+    @property
+    def low_df(self) -> bool:
+        """The intervals' df are below :data:`~psyop.statistics.small_sample.MIN_RELIABLE_DF`."""
+        from psyop.statistics.small_sample import MIN_RELIABLE_DF
+
+        return not self.df_interval >= MIN_RELIABLE_DF
 
     def get(self, name: str) -> tuple[float, float, float]:
         """(estimate, CI low, CI high) of one coefficient."""
@@ -129,8 +148,31 @@ def _newton_polish(x: np.ndarray, y: np.ndarray, X: np.ndarray, side: np.ndarray
     return x, grad, hess
 
 
+def _row_scores(params: np.ndarray, y: np.ndarray, X: np.ndarray, side: np.ndarray) -> np.ndarray:
+    """(n, k + 1) per-row gradients of the log-likelihood in (beta, log sigma); their column sums are
+    minus :func:`_negloglik_derivatives`' gradient."""
+    sigma = float(np.exp(params[-1]))
+    z = (y - X @ params[:-1]) / sigma
+    below = np.exp(stats.norm.logpdf(z) - stats.norm.logcdf(z))
+    above = np.exp(stats.norm.logpdf(z) - stats.norm.logsf(z))
+    g1 = np.where(side == 0, -z, np.where(side < 0, below, -above))
+    scores = np.column_stack([-X / sigma, -z]) * g1[:, None]
+    scores[:, -1] -= (side == 0).astype(float)
+    return scores
+
+
+def cluster_sandwich(params: np.ndarray, hess: np.ndarray, y: np.ndarray, X: np.ndarray, side: np.ndarray,
+                     clusters: np.ndarray) -> np.ndarray:
+    """H^-1 (sum_g u_g u_g') H^-1 over (beta, log sigma), u_g the score sum of cluster g: R's
+    ``survreg(..., cluster = g)`` robust variance (no small-sample factor)."""
+    bread = np.linalg.pinv(hess)
+    scores = _row_scores(params, y, X, side)
+    sums = pd.DataFrame(scores).groupby(np.asarray(clusters), sort=True).sum().to_numpy()
+    return bread @ (sums.T @ sums) @ bread
+
+
 def tobit_fit(y: np.ndarray, X: np.ndarray, side: np.ndarray, names: tuple[str, ...],
-              ci_level: float = 0.95) -> TobitFit:
+              ci_level: float = 0.95, clusters: np.ndarray | None = None) -> TobitFit:
     """Maximum-likelihood censored-normal regression.
 
     Parameters
@@ -139,6 +181,7 @@ def tobit_fit(y: np.ndarray, X: np.ndarray, side: np.ndarray, names: tuple[str, 
     X : (n, k) design matrix
     side : -1 (true value < y), 0 (observed), +1 (true value > y)
     names : the k column names
+    clusters : the participant of each row: participant-clustered SEs, t on G - 1 df (module docstring)
     """
     y, X, side = np.asarray(y, float), np.asarray(X, float), np.asarray(side, int)
     n, k = X.shape
@@ -150,9 +193,7 @@ def tobit_fit(y: np.ndarray, X: np.ndarray, side: np.ndarray, names: tuple[str, 
     res = optimize.minimize(_negloglik, start, args=(y, X, side), method="BFGS",
                             jac=lambda p, *a: _negloglik_derivatives(p, *a)[0], options={"gtol": 1e-9})
     x, grad, hess = _newton_polish(res.x, y, X, side)
-    cov = np.linalg.pinv(hess)
-    se = np.sqrt(np.clip(np.diag(cov)[:k], 0, None))
-    df = max(n - k, 1)
+    se, df, n_clusters, se_sandwich = _tobit_se(x, hess, y, X, side, clusters)
     half = stats.t.ppf(0.5 + ci_level / 2, df) * se
     coef = x[:k]
     n_below, n_above = int((side < 0).sum()), int((side > 0).sum())
@@ -161,14 +202,34 @@ def tobit_fit(y: np.ndarray, X: np.ndarray, side: np.ndarray, names: tuple[str, 
         ci_low=tuple(map(float, coef - half)), ci_high=tuple(map(float, coef + half)),
         sigma=float(np.exp(x[-1])), n=n, n_below=n_below, n_above=n_above, df_resid=n - k,
         converged=bool(np.max(np.abs(grad)) < 1e-6), loglik=-_negloglik(x, y, X, side),
+        n_clusters=n_clusters, df_interval=df, se_sandwich=se_sandwich,
         model=(f"censored-normal (Tobit) ML over {n} fits, {n_below} censored below and {n_above} above "
-               "the tested levels entered at their bounds as censored; fits treated as independent"))
+               "the tested levels entered at their bounds as censored; "
+               + (f"participant-clustered SEs ({n_clusters} participants, t on {df} df)" if n_clusters
+                  else "fits treated as independent")))
 
 
-def tobit_mean(y: np.ndarray, side: np.ndarray, ci_level: float = 0.95) -> TobitFit:
+def _tobit_se(x: np.ndarray, hess: np.ndarray, y: np.ndarray, X: np.ndarray, side: np.ndarray,
+              clusters: np.ndarray | None) -> tuple[np.ndarray, int, int, tuple[float, ...]]:
+    """(SEs of beta, interval df, clusters, sandwich SEs of every parameter): the observed information
+    with n - k df, or the participant-clustered sandwich times G / (G - 1) with G - 1 df."""
+    n, k = X.shape
+    if clusters is None:
+        cov = np.linalg.pinv(hess)
+        return np.sqrt(np.clip(np.diag(cov)[:k], 0, None)), max(n - k, 1), 0, ()
+    g = int(pd.Series(np.asarray(clusters)).nunique())
+    if g < 2:
+        raise ValueError(f"participant-clustered errors need at least 2 participants, have {g}")
+    sandwich = cluster_sandwich(x, hess, y, X, side, clusters)
+    se_all = np.sqrt(np.clip(np.diag(sandwich), 0, None))
+    return se_all[:k] * np.sqrt(g / (g - 1)), g - 1, g, tuple(map(float, se_all))
+
+
+def tobit_mean(y: np.ndarray, side: np.ndarray, ci_level: float = 0.95,
+               clusters: np.ndarray | None = None) -> TobitFit:
     """The group mean of values some of which are censored (the intercept-only Tobit model)."""
     y = np.asarray(y, float)
-    return tobit_fit(y, np.ones((len(y), 1)), side, ("mean",), ci_level)
+    return tobit_fit(y, np.ones((len(y), 1)), side, ("mean",), ci_level, clusters)
 
 
 def substituted(rows: pd.DataFrame) -> pd.DataFrame:
@@ -182,22 +243,35 @@ def format_tobit(fit: TobitFit, name: str, unit: str = "") -> str:
     """'0.41 D [95 % CI 0.33, 0.49]; censored-normal (Tobit) ML over ...'."""
     est, lo, hi = fit.get(name)
     u = f" {unit}" if unit else ""
+    from psyop.statistics.small_sample import low_df_note
+
     warn = "" if fit.converged else "; NOT CONVERGED"
-    return f"{est:.3f}{u} [95 % CI {lo:.3f}, {hi:.3f}; df = {fit.df_resid}]; {fit.model}{warn}"
+    note = low_df_note(float(fit.df_interval), "participant" if fit.n_clusters else "residual")
+    warn += f" [{note.replace('p-value', 'interval')}]" if note else ""
+    return f"{est:.3f}{u} [95 % CI {lo:.3f}, {hi:.3f}; df = {fit.df_interval}]; {fit.model}{warn}"
 
 
-def censored_condition_means(rows: pd.DataFrame, cond: str) -> TobitFit:
+def censored_condition_means(rows: pd.DataFrame, cond: str, clusters: np.ndarray | None = None) -> TobitFit:
     """One Tobit mean per level of ``cond`` (cell-means design, a common sigma)."""
     levels = sorted(rows[cond].unique())
     X = np.column_stack([(rows[cond] == lv).to_numpy(float) for lv in levels])
-    return tobit_fit(rows["y"].to_numpy(), X, rows["side"].to_numpy(), tuple(str(lv) for lv in levels))
+    return tobit_fit(rows["y"].to_numpy(), X, rows["side"].to_numpy(), tuple(str(lv) for lv in levels),
+                     clusters=clusters)
 
 
-def censored_line(rows: pd.DataFrame, x: str) -> TobitFit:
+def censored_line(rows: pd.DataFrame, x: str, clusters: np.ndarray | None = None) -> TobitFit:
     """Tobit regression of the threshold on a numeric ``x`` (intercept, slope)."""
     xs = rows[x].to_numpy(float)
     X = np.column_stack([np.ones_like(xs), xs])
-    return tobit_fit(rows["y"].to_numpy(), X, rows["side"].to_numpy(), ("intercept", "slope"))
+    return tobit_fit(rows["y"].to_numpy(), X, rows["side"].to_numpy(), ("intercept", "slope"), clusters=clusters)
+
+
+def participant_clusters(rows: pd.DataFrame) -> np.ndarray | None:
+    """The participant of each row when some participant has several fits (then they are not independent),
+    else None (one fit each: independent)."""
+    if "participant" not in rows or not rows["participant"].duplicated().any():
+        return None
+    return rows["participant"].astype(str).to_numpy()
 
 
 def censored_report(fits: pd.DataFrame, cond: str, unit: str, numeric: bool = False) -> dict:
@@ -208,16 +282,17 @@ def censored_report(fits: pd.DataFrame, cond: str, unit: str, numeric: bool = Fa
     out: dict = {"n_censored_below": n_b, "n_censored_above": n_a, "still_left_out_by_status": left,
                  "rule": ("censored thresholds enter a censored-normal (Tobit) likelihood at their bound "
                           "(the lowest / highest tested level); bimodal, grid-edge and no-fit fits stay out")}
+    clusters = participant_clusters(rows)
     try:
-        mean = tobit_mean(rows["y"].to_numpy(), rows["side"].to_numpy())
-        out["mean"] = mean.__dict__
+        mean = tobit_mean(rows["y"].to_numpy(), rows["side"].to_numpy(), clusters=clusters)
+        out["mean"] = {**mean.__dict__, "low_df": mean.low_df}
         out["text_mean"] = format_tobit(mean, "mean", unit)
         if numeric:
-            line = censored_line(rows, cond)
-            out["line"] = line.__dict__
+            line = censored_line(rows, cond, clusters)
+            out["line"] = {**line.__dict__, "low_df": line.low_df}
             out["text_slope"] = format_tobit(line, "slope", "")
         else:
-            out["condition_means"] = censored_condition_means(rows, cond).__dict__
+            out["condition_means"] = {**censored_condition_means(rows, cond, clusters).__dict__}
     except ValueError as exc:
         out["text_mean"] = f"not computed: {exc}"
     out["headline"] = (f"{n_b + n_a} of {len(fits)} fits censored ({n_b} below, {n_a} above the tested levels): "
@@ -226,5 +301,5 @@ def censored_report(fits: pd.DataFrame, cond: str, unit: str, numeric: bool = Fa
     return out
 
 
-__all__ = ["censored_condition_means", "censored_line", "censored_report", "CENSORED_ABOVE", "CENSORED_BELOW", "TobitFit", "censoring_of", "format_tobit", "substituted",
+__all__ = ["censored_condition_means", "censored_line", "cluster_sandwich", "participant_clusters", "censored_report", "CENSORED_ABOVE", "CENSORED_BELOW", "TobitFit", "censoring_of", "format_tobit", "substituted",
            "tobit_fit", "tobit_mean"]

@@ -77,3 +77,21 @@ def test_a_linear_fit_with_few_residual_df_is_flagged_low_df_and_states_its_df()
     many = pd.concat([few] * 3, ignore_index=True)
     text = format_linear_fit(linear_fit(many, "x", "y"), "D")
     assert "df = 13" in text and "LOW DF" not in text
+
+
+def test_repeated_fits_of_few_participants_get_clustered_errors_on_participant_df_flagged_low():
+    """Three participants x two conditions: six fits but three independent observers. The report's Tobit
+    mean uses participant-clustered SEs with t on 2 df and says LOW DF, never df = 5 as if the six fits
+    were independent; one fit per participant stays the independent model."""
+    from psyop.statistics.censored import censored_report
+
+    fits = pd.DataFrame({"participant": ["S1", "S1", "S2", "S2", "S3", "S3"], "c": [1, 2] * 3,
+                         "status": ["ok", "ok", "censored_below", "ok", "ok", "ok"],
+                         "threshold_D": [0.41, 0.52, np.nan, 0.38, 0.47, 0.60],
+                         "threshold_bound_D": [np.nan, np.nan, 0.3, np.nan, np.nan, np.nan]})
+    report = censored_report(fits, "c", "D")
+    assert report["mean"]["n_clusters"] == 3 and report["mean"]["df_interval"] == 2 and report["mean"]["low_df"]
+    assert "df = 2]" in report["text_mean"] and "participant-clustered SEs (3 participants" in report["text_mean"]
+    assert "LOW DF: 2 participant df < 4" in report["text_mean"]
+    one_each = censored_report(fits.drop_duplicates("participant"), "c", "D")
+    assert one_each["mean"]["n_clusters"] == 0 and "fits treated as independent" in one_each["text_mean"]

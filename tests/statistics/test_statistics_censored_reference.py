@@ -55,3 +55,22 @@ def test_goldens_record_their_r_and_survival_versions():
     for name in ("mean", "line", "cells"):
         sides = pd.read_csv(FIXTURES / f"design_tobit_{name}.csv")["side"]
         assert (sides < 0).any() and (sides > 0).any(), f"{name}: the golden design is censored on both sides"
+
+
+def test_participant_clustered_sandwich_equals_survreg_robust_variance():
+    """5 participants x 3 conditions, censored on both sides (design_tobit_clustered.csv): psyop's
+    sandwich before its G / (G - 1) factor equals survreg(..., cluster = participant)'s robust
+    variance (fit$var; measured 1.6e-15 relative); the reported SEs are it times sqrt(G / (G - 1)) and
+    the intervals use t on G - 1 = 4 df."""
+    d = pd.read_csv(FIXTURES / "design_tobit_clustered.csv")
+    fit = censored_condition_means(d, "cond", clusters=d["participant"].to_numpy())
+    golden = pd.read_csv(FIXTURES / "golden_tobit_clustered_coef.csv")
+    summary = pd.read_csv(FIXTURES / "golden_tobit_clustered_fit.csv").iloc[0]
+    np.testing.assert_allclose(fit.coef, golden["estimate"][:3], rtol=RTOL)
+    np.testing.assert_allclose(fit.se_sandwich, golden["robust_se"], rtol=RTOL)
+    np.testing.assert_allclose(fit.se, golden["robust_se"][:3] * np.sqrt(5 / 4), rtol=RTOL)
+    assert fit.sigma == pytest.approx(summary["scale"], rel=RTOL)
+    assert (fit.n_clusters, fit.df_interval, fit.low_df) == (5, 4, False)
+    assert "participant-clustered SEs (5 participants, t on 4 df)" in fit.model
+    sides = d["side"]
+    assert (sides < 0).any() and (sides > 0).any()
