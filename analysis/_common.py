@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from psyop.session.responses.base import ResponseKind
+
 
 class _Parser(argparse.ArgumentParser):
     """argparse whose usage errors are one line and exit 2 (no usage block)."""
@@ -85,17 +87,17 @@ def provenance(facts, analysis: str, pool_protocols: bool = False) -> dict:
                         f"{', '.join(h[:12] for h in hashes)}); analyse each version apart with --study "
                         f"{' / '.join(unit_name(facts.name, h) for h in hashes)} (as `make figures` does) or pool "
                         "them on purpose with --pool-protocols (`make figures POOL=1`)", facts.name)
-    return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind, "protocol_sha256": hashes,
+    return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind.value, "protocol_sha256": hashes,
             "protocols_pooled": len(hashes) > 1, "study_folder": facts.folder,
             "study_protocol_versions": list(facts.folder_protocol_sha256)}
 
 
-def require_kind(facts, kind: str, script: str) -> None:
+def require_kind(facts, kind: ResponseKind, script: str) -> None:
     """A UserError when the study's responses are of another kind than this script analyses."""
-    if facts.kind != kind:
+    if facts.kind is not kind:
         from psyop.errors import UserError
 
-        raise UserError(f"study {facts.name!r} has {facts.kind} responses; {script} analyses {kind} studies "
+        raise UserError(f"study {facts.name!r} has {facts.kind.value} responses; {script} analyses {kind.value} studies "
                         "(`python -m psyop studies DATA` lists each study's kind and its scripts)", facts.name)
 
 

@@ -5,7 +5,8 @@ from the protocol its sessions ran (psyop.statistics.studies), or given on the c
 from __future__ import annotations
 
 from psyop.errors import UserError
-from psyop.statistics.studies import TWO_INTERVAL, StudyFacts
+from psyop.session.responses.base import ResponseKind
+from psyop.statistics.studies import StudyFacts
 
 #: Studies whose sessions carry no protocol (older logs, write_dataset without hashes): the paper's names.
 KNOWN_CONDITIONS = {"detection": "back_D", "discrimination": "offset_D"}
@@ -34,6 +35,6 @@ def level_column(facts: StudyFacts, given: str | None) -> str:
 
 
 def check_two_interval(facts: StudyFacts, script: str) -> None:
-    if facts.kind != TWO_INTERVAL:
-        raise UserError(f"study {facts.name!r} has {facts.kind} responses; {script} analyses two-interval "
+    if facts.kind is not ResponseKind.TWO_INTERVAL:
+        raise UserError(f"study {facts.name!r} has {facts.kind.value} responses; {script} analyses two-interval "
                         "(2AFC) studies (`python -m psyop studies DATA` lists each study's kind)", facts.name)
