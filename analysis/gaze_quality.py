@@ -1,5 +1,6 @@
 """Gaze quality of one study (issue 27): the per-trial measures of every session (psyop.quality, from the
-raw gaze stream each session finalised; a ``requested`` stream is measured from the samples it holds),
+raw gaze stream each session finalised; a ``requested`` simulated stream is rebuilt from its seed and checked
+against every recorded sample, else measured from the samples it holds: psyop.quality.resimulate),
 the fixation/saccade events (pymovements; built here from the finalised session files, not stored in
 them), the protocol's ``quality:`` exclusions and the methods sentence. Writes
 results/<study>_gaze_quality.csv, results/<study>_gaze_events.csv, results/<study>_exclusions.csv,
@@ -11,14 +12,12 @@ from __future__ import annotations
 
 import sys
 
-import pandas as pd
 from _common import out_path, parser, results_file, run, write_csv, write_text
 
-from psyop import datacontract as dc
 from psyop.figures.output import save_figure
 from psyop.quality.figures import plot_measures, plot_sample_trials
 from psyop.quality.included import quality_rules, study_quality
-from psyop.quality.session import recorded_plan
+from psyop.quality.session import session_gaze
 from psyop.statistics.dataset import session_files
 
 
@@ -33,12 +32,9 @@ def main(argv: list[str] | None = None) -> int:
     write_csv(quality.exclusions, results_file(args.results, args.study, "exclusions", "csv"))
     write_text(results_file(args.results, args.study, "quality", "txt"), quality.sentence + "\n")
     out = out_path(args)
-    if sessions:
-        gaze_path = sessions[0] / dc.GAZE_FILE
-        gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
-        trials = pd.read_parquet(sessions[0] / dc.TRIALS_FILE)
-        save_figure(plot_sample_trials(gaze, trials, recorded_plan(sessions[0])),
-                    out.with_name(out.stem + "_samples.png"))
+    if sessions:  # the stream it was measured from (a requested simulated session's rebuilt one)
+        first = session_gaze(sessions[0])
+        save_figure(plot_sample_trials(first.gaze, first.trials, first.plan), out.with_name(out.stem + "_samples.png"))
     save_figure(plot_measures(quality.measures, rules, args.study), out)
     print(f"[psyop] {args.study}: {quality.sentence}")
     return 0

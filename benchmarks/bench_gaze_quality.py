@@ -57,6 +57,7 @@ def run(out_dir: Path, quick: bool) -> str:
     trial_measures(grid, trials, plan)  # events again, then the measures
     t3 = time.perf_counter()
     per = 1e6 / len(gaze)
+    rebuilt_s, n_rebuilt, n_checked = _rebuild(out_dir, 1 if quick else 3)
     return "\n".join([
         "## Gaze quality and events (bench_gaze_quality)",
         "",
@@ -68,4 +69,38 @@ def run(out_dir: Path, quick: bool) -> str:
         f"| grid (psyop.quality.samples) | {(t1 - t0) * per:.2f} s |",
         f"| events (pymovements ivt + microsaccades, amplitude, peak velocity) | {(t2 - t1) * per:.2f} s |",
         f"| events + per-trial measures (trial_measures) | {(t3 - t2) * per:.2f} s |",
+        f"| rebuild a requested session's stream from its seed and check it (psyop.quality.resimulate; "
+        f"{n_rebuilt:,} samples of a simulated detection session, checked against its {n_checked} recorded ones) | "
+        f"{rebuilt_s * 1e6 / n_rebuilt:.2f} s |",
     ])
+
+
+def _rebuild(out_dir: Path, repetitions: int) -> tuple[float, int, int]:
+    """(seconds, samples rebuilt, recorded samples checked) of one rebuild of a simulated detection session."""
+    import json
+    import re
+    import shutil
+
+    from psyop.quality.resimulate import resimulate_gaze
+    from psyop.quality.session import session_gaze
+    from psyop.run.runner import SessionOptions, run_session
+    from psyop.schedule import compile_schedule
+    from psyop.session.log.record import SessionRecord
+
+    work = out_dir / "bench_gaze_quality_rebuild"
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    text = re.sub(r"(?m)^(\s*repetitions:)\s*\d+", rf"\g<1> {repetitions}", (PROTOCOLS / "detection.yaml").read_text())
+    (work / "detection.yaml").write_text(text)
+    options = SessionOptions(participant="B1", seed=3, data_root=work / "data", progress=False, render="cameras")
+    run_session(load_protocol(work / "detection.yaml"), compile_schedule, options)
+    session = work / "data" / "detection" / "sub-B1" / "ses-1"
+    s = session_gaze(session)  # (the imports, once)
+    record = SessionRecord.model_validate(json.loads((session / "session.json").read_text()))
+    recorded = pd.read_parquet(session / "gaze.parquet")
+    t0 = time.perf_counter()
+    r = resimulate_gaze(s.plan, record, "B1", s.trials, recorded)
+    seconds = time.perf_counter() - t0
+    assert r.gaze is not None, r.reason
+    shutil.rmtree(work, ignore_errors=True)
+    return seconds, len(r.gaze), r.n_checked

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,7 +14,9 @@ from psyop.errors import UserError
 from psyop.finalised import verify_session
 from psyop.quality.measures import trial_measures
 from psyop.protocol.validation import VALIDATION_MEASURES
+from psyop.quality.resimulate import resimulate_gaze
 from psyop.quality.samples import gaze_grid
+from psyop.session.log.record import SessionRecord
 from psyop.quality.validation import read_validations, trial_validation_measures
 
 if TYPE_CHECKING:
@@ -39,14 +42,26 @@ def recorded_plan(directory: Path) -> SessionPlan:
     return compile_plan(recorded_protocol(json.loads(meta_path.read_text()), meta_path))
 
 
-def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(per-trial measures, events) of the session in ``directory``, each with participant and session.
+@dataclass(frozen=True)
+class SessionGaze:
+    """One finalised session's gaze as the quality analysis measures it: ``gaze`` (GAZE_SCHEMA columns) is
+    the recorded raw stream, or for a ``requested`` simulated session the stream rebuilt from its seed when
+    that agrees with every recorded sample (:mod:`psyop.quality.resimulate`); ``stream`` says which
+    (``every_sample``, ``resimulated`` or ``requested``), ``note`` how it was checked or why it was not
+    rebuilt; ``rate_hz``: the simulated tracker's nominal rate (None: from the samples)."""
 
-    The nominal rate is the simulated tracker's ``rate_hz`` (protocol ``observer: eye:``, default 120 Hz)
-    for a simulated session, else the median interval between samples. A simulated session whose raw stream
-    is ``requested`` (the shipped protocols' choice) holds only the samples the session asked for (about one
-    per trial on the virtual clock): its measures come from :func:`requested_stream_measures`; column
-    ``raw_stream`` says which stream each row was measured from."""
+    plan: SessionPlan
+    trials: pd.DataFrame
+    gaze: pd.DataFrame
+    stream: str
+    note: str
+    rate_hz: float | None
+    participant: str
+    session: int
+
+
+def session_gaze(directory: Path) -> SessionGaze:
+    """The verified session in ``directory`` and the gaze stream its quality is measured from."""
     from psyop.session.gaze.simulated import tracker_config
     from psyop.session.plan import compile_plan
 
@@ -57,24 +72,58 @@ def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     verify_session(directory)
     meta = json.loads(meta_path.read_text())
     plan = compile_plan(recorded_protocol(meta, meta_path))
-    rate, stream = None, "every_sample"
-    if meta.get("tracker") == "sim":
-        config = tracker_config(plan.observer.eye if plan.observer is not None else None, str(meta.get("participant", "")))
+    record = _record(meta, meta_path)
+    participant = str(meta.get("participant", ""))
+    rate, stream, note = None, "every_sample", ""
+    if (record.tracker or "").partition(":")[0] == "sim":
+        config = tracker_config(plan.observer.eye if plan.observer is not None else None, participant)
         rate, stream = config.rate_hz, config.raw_stream or "requested"
     gaze_path = directory / dc.GAZE_FILE
     gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
     trials = pd.read_parquet(directory / dc.TRIALS_FILE)
-    measures, events = trial_measures(gaze_grid(gaze, rate), trials, plan)
     if stream == "requested":
-        measures, events = requested_stream_measures(measures, gaze), events.iloc[0:0]
-    measures.insert(1, "raw_stream", stream)
-    validation = trial_validation_measures(trials, read_validations(directory))  # NaN: no gaze_validation
+        rebuilt = resimulate_gaze(plan, record, participant, trials, gaze)
+        if rebuilt.gaze is not None:
+            gaze, stream = rebuilt.gaze, "resimulated"
+            note = f"rebuilt from the seed; equal to all {rebuilt.n_checked} recorded samples in trials"
+        else:
+            note = f"not rebuilt: {rebuilt.reason}"
+    return SessionGaze(plan, trials, gaze, stream, note, rate, participant, int(meta.get("session", 1)))
+
+
+def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(per-trial measures, events) of the session in ``directory``, each with participant and session.
+
+    The nominal rate is the simulated tracker's ``rate_hz`` (protocol ``observer: eye:``, default 120 Hz)
+    for a simulated session, else the median interval between samples. A simulated session whose raw stream
+    is ``requested`` (the shipped protocols' choice) holds only the samples the session asked for (about one
+    per trial on the virtual clock); it is measured from its rebuilt full stream (:func:`session_gaze`,
+    ``raw_stream`` = ``resimulated``), or where that cannot be rebuilt and checked from the samples it holds
+    (:func:`requested_stream_measures`, ``raw_stream`` = ``requested``). Column ``raw_stream`` says which
+    stream each row was measured from, ``raw_stream_note`` how a rebuilt one was checked or why it was not."""
+    s = session_gaze(directory)
+    measures, events = trial_measures(gaze_grid(s.gaze, s.rate_hz), s.trials, s.plan)
+    if s.stream == "requested":
+        measures, events = requested_stream_measures(measures, s.gaze), events.iloc[0:0]
+    measures.insert(1, "raw_stream", s.stream)
+    measures.insert(2, "raw_stream_note", s.note)
+    validation = trial_validation_measures(s.trials, read_validations(Path(directory)))  # NaN: no gaze_validation
     for name in VALIDATION_MEASURES:
         measures[name] = validation[name].to_numpy()
     for table in (measures, events):
-        table.insert(0, "session", int(meta.get("session", 1)))
-        table.insert(0, "participant", str(meta.get("participant", "")))
+        table.insert(0, "session", s.session)
+        table.insert(0, "participant", s.participant)
     return measures, events
+
+
+def _record(meta: dict, meta_path: Path) -> SessionRecord:
+    """session.json's typed fields (a seed that is not an integer is one line naming the file)."""
+    from pydantic import ValidationError
+
+    try:
+        return SessionRecord.model_validate({**meta, "raw": meta})
+    except ValidationError as exc:
+        raise UserError(f"the recorded seed {meta.get('seed')!r} is not an integer", str(meta_path)) from exc
 
 
 #: measures a stream of the requested samples cannot give (they need the tracker's every sample)

@@ -271,6 +271,10 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
         "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,
         "pose": options.pose, "meshes": protocol_mesh_records(protocol, source, opened.mesh_files),
+        # the command line's fault rates of the simulated tracker (the analysis rebuilds its stream from them)
+        "sim_tracker_faults": {"dropout_rate_hz": options.tracker_faults.dropout_rate_hz,
+                               "nan_burst_rate_hz": options.tracker_faults.nan_burst_rate_hz}
+        if options.tracker.partition(":")[0] == "sim" else None,
     }
 
 

@@ -3,6 +3,7 @@ participants simulated to fail them (observer eye overrides per participant)."""
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -99,6 +100,9 @@ def test_a_requested_stream_is_measured_from_its_requested_samples_only(tmp_path
     options = SessionOptions(participant="Q", seed=1, data_root=tmp_path / "data", progress=False, render="cameras")
     assert run_session(protocol, compile_schedule, options).status == "complete"
     ses = tmp_path / "data" / "detection" / "sub-Q" / "ses-1"
+    meta = json.loads((ses / "session.json").read_text())
+    meta["sim_tracker_faults"] = None  # not rebuilt from the seed (tests/quality/test_resimulate.py): as recorded
+    (ses / "session.json").write_text(json.dumps(meta))
     measures = measure_session(ses)[0]
     gaze = pd.read_parquet(ses / "gaze.parquet")
     assert set(measures["raw_stream"]) == {"requested"}

@@ -22,7 +22,16 @@ from psyop.session.rows import JsonMapping, JsonObject
 from psyop.errors import UserError
 from psyop.session.log.layout import SessionPaths
 
-__all__ = ["MAX_METADATA_BYTES", "SessionRecord", "read_metadata", "read_record", "record_of"]
+__all__ = ["MAX_METADATA_BYTES", "SessionRecord", "SimTrackerFaults", "read_metadata", "read_record", "record_of"]
+
+
+class SimTrackerFaults(BaseModel):
+    """session.json ``sim_tracker_faults``: the simulated tracker's command-line fault rates (Hz)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    dropout_rate_hz: float = Field(ge=0, allow_inf_nan=False)
+    nan_burst_rate_hz: float = Field(ge=0, allow_inf_nan=False)
 
 
 class SessionRecord(BaseModel):
@@ -38,6 +47,11 @@ class SessionRecord(BaseModel):
     protocol_text: str | None = None
     status: str | None = None
     runs: list[JsonObject] = Field(default_factory=list)  # Any: each run's JSON fields (store.py writes them)
+    #: the ``--tracker`` option (``sim``, ``replay:PATH``, ...); not a string: none
+    tracker: str | None = None
+    #: ``--tracker sim``'s fault rates; None: another tracker, or not recorded (a session before psyop
+    #: recorded them, or a value that is not two rates)
+    sim_tracker_faults: SimTrackerFaults | None = None
     #: the whole file as read (the store merges and writes it back as it was)
     raw: Mapping[str, Any] = Field(default_factory=dict, exclude=True)  # Any: JSON values of every field
 
@@ -51,7 +65,15 @@ class SessionRecord(BaseModel):
     def _sha_as_text(cls, value: object) -> str | None:
         return None if value is None else str(value)
 
-    @field_validator("protocol_text", "status", mode="before")
+    @field_validator("sim_tracker_faults", mode="before")
+    @classmethod
+    def _faults_or_none(cls, value: object) -> SimTrackerFaults | None:
+        try:
+            return SimTrackerFaults.model_validate(value) if isinstance(value, dict) else None
+        except ValidationError:
+            return None
+
+    @field_validator("protocol_text", "status", "tracker", mode="before")
     @classmethod
     def _text_or_none(cls, value: object) -> str | None:
         return value if isinstance(value, str) else None

@@ -1,0 +1,157 @@
+"""The full raw stream of a simulated session that recorded only the samples it asked for (issue 27).
+
+A ``--tracker sim`` session whose protocol says ``raw_stream: requested`` (the shipped protocols' choice: an
+``every_sample`` stream is about 30 times the disk) holds a few samples per trial, so precision, pursuit
+gain and lag, catch-up saccades and eye-movement events cannot be measured from it. The simulated tracker is
+stateless in time (:mod:`psyop.session.gaze.simulated`): the sample at tick k is a function of the tracker's
+seed, its configuration and the fixation plan active at k. All three are recorded: the seed
+(``seed_for(session.json seed, "tracker")``), the configuration (the recorded protocol's ``observer: eye:``
+with the participant's overrides, and session.json ``sim_tracker_faults``) and the plans (each phase's
+:func:`psyop.session.loop.fixation_plan` from the trial row, :func:`psyop.quality.target.trial_phases`). So
+:func:`resimulate_gaze` rebuilds every tick of every trial window, in the order an ``every_sample`` session
+streams them, and then checks the rebuilt stream against **every** sample the session recorded inside a trial
+window: the same ticks delivered, the same validity, the fixation points within :data:`TOLERANCE_M` (the
+recorded samples come from :meth:`SimulatedTracker.sample_at`, the rebuilt from
+:meth:`SimulatedTracker.samples_block`, which agree to round-off). A session that disagrees anywhere, records
+no faults, or has no recorded sample to check against is not rebuilt (:attr:`Resimulation.usable` False,
+:attr:`Resimulation.reason` says why) and keeps its requested-stream measures: a rebuilt stream is never used
+on trust. Nothing recorded is read for anything but the check, and nothing is written.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+from psyop.quality.target import loop_config, trial_phases
+from psyop.session.gaze.sample import RawGazeSample
+from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, seed_for, tracker_config
+from psyop.session.log.raw_gaze import raw_gaze_table
+from psyop.session.log.record import SessionRecord
+from psyop.session.plan import SessionPlan
+
+#: largest difference (m, per fixation coordinate) between a recorded and a rebuilt sample; the two
+#: computations differ by round-off (about 1e-16 m at 1 m), a different model or seed by centimetres
+TOLERANCE_M = 1e-9
+
+
+@dataclass(frozen=True)
+class Resimulation:
+    """The rebuilt stream (``gaze``: GAZE_SCHEMA columns, every delivered tick of every trial window, or None
+    when not usable) and its check: ``n_checked`` recorded samples compared, ``n_disagreeing`` of them not
+    rebuilt equal, ``max_error_m`` the largest coordinate difference of the matched ones; ``reason``: why
+    it is not usable ("" when it is)."""
+
+    gaze: pd.DataFrame | None
+    n_checked: int
+    n_disagreeing: int
+    max_error_m: float
+    reason: str
+
+    @property
+    def usable(self) -> bool:
+        return self.gaze is not None
+
+
+def _refused(reason: str, n_checked: int = 0, n_disagreeing: int = 0, max_error_m: float = math.nan) -> Resimulation:
+    return Resimulation(None, n_checked, n_disagreeing, max_error_m, reason)
+
+
+def rebuilt_stream(plan: SessionPlan, record: SessionRecord, participant: str, trials: pd.DataFrame) -> pa.Table:
+    """Every sample the session's simulated tracker delivers inside each trial's ``[trial_start_s, trial_end_s)``,
+    as an ``every_sample`` run of the same session would have recorded it (``run``/``trial`` from the row)."""
+    assert record.seed is not None and record.sim_tracker_faults is not None  # resimulate_gaze checked
+    faults = record.sim_tracker_faults
+    base = dataclasses.replace(SimulatedTrackerConfig(), dropout_rate_hz=faults.dropout_rate_hz,
+                               nan_burst_rate_hz=faults.nan_burst_rate_hz, raw_stream="requested")
+    eye = plan.observer.eye if plan.observer is not None else None
+    tracker = SimulatedTracker(seed_for(record.seed, "tracker"), tracker_config(eye, participant, base))
+    rate = tracker.config.rate_hz
+    config = loop_config(plan)
+    tables = []
+    for row in trials.sort_values("trial_start_s", kind="stable").to_dict("records"):
+        start_s, end_s = float(row["trial_start_s"]), float(row["trial_end_s"])
+        next_tick, last_tick = math.ceil(start_s * rate), math.ceil(end_s * rate) - 1  # ticks in [start, end)
+        samples: list[RawGazeSample] = []
+        for phase in trial_phases(plan, row, config):  # each phase's ticks before the next plan, under the plans so far
+            before = min(math.ceil(phase.start_s * rate) - 1, last_tick)
+            if before >= next_tick:
+                samples += tracker.stream_ticks(next_tick, before)
+                next_tick = before + 1
+            tracker.set_plan(phase.fixation)
+        if last_tick >= next_tick:
+            samples += tracker.stream_ticks(next_tick, last_tick)
+        tables.append(raw_gaze_table(samples, run=int(row.get("run", 0) or 0), trial=int(row["trial"])))
+    return pa.concat_tables(tables) if tables else raw_gaze_table([], run=0, trial=-1)
+
+
+def _in_windows(t_s: np.ndarray, trials: pd.DataFrame) -> np.ndarray:
+    inside = np.zeros(len(t_s), dtype=bool)
+    for start, end in zip(trials["trial_start_s"].to_numpy(float), trials["trial_end_s"].to_numpy(float)):
+        inside |= (t_s >= start) & (t_s < end)
+    return inside
+
+
+def check_against_recorded(rebuilt: pd.DataFrame, recorded: pd.DataFrame, trials: pd.DataFrame,
+                           rate_hz: float) -> tuple[int, int, float]:
+    """(recorded samples checked, of them not rebuilt equal, largest coordinate difference of the matched):
+    every recorded sample inside a trial window must be a rebuilt tick with the same validity and its
+    fixation point within :data:`TOLERANCE_M` (NaN where invalid on both sides)."""
+    if recorded.empty:
+        return 0, 0, math.nan
+    t_rec = recorded["gaze_sample_t_s"].to_numpy(float)
+    recorded = recorded[np.isfinite(t_rec) & _in_windows(t_rec, trials)]
+    if recorded.empty:
+        return 0, 0, math.nan
+    axes = [f"fixation_{a}_m" for a in "xyz"]
+    key = "tick"
+    left = recorded.assign(**{key: np.rint(recorded["gaze_sample_t_s"].to_numpy(float) * rate_hz).astype(np.int64)})
+    right = rebuilt.assign(**{key: np.rint(rebuilt["gaze_sample_t_s"].to_numpy(float) * rate_hz).astype(np.int64)})
+    both = left[[key, "gaze_valid", *axes]].merge(right[[key, "gaze_valid", *axes]].drop_duplicates(key), on=key,
+                                                  how="left", suffixes=("", "_rebuilt"), indicator=True)
+    found = (both["_merge"] == "both").to_numpy()
+    same_valid = found & (both["gaze_valid"].to_numpy() == both["gaze_valid_rebuilt"].to_numpy())
+    diff = np.stack([np.abs(both[a].to_numpy(float) - both[f"{a}_rebuilt"].to_numpy(float)) for a in axes], axis=1)
+    nan_both = np.stack([np.isnan(both[a].to_numpy(float)) & np.isnan(both[f"{a}_rebuilt"].to_numpy(float))
+                         for a in axes], axis=1)
+    close = np.all(nan_both | (diff <= TOLERANCE_M), axis=1)
+    agree = same_valid & close
+    finite = diff[found & ~np.any(nan_both, axis=1)]
+    return int(len(both)), int((~agree).sum()), float(np.max(finite)) if finite.size else math.nan
+
+
+def resimulate_gaze(plan: SessionPlan, record: SessionRecord, participant: str, trials: pd.DataFrame,
+                    recorded: pd.DataFrame) -> Resimulation:
+    """The rebuilt full stream of a ``--tracker sim`` session, checked against ``recorded`` (its gaze.parquet).
+
+    Examples
+    --------
+    A record without the tracker's faults (a session psyop recorded before it stored them) is not rebuilt:
+
+    >>> r = resimulate_gaze(None, SessionRecord(seed=1, tracker="sim"), "S01", pd.DataFrame(), pd.DataFrame())
+    >>> r.usable, r.reason
+    (False, 'session.json has no sim_tracker_faults (recorded before psyop stored them)')
+    """
+    if (record.tracker or "").partition(":")[0] != "sim":
+        return _refused(f"not a simulated tracker ({record.tracker!r})")
+    if record.seed is None:
+        return _refused("session.json has no seed")
+    if record.sim_tracker_faults is None:
+        return _refused("session.json has no sim_tracker_faults (recorded before psyop stored them)")
+    if trials.empty:
+        return _refused("no trial recorded")
+    rebuilt = rebuilt_stream(plan, record, participant, trials).to_pandas()
+    eye = plan.observer.eye if plan.observer is not None else None
+    rate = tracker_config(eye, participant).rate_hz
+    n, bad, worst = check_against_recorded(rebuilt, recorded, trials, rate)
+    if n == 0:
+        return _refused("no recorded sample inside a trial to check the rebuilt stream against")
+    if bad:
+        return _refused(f"{bad} of {n} recorded samples differ from the rebuilt stream (largest difference "
+                        f"{worst:.3g} m; tolerance {TOLERANCE_M:g} m)", n, bad, worst)
+    return Resimulation(rebuilt, n, 0, worst, "")

@@ -1,0 +1,140 @@
+"""A requested-stream simulated session is measured from its full stream rebuilt from the seed (issue 27):
+the rebuilt stream equals what an every_sample run of the same session recorded, its measures equal that
+run's, it is checked against every recorded sample, and it is refused (requested measures kept) where it
+cannot be checked or disagrees."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from psyop.protocol import load_protocol
+from psyop.quality.measures import TRIAL_MEASURES
+from psyop.quality.resimulate import TOLERANCE_M, rebuilt_stream, resimulate_gaze
+from psyop.quality.session import NEEDS_EVERY_SAMPLE, measure_session, session_gaze
+from psyop.run.runner import SessionOptions, run_session
+from psyop.schedule import compile_schedule
+from psyop.session.log.record import SessionRecord
+from tests.session.session_helpers import small_protocol
+
+AXES = [f"fixation_{a}_m" for a in "xyz"]
+
+
+def _run(directory: Path, stream: str) -> Path:
+    """The shipped detection protocol (pursuit, cross, blinks), one repetition, ``raw_stream: stream``."""
+    path = small_protocol(directory, "detection", 1)
+    text, n = re.subn(r"(?m)^(    raw_stream:) \S+", rf"\g<1> {stream}", path.read_text())
+    assert n == 1
+    path.write_text(text)
+    options = SessionOptions(participant="P1", seed=7, data_root=directory / "data", progress=False, render="cameras")
+    assert run_session(load_protocol(path), compile_schedule, options).status == "complete"
+    return directory / "data" / "detection" / "sub-P1" / "ses-1"
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The same session (participant, seed, schedule) run once with each raw stream."""
+    return _run(tmp_path_factory.mktemp("requested"), "requested"), _run(tmp_path_factory.mktemp("every"), "every_sample")
+
+
+def _in_trials(gaze: pd.DataFrame, trials: pd.DataFrame) -> pd.DataFrame:
+    t = gaze["gaze_sample_t_s"].to_numpy(float)
+    inside = np.zeros(len(t), dtype=bool)
+    for start, end in zip(trials["trial_start_s"], trials["trial_end_s"]):
+        inside |= (t >= start) & (t < end)
+    return gaze[inside].sort_values("gaze_sample_t_s").reset_index(drop=True)
+
+
+def test_the_rebuilt_stream_is_what_an_every_sample_run_recorded(pair: tuple[Path, Path]) -> None:
+    requested, every = pair
+    s = session_gaze(requested)
+    assert s.stream == "resimulated" and "equal to all" in s.note
+    trials = pd.read_parquet(requested / "trials.parquet")
+    assert trials.drop(columns=[c for c in trials if "_s" in c or c == "run"]).equals(
+        pd.read_parquet(every / "trials.parquet").drop(columns=[c for c in trials if "_s" in c or c == "run"]))
+    recorded = _in_trials(pd.read_parquet(every / "gaze.parquet"), trials)
+    # an every_sample run streams up to the tracker's last tick it was asked for: the end of its last trial
+    # (after the last frame) is never streamed; the rebuilt stream holds it
+    rebuilt = _in_trials(s.gaze, trials)
+    tail = rebuilt["gaze_sample_t_s"] > recorded["gaze_sample_t_s"].max()
+    assert rebuilt.loc[tail, "gaze_sample_t_s"].min() >= trials["trial_start_s"].max()  # in the last trial only
+    rebuilt = rebuilt[~tail].reset_index(drop=True)
+    assert len(rebuilt) == len(recorded) > 1000  # every 120 Hz tick of every trial, dropouts aside
+    np.testing.assert_array_equal(rebuilt["gaze_sample_t_s"], recorded["gaze_sample_t_s"])
+    np.testing.assert_array_equal(rebuilt["gaze_valid"], recorded["gaze_valid"])
+    assert (~recorded["gaze_valid"]).any()  # blinks: the check covers invalid samples too
+    np.testing.assert_allclose(rebuilt[AXES], recorded[AXES], rtol=0, atol=TOLERANCE_M)
+
+
+def test_its_measures_and_events_equal_the_every_sample_runs(pair: tuple[Path, Path]) -> None:
+    requested, every = pair
+    (m_req, ev_req), (m_all, ev_all) = measure_session(requested), measure_session(every)
+    assert set(m_req["raw_stream"]) == {"resimulated"} and set(m_all["raw_stream"]) == {"every_sample"}
+    names = [n for n in TRIAL_MEASURES if not n.startswith("validation_")]
+    last = m_req.index[-1]  # the every_sample run never streamed its last trial's end (above)
+    pd.testing.assert_frame_equal(m_req.loc[:last - 1, names], m_all.loc[:last - 1, names], check_exact=False,
+                                  rtol=1e-9, atol=1e-9)
+    assert m_req.loc[last, "data_loss_share"] < m_all.loc[last, "data_loss_share"]
+    assert m_req[list(NEEDS_EVERY_SAMPLE)].notna().any().all()  # precision, pursuit, events: measured
+    last_trial = int(m_req.loc[last, "trial"])
+    columns = ["trial", "phase", "name", "onset_s", "offset_s"]
+    req, full = ((ev[(ev["trial"] >= 0) & (ev["trial"] != last_trial)].reset_index(drop=True)[columns])
+                 for ev in (ev_req, ev_all))
+    assert len(req) > 20
+    pd.testing.assert_frame_equal(req, full, check_exact=False, rtol=1e-9, atol=1e-9)
+
+
+def test_a_wrong_seed_or_fault_rate_disagrees_with_the_recorded_samples_and_is_not_used(pair: tuple[Path, Path]) -> None:
+    requested, _ = pair
+    meta = json.loads((requested / "session.json").read_text())
+    s = session_gaze(requested)
+    recorded = pd.read_parquet(requested / "gaze.parquet")
+    good = SessionRecord.model_validate(meta)
+    assert resimulate_gaze(s.plan, good, "P1", s.trials, recorded).usable
+    for changed in ({"seed": meta["seed"] + 1},
+                    {"sim_tracker_faults": {"dropout_rate_hz": 0.0, "nan_burst_rate_hz": 30.0}}):
+        r = resimulate_gaze(s.plan, SessionRecord.model_validate({**meta, **changed}), "P1", s.trials, recorded)
+        assert not r.usable and r.gaze is None and r.n_checked > 0 and r.n_disagreeing > 0, changed
+        assert "recorded samples differ from the rebuilt stream" in r.reason
+    # a recorded sample that is not what the model gives (a changed simulated eye, a corrupted file) is caught
+    edited = recorded.copy()
+    row = edited.index[(edited["trial"] >= 0) & edited["gaze_valid"]][0]
+    edited.loc[row, "fixation_x_m"] += 1e-6
+    r = resimulate_gaze(s.plan, good, "P1", s.trials, edited)
+    assert not r.usable and r.n_disagreeing == 1 and r.max_error_m == pytest.approx(1e-6, rel=1e-3)
+
+
+def test_a_session_without_recorded_faults_keeps_its_requested_measures(pair: tuple[Path, Path], tmp_path: Path) -> None:
+    import shutil
+
+    copy = tmp_path / "ses-1"
+    shutil.copytree(pair[0], copy)
+    meta = json.loads((copy / "session.json").read_text())
+    del meta["sim_tracker_faults"]  # a session recorded before psyop stored them
+    (copy / "session.json").write_text(json.dumps(meta))
+    measures = measure_session(copy)[0]
+    assert set(measures["raw_stream"]) == {"requested"}
+    assert measures["raw_stream_note"].str.contains("no sim_tracker_faults").all()
+    assert measures[list(NEEDS_EVERY_SAMPLE)].isna().all().all()
+
+
+def test_only_a_simulated_tracker_is_rebuilt(pair: tuple[Path, Path]) -> None:
+    s = session_gaze(pair[0])
+    record = SessionRecord(seed=1, tracker="replay:/some/gaze.parquet",
+                           sim_tracker_faults={"dropout_rate_hz": 0.0, "nan_burst_rate_hz": 0.0})
+    r = resimulate_gaze(s.plan, record, "P1", s.trials, pd.DataFrame())
+    assert not r.usable and "not a simulated tracker" in r.reason
+
+
+def test_the_stream_is_rebuilt_per_trial_window_in_time_order(pair: tuple[Path, Path]) -> None:
+    s = session_gaze(pair[0])
+    shuffled = s.trials.sample(frac=1.0, random_state=3)
+    meta = json.loads((pair[0] / "session.json").read_text())
+    a = rebuilt_stream(s.plan, SessionRecord.model_validate(meta), "P1", shuffled).to_pandas()
+    assert a["gaze_sample_t_s"].is_monotonic_increasing
+    pd.testing.assert_frame_equal(a, s.gaze)
