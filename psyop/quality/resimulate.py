@@ -29,9 +29,8 @@ import pandas as pd
 import pyarrow as pa
 
 from psyop.quality.target import loop_config, trial_phases
-from psyop.session.gaze.sample import RawGazeSample
-from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, seed_for, tracker_config
-from psyop.session.log.raw_gaze import raw_gaze_table
+from psyop.session.gaze.simulated import SampleBlock, SimulatedTracker, SimulatedTrackerConfig, seed_for, tracker_config
+from psyop.session.log.raw_gaze import raw_gaze_block_table, raw_gaze_table
 from psyop.session.log.record import SessionRecord
 from psyop.session.plan import SessionPlan
 
@@ -77,17 +76,29 @@ def rebuilt_stream(plan: SessionPlan, record: SessionRecord, participant: str, t
     for row in trials.sort_values("trial_start_s", kind="stable").to_dict("records"):
         start_s, end_s = float(row["trial_start_s"]), float(row["trial_end_s"])
         next_tick, last_tick = math.ceil(start_s * rate), math.ceil(end_s * rate) - 1  # ticks in [start, end)
-        samples: list[RawGazeSample] = []
+        blocks: list[SampleBlock] = []
         for phase in trial_phases(plan, row, config):  # each phase's ticks before the next plan, under the plans so far
             before = min(math.ceil(phase.start_s * rate) - 1, last_tick)
             if before >= next_tick:
-                samples += tracker.stream_ticks(next_tick, before)
+                blocks.append(tracker.samples_block(np.arange(next_tick, before + 1)))
                 next_tick = before + 1
             tracker.set_plan(phase.fixation)
         if last_tick >= next_tick:
-            samples += tracker.stream_ticks(next_tick, last_tick)
-        tables.append(raw_gaze_table(samples, run=int(row.get("run", 0) or 0), trial=int(row["trial"])))
+            blocks.append(tracker.samples_block(np.arange(next_tick, last_tick + 1)))
+        tables.append(_delivered_table(blocks, tracker.config.latency_s, int(row.get("run", 0) or 0), int(row["trial"])))
     return pa.concat_tables(tables) if tables else raw_gaze_table([], run=0, trial=-1)
+
+
+def _delivered_table(blocks: list[SampleBlock], latency_s: float, run: int, trial: int) -> pa.Table:
+    """The ticks of ``blocks`` a dropout did not keep from being delivered, as an every_sample stream
+    records them (:meth:`SimulatedTracker._stream_until`: received ``latency_s`` after the tick)."""
+    if not blocks:
+        return raw_gaze_table([], run=run, trial=trial)
+    t = np.concatenate([b.t_s for b in blocks])
+    keep = np.concatenate([b.delivered for b in blocks])
+    fixation = np.concatenate([b.fixation_m for b in blocks])[keep]
+    return raw_gaze_block_table(t[keep], t[keep] + latency_s, np.concatenate([b.valid for b in blocks])[keep],
+                                np.concatenate([b.confidence for b in blocks])[keep], fixation, run=run, trial=trial)
 
 
 def _in_windows(t_s: np.ndarray, trials: pd.DataFrame) -> np.ndarray:

@@ -222,21 +222,13 @@ class SimulatedTracker:
         if last_tick < first:
             return
         self._stream_next = last_tick + 1
-        for sample in self.stream_ticks(first, last_tick):
-            self._raw.add(sample)
-
-    def stream_ticks(self, first_tick: int, last_tick: int) -> list[RawGazeSample]:
-        """The raw samples an ``every_sample`` stream delivers for ticks ``first_tick..last_tick`` (a dropout
-        delivers none), under the plans set so far; nothing is added to the raw stream. The analysis
-        rebuilds a ``requested`` session's full stream with it (:mod:`psyop.quality.resimulate`)."""
-        block = self.samples_block(np.arange(first_tick, last_tick + 1))
+        ticks = np.arange(first, last_tick + 1)
+        block = self.samples_block(ticks)
         latency = self.config.latency_s
-        out = []
         for i in np.flatnonzero(block.delivered):
             t = float(block.t_s[i])
             fixation = (float(block.fixation_m[i, 0]), float(block.fixation_m[i, 1]), float(block.fixation_m[i, 2]))
-            out.append(RawGazeSample(t, t, t + latency, bool(block.valid[i]), float(block.confidence[i]), fixation))
-        return out
+            self._raw.add(RawGazeSample(t, t, t + latency, bool(block.valid[i]), float(block.confidence[i]), fixation))
 
     def samples_block(self, ticks: np.ndarray) -> SampleBlock:
         """The samples of ``ticks`` (ascending) at once: what :meth:`sample_at` gives per tick (to

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
 import pyarrow as pa
 
 from psyop.session.gaze.sample import EyeSample, RawGazeSample
@@ -43,3 +44,28 @@ def raw_gaze_table(samples: Sequence[RawGazeSample], *, run: int, trial: int) ->
         columns[f"pupil_diameter_{eye}_mm"] = [p.pupil_diameter_mm for p in parts]
         columns[f"pupil_diameter_{eye}_px"] = [p.pupil_diameter_px for p in parts]
     return pa.Table.from_pydict(columns, schema=GAZE_SCHEMA)
+
+
+def raw_gaze_block_table(t_s: np.ndarray, received_s: np.ndarray, valid: np.ndarray, confidence: np.ndarray,
+                         fixation_m: np.ndarray, *, run: int, trial: int) -> pa.Table:
+    """:func:`raw_gaze_table` of samples given as columns (a source that delivers the session clock's times
+    and a binocular fixation point only: ``tracker_t_s`` = ``t_s``, every per-eye and 2-D field NaN), built
+    without a Python object per sample (the analysis rebuilds whole streams, psyop.quality.resimulate).
+
+    Examples
+    --------
+    >>> s = RawGazeSample(5.0, 5.0, 5.01, True, 0.9, (0.0, 0.1, -1.0))
+    >>> block = raw_gaze_block_table(np.array([5.0]), np.array([5.01]), np.array([True]), np.array([0.9]),
+    ...                              np.array([[0.0, 0.1, -1.0]]), run=0, trial=3)
+    >>> block.to_pandas().equals(raw_gaze_table([s], run=0, trial=3).to_pandas())  # (NaN equal to NaN)
+    True
+    """
+    n = len(t_s)
+    nan = np.full(n, _NAN)
+    given: dict[str, np.ndarray] = {
+        "run": np.full(n, run, dtype=np.int64), "trial": np.full(n, trial, dtype=np.int64),
+        "tracker_t_s": t_s, "gaze_sample_t_s": t_s, "received_s": received_s,
+        "gaze_valid": np.asarray(valid, dtype=bool), "gaze_confidence": confidence,
+        **{f"fixation_{axis}_m": fixation_m[:, i] for i, axis in enumerate("xyz")},
+    }
+    return pa.Table.from_pydict({f.name: given.get(f.name, nan) for f in GAZE_SCHEMA}, schema=GAZE_SCHEMA)
