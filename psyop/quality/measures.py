@@ -217,30 +217,36 @@ class _SessionGaze:
     velocity: np.ndarray
     in_saccade: np.ndarray
     near_saccade: np.ndarray
+    #: the events' onsets (s), whether each is a fixation, and the trial (-1: none) and phase each began in
+    #: (filled in trial by trial, written to ``events`` at the end: numpy, not a pandas write per phase)
+    onset_s: np.ndarray
+    is_fixation: np.ndarray
+    event_trial: np.ndarray
+    event_phase: np.ndarray
 
 
 def _trial_row(session: _SessionGaze, row: TrialRow, plan: SessionPlan, config: LoopConfig) -> dict[str, object]:
     """One trial's measures; marks the events that began in it with its trial number and phase."""
-    grid, events = session.grid, session.events
+    grid = session.grid
     start, end = float(row["trial_start_s"]), float(row["trial_end_s"])
     window = (grid.t_s >= start) & (grid.t_s < end)
     out: dict[str, object] = {"trial": int(row["trial"]), **_loss_measures(grid, window, start, end)}
     parts = _TrialParts()
     for p in trial_phases(plan, row, config):
         sel = window & grid.valid & (grid.t_s >= p.start_s) & (grid.t_s < p.end_s)
-        ev = (events["onset_s"] >= p.start_s) & (events["onset_s"] < p.end_s)
-        events.loc[ev, "trial"], events.loc[ev, "phase"] = int(row["trial"]), p.phase.name
+        ev = (session.onset_s >= p.start_s) & (session.onset_s < p.end_s)
+        session.event_trial[ev], session.event_phase[ev] = int(row["trial"]), p.phase.name
         s = _Samples(sel, grid.az_deg[sel], grid.el_deg[sel], grid.t_s[sel])
         if p.phase.gaze in ("cross", "fixate") and len(s.t):
             _cross_phase(parts, grid, s, p.fixation, p.end_s, session.in_saccade, p.phase.gaze == "cross")
         elif p.phase.gaze == "pursuit" and p.fixation.target is not None and len(s.t):
             _pursuit_phase(parts, s, p.fixation.target, p.start_s, session.velocity[sel], session.near_saccade[sel])
             parts.pursuit_s += p.phase.duration_s
-            parts.n_catch += int((ev & (events["name"] != "fixation")).sum())
+            parts.n_catch += int((ev & ~session.is_fixation).sum())
     out.update(_summary(parts))
-    in_trial = events["trial"] == int(row["trial"])
-    out["n_fixations"] = int((in_trial & (events["name"] == "fixation")).sum())
-    out["n_saccades"] = int((in_trial & (events["name"] != "fixation")).sum())
+    in_trial = session.event_trial == int(row["trial"])
+    out["n_fixations"] = int((in_trial & session.is_fixation).sum())
+    out["n_saccades"] = int((in_trial & ~session.is_fixation).sum())
     return out
 
 
@@ -251,10 +257,14 @@ def trial_measures(grid: GazeGrid, trials: pd.DataFrame, plan: SessionPlan,
     each began in."""
     method = method or EventMethod()
     events, velocity = detect_events(grid.t_s, grid.az_deg, grid.el_deg, grid.rate_hz, method)
-    events["trial"], events["phase"] = -1, ""
-    session = _SessionGaze(grid, events, velocity, *_saccade_masks(grid.t_s, events))
+    n = len(events)
+    session = _SessionGaze(grid, events, velocity, *_saccade_masks(grid.t_s, events),
+                           onset_s=events["onset_s"].to_numpy(dtype=np.float64),
+                           is_fixation=(events["name"] == "fixation").to_numpy(dtype=bool),
+                           event_trial=np.full(n, -1, dtype=np.int64), event_phase=np.full(n, "", dtype=object))
     config = loop_config(plan)
     table = pd.DataFrame([_trial_row(session, row, plan, config) for row in trials.to_dict("records")])
+    events["trial"], events["phase"] = session.event_trial, session.event_phase
     for name, value in grid.flags.items():
         table[name] = value  # the session's stream faults, by name, on every row
     table["rate_hz"], table["rate_source"] = grid.rate_hz, grid.rate_source
