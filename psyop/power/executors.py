@@ -185,8 +185,11 @@ def _result(future, scheduler: str, describe: Callable[[], str], poll_s: float, 
 
     The result is fetched in waits of ``poll_s`` with ``check`` (the cluster's health) between them:
     a result held by a worker that dies before the client fetched it is computed again, and with every
-    worker gone ``future.result()`` would wait for ever (seen under load: no exit within 180 s)."""
-    if future.status in ("cancelled", "lost") or future.cancelled():
+    worker gone ``future.result()`` would wait for ever (seen under load: no exit within 180 s). A future whose
+    status is ``lost`` (its result was on a worker that died: the scheduler computes it again, as the
+    client still holds it) is waited for like any other, not a lost cluster (seen once under load: the
+    worker that a later task killed held the earlier tasks' results)."""
+    if future.status == "cancelled" or future.cancelled():
         raise _lost(scheduler, "the scheduler cancelled its tasks (it was stopped or restarted)")
     try:
         while True:
