@@ -21,12 +21,13 @@ import fit_psychometric
 from _twoafc import check_two_interval, condition_column, level_column
 
 from psyop.figures.output import save_figure
-from psyop.figures.study_figures import plot_thresholds
+from psyop.figures.study_figures import caption, plot_thresholds
 from psyop.statistics.anova import rm_anova
-from psyop.statistics.censored import censored_report, censoring_of, substituted
+from psyop.statistics.censored import censored_report, censoring_of, fit_fates, substituted
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_anova
-from psyop.statistics.psychometric import usable_for_analysis
+from psyop.statistics.psychometric import interval_report, usable_for_analysis
+from psyop.statistics.small_sample import low_df_note
 from psyop.statistics.studies import study_facts
 from scipy import stats
 
@@ -57,6 +58,11 @@ def main(argv: list[str] | None = None) -> int:
     n = len(per_subject)
     half = float(stats.t.ppf(0.975, n - 1) * per_subject.std(ddof=1) / n ** 0.5) if n > 1 else float("nan")
     mean = float(per_subject.mean()) if n else float("nan")
+    everyone = sorted(fits["participant"].astype(str).unique())
+    without = [s for s in everyone if s not in set(per_subject.index.astype(str))]
+    who = f"{n} of {len(everyone)} participants" + (f" (no usable fit: {', '.join(without)})" if without else "")
+    mean_note = low_df_note(float(n - 1), "participant") if n > 1 else ""
+    mean_note = f" [{mean_note.replace('p-value', 'interval')}]" if mean_note else ""
     cond_label = facts.factor(cond).label
     key_mean = ("detection threshold (mean over subjects and back distances)" if cond == "back_D"
                 else f"{args.study} threshold (mean over subjects and {cond_label})")
@@ -68,8 +74,11 @@ def main(argv: list[str] | None = None) -> int:
         "mean_threshold_D": mean, "mean_threshold_ci_D": [mean - half, mean + half],
         "per_condition": per_cond.to_dict("records"),
         "summary": {key_mean:
-                    f"{mean:.2f} {unit} [95 % CI {mean - half:.2f}, {mean + half:.2f}; {n} participants; "
-                    f"{sum(left_out.values())} of {len(fits)} fits left out: {left_out or 'none'}]"},
+                    f"{mean:.2f} {unit} [95 % CI {mean - half:.2f}, {mean + half:.2f}; t on {n - 1} df; {who}; "
+                    f"{sum(left_out.values())} of {len(fits)} fits left out: {left_out or 'none'}]{mean_note}",
+                    "fit intervals": interval_report(fits)["text"]},
+        "fit_intervals": interval_report(fits),
+        "fits": fit_fates(fits, cond),
     }
     effect_key = ("effect of back distance on threshold (rm-ANOVA)" if cond == "back_D"
                   else f"effect of {cond_label} on threshold (rm-ANOVA)")
@@ -80,13 +89,45 @@ def main(argv: list[str] | None = None) -> int:
     else:
         payload[f"anova_{cond}"] = aov.table.to_dict("records")
         payload["anova_dropped"] = aov.dropped.to_dict("records")
-        payload["summary"][effect_key] = format_anova(aov.table.iloc[0])
+        payload["summary"][effect_key] = format_anova(aov.table.iloc[0]) + _dropped_text(aov.dropped)
     _add_censored(payload, fits, cond, unit, effect_key)
+    payload["group_model"] = _group_model(payload["censored"], n)
     write_json(results_file(args.results, args.study, "thresholds"), payload)
     title = "Detection thresholds" if args.study == "detection" else f"Thresholds: {args.study}"
     fig = plot_thresholds(fits, cond, cond_label, title, simulated=simulated, level_unit=unit or "level units")
+    caption(fig, _caption(payload["group_model"]))
     save_figure(fig, out_path(args))
     return 0
+
+
+def _dropped_text(dropped) -> str:
+    """'; participants left out of this rm-ANOVA (no usable fit in every condition): S04' or ''."""
+    if not len(dropped):
+        return ""
+    return ("; participants left out of this rm-ANOVA (no usable fit in every condition): "
+            + ", ".join(map(str, dropped["subject"])))
+
+
+def _group_model(report: dict, n_usable: int) -> dict:
+    """The model behind the group estimate that was actually fitted: the censored-data (Tobit) mean, or,
+    where it could not be fitted, its fallback (the t-interval over participants' usable fits)."""
+    mean = report.get("mean")
+    if mean is not None:
+        flags = ["low_df"] if mean["low_df"] else []
+        name = ("censored-normal (Tobit) ML mean, " + (f"participant-clustered SEs, t on {mean['df_interval']} df"
+                if mean["n_clusters"] else f"fits independent, t on {mean['df_interval']} df"))
+        return {"name": name, "fallback": False, "flags": flags, "model": mean["model"]}
+    return {"name": f"t-interval over the participants' usable fits (t on {n_usable - 1} df)", "fallback": True,
+            "flags": ["censored_fits_left_out"] + (["low_df"] if n_usable - 1 < 4 else []),
+            "model": f"fallback: the censored-data model was {report['text_mean']}"}
+
+
+def _caption(model: dict) -> str:
+    """The figure's caption: what the black squares are and the group model actually fitted."""
+    flags = f" [FLAGGED: {', '.join(model['flags'])}]" if model["flags"] else ""
+    return ("Grey: participants' thresholds, 95 % CIs; open triangles: censored fits at their bound.\n"
+            "Black: mean ± SE of the usable fits. Group estimate (results/summary.md):\n"
+            f"{model['name']}{' (FALLBACK)' if model['fallback'] else ''}{flags}.")
 
 
 def _add_censored(payload: dict, fits, cond: str, unit: str, effect_key: str) -> None:

@@ -20,10 +20,10 @@ from _twoafc import check_two_interval, condition_column, level_column
 from psyop.errors import UserError
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_thresholds
-from psyop.statistics.censored import censored_report
+from psyop.statistics.censored import censored_report, fit_fates
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_linear_fit
-from psyop.statistics.psychometric import usable_for_analysis
+from psyop.statistics.psychometric import interval_report, usable_for_analysis
 from psyop.statistics.regression import linear_fit
 from psyop.statistics.studies import study_facts
 
@@ -65,9 +65,10 @@ def main(argv: list[str] | None = None) -> int:
         "linear_fit": fit.__dict__,
         "summary": {key: format_linear_fit(fit, unit)
                     + f"; {sum(left_out.values())} of {len(fits)} fits left out: {left_out or 'none'}",
+                    "fit intervals": interval_report(fits)["text"],
                     "censored thresholds": censored["headline"],
                     f"{key}, censored-data model (Tobit) slope": censored.get("text_slope", censored["text_mean"])},
-        "censored": censored,
+        "censored": censored, "fit_intervals": interval_report(fits), "fits": fit_fates(fits, cond),
     })
     title = "Discrimination thresholds" if args.study == "discrimination" else f"Thresholds: {args.study}"
     fig = plot_thresholds(fits, cond, label, title, line=(fit.slope, fit.intercept), simulated=simulated,

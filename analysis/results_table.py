@@ -123,6 +123,14 @@ def quality_lines(results: Path, studies: list[str]) -> list[str]:
         if lines else []
 
 
+def _open_intervals(report: dict | None) -> str:
+    """' k of n fits used as numbers have an open or out-of-range 95 % CI (...): kept ...' or ''."""
+    if not report:
+        return ""
+    counts = ", ".join(f"{k}: {v}" for k, v in report["by_flag"].items() if v) or "none"
+    return (f" {report['n_open_or_out_of_range']} of {report['n_used']} fits used as numbers have an open or "
+            f"out-of-range 95 % CI ({counts}): kept at their threshold, their per-fit intervals not used.")
+
 def _methods(studies: dict) -> list[str]:
     lines = ["## How psyop computed these", ""]
     lines.append("- Psychometric fits (detection, discrimination): psignifit 4.3 priors and grid, 2AFC cumulative "
@@ -137,7 +145,7 @@ def _methods(studies: dict) -> list[str]:
             lines.append(f"- {s['study']}: {s.get('n_left_out', 0)} of {s.get('n_fits', '?')} fits left out of the "
                          f"plain mean and tests by status ({left or 'none'}); censored ones enter the censored-data (Tobit) "
                          "estimates at their bounds and a bound-substitution sensitivity test (docs/statistics.md, "
-                         "'Censored thresholds').")
+                         "'Censored thresholds')." + _open_intervals(s.get("fit_intervals")))
     o = studies.get("ordinal")
     if o is not None:
         lines.append(f"- Ordinal post-hoc: paired t-tests, Bonferroni over {o.get('bonferroni_family_text', '?')}; "

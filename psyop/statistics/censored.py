@@ -301,5 +301,29 @@ def censored_report(fits: pd.DataFrame, cond: str, unit: str, numeric: bool = Fa
     return out
 
 
-__all__ = ["censored_condition_means", "censored_line", "cluster_sandwich", "participant_clusters", "censored_report", "CENSORED_ABOVE", "CENSORED_BELOW", "TobitFit", "censoring_of", "format_tobit", "substituted",
+def fit_fates(fits: pd.DataFrame, cond: str) -> list[dict]:
+    """Every fit with what each analysis did with it, so that no participant is dropped unseen.
+
+    One record per fit: ``participant``, ``cond``'s value, ``status``, ``flags``, the threshold, its
+    bound and CI; ``in_plain_analysis`` (a usable status: in the plain mean and rm-ANOVA) and
+    ``in_censored_model``: ``observed``, ``censored_below`` / ``censored_above`` (entered at
+    ``threshold_bound_D``) or ``left out (<status>)`` (ambiguous: bimodal, grid edge, no fit)."""
+    status = fits["status"].astype(str)
+    side = np.where(status.isin(CENSORED_BELOW), -1, np.where(status.isin(CENSORED_ABOVE), 1, 0))
+    records = []
+    for (_, row), s, sd in zip(fits.iterrows(), status, side):
+        usable = s in USABLE_STATUSES
+        bound = pd.to_numeric(pd.Series([row.get("threshold_bound_D")]), errors="coerce").iloc[0]
+        fate = ("observed" if usable else f"left out ({s})" if sd == 0
+                else "left out (censored, no bound recorded)" if not np.isfinite(bound)
+                else "censored_below" if sd < 0 else "censored_above")
+        records.append({"participant": str(row["participant"]), cond: row[cond], "status": s,
+                        "flags": str(row.get("flags", "") or ""), "threshold_D": row.get("threshold_D"),
+                        "threshold_bound_D": row.get("threshold_bound_D"),
+                        "threshold_ci_D": [row.get("threshold_ci_low_D"), row.get("threshold_ci_high_D")],
+                        "in_plain_analysis": bool(usable), "in_censored_model": fate})
+    return records
+
+
+__all__ = ["censored_condition_means", "fit_fates", "censored_line", "cluster_sandwich", "participant_clusters", "censored_report", "CENSORED_ABOVE", "CENSORED_BELOW", "TobitFit", "censoring_of", "format_tobit", "substituted",
            "tobit_fit", "tobit_mean"]

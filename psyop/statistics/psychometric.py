@@ -868,6 +868,43 @@ def usable_for_analysis(fits: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int
     return fits[keep], {str(k): int(v) for k, v in excluded.items()}
 
 
+#: Flags of a fit whose 95 % CI is open (an infinite bound) or reaches beyond the tested levels.
+OPEN_INTERVAL_FLAGS = ("no_upper_bound", "ci_below_range", "ci_above_range")
+
+
+def interval_report(fits: pd.DataFrame) -> dict:
+    """The fits used as numbers (:data:`USABLE_STATUSES`) whose CI is open or out of range, counted.
+
+    Such a fit's threshold is a point inside the tested levels and enters means, tests and the
+    censored-data model as a number; its interval is a posterior extrapolation beyond the levels
+    (or unbounded). The group intervals come from the spread over participants, not from each fit's
+    interval, so nothing is dropped or substituted: the count and the rule are reported instead.
+    Returns ``{"n_used", "n_open_or_out_of_range", "by_flag": {flag: count}, "text"}``; a fit with
+    several of the flags counts once in ``n_open_or_out_of_range`` and under each flag.
+
+    Examples
+    --------
+    >>> fits = pd.DataFrame({"status": ["ok", "no_upper_bound", "censored_below"],
+    ...                      "flags": ["ci_below_range", "no_upper_bound", "censored_below;ci_below_range"]})
+    >>> r = interval_report(fits)
+    >>> r["n_used"], r["n_open_or_out_of_range"], r["by_flag"]
+    (2, 2, {'no_upper_bound': 1, 'ci_below_range': 1, 'ci_above_range': 0})
+    """
+    used = fits[fits["status"].astype(str).isin(USABLE_STATUSES)]
+    flags = [set(str(f).split(";")) if isinstance(f, str) else set() for f in used.get("flags", [""] * len(used))]
+    for i, status in enumerate(used["status"].astype(str)):
+        flags[i].add(status)  # a no_upper_bound status is the open interval whether or not flags repeat it
+    by_flag = {flag: sum(flag in f for f in flags) for flag in OPEN_INTERVAL_FLAGS}
+    n_open = sum(bool(f & set(OPEN_INTERVAL_FLAGS)) for f in flags)
+    counts = ", ".join(f"{k}: {v}" for k, v in by_flag.items() if v) or "none"
+    text = (f"{n_open} of {len(used)} fits used as numbers have an open or out-of-range 95 % CI ({counts}): "
+            "kept at their threshold (inside the tested levels) in the means, tests and censored-data model; "
+            "the group intervals come from the spread over participants, not from these per-fit intervals, "
+            "which are extrapolations beyond the tested levels (flagged in the fit table, not used)"
+            if n_open else f"all {len(used)} fits used as numbers have a closed 95 % CI inside the tested levels")
+    return {"n_used": len(used), "n_open_or_out_of_range": n_open, "by_flag": by_flag, "text": text}
+
+
 def fit_psychometric_table(
     trials: pd.DataFrame,
     level_column: str = "level_D",

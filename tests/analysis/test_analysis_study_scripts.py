@@ -82,6 +82,12 @@ def test_fit_cache_flags_the_degenerate_subject(built):
     assert payload["n_left_out"] >= 1 and payload["left_out_by_status"].get("censored_below", 0) >= 1
     assert any(r["participant"] == "03" and r["status"] == "censored_below" for r in payload["left_out"])
     assert "fits left out" in payload["summary"]["detection threshold (mean over subjects and back distances)"]
+    report = payload["fit_intervals"]  # the fits whose CI is open or beyond the levels: counted, and the rule said
+    assert payload["summary"]["fit intervals"] == report["text"] and "fits used as numbers" in report["text"]
+    assert {r["participant"] for r in payload["fits"]} == set(fits["participant"]) and len(payload["fits"]) == len(fits)
+    md = (built / "results" / "summary.md").read_text()
+    assert f"- fit intervals: {report['text']}" in md
+    assert f"{report['n_open_or_out_of_range']} of {report['n_used']} fits used as numbers have an open" in md
 
 
 def test_summary_collects_every_study_and_says_simulated(built):
