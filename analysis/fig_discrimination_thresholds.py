@@ -19,12 +19,13 @@ from _twoafc import check_two_interval, condition_column, level_column
 
 from psyop.errors import UserError
 from psyop.figures.output import save_figure
-from psyop.figures.study_figures import plot_thresholds
+from psyop.figures.study_figures import caption, plot_thresholds
 from psyop.statistics.censored import censored_report, fit_fates
 from psyop.statistics.dataset import is_simulated
 from psyop.statistics.formatting import format_linear_fit
 from psyop.statistics.psychometric import interval_report, usable_for_analysis
 from psyop.statistics.regression import linear_fit
+from psyop.statistics.small_sample import MIN_RELIABLE_DF
 from psyop.statistics.studies import study_facts
 
 
@@ -73,8 +74,34 @@ def main(argv: list[str] | None = None) -> int:
     title = "Discrimination thresholds" if args.study == "discrimination" else f"Thresholds: {args.study}"
     fig = plot_thresholds(fits, cond, label, title, line=(fit.slope, fit.intercept), simulated=simulated,
                           level_unit=unit)
+    caption(fig, line_caption(fit.n, int(sum(left_out.values())), censored))
     save_figure(fig, out_path(args))
     return 0
+
+
+def line_caption(n_fits: int, n_left_out: int, censored: dict) -> str:
+    """The figure's caption: the drawn line's model (least squares over the usable fits, its df and flag)
+    and the censored-data line fitted beside it (its slope, df and flags, or why it was not fitted).
+
+    >>> text = line_caption(5, 1, {"line": {"df_interval": 2, "low_df": True, "n_clusters": 3}})
+    >>> text.splitlines()[1:]  # doctest: +NORMALIZE_WHITESPACE
+    ['Line: least-squares fit of the 5 usable fits (t on 3 df) [FLAGGED: low_df]; 1 fit left out.',
+     'With the censored fits (results/summary.md): censored-normal (Tobit) line, participant-clustered SEs,
+     t on 2 df [FLAGGED: low_df].']
+    """
+    df = n_fits - 2
+    flag = " [FLAGGED: low_df]" if df < MIN_RELIABLE_DF else ""
+    line = censored.get("line")
+    if line is None:
+        tobit = f"censored-normal (Tobit) line NOT FITTED ({censored.get('text_mean', 'no censored-data model')})"
+    else:
+        se = "participant-clustered SEs" if line["n_clusters"] else "fits independent"
+        tobit = (f"censored-normal (Tobit) line, {se}, t on {line['df_interval']} df"
+                 + (" [FLAGGED: low_df]" if line["low_df"] else ""))
+    return ("Grey: participants' thresholds, 95 % CIs; open triangles: censored fits at their bound.\n"
+            f"Line: least-squares fit of the {n_fits} usable fits (t on {df} df){flag}; "
+            f"{n_left_out} fit{'' if n_left_out == 1 else 's'} left out.\n"
+            f"With the censored fits (results/summary.md): {tobit}.")
 
 
 if __name__ == "__main__":
