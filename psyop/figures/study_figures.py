@@ -84,7 +84,7 @@ def _threshold_handles(n_clipped: int, n_open: int, n_censored: int, level_unit:
     """The legend entries of :func:`plot_thresholds` (markers that were drawn only)."""
     handles = [
         Line2D([], [], color=SUBJECT_GREY, marker="o", ms=4, lw=0.9, label="participant: threshold ± 95 % CI"),
-        Line2D([], [], color="k", marker="s", ms=6, lw=1.5, label="mean ± SE across participants"),
+        Line2D([], [], color="k", marker="s", ms=6, lw=1.5, label="mean ± SE across participants (usable fits)"),
     ]
     if n_clipped:
         handles.append(Line2D([], [], color=SUBJECT_GREY, marker="v", ls="", ms=5, label=f"CI clipped at 0 {level_unit}"))
@@ -92,7 +92,7 @@ def _threshold_handles(n_clipped: int, n_open: int, n_censored: int, level_unit:
         handles.append(Line2D([], [], color=SUBJECT_GREY, marker="$\\uparrow$", ls="", ms=7, label="CI without upper bound"))
     if n_censored:
         handles.append(Line2D([], [], color="#b00020", marker="v", mfc="white", ls="", ms=6,
-                              label="censored: beyond tested levels (left out)"))
+                              label="censored: beyond tested levels (not in the mean; in the Tobit model)"))
     return handles
 
 
@@ -104,7 +104,7 @@ def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, titl
     CIs are clipped at 0 D (a down-triangle marks a clipped lower bound) and an infinite upper
     bound is drawn as an up-arrow. Censored fits are drawn at their bound as open triangles
     (below the lowest / above the highest level) and, like other unusable fits, left out of the
-    mean. ``line`` = (slope, intercept) draws the linear fit (discrimination). ``level_unit``: the
+    mean drawn (the censored-data model of results/summary.md enters them at their bound). ``line`` = (slope, intercept) draws the linear fit (discrimination). ``level_unit``: the
     level factor's unit (thresholds are in it; the fit cache's ``_D`` columns hold that unit).
     """
     with plt.rc_context(STYLE):
