@@ -124,10 +124,8 @@ def session_measures(log: MemoryLog, plans: dict[tuple[object, object], SessionP
     psyop.quality.session.measure_session computes them from the finalised files (the plan of the
     recorded protocol text, the simulated tracker's nominal rate and stream, the same measure calls);
     ``plans`` caches the compiled plan per protocol text."""
-    from psyop.quality.measures import trial_measures
-    from psyop.quality.samples import gaze_grid
-    from psyop.quality.session import recorded_protocol, requested_stream_measures
-    from psyop.session.gaze.simulated import tracker_config
+    from psyop.quality.session import recorded_protocol, stream_measures, stream_of
+    from psyop.session.log.record import SessionRecord
     from psyop.session.plan import compile_plan
 
     if log.trials is None or log.gaze is None:
@@ -136,15 +134,8 @@ def session_measures(log: MemoryLog, plans: dict[tuple[object, object], SessionP
     key = (meta.get("protocol_text"), meta.get("protocol_file"))
     if key not in plans:
         plans[key] = compile_plan(recorded_protocol(meta, Path(log.paths.directory) / dc.SESSION_METADATA_FILE))
-    plan = plans[key]
-    rate, stream = None, "every_sample"
-    if meta.get("tracker") == "sim":
-        config = tracker_config(plan.observer.eye if plan.observer is not None else None, str(meta.get("participant", "")))
-        rate, stream = config.rate_hz, config.raw_stream or "requested"
-    measures, _ = trial_measures(gaze_grid(log.gaze, rate), log.trials, plan)
-    if stream == "requested":
-        measures = requested_stream_measures(measures, log.gaze)
-    measures.insert(1, "raw_stream", stream)
-    measures.insert(0, "session", int(str(meta.get("session", 1))))
-    measures.insert(0, "participant", str(meta.get("participant", "")))
+    s = stream_of(plans[key], SessionRecord.model_validate({**meta, "raw": meta}), log.trials, log.gaze)
+    measures, _ = stream_measures(s)
+    measures.insert(0, "session", s.session)
+    measures.insert(0, "participant", s.participant)
     return measures

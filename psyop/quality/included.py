@@ -60,9 +60,10 @@ def validation_bounded(session_dirs: list[Path]) -> bool:
 
 def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> StudyQuality:
     """Measure every session, apply ``rules`` and state the counts."""
-    from psyop.quality.session import measure_session
+    from psyop.quality.session import PlanCache, measure_session
 
-    tables = [measure_session(d) for d in session_dirs]
+    plans: PlanCache = {}  # one compiled plan per recorded protocol, shared by the sessions that ran it
+    tables = [measure_session(d, plans) for d in session_dirs]
     measures = pd.concat([t[0] for t in tables], ignore_index=True) if tables else pd.DataFrame()
     events = pd.concat([t[1] for t in tables], ignore_index=True) if tables else pd.DataFrame()
     exclusions = apply_rules(measures, rules)

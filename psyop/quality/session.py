@@ -60,9 +60,14 @@ class SessionGaze:
     session: int
 
 
-def session_gaze(directory: Path) -> SessionGaze:
-    """The verified session in ``directory`` and the gaze stream its quality is measured from."""
-    from psyop.session.gaze.simulated import tracker_config
+#: compiled plans by the recorded (protocol text, protocol file): a study's sessions share one (a mesh
+#: protocol's models are parsed once, not per session); the caller owns it
+PlanCache = dict[tuple[object, object], "SessionPlan"]
+
+
+def session_gaze(directory: Path, plans: PlanCache | None = None) -> SessionGaze:
+    """The verified session in ``directory`` and the gaze stream its quality is measured from; ``plans``:
+    the compiled plans of sessions measured before (filled in)."""
     from psyop.session.plan import compile_plan
 
     directory = Path(directory)
@@ -71,27 +76,48 @@ def session_gaze(directory: Path) -> SessionGaze:
         raise UserError("not a finalised psyop session (no session.json and trials.parquet)", str(directory))
     verify_session(directory)
     meta = json.loads(meta_path.read_text())
-    plan = compile_plan(recorded_protocol(meta, meta_path))
-    record = _record(meta, meta_path)
-    participant = str(meta.get("participant", ""))
-    rate, stream, note = None, "every_sample", ""
+    plans = {} if plans is None else plans
+    key = (meta.get("protocol_text"), meta.get("protocol_file"))
+    if key not in plans:
+        plans[key] = compile_plan(recorded_protocol(meta, meta_path))
+    plan = plans[key]
+    gaze_path = directory / dc.GAZE_FILE
+    gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
+    return stream_of(plan, _record(meta, meta_path), pd.read_parquet(directory / dc.TRIALS_FILE), gaze)
+
+
+def stream_of(plan: SessionPlan, record: SessionRecord, trials: pd.DataFrame, recorded: pd.DataFrame) -> SessionGaze:
+    """The stream a session's quality is measured from, given its plan, session.json, trials and recorded raw
+    gaze (from the finalised files, or a replication's in-memory log: psyop.power.memory_log)."""
+    from psyop.session.gaze.simulated import tracker_config
+
+    participant = str(record.raw.get("participant", ""))
+    rate, stream, note, gaze = None, "every_sample", "", recorded
     if (record.tracker or "").partition(":")[0] == "sim":
         config = tracker_config(plan.observer.eye if plan.observer is not None else None, participant)
         rate, stream = config.rate_hz, config.raw_stream or "requested"
-    gaze_path = directory / dc.GAZE_FILE
-    gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
-    trials = pd.read_parquet(directory / dc.TRIALS_FILE)
     if stream == "requested":
-        rebuilt = resimulate_gaze(plan, record, participant, trials, gaze)
+        rebuilt = resimulate_gaze(plan, record, participant, trials, recorded)
         if rebuilt.gaze is not None:
             gaze, stream = rebuilt.gaze, "resimulated"
             note = f"rebuilt from the seed; equal to all {rebuilt.n_checked} recorded samples in trials"
         else:
             note = f"not rebuilt: {rebuilt.reason}"
-    return SessionGaze(plan, trials, gaze, stream, note, rate, participant, int(meta.get("session", 1)))
+    return SessionGaze(plan, trials, gaze, stream, note, rate, participant, int(str(record.raw.get("session", 1))))
 
 
-def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+def stream_measures(s: SessionGaze) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(per-trial measures, events) of ``s`` with columns ``raw_stream`` and ``raw_stream_note`` (a stream of
+    the requested samples only: :func:`requested_stream_measures`, no events)."""
+    measures, events = trial_measures(gaze_grid(s.gaze, s.rate_hz), s.trials, s.plan)
+    if s.stream == "requested":
+        measures, events = requested_stream_measures(measures, s.gaze), events.iloc[0:0]
+    measures.insert(1, "raw_stream", s.stream)
+    measures.insert(2, "raw_stream_note", s.note)
+    return measures, events
+
+
+def measure_session(directory: Path, plans: PlanCache | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(per-trial measures, events) of the session in ``directory``, each with participant and session.
 
     The nominal rate is the simulated tracker's ``rate_hz`` (protocol ``observer: eye:``, default 120 Hz)
@@ -100,13 +126,10 @@ def measure_session(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     per trial on the virtual clock); it is measured from its rebuilt full stream (:func:`session_gaze`,
     ``raw_stream`` = ``resimulated``), or where that cannot be rebuilt and checked from the samples it holds
     (:func:`requested_stream_measures`, ``raw_stream`` = ``requested``). Column ``raw_stream`` says which
-    stream each row was measured from, ``raw_stream_note`` how a rebuilt one was checked or why it was not."""
-    s = session_gaze(directory)
-    measures, events = trial_measures(gaze_grid(s.gaze, s.rate_hz), s.trials, s.plan)
-    if s.stream == "requested":
-        measures, events = requested_stream_measures(measures, s.gaze), events.iloc[0:0]
-    measures.insert(1, "raw_stream", s.stream)
-    measures.insert(2, "raw_stream_note", s.note)
+    stream each row was measured from, ``raw_stream_note`` how a rebuilt one was checked or why it was not.
+    ``plans``: as :func:`session_gaze`'s."""
+    s = session_gaze(directory, plans)
+    measures, events = stream_measures(s)
     validation = trial_validation_measures(s.trials, read_validations(Path(directory)))  # NaN: no gaze_validation
     for name in VALIDATION_MEASURES:
         measures[name] = validation[name].to_numpy()
