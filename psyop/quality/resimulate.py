@@ -61,15 +61,31 @@ def _refused(reason: str, n_checked: int = 0, n_disagreeing: int = 0, max_error_
     return Resimulation(None, n_checked, n_disagreeing, max_error_m, reason)
 
 
+def runs_of(trials: pd.DataFrame) -> list[tuple[int, pd.DataFrame]]:
+    """``trials`` split by run (column ``run``; none: all run 0), runs in order: each run's session clock
+    starts at 0 (a resumed session's trial times overlap the first run's), so a run is measured apart."""
+    if "run" not in trials:
+        return [(0, trials)]
+    return [(int(run), rows) for run, rows in trials.groupby(trials["run"].fillna(0).astype(int), sort=True)]
+
+
 def rebuilt_stream(plan: SessionPlan, record: SessionRecord, participant: str, trials: pd.DataFrame) -> pa.Table:
     """Every sample the session's simulated tracker delivers inside each trial's ``[trial_start_s, trial_end_s)``,
-    as an ``every_sample`` run of the same session would have recorded it (``run``/``trial`` from the row)."""
+    as an ``every_sample`` run of the same session would have recorded it (``run``/``trial`` from the row);
+    each run's tracker starts afresh with the same seed, as :mod:`psyop.run.backends` builds it."""
     assert record.seed is not None and record.sim_tracker_faults is not None  # resimulate_gaze checked
     faults = record.sim_tracker_faults
     base = dataclasses.replace(SimulatedTrackerConfig(), dropout_rate_hz=faults.dropout_rate_hz,
                                nan_burst_rate_hz=faults.nan_burst_rate_hz, raw_stream="requested")
     eye = plan.observer.eye if plan.observer is not None else None
-    tracker = SimulatedTracker(seed_for(record.seed, "tracker"), tracker_config(eye, participant, base))
+    config = tracker_config(eye, participant, base)
+    tables = [_run_stream(SimulatedTracker(seed_for(record.seed, "tracker"), config), plan, run, rows)
+              for run, rows in runs_of(trials)]
+    return pa.concat_tables(tables) if tables else raw_gaze_table([], run=0, trial=-1)
+
+
+def _run_stream(tracker: SimulatedTracker, plan: SessionPlan, run: int, trials: pd.DataFrame) -> pa.Table:
+    """:func:`rebuilt_stream` of one run's ``trials`` (its tracker given fresh)."""
     rate = tracker.config.rate_hz
     config = loop_config(plan)
     tables = []
@@ -85,8 +101,8 @@ def rebuilt_stream(plan: SessionPlan, record: SessionRecord, participant: str, t
             tracker.set_plan(phase.fixation)
         if last_tick >= next_tick:
             blocks.append(tracker.samples_block(np.arange(next_tick, last_tick + 1)))
-        tables.append(_delivered_table(blocks, tracker.config.latency_s, int(row.get("run", 0) or 0), int(row["trial"])))
-    return pa.concat_tables(tables) if tables else raw_gaze_table([], run=0, trial=-1)
+        tables.append(_delivered_table(blocks, tracker.config.latency_s, run, int(row["trial"])))
+    return pa.concat_tables(tables) if tables else raw_gaze_table([], run=run, trial=-1)
 
 
 def _delivered_table(blocks: list[SampleBlock], latency_s: float, run: int, trial: int) -> pa.Table:
@@ -101,30 +117,37 @@ def _delivered_table(blocks: list[SampleBlock], latency_s: float, run: int, tria
                                 np.concatenate([b.confidence for b in blocks])[keep], fixation, run=run, trial=trial)
 
 
-def _in_windows(t_s: np.ndarray, trials: pd.DataFrame) -> np.ndarray:
-    inside = np.zeros(len(t_s), dtype=bool)
-    for start, end in zip(trials["trial_start_s"].to_numpy(float), trials["trial_end_s"].to_numpy(float)):
-        inside |= (t_s >= start) & (t_s < end)
+def in_trial_windows(gaze: pd.DataFrame, trials: pd.DataFrame) -> np.ndarray:
+    """Which rows of ``gaze`` lie inside a trial of their own run: ``[trial_start_s, trial_end_s)``."""
+    t_s = gaze["gaze_sample_t_s"].to_numpy(float)
+    runs = gaze["run"].to_numpy() if "run" in gaze else np.zeros(len(gaze), dtype=np.int64)
+    inside = np.zeros(len(gaze), dtype=bool)
+    for run, rows in runs_of(trials):
+        mine = runs == run
+        for start, end in zip(rows["trial_start_s"].to_numpy(float), rows["trial_end_s"].to_numpy(float)):
+            inside |= mine & (t_s >= start) & (t_s < end)
     return inside
 
 
 def check_against_recorded(rebuilt: pd.DataFrame, recorded: pd.DataFrame, trials: pd.DataFrame,
                            rate_hz: float) -> tuple[int, int, float]:
     """(recorded samples checked, of them not rebuilt equal, largest coordinate difference of the matched):
-    every recorded sample inside a trial window must be a rebuilt tick with the same validity and its
-    fixation point within :data:`TOLERANCE_M` (NaN where invalid on both sides)."""
+    every recorded sample inside a trial window of its run must be a rebuilt tick of that run with the same
+    validity and its fixation point within :data:`TOLERANCE_M` (NaN where invalid on both sides)."""
     if recorded.empty:
         return 0, 0, math.nan
-    t_rec = recorded["gaze_sample_t_s"].to_numpy(float)
-    recorded = recorded[np.isfinite(t_rec) & _in_windows(t_rec, trials)]
+    recorded = recorded[np.isfinite(recorded["gaze_sample_t_s"].to_numpy(float)) & in_trial_windows(recorded, trials)]
     if recorded.empty:
         return 0, 0, math.nan
     axes = [f"fixation_{a}_m" for a in "xyz"]
-    key = "tick"
-    left = recorded.assign(**{key: np.rint(recorded["gaze_sample_t_s"].to_numpy(float) * rate_hz).astype(np.int64)})
-    right = rebuilt.assign(**{key: np.rint(rebuilt["gaze_sample_t_s"].to_numpy(float) * rate_hz).astype(np.int64)})
-    both = left[[key, "gaze_valid", *axes]].merge(right[[key, "gaze_valid", *axes]].drop_duplicates(key), on=key,
-                                                  how="left", suffixes=("", "_rebuilt"), indicator=True)
+    keys = ["run", "tick"]
+
+    def keyed(frame: pd.DataFrame) -> pd.DataFrame:
+        tick = np.rint(frame["gaze_sample_t_s"].to_numpy(float) * rate_hz).astype(np.int64)
+        return frame.assign(tick=tick)[[*keys, "gaze_valid", *axes]]
+
+    both = keyed(recorded).merge(keyed(rebuilt).drop_duplicates(keys), on=keys, how="left", suffixes=("", "_rebuilt"),
+                                 indicator=True)
     found = (both["_merge"] == "both").to_numpy()
     same_valid = found & (both["gaze_valid"].to_numpy() == both["gaze_valid_rebuilt"].to_numpy())
     diff = np.stack([np.abs(both[a].to_numpy(float) - both[f"{a}_rebuilt"].to_numpy(float)) for a in axes], axis=1)
@@ -163,6 +186,9 @@ def resimulate_gaze(plan: SessionPlan, record: SessionRecord, participant: str, 
     if n == 0:
         return _refused("no recorded sample inside a trial to check the rebuilt stream against")
     if bad:
+        why = ("; on a real clock a sample asked for late (after its phase's nominal start, before the loop set "
+               "that phase's gaze plan) follows the earlier plan, so only a session that kept up is rebuilt"
+               if record.raw.get("clock") == "real" else "")
         return _refused(f"{bad} of {n} recorded samples differ from the rebuilt stream (largest difference "
-                        f"{worst:.3g} m; tolerance {TOLERANCE_M:g} m)", n, bad, worst)
+                        f"{worst:.3g} m; tolerance {TOLERANCE_M:g} m){why}", n, bad, worst)
     return Resimulation(rebuilt, n, 0, worst, "")

@@ -14,7 +14,7 @@ from psyop.errors import UserError
 from psyop.finalised import verify_session
 from psyop.quality.measures import trial_measures
 from psyop.protocol.validation import VALIDATION_MEASURES
-from psyop.quality.resimulate import resimulate_gaze
+from psyop.quality.resimulate import resimulate_gaze, runs_of
 from psyop.quality.samples import gaze_grid
 from psyop.session.log.record import SessionRecord
 from psyop.quality.validation import read_validations, trial_validation_measures
@@ -108,10 +108,20 @@ def stream_of(plan: SessionPlan, record: SessionRecord, trials: pd.DataFrame, re
 
 def stream_measures(s: SessionGaze) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(per-trial measures, events) of ``s`` with columns ``raw_stream`` and ``raw_stream_note`` (a stream of
-    the requested samples only: :func:`requested_stream_measures`, no events)."""
-    measures, events = trial_measures(gaze_grid(s.gaze, s.rate_hz), s.trials, s.plan)
-    if s.stream == "requested":
-        measures, events = requested_stream_measures(measures, s.gaze), events.iloc[0:0]
+    the requested samples only: :func:`requested_stream_measures`, no events). Each run is measured apart
+    (its session clock starts at 0: a resumed session's times overlap its first run's); rows in the order
+    of ``s.trials``, events run by run."""
+    tables, event_tables = [], []
+    for run, trials in runs_of(s.trials) or [(0, s.trials)]:  # (no trial recorded: one empty table)
+        gaze = s.gaze[s.gaze["run"].to_numpy() == run] if "run" in s.gaze else s.gaze
+        measures, events = trial_measures(gaze_grid(gaze, s.rate_hz), trials, s.plan)
+        if s.stream == "requested":
+            measures, events = requested_stream_measures(measures, gaze), events.iloc[0:0]
+        tables.append(measures.set_axis(trials.index))
+        event_tables.append(events)
+    measures = pd.concat(tables).loc[s.trials.index].reset_index(drop=True) if len(tables) > 1 else \
+        tables[0].reset_index(drop=True)
+    events = pd.concat(event_tables, ignore_index=True) if len(event_tables) > 1 else event_tables[0]
     measures.insert(1, "raw_stream", s.stream)
     measures.insert(2, "raw_stream_note", s.note)
     return measures, events

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -142,3 +143,44 @@ def test_the_stream_is_rebuilt_per_trial_window_in_time_order(pair: tuple[Path, 
     a = rebuilt_stream(s.plan, SessionRecord.model_validate(meta), "P1", shuffled).to_pandas()
     assert a["gaze_sample_t_s"].is_monotonic_increasing
     pd.testing.assert_frame_equal(a, s.gaze)
+
+
+def test_a_resumed_session_is_rebuilt_and_measured_run_by_run(tmp_path: Path) -> None:
+    """A resumed session: the stream is rebuilt per run (a fresh tracker, as each run has), and each run is
+    measured apart: on a real clock each run's session clock starts at 0, so run times overlap (shown by
+    moving the second run's times back onto the first's: the measures do not change)."""
+    import dataclasses
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "session"))
+    from kill_helpers import kill_once, run_args
+
+    from psyop.cli import main as cli_main
+    from psyop.quality.session import stream_measures
+
+    protocol, data = small_protocol(tmp_path, "detection", 1), tmp_path / "data"
+    argv = run_args(protocol, data, "K1", 5, 0.01)
+    kill_once(argv, 0.0, after_trials=3)  # SIGKILLed after its third durable trial
+    assert cli_main(argv) == 0  # resumes and completes
+    session = data / "detection" / "sub-K1" / "ses-1"
+    trials = pd.read_parquet(session / "trials.parquet")
+    assert trials["run"].nunique() == 2
+    s = session_gaze(session)
+    assert s.stream == "resimulated", s.note
+    measures = measure_session(session)[0]
+    assert measures["trial"].tolist() == trials["trial"].tolist()
+    assert measures.groupby(trials["run"].to_numpy())["pursuit_gain"].median().between(0.8, 1.0).all()
+    # the second run's clock moved back to 0, as a real clock's would be: the same measures, no stream faults
+    shift = float(trials.loc[trials["run"] == 1, "trial_start_s"].min())
+    moved_trials = s.trials.copy()
+    second = moved_trials["run"] == 1
+    for column in ("trial_start_s", "trial_end_s"):
+        moved_trials.loc[second, column] -= shift
+    moved_gaze = s.gaze.copy()
+    later = moved_gaze["run"] == 1
+    for column in ("gaze_sample_t_s", "tracker_t_s", "received_s"):
+        moved_gaze.loc[later, column] -= shift
+    overlapping = dataclasses.replace(s, trials=moved_trials, gaze=moved_gaze, stream="every_sample")
+    moved = stream_measures(overlapping)[0]
+    assert (moved[["n_duplicate_timestamps", "n_non_monotonic", "n_off_grid"]] == 0).all().all()
+    names = [n for n in TRIAL_MEASURES if not n.startswith("validation_")]
+    pd.testing.assert_frame_equal(moved[names], stream_measures(s)[0][names], check_exact=False, rtol=1e-9, atol=1e-6)
