@@ -17,6 +17,7 @@ from _common import out_path, parser, results_file, run, write_csv, write_text
 from psyop.figures.output import save_figure
 from psyop.quality.figures import plot_measures, plot_sample_trials
 from psyop.quality.included import quality_rules, study_quality
+from psyop.quality.resimulate import runs_of
 from psyop.quality.session import session_gaze
 from psyop.statistics.dataset import session_files
 
@@ -34,7 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     out = out_path(args)
     if sessions:  # the stream it was measured from (a requested simulated session's rebuilt one)
         first = session_gaze(sessions[0])
-        save_figure(plot_sample_trials(first.gaze, first.trials, first.plan), out.with_name(out.stem + "_samples.png"))
+        run, trials = (runs_of(first.trials) or [(0, first.trials)])[0]  # one run: each run's clock starts anew
+        gaze = first.gaze[first.gaze["run"] == run] if "run" in first.gaze else first.gaze
+        save_figure(plot_sample_trials(gaze, trials, first.plan), out.with_name(out.stem + "_samples.png"))
     save_figure(plot_measures(quality.measures, rules, args.study), out)
     print(f"[psyop] {args.study}: {quality.sentence}")
     return 0
