@@ -193,6 +193,9 @@ def summary_lines(measures: pd.DataFrame) -> list[str]:
             f"{m['precision_rms_s2s_deg']:.3f} deg, SD {m['precision_sd_deg']:.3f} deg; pursuit gain {m['pursuit_gain']:.2f}, "
             f"lag {1000 * m['pursuit_lag_s']:.0f} ms, {rows['catch_up_saccades_per_s'].mean():.2f} catch-up saccades/s "
             "(medians over trials; nan: no such phase)")
+        if "raw_stream" in rows and rows["raw_stream"].iloc[0] != "every_sample":  # how the stream was measured
+            note = str(rows["raw_stream_note"].iloc[0]) if "raw_stream_note" in rows else ""
+            lines.append(f"  raw stream: {rows['raw_stream'].iloc[0]}" + (f" ({note})" if note else ""))
         flagged = {k: int(rows[k].iloc[0]) for k in ("n_non_finite_time", "n_duplicate_timestamps", "n_non_monotonic",
                                                       "n_off_grid") if int(rows[k].iloc[0])}
         if flagged:

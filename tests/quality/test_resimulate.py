@@ -184,3 +184,12 @@ def test_a_resumed_session_is_rebuilt_and_measured_run_by_run(tmp_path: Path) ->
     assert (moved[["n_duplicate_timestamps", "n_non_monotonic", "n_off_grid"]] == 0).all().all()
     names = [n for n in TRIAL_MEASURES if not n.startswith("validation_")]
     pd.testing.assert_frame_equal(moved[names], stream_measures(s)[0][names], check_exact=False, rtol=1e-9, atol=1e-6)
+
+
+def test_psyop_gaze_says_the_stream_was_rebuilt_and_how_it_was_checked(pair: tuple[Path, Path]) -> None:
+    from psyop.quality.session import summary_lines
+
+    lines = summary_lines(measure_session(pair[0])[0])
+    assert any(re.fullmatch(r"  raw stream: resimulated \(rebuilt from the seed; equal to all \d+ recorded samples "
+                            r"in trials\)", line) for line in lines), lines
+    assert not any("raw stream" in line for line in summary_lines(measure_session(pair[1])[0]))  # every_sample
