@@ -95,6 +95,75 @@ def catch_up_schedule(target: Positions, p: PursuitParams, horizon_s: float, rng
     return saccades
 
 
+class CatchUpStream:
+    """:func:`catch_up_schedule` on demand: the saccades of one pursuit, found only as far as a caller asks
+    (:meth:`through`) and extended when a later time is asked. The same saccades as
+    ``catch_up_schedule(target, p, horizon_s, rng)`` for every onset up to the time asked (and any
+    ``horizon_s`` above it): the same grid values (``index * step``), the target evaluated on it chunk by chunk
+    (elementwise: the same numbers as on the whole grid), the same first threshold crossing searched chunk by
+    chunk and the same draws from ``rng``, in order (tests/session/test_simulated_eye.py compares them)."""
+
+    _CHUNK = 512  # grid points per evaluation of the target (0.256 s)
+    _STEP = 0.0005
+    _AHEAD = 4000  # how far a search looks for the next onset (2 s), as catch_up_schedule
+
+    def __init__(self, target: Positions, p: PursuitParams, rng: np.random.Generator) -> None:
+        self._target, self._p, self._rng = target, p, rng
+        self.saccades: list[CatchUp] = []
+        self._late = _late(target, np.arange(self._CHUNK) * self._STEP, p.lag_s)
+        self._i_n, self._e_n = 0, self._late[0]
+        self._done = p.gain >= 1.0 or p.threshold_deg <= 0.0
+
+    def _late_to(self, n: int) -> np.ndarray:
+        """The late target on the grid, at least its first ``n`` points."""
+        have = len(self._late)
+        if have < n:
+            more = max(n - have, self._CHUNK)
+            extra = _late(self._target, np.arange(have, have + more) * self._STEP, self._p.lag_s)
+            self._late = np.concatenate([self._late, extra])
+        return self._late
+
+    def through(self, until_rel_s: float) -> list[CatchUp]:
+        """The saccades whose onset is at most ``until_rel_s`` (s after the pursuit's start)."""
+        self._late_to(int(until_rel_s / self._STEP) + self._CHUNK)  # the grid asked for, in one evaluation
+        while not self._done and self._i_n * self._STEP <= until_rel_s:
+            self._next()
+        return [s for s in self.saccades if s.onset_s <= until_rel_s]
+
+    def _onset(self, threshold: float) -> int | None:
+        """The grid index of the first crossing of ``threshold`` in the search window, or None."""
+        i_n, gain = self._i_n, self._p.gain
+        for a in range(i_n + 1, i_n + 1 + self._AHEAD, self._CHUNK):
+            b = min(a + self._CHUNK, i_n + 1 + self._AHEAD)
+            late = self._late_to(b)
+            error = (1.0 - gain) * np.hypot(*(late[a:b] - late[i_n]).T)
+            over = np.flatnonzero(error >= threshold)
+            if len(over):
+                return a + int(over[0])
+        return None
+
+    def _next(self) -> None:
+        p, step = self._p, self._STEP
+        threshold = p.threshold_deg * self._rng.uniform(0.8, 1.2)
+        i_on = self._onset(threshold)
+        if i_on is None:
+            self._done = True
+            return
+        late = self._late
+        start = self._e_n + p.gain * (late[i_on] - late[self._i_n])
+        i_land = i_on + 60  # a first guess of 30 ms
+        for _ in range(3):  # the duration from the amplitude to where it lands at its end
+            late = self._late_to(i_land + 1)
+            amplitude = float(np.hypot(*(late[i_land] - start)))
+            duration = 2.0 * amplitude / max(main_sequence_peak_deg_s(amplitude, p.vmax_deg_s, p.c_deg), 1e-9)
+            i_land = i_on + max(1, int(round(duration / step)))
+        land = self._late_to(i_land + 1)[i_land]
+        t_on, t_land = i_on * step, i_land * step
+        self.saccades.append(CatchUp(float(t_on), float(t_land - t_on), (float(start[0]), float(start[1])),
+                                     (float(land[0]), float(land[1]))))
+        self._i_n, self._e_n = i_land, land
+
+
 def eye_positions(target: Positions, p: PursuitParams, saccades: list[CatchUp], t_rel_s: np.ndarray) -> np.ndarray:
     """Fick (az, el) of the pursuing eye at ``t_rel_s`` (s after the plan's start); shape (n, 2)."""
     t = np.asarray(t_rel_s, dtype=np.float64)
