@@ -82,7 +82,8 @@ def keyed_rng(*keys: int) -> np.random.Generator:
     list of 32-bit ints and a uint32 array as the same entropy words; tests/session/test_keyed_rng.py),
     about a third cheaper (a list is coerced to words int by int). A simulation draws one per trial,
     plan and window."""
-    return np.random.default_rng(np.array([k & 0xFFFFFFFF for k in keys], dtype=np.uint32))
+    words = np.array([k & 0xFFFFFFFF for k in keys], dtype=np.uint32)
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(words)))  # what default_rng builds, directly
 
 
 _rng = keyed_rng
