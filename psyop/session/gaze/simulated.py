@@ -160,7 +160,7 @@ class SimulatedTracker:
         self._offset_cache: tuple[tuple[int, int], np.ndarray] | None = None  # the current plan's error offset
         self._offset_floats: tuple[tuple[int, int], tuple[float, float]] | None = None  # the same, as floats
         # sample_at's noise: the window, its generator and the rows drawn so far (_noise_row)
-        self._noise_rows: tuple[int, np.random.Generator, list[tuple[float, float, float]]] | None = None
+        self._noise_rows: tuple[int, np.random.Generator, np.ndarray] | None = None
         self._error_grow = (float(self._error_grow_dir[0]), float(self._error_grow_dir[1]))
         self._drift = (float(self._drift_dir[0]), float(self._drift_dir[1]))
         self._dropouts = _EventTimes(self.seed, 3, c.dropout_rate_hz, c.dropout_s)
@@ -326,11 +326,13 @@ class SimulatedTracker:
         window, index = divmod(tick, 256)
         rows = self._noise_rows
         if rows is None or rows[0] != window:
-            rows = self._noise_rows = (window, _rng(self.seed, 6, window), [])
-        drawn = rows[2]
-        if index >= len(drawn):
-            drawn.extend(map(tuple, rows[1].normal(0.0, self.config.precision_deg, (index + 1 - len(drawn), 3)).tolist()))
-        return drawn[index]
+            rows = (window, _rng(self.seed, 6, window), np.empty((0, 3)))
+        if index >= len(rows[2]):
+            more = rows[1].normal(0.0, self.config.precision_deg, (index + 1 - len(rows[2]), 3))
+            rows = (window, rows[1], np.concatenate([rows[2], more]) if len(rows[2]) else more)
+        self._noise_rows = rows
+        n0, n1, n2 = rows[2][index].tolist()
+        return n0, n1, n2
 
     def _noise(self, tick: int) -> np.ndarray:
         """Three normal draws for ``tick`` (two angles scaled to the precision, one spare)."""
