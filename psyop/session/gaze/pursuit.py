@@ -110,8 +110,8 @@ class CatchUpStream:
     def __init__(self, target: Positions, p: PursuitParams, rng: np.random.Generator) -> None:
         self._target, self._p, self._rng = target, p, rng
         self.saccades: list[CatchUp] = []
-        self._late = _late(target, np.arange(self._CHUNK) * self._STEP, p.lag_s)
-        self._i_n, self._e_n = 0, self._late[0]
+        self._late = np.empty((0, 2))  # the late target on the grid, as far as evaluated (_late_to)
+        self._i_n, self._e_n = 0, np.zeros(2)  # the eye at the current segment's start (set on the first call)
         self._done = p.gain >= 1.0 or p.threshold_deg <= 0.0
 
     def _late_to(self, n: int) -> np.ndarray:
@@ -120,12 +120,15 @@ class CatchUpStream:
         if have < n:
             more = max(n - have, self._CHUNK)
             extra = _late(self._target, np.arange(have, have + more) * self._STEP, self._p.lag_s)
-            self._late = np.concatenate([self._late, extra])
+            self._late = np.concatenate([self._late, extra]) if have else extra
         return self._late
 
     def through(self, until_rel_s: float) -> list[CatchUp]:
         """The saccades whose onset is at most ``until_rel_s`` (s after the pursuit's start)."""
-        self._late_to(int(until_rel_s / self._STEP) + self._CHUNK)  # the grid asked for, in one evaluation
+        started = len(self._late) > 0
+        late = self._late_to(max(0, int(until_rel_s / self._STEP)) + self._CHUNK)  # the grid asked, in one evaluation
+        if not started:
+            self._e_n = late[0]  # the eye starts on the late target
         while not self._done and self._i_n * self._STEP <= until_rel_s:
             self._next()
         return [s for s in self.saccades if s.onset_s <= until_rel_s]
@@ -167,14 +170,17 @@ class CatchUpStream:
 def eye_positions(target: Positions, p: PursuitParams, saccades: list[CatchUp], t_rel_s: np.ndarray) -> np.ndarray:
     """Fick (az, el) of the pursuing eye at ``t_rel_s`` (s after the plan's start); shape (n, 2)."""
     t = np.asarray(t_rel_s, dtype=np.float64)
-    late = _late(target, t, p.lag_s)
     onsets = np.array([s.onset_s for s in saccades] + [math.inf])
     ends = np.array([0.0] + [s.onset_s + s.duration_s for s in saccades])
     n = np.searchsorted(ends, t, side="right") - 1  # the smooth segment begun last (index into ends)
     n = np.clip(n, 0, len(ends) - 1)
     seg_start = ends[n]
-    e_start = np.array([_late(target, np.array([0.0]), p.lag_s)[0]] + [np.array(s.land_deg) for s in saccades])
-    out = e_start[n] + p.gain * (late - _late(target, seg_start, p.lag_s))
+    # the late target at t, at the segments' starts and at 0 in one evaluation (elementwise: the same numbers)
+    count = t.size
+    late_all = _late(target, np.concatenate([t.reshape(-1), seg_start.reshape(-1), [0.0]]), p.lag_s)
+    late, late_seg = late_all[:count], late_all[count:2 * count]
+    e_start = np.array([late_all[-1]] + [np.array(s.land_deg) for s in saccades])
+    out = e_start[n] + p.gain * (late - late_seg)
     in_saccade = t >= onsets[n]
     if np.any(in_saccade):
         k = n[in_saccade]
