@@ -115,7 +115,9 @@ class _EventTimes:
             if len(self._cache) > 64:
                 self._cache.clear()
             rng = _rng(self.seed, self.stream, window)
-            starts = (window + np.sort(rng.uniform(0, 1, rng.poisson(self.rate_hz)))).tolist()
+            count = int(rng.poisson(self.rate_hz))
+            # no event (most windows): the empty list the arithmetic below gives, without it
+            starts = (window + np.sort(rng.uniform(0, 1, count))).tolist() if count else []
             self._cache[window] = starts
         return starts
 
