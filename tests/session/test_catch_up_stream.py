@@ -19,9 +19,10 @@ def test_stream_equals_schedule_at_every_time_asked(gain: float, threshold_deg: 
     target = circling_target(16.0, speed, 37.0, (2.0, -3.0))
     for seed in range(4):
         stream = CatchUpStream(target.positions, params, keyed_rng(seed, 9))
-        for until in (0.0, 0.31, 0.2, 1.7, 1.7, 4.05, 2.5, 7.3):
+        # a search left at a time asked resumes at the next (the dense steps), later times extend the stream
+        for until in (0.0, 0.0004, 0.0011, *np.arange(0.01, 0.8, 0.037), 0.31, 0.2, 1.7, 1.7, 4.05, 2.5, 7.3):
             horizon = max(until, 0.5) + 0.5  # as SimulatedTracker.catch_ups asked catch_up_schedule before
-            whole = [s for s in catch_up_schedule(target.positions, params, horizon, keyed_rng(seed, 9))
+            whole = [s for s in catch_up_schedule(target.positions, params, float(horizon), keyed_rng(seed, 9))
                      if s.onset_s <= until]
             assert stream.through(until) == whole  # dataclass equality: every float the same
 

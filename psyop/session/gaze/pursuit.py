@@ -106,6 +106,7 @@ class CatchUpStream:
     _CHUNK = 512  # grid points per evaluation of the target (0.256 s)
     _STEP = 0.0005
     _AHEAD = 4000  # how far a search looks for the next onset (2 s), as catch_up_schedule
+    _MARGIN = 128  # grid points evaluated past the time asked (a saccade begun by then lands after it)
 
     def __init__(self, target: Positions, p: PursuitParams, rng: np.random.Generator) -> None:
         self._target, self._p, self._rng = target, p, rng
@@ -113,6 +114,7 @@ class CatchUpStream:
         self._late = np.empty((0, 2))  # the late target on the grid, as far as evaluated (_late_to)
         self._i_n, self._e_n = 0, np.zeros(2)  # the eye at the current segment's start (set on the first call)
         self._done = p.gain >= 1.0 or p.threshold_deg <= 0.0
+        self._pending: tuple[float, int] | None = None  # a search begun: its threshold and the next index to scan
 
     def _late_to(self, n: int) -> np.ndarray:
         """The late target on the grid, at least its first ``n`` points."""
@@ -125,19 +127,22 @@ class CatchUpStream:
 
     def through(self, until_rel_s: float) -> list[CatchUp]:
         """The saccades whose onset is at most ``until_rel_s`` (s after the pursuit's start)."""
+        # the last grid index a search must reach (one past int(until / step): round-off never hides an onset)
+        last = max(0, int(until_rel_s / self._STEP)) + 1
         started = len(self._late) > 0
-        late = self._late_to(max(0, int(until_rel_s / self._STEP)) + self._CHUNK)  # the grid asked, in one evaluation
+        late = self._late_to(last + self._MARGIN)  # the grid asked, in one evaluation
         if not started:
             self._e_n = late[0]  # the eye starts on the late target
-        while not self._done and self._i_n * self._STEP <= until_rel_s:
-            self._next()
+        while not self._done and self._i_n * self._STEP <= until_rel_s and self._next(last):
+            pass
         return [s for s in self.saccades if s.onset_s <= until_rel_s]
 
-    def _onset(self, threshold: float) -> int | None:
-        """The grid index of the first crossing of ``threshold`` in the search window, or None."""
+    def _onset(self, threshold: float, first: int, last: int) -> int | None:
+        """The grid index of the first crossing of ``threshold`` from ``first`` to ``last`` (inclusive) in the
+        current search window, or None."""
         i_n, gain = self._i_n, self._p.gain
-        for a in range(i_n + 1, i_n + 1 + self._AHEAD, self._CHUNK):
-            b = min(a + self._CHUNK, i_n + 1 + self._AHEAD)
+        for a in range(first, last + 1, self._CHUNK):
+            b = min(a + self._CHUNK, last + 1)
             late = self._late_to(b)
             error = (1.0 - gain) * np.hypot(*(late[a:b] - late[i_n]).T)
             over = np.flatnonzero(error >= threshold)
@@ -145,13 +150,23 @@ class CatchUpStream:
                 return a + int(over[0])
         return None
 
-    def _next(self) -> None:
+    def _next(self, last: int) -> bool:
+        """Search the next onset up to grid index ``last``: True when a saccade was added; False when none
+        begins by then (the search, its threshold drawn, resumes there when a later time is asked) or at all."""
         p, step = self._p, self._STEP
-        threshold = p.threshold_deg * self._rng.uniform(0.8, 1.2)
-        i_on = self._onset(threshold)
+        if self._pending is None:  # a new search: its threshold (one draw, in order)
+            self._pending = (p.threshold_deg * self._rng.uniform(0.8, 1.2), self._i_n + 1)
+        threshold, first = self._pending
+        window_end = self._i_n + self._AHEAD  # the search window's last index, as catch_up_schedule
+        stop = min(window_end, last)
+        i_on = self._onset(threshold, first, stop)
         if i_on is None:
-            self._done = True
-            return
+            if stop == window_end:
+                self._done = True  # no crossing in the whole window: catch_up_schedule ends there
+            else:
+                self._pending = (threshold, stop + 1)
+            return False
+        self._pending = None
         late = self._late
         start = self._e_n + p.gain * (late[i_on] - late[self._i_n])
         i_land = i_on + 60  # a first guess of 30 ms
@@ -165,6 +180,7 @@ class CatchUpStream:
         self.saccades.append(CatchUp(float(t_on), float(t_land - t_on), (float(start[0]), float(start[1])),
                                      (float(land[0]), float(land[1]))))
         self._i_n, self._e_n = i_land, land
+        return True
 
 
 def eye_positions(target: Positions, p: PursuitParams, saccades: list[CatchUp], t_rel_s: np.ndarray) -> np.ndarray:
