@@ -101,7 +101,8 @@ class CatchUpStream:
     ``catch_up_schedule(target, p, horizon_s, rng)`` for every onset up to the time asked (and any
     ``horizon_s`` above it): the same grid values (``index * step``), the target evaluated on it chunk by chunk
     (elementwise: the same numbers as on the whole grid), the same first threshold crossing searched chunk by
-    chunk and the same draws from ``rng``, in order (tests/session/test_simulated_eye.py compares them)."""
+    chunk (a search stopped at the time asked resumes there, its threshold kept) and the same draws from ``rng``,
+    in order (tests/session/test_catch_up_stream.py compares them)."""
 
     _CHUNK = 512  # grid points per evaluation of the target (0.256 s)
     _STEP = 0.0005
