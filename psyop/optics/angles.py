@@ -154,10 +154,32 @@ def offset_direction(centre_azimuth_deg: float, centre_elevation_deg: float, ecc
     >>> round(float(angle_between_deg(d, fick_direction(10.0, 5.0))), 12)
     16.0
     """
+    return offset_direction_in(offset_frame(centre_azimuth_deg, centre_elevation_deg, eccentricity_deg), meridian_deg)
+
+
+def offset_frame(centre_azimuth_deg: float, centre_elevation_deg: float,
+                 eccentricity_deg: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What :func:`offset_direction` computes once for a centre and eccentricity, whatever the meridian:
+    (cos ecc * forward, sin ecc, right, up); :func:`offset_direction_in` finishes it (the same numbers as
+    :func:`offset_direction`, which is the two; a circling target keeps its frame)."""
     forward, right, up = local_axes(centre_azimuth_deg, centre_elevation_deg)
     ecc = np.radians(np.asarray(eccentricity_deg, dtype=np.float64))[..., None]
+    return np.cos(ecc) * forward, np.sin(ecc), right, up
+
+
+def offset_direction_in(frame: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                        meridian_deg: ArrayLike) -> np.ndarray:
+    """:func:`offset_direction` at ``meridian_deg`` in a frame from :func:`offset_frame`; ``(..., 3)``.
+
+    Examples
+    --------
+    >>> frame = offset_frame(10.0, 5.0, 16.0)
+    >>> bool(np.array_equal(offset_direction_in(frame, 123.0), offset_direction(10.0, 5.0, 16.0, 123.0)))
+    True
+    """
+    ahead, sin_ecc, right, up = frame
     mer = np.radians(np.asarray(meridian_deg, dtype=np.float64))[..., None]
-    return np.cos(ecc) * forward + np.sin(ecc) * (np.cos(mer) * right + np.sin(mer) * up)
+    return ahead + sin_ecc * (np.cos(mer) * right + np.sin(mer) * up)
 
 
 def circle_angular_speed_deg_s(eccentricity_deg: float, polar_speed_deg_s: float) -> float:

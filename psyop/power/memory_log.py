@@ -41,10 +41,11 @@ class MemoryLog:
     def __init__(self, paths: SessionPaths, trial_schema: pa.Schema, keep_gaze: bool = False) -> None:
         self.paths = paths
         self.trial_schema = trial_schema
+        self._names = tuple(trial_schema.names)  # the schema's column names, once (Schema.names builds a list)
         self.keeps_samples = keep_gaze  # the loop builds a trial's raw gaze table only for a log that keeps it
         self.run_index = 0
         self.metadata: JsonObject = {}
-        self._rows: list[JsonObject] = []
+        self._rows: list[tuple[object, ...]] = []  # each trial's values in schema order (None: not in the row)
         self._gaze: list[pa.Table] = []
         self.trials: pd.DataFrame | None = None
         self.gaze: pd.DataFrame | None = None
@@ -54,7 +55,8 @@ class MemoryLog:
         return set()  # a fresh session: nothing to resume
 
     def append_trial(self, row: JsonMapping, frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
-        self._rows.append({name: row.get(name) for name in self.trial_schema.names})
+        get = row.get
+        self._rows.append(tuple([get(name) for name in self._names]))
         if self.keeps_samples and gaze is not None and gaze.num_rows:  # frames: nothing a replication reads
             self._gaze.append(gaze)
 
@@ -73,7 +75,8 @@ class MemoryLog:
 
     def finalise(self, *, status: str, summary: JsonMapping | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
         """The trial table as the durable log's salvage gives it (one row per trial, by trial)."""
-        columns = {name: [r[name] for r in self._rows] for name in self.trial_schema.names}
+        by_column = list(zip(*self._rows)) if self._rows else [() for _ in self._names]
+        columns = {name: list(values) for name, values in zip(self._names, by_column)}
         trials = pa.Table.from_pydict(columns, schema=self.trial_schema).to_pandas()
         trials = trials.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
         self.trials = trials.reset_index(drop=True)

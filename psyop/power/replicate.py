@@ -9,6 +9,8 @@ the same on a local process pool, a Dask cluster, or in this process.
 
 from __future__ import annotations
 
+import functools
+import os
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,15 +53,24 @@ def session_seed(seed: int, participants: int, replication: int, participant_ind
     return int(sequence.generate_state(1, dtype=np.uint32)[0])
 
 
+@functools.lru_cache(maxsize=8)
+def _parsed(text: str, name: str, cwd: str) -> Protocol:
+    """``parse_protocol(text, name)``, once per process for each protocol text (a worker runs many replications
+    of one protocol; parsing its YAML was a tenth of a detection replication). The parsed protocol is frozen
+    (pydantic ``frozen=True``) and apply_effects copies it; ``cwd``: relative paths resolve against it."""
+    from psyop.protocol import parse_protocol
+
+    return parse_protocol(text, name)
+
+
 def _sessions(task: ReplicationTask) -> tuple[Protocol, Callable[[Path], list[SessionOptions]]]:
     """The protocol of ``task`` and, per participant, the options of its session (seeded as the
     module docstring says) into ``data_root``."""
     from psyop.power.effects import apply_effects
-    from psyop.protocol import parse_protocol
     from psyop.session.gaze.simulated import SimulatedTrackerConfig
     from psyop.run.runner import SessionOptions
 
-    protocol = apply_effects(parse_protocol(task.protocol_text, task.protocol_name), task.effects)
+    protocol = apply_effects(_parsed(task.protocol_text, task.protocol_name, os.getcwd()), task.effects)
 
     def options(data_root: Path) -> list[SessionOptions]:
         return [SessionOptions(participant=f"S{j + 1:02d}",

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
-from psyop.optics.angles import fick_angles_deg, fick_direction, offset_direction
+from psyop.optics.angles import fick_angles_deg, fick_direction, offset_direction_in, offset_frame
 from psyop.stimulus.placement import circle_position_deg
 
 
@@ -53,10 +54,16 @@ class CirclingTarget:
         return circle_position_deg(self.centre_deg[0], self.centre_deg[1], self.eccentricity_deg, self.phase_deg,
                                    self.speed_deg_s, t_rel_s)
 
+    @cached_property
+    def _frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The offset frame of the centre and eccentricity (:func:`psyop.optics.angles.offset_frame`), once:
+        the simulated eye evaluates the target thousands of times per pursuit."""
+        return offset_frame(self.centre_deg[0], self.centre_deg[1], self.eccentricity_deg)
+
     def positions(self, t_rel_s: np.ndarray) -> np.ndarray:
         """Fick (az, el) at each of ``t_rel_s``; shape (n, 2) (equal to calling it per time, to round-off)."""
         polar = self.phase_deg + self.speed_deg_s * np.asarray(t_rel_s, dtype=np.float64)
-        d = offset_direction(self.centre_deg[0], self.centre_deg[1], self.eccentricity_deg, polar)
+        d = offset_direction_in(self._frame, polar)  # offset_direction(*centre_deg, eccentricity_deg, polar)
         az, el = fick_angles_deg(d)
         return np.stack([np.asarray(az, dtype=np.float64).reshape(-1), np.asarray(el, dtype=np.float64).reshape(-1)],
                         axis=-1)

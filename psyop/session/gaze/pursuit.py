@@ -95,17 +95,109 @@ def catch_up_schedule(target: Positions, p: PursuitParams, horizon_s: float, rng
     return saccades
 
 
+class CatchUpStream:
+    """:func:`catch_up_schedule` on demand: the saccades of one pursuit, found only as far as a caller asks
+    (:meth:`through`) and extended when a later time is asked. The same saccades as
+    ``catch_up_schedule(target, p, horizon_s, rng)`` for every onset up to the time asked (and any
+    ``horizon_s`` above it): the same grid values (``index * step``), the target evaluated on it chunk by chunk
+    (elementwise: the same numbers as on the whole grid), the same first threshold crossing searched chunk by
+    chunk (a search stopped at the time asked resumes there, its threshold kept) and the same draws from ``rng``,
+    in order (tests/session/test_catch_up_stream.py compares them)."""
+
+    _CHUNK = 512  # grid points per evaluation of the target (0.256 s)
+    _STEP = 0.0005
+    _AHEAD = 4000  # how far a search looks for the next onset (2 s), as catch_up_schedule
+    _MARGIN = 128  # grid points evaluated past the time asked (a saccade begun by then lands after it)
+
+    def __init__(self, target: Positions, p: PursuitParams, rng: np.random.Generator) -> None:
+        self._target, self._p, self._rng = target, p, rng
+        self.saccades: list[CatchUp] = []
+        self._late = np.empty((0, 2))  # the late target on the grid, as far as evaluated (_late_to)
+        self._i_n, self._e_n = 0, np.zeros(2)  # the eye at the current segment's start (set on the first call)
+        self._done = p.gain >= 1.0 or p.threshold_deg <= 0.0
+        self._pending: tuple[float, int] | None = None  # a search begun: its threshold and the next index to scan
+
+    def _late_to(self, n: int) -> np.ndarray:
+        """The late target on the grid, at least its first ``n`` points."""
+        have = len(self._late)
+        if have < n:
+            more = max(n - have, self._CHUNK)
+            extra = _late(self._target, np.arange(have, have + more) * self._STEP, self._p.lag_s)
+            self._late = np.concatenate([self._late, extra]) if have else extra
+        return self._late
+
+    def through(self, until_rel_s: float) -> list[CatchUp]:
+        """The saccades whose onset is at most ``until_rel_s`` (s after the pursuit's start)."""
+        # the last grid index a search must reach (one past int(until / step): round-off never hides an onset)
+        last = max(0, int(until_rel_s / self._STEP)) + 1
+        started = len(self._late) > 0
+        late = self._late_to(last + self._MARGIN)  # the grid asked, in one evaluation
+        if not started:
+            self._e_n = late[0]  # the eye starts on the late target
+        while not self._done and self._i_n * self._STEP <= until_rel_s and self._next(last):
+            pass
+        return [s for s in self.saccades if s.onset_s <= until_rel_s]
+
+    def _onset(self, threshold: float, first: int, last: int) -> int | None:
+        """The grid index of the first crossing of ``threshold`` from ``first`` to ``last`` (inclusive) in the
+        current search window, or None."""
+        i_n, gain = self._i_n, self._p.gain
+        for a in range(first, last + 1, self._CHUNK):
+            b = min(a + self._CHUNK, last + 1)
+            late = self._late_to(b)
+            error = (1.0 - gain) * np.hypot(*(late[a:b] - late[i_n]).T)
+            over = np.flatnonzero(error >= threshold)
+            if len(over):
+                return a + int(over[0])
+        return None
+
+    def _next(self, last: int) -> bool:
+        """Search the next onset up to grid index ``last``: True when a saccade was added; False when none
+        begins by then (the search, its threshold drawn, resumes there when a later time is asked) or at all."""
+        p, step = self._p, self._STEP
+        if self._pending is None:  # a new search: its threshold (one draw, in order)
+            self._pending = (p.threshold_deg * self._rng.uniform(0.8, 1.2), self._i_n + 1)
+        threshold, first = self._pending
+        window_end = self._i_n + self._AHEAD  # the search window's last index, as catch_up_schedule
+        stop = min(window_end, last)
+        i_on = self._onset(threshold, first, stop)
+        if i_on is None:
+            if stop == window_end:
+                self._done = True  # no crossing in the whole window: catch_up_schedule ends there
+            else:
+                self._pending = (threshold, stop + 1)
+            return False
+        self._pending = None
+        late = self._late
+        start = self._e_n + p.gain * (late[i_on] - late[self._i_n])
+        i_land = i_on + 60  # a first guess of 30 ms
+        for _ in range(3):  # the duration from the amplitude to where it lands at its end
+            late = self._late_to(i_land + 1)
+            amplitude = float(np.hypot(*(late[i_land] - start)))
+            duration = 2.0 * amplitude / max(main_sequence_peak_deg_s(amplitude, p.vmax_deg_s, p.c_deg), 1e-9)
+            i_land = i_on + max(1, int(round(duration / step)))
+        land = self._late_to(i_land + 1)[i_land]
+        t_on, t_land = i_on * step, i_land * step
+        self.saccades.append(CatchUp(float(t_on), float(t_land - t_on), (float(start[0]), float(start[1])),
+                                     (float(land[0]), float(land[1]))))
+        self._i_n, self._e_n = i_land, land
+        return True
+
+
 def eye_positions(target: Positions, p: PursuitParams, saccades: list[CatchUp], t_rel_s: np.ndarray) -> np.ndarray:
     """Fick (az, el) of the pursuing eye at ``t_rel_s`` (s after the plan's start); shape (n, 2)."""
     t = np.asarray(t_rel_s, dtype=np.float64)
-    late = _late(target, t, p.lag_s)
     onsets = np.array([s.onset_s for s in saccades] + [math.inf])
     ends = np.array([0.0] + [s.onset_s + s.duration_s for s in saccades])
     n = np.searchsorted(ends, t, side="right") - 1  # the smooth segment begun last (index into ends)
     n = np.clip(n, 0, len(ends) - 1)
     seg_start = ends[n]
-    e_start = np.array([_late(target, np.array([0.0]), p.lag_s)[0]] + [np.array(s.land_deg) for s in saccades])
-    out = e_start[n] + p.gain * (late - _late(target, seg_start, p.lag_s))
+    # the late target at t, at the segments' starts and at 0 in one evaluation (elementwise: the same numbers)
+    count = t.size
+    late_all = _late(target, np.concatenate([t.reshape(-1), seg_start.reshape(-1), [0.0]]), p.lag_s)
+    late, late_seg = late_all[:count], late_all[count:2 * count]
+    e_start = np.array([late_all[-1]] + [np.array(s.land_deg) for s in saccades])
+    out = e_start[n] + p.gain * (late - late_seg)
     in_saccade = t >= onsets[n]
     if np.any(in_saccade):
         k = n[in_saccade]

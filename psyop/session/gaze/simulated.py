@@ -41,7 +41,7 @@ import numpy as np
 from collections.abc import Callable
 
 from psyop.session.gaze.plan import CirclingTarget, FixationPlan
-from psyop.session.gaze.pursuit import CatchUp, PursuitParams, catch_up_schedule, eye_positions
+from psyop.session.gaze.pursuit import CatchUp, CatchUpStream, PursuitParams, eye_positions
 from psyop.optics.angles import fick_angles_deg, fick_direction, offset_direction
 from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample, angles_to_direction
 from psyop.session.gaze.sync import ClockSync
@@ -82,7 +82,8 @@ def keyed_rng(*keys: int) -> np.random.Generator:
     list of 32-bit ints and a uint32 array as the same entropy words; tests/session/test_keyed_rng.py),
     about a third cheaper (a list is coerced to words int by int). A simulation draws one per trial,
     plan and window."""
-    return np.random.default_rng(np.array([k & 0xFFFFFFFF for k in keys], dtype=np.uint32))
+    words = np.array([k & 0xFFFFFFFF for k in keys], dtype=np.uint32)
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(words)))  # what default_rng builds, directly
 
 
 _rng = keyed_rng
@@ -114,7 +115,9 @@ class _EventTimes:
             if len(self._cache) > 64:
                 self._cache.clear()
             rng = _rng(self.seed, self.stream, window)
-            starts = (window + np.sort(rng.uniform(0, 1, rng.poisson(self.rate_hz)))).tolist()
+            count = int(rng.poisson(self.rate_hz))
+            # no event (most windows): the empty list the arithmetic below gives, without it
+            starts = (window + np.sort(rng.uniform(0, 1, count))).tolist() if count else []
             self._cache[window] = starts
         return starts
 
@@ -157,13 +160,18 @@ class SimulatedTracker:
         self._delivered = 0
         self._noise_cache: tuple[int, np.ndarray] | None = None
         self._offset_cache: tuple[tuple[int, int], np.ndarray] | None = None  # the current plan's error offset
+        self._offset_floats: tuple[tuple[int, int], tuple[float, float]] | None = None  # the same, as floats
+        # sample_at's noise: the window, its generator and the rows drawn so far (_noise_row)
+        self._noise_rows: tuple[int, np.random.Generator, np.ndarray] | None = None
+        self._error_grow = (float(self._error_grow_dir[0]), float(self._error_grow_dir[1]))
+        self._drift = (float(self._drift_dir[0]), float(self._drift_dir[1]))
         self._dropouts = _EventTimes(self.seed, 3, c.dropout_rate_hz, c.dropout_s)
         self._blinks = _EventTimes(self.seed, 4, c.blink_rate_hz, c.blink_s)
         self._nan_bursts = _EventTimes(self.seed, 5, c.nan_burst_rate_hz, c.nan_burst_s)
         self._raw = RawBuffer()
         self._last_raw_tick = -1
         self._stream_next: int | None = None  # every_sample: the next tick to stream (None: not started)
-        self._catch_up_cache: tuple[tuple[int, int, int], float, list[CatchUp]] | None = None
+        self._catch_up_cache: tuple[tuple[int, int, int], CatchUpStream] | None = None
         if c.raw_stream not in (None, "requested", "every_sample"):
             raise ValueError(f"raw_stream must be requested or every_sample, not {c.raw_stream!r}")
 
@@ -277,13 +285,18 @@ class SimulatedTracker:
             return GazeSample(t_s, (math.nan, math.nan, math.nan), 0.0, False)
         plan = self._plan_at(t_s)
         az, el = self._eye_angles(plan, t_s)
-        noise = self._noise(tick)
+        n0, n1, n2 = self._noise_row(tick)
         ecc = math.hypot(az, el)
-        err = self._plan_offset(plan) + self._error_grow_dir * c.error_per_15deg * (ecc / 15.0)
-        drift = self._drift_dir * (c.drift_start_deg + c.drift_deg_per_min * t_s / 60.0)
-        f = angles_to_direction(az + noise[0] + err[0] + drift[0], el + noise[1] + err[1] + drift[1]) * plan.distance_m
-        confidence = float(np.clip(0.95 + 0.02 * noise[2] / c.precision_deg, 0.0, 1.0))
-        return GazeSample(t_s, (float(f[0]), float(f[1]), float(f[2])), confidence, True)
+        # the arithmetic of the 2-vectors err = offset + grow_dir * error_per_15deg * (ecc / 15) and
+        # drift = drift_dir * (start + rate * t / 60), element by element in the same order (float64 either way)
+        (o0, o1), (g0, g1), (d0, d1) = self._plan_offset_floats(plan), self._error_grow, self._drift
+        grow, drifted = ecc / 15.0, c.drift_start_deg + c.drift_deg_per_min * t_s / 60.0
+        az_deg = az + n0 + (o0 + g0 * c.error_per_15deg * grow) + d0 * drifted
+        el_deg = el + n1 + (o1 + g1 * c.error_per_15deg * grow) + d1 * drifted
+        f = _fick_direction_0d(az_deg, el_deg)
+        d = plan.distance_m
+        confidence = min(1.0, max(0.0, 0.95 + 0.02 * n2 / c.precision_deg))  # np.clip of a finite float
+        return GazeSample(t_s, (f[0] * d, f[1] * d, f[2] * d), confidence, True)
 
     def _plan_offset(self, plan: FixationPlan) -> np.ndarray:
         """Per-plan error offset; the difference of two has mean norm ``error_centre_deg``. Drawn once per
@@ -298,6 +311,30 @@ class SimulatedTracker:
         offset = _rng(self.seed, 8, start_ms, plan_seed).normal(0.0, sigma, 2)
         offset.setflags(write=False)  # shared by every sample of the plan
         return offset
+
+    def _plan_offset_floats(self, plan: FixationPlan) -> tuple[float, float]:
+        """:meth:`_plan_offset` as two Python floats (the same numbers), kept with the plan's key."""
+        key = (int(round(plan.start_s * 1000.0)), plan.seed)
+        cached = self._offset_floats
+        if cached is None or cached[0] != key:
+            o0, o1 = self._plan_offset(plan).tolist()
+            self._offset_floats = cached = (key, (o0, o1))
+        return cached[1]
+
+    def _noise_row(self, tick: int) -> tuple[float, float, float]:
+        """:meth:`_noise` of ``tick`` as three Python floats, drawing the window's table only as far as
+        asked: its rows come from the window's generator in order (a normal draw holds no state between
+        calls), so a prefix drawn now and the rows drawn on later equal the table :meth:`_noise` draws at once."""
+        window, index = divmod(tick, 256)
+        rows = self._noise_rows
+        if rows is None or rows[0] != window:
+            rows = (window, _rng(self.seed, 6, window), np.empty((0, 3)))
+        if index >= len(rows[2]):
+            more = rows[1].normal(0.0, self.config.precision_deg, (index + 1 - len(rows[2]), 3))
+            rows = (window, rows[1], np.concatenate([rows[2], more]) if len(rows[2]) else more)
+        self._noise_rows = rows
+        n0, n1, n2 = rows[2][index].tolist()
+        return n0, n1, n2
 
     def _noise(self, tick: int) -> np.ndarray:
         """Three normal draws for ``tick`` (two angles scaled to the precision, one spare)."""
@@ -336,12 +373,11 @@ class SimulatedTracker:
         start (the ground truth recovery tests compare psyop's measures with)."""
         key = (int(round(plan.start_s * 1e6)), plan.seed, id(plan.target))
         cached = self._catch_up_cache
-        if cached is None or cached[0] != key or cached[1] < until_rel_s:
-            horizon = max(until_rel_s, 0.5) + 0.5
+        if cached is None or cached[0] != key:
             rng = _rng(self.seed, 9, key[0] & 0xFFFFFFFF, plan.seed)
-            self._catch_up_cache = cached = (key, horizon,
-                                             catch_up_schedule(self._positions(plan), self._pursuit_params(), horizon, rng))
-        return [s for s in cached[2] if s.onset_s <= until_rel_s]
+            # catch_up_schedule found as far as asked (the same saccades; psyop.session.gaze.pursuit)
+            self._catch_up_cache = cached = (key, CatchUpStream(self._positions(plan), self._pursuit_params(), rng))
+        return cached[1].through(until_rel_s)
 
     @staticmethod
     def _positions(plan: FixationPlan) -> Callable[[np.ndarray], np.ndarray]:
@@ -356,7 +392,9 @@ class SimulatedTracker:
         return one_by_one
 
     def _pursuit(self, plan: FixationPlan, t_rel_s: np.ndarray) -> np.ndarray:
-        saccades = self.catch_ups(plan, float(np.max(t_rel_s)) + 1.0)
+        # the saccades begun by the last time asked: eye_positions reads no later one (the segment a time
+        # lies in and the saccade after it, which has not begun, give the same positions with or without it)
+        saccades = self.catch_ups(plan, float(np.max(t_rel_s)))
         return eye_positions(self._positions(plan), self._pursuit_params(), saccades, t_rel_s)
 
     def _free_block(self, plan: FixationPlan, t_rel_s: np.ndarray) -> np.ndarray:
@@ -396,6 +434,15 @@ class SimulatedTracker:
             w = (t_rel_s - start) / c.saccade_s
             return paz + w * (az - paz), pel + w * (el - pel)
         return az, el
+
+
+def _fick_direction_0d(azimuth_deg: float, elevation_deg: float) -> tuple[float, float, float]:
+    """:func:`psyop.optics.angles.fick_direction` of one direction, as floats: the same numpy functions on the
+    same 0-d values (``angles_to_direction`` of two floats), without building arrays around them."""
+    az = np.radians(np.float64(azimuth_deg))
+    el = np.radians(np.float64(elevation_deg))
+    cos_el = np.cos(el)
+    return float(cos_el * np.sin(az) + 0.0), float(np.sin(el) + 0.0), float(-cos_el * np.cos(az) + 0.0)
 
 
 def _unit2(rng: np.random.Generator) -> np.ndarray:
