@@ -73,12 +73,17 @@ def _sessions(task: ReplicationTask) -> tuple[Protocol, Callable[[Path], list[Se
     protocol = apply_effects(_parsed(task.protocol_text, task.protocol_name, os.getcwd()), task.effects)
 
     def options(data_root: Path) -> list[SessionOptions]:
+        from psyop.mesh.load import MeshFiles
+
+        # one model cache for the replication's sessions (each checks every file's SHA-256 before reusing a
+        # parse): a mesh protocol's glTF models were parsed again for every session's session.json
+        meshes = MeshFiles(Path(task.protocol_name).parent if task.protocol_name else Path.cwd())
         return [SessionOptions(participant=f"S{j + 1:02d}",
                                seed=session_seed(task.seed, task.participants, task.replication, j),
                                data_root=data_root, progress=False, write_description=False,
                                render="cameras", fsync=False,
                                # power reads trials only: no 120 Hz raw gaze stream (issue 27)
-                               tracker_faults=SimulatedTrackerConfig(raw_stream="requested"))
+                               tracker_faults=SimulatedTrackerConfig(raw_stream="requested"), mesh_files=meshes)
                 for j in range(task.participants)]
     return protocol, options
 
