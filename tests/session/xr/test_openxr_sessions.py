@@ -81,7 +81,9 @@ def test_a_session_runs_to_completion_on_the_simulated_hmd(tmp_path):
     frames = pd.read_parquet(_session_dir(tmp_path) / "frames.parquet")
     trials = pd.read_parquet(_session_dir(tmp_path) / "trials.parquet")
     assert sorted(trials["trial"]) == [0, 1]
-    assert len(frames) >= 6 and frames["display_should_render"].all()
+    # every trial drew frames; how many depends on the machine's speed (5 in all under two busy loops, CI
+    # beside it: a count floor of 6 failed there), so only their presence is asserted
+    assert set(frames["trial"]) == {0, 1} and frames["display_should_render"].all()
     assert (np.diff(frames["display_time_s"].to_numpy()) > 0).all()  # the runtime's display times move on
     assert (frames["display_period_s"] > 0).all()
     for eye in ("left", "right"):  # every frame logs the runtime's views of both eyes
