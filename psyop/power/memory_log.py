@@ -127,17 +127,14 @@ def session_measures(log: MemoryLog, plans: dict[tuple[object, object], SessionP
     psyop.quality.session.measure_session computes them from the finalised files (the plan of the
     recorded protocol text, the simulated tracker's nominal rate and stream, the same measure calls);
     ``plans`` caches the compiled plan per protocol text."""
-    from psyop.quality.session import recorded_protocol, stream_measures, stream_of
-    from psyop.session.log.record import SessionRecord
-    from psyop.session.plan import compile_plan
+    from psyop.quality.session import cached_plan, stream_measures, stream_of
+    from psyop.session.log.record import record_of
 
     if log.trials is None or log.gaze is None:
         raise RuntimeError(f"{log.paths.directory}: the session was not finalised with its raw gaze kept")
     meta = log.metadata
-    key = (meta.get("protocol_text"), meta.get("protocol_file"))
-    if key not in plans:
-        plans[key] = compile_plan(recorded_protocol(meta, Path(log.paths.directory) / dc.SESSION_METADATA_FILE))
-    s = stream_of(plans[key], SessionRecord.model_validate({**meta, "raw": meta}), log.trials, log.gaze)
+    meta_path = Path(log.paths.directory) / dc.SESSION_METADATA_FILE
+    s = stream_of(cached_plan(meta, meta_path, plans), record_of(meta, meta_path), log.trials, log.gaze)
     measures, _ = stream_measures(s)
     measures.insert(0, "session", s.session)
     measures.insert(0, "participant", s.participant)

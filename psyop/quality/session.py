@@ -16,14 +16,15 @@ from psyop.quality.measures import trial_measures
 from psyop.protocol.validation import VALIDATION_MEASURES
 from psyop.quality.resimulate import resimulate_gaze, runs_of
 from psyop.quality.samples import gaze_grid
-from psyop.session.log.record import SessionRecord
+from psyop.session.log.record import SessionRecord, record_of
+from psyop.session.rows import JsonMapping
 from psyop.quality.validation import read_validations, trial_validation_measures
 
 if TYPE_CHECKING:
     from psyop.session.plan import SessionPlan
 
 
-def recorded_protocol(meta: dict, meta_path: Path):
+def recorded_protocol(meta: JsonMapping, meta_path: Path):
     """The protocol a session recorded (session.json ``protocol_text``), its files (a mesh) resolved beside
     the protocol file it was run from (``protocol_file``), as the session resolved them."""
     from psyop.protocol import parse_protocol
@@ -65,25 +66,30 @@ class SessionGaze:
 PlanCache = dict[tuple[object, object], "SessionPlan"]
 
 
+def cached_plan(meta: JsonMapping, meta_path: Path, plans: PlanCache) -> SessionPlan:
+    """The compiled plan of the protocol session.json ``meta`` recorded, from ``plans`` when a session of the
+    same protocol text and file was compiled before (then added)."""
+    from psyop.session.plan import compile_plan
+
+    key = (meta.get("protocol_text"), meta.get("protocol_file"))
+    if key not in plans:
+        plans[key] = compile_plan(recorded_protocol(meta, meta_path))
+    return plans[key]
+
+
 def session_gaze(directory: Path, plans: PlanCache | None = None) -> SessionGaze:
     """The verified session in ``directory`` and the gaze stream its quality is measured from; ``plans``:
     the compiled plans of sessions measured before (filled in)."""
-    from psyop.session.plan import compile_plan
-
     directory = Path(directory)
     meta_path = directory / dc.SESSION_METADATA_FILE
     if not meta_path.is_file() or not (directory / dc.TRIALS_FILE).is_file():
         raise UserError("not a finalised psyop session (no session.json and trials.parquet)", str(directory))
     verify_session(directory)
     meta = json.loads(meta_path.read_text())
-    plans = {} if plans is None else plans
-    key = (meta.get("protocol_text"), meta.get("protocol_file"))
-    if key not in plans:
-        plans[key] = compile_plan(recorded_protocol(meta, meta_path))
-    plan = plans[key]
+    plan = cached_plan(meta, meta_path, {} if plans is None else plans)
     gaze_path = directory / dc.GAZE_FILE
     gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
-    return stream_of(plan, _record(meta, meta_path), pd.read_parquet(directory / dc.TRIALS_FILE), gaze)
+    return stream_of(plan, record_of(meta, meta_path), pd.read_parquet(directory / dc.TRIALS_FILE), gaze)
 
 
 def stream_of(plan: SessionPlan, record: SessionRecord, trials: pd.DataFrame, recorded: pd.DataFrame) -> SessionGaze:
@@ -147,16 +153,6 @@ def measure_session(directory: Path, plans: PlanCache | None = None) -> tuple[pd
         table.insert(0, "session", s.session)
         table.insert(0, "participant", s.participant)
     return measures, events
-
-
-def _record(meta: dict, meta_path: Path) -> SessionRecord:
-    """session.json's typed fields (a seed that is not an integer is one line naming the file)."""
-    from pydantic import ValidationError
-
-    try:
-        return SessionRecord.model_validate({**meta, "raw": meta})
-    except ValidationError as exc:
-        raise UserError(f"the recorded seed {meta.get('seed')!r} is not an integer", str(meta_path)) from exc
 
 
 #: measures a stream of the requested samples cannot give (they need the tracker's every sample)

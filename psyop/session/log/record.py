@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+from pathlib import Path
 from collections.abc import Mapping
 from typing import Any
 
@@ -129,11 +130,13 @@ def read_record(paths: SessionPaths) -> SessionRecord | None:
     return record_of(meta, paths)
 
 
-def record_of(meta: JsonMapping, paths: SessionPaths) -> SessionRecord:
-    """``meta`` (session.json as read, or rebuilt from the log) as a :class:`SessionRecord`.
+def record_of(meta: JsonMapping, paths: SessionPaths | Path) -> SessionRecord:
+    """``meta`` (session.json as read, or rebuilt from the log) as a :class:`SessionRecord`; ``paths``: the
+    session's paths, or the session.json file it came from (a finalised session's, a replication's).
 
     A recorded seed that is not an integer is a UserError naming session.json."""
     try:
         return SessionRecord.model_validate({**meta, "raw": meta})
     except ValidationError as exc:
-        raise UserError(f"the recorded seed {meta.get('seed')!r} is not an integer", str(paths.metadata)) from exc
+        where = paths.metadata if isinstance(paths, SessionPaths) else paths
+        raise UserError(f"the recorded seed {meta.get('seed')!r} is not an integer", str(where)) from exc
