@@ -40,6 +40,7 @@ import numpy as np
 
 from collections.abc import Callable
 
+from psyop.session.gaze.keyed import KeyedGenerator, keyed_poisson_uniforms, keyed_rng
 from psyop.session.gaze.plan import CirclingTarget, FixationPlan
 from psyop.session.gaze.pursuit import CatchUp, CatchUpStream, PursuitParams, eye_positions
 from psyop.optics.angles import fick_angles_deg, fick_direction, offset_direction
@@ -77,16 +78,7 @@ class SimulatedTrackerConfig:
     raw_stream: str | None = None
 
 
-def keyed_rng(*keys: int) -> np.random.Generator:
-    """``np.random.default_rng([k & 0xFFFFFFFF for k in keys])``: the same stream (SeedSequence reads a
-    list of 32-bit ints and a uint32 array as the same entropy words; tests/session/test_keyed_rng.py),
-    about a third cheaper (a list is coerced to words int by int). A simulation draws one per trial,
-    plan and window."""
-    words = np.array([k & 0xFFFFFFFF for k in keys], dtype=np.uint32)
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(words)))  # what default_rng builds, directly
-
-
-_rng = keyed_rng
+_rng = keyed_rng  # a fresh generator, for a caller that keeps it (psyop.session.gaze.keyed)
 
 
 @dataclass(frozen=True)
@@ -114,10 +106,9 @@ class _EventTimes:
         if starts is None:
             if len(self._cache) > 64:
                 self._cache.clear()
-            rng = _rng(self.seed, self.stream, window)
-            count = int(rng.poisson(self.rate_hz))
-            # no event (most windows): the empty list the arithmetic below gives, without it
-            starts = (window + np.sort(rng.uniform(0, 1, count))).tolist() if count else []
+            # rng.uniform(0, 1, rng.poisson(rate)) of the window's stream, sorted (stepped in Python integers:
+            # the same numbers, without a Generator per window); no event (most windows): the empty list
+            starts = [window + u for u in sorted(keyed_poisson_uniforms(self.rate_hz, self.seed, self.stream, window))]
             self._cache[window] = starts
         return starts
 
@@ -163,6 +154,9 @@ class SimulatedTracker:
         self._offset_floats: tuple[tuple[int, int], tuple[float, float]] | None = None  # the same, as floats
         # sample_at's noise: the window, its generator and the rows drawn so far (_noise_row)
         self._noise_rows: tuple[int, np.random.Generator, np.ndarray] | None = None
+        # generators re-seeded in place (psyop.session.gaze.keyed): the noise rows' (drawn on as a window is read)
+        # and a scratch one for the streams drawn at once (plan offsets, noise tables, free-viewing fixations)
+        self._noise_generator, self._scratch = KeyedGenerator(), KeyedGenerator()
         self._error_grow = (float(self._error_grow_dir[0]), float(self._error_grow_dir[1]))
         self._drift = (float(self._drift_dir[0]), float(self._drift_dir[1]))
         self._dropouts = _EventTimes(self.seed, 3, c.dropout_rate_hz, c.dropout_s)
@@ -308,7 +302,7 @@ class SimulatedTracker:
 
     def _draw_plan_offset(self, start_ms: int, plan_seed: int) -> np.ndarray:
         sigma = self.config.error_centre_deg / (math.sqrt(2.0) * math.sqrt(math.pi / 2.0))
-        offset = _rng(self.seed, 8, start_ms, plan_seed).normal(0.0, sigma, 2)
+        offset = self._scratch.at(self.seed, 8, start_ms, plan_seed).normal(0.0, sigma, 2)
         offset.setflags(write=False)  # shared by every sample of the plan
         return offset
 
@@ -328,7 +322,7 @@ class SimulatedTracker:
         window, index = divmod(tick, 256)
         rows = self._noise_rows
         if rows is None or rows[0] != window:
-            rows = (window, _rng(self.seed, 6, window), np.empty((0, 3)))
+            rows = (window, self._noise_generator.at(self.seed, 6, window), np.empty((0, 3)))
         if index >= len(rows[2]):
             more = rows[1].normal(0.0, self.config.precision_deg, (index + 1 - len(rows[2]), 3))
             rows = (window, rows[1], np.concatenate([rows[2], more]) if len(rows[2]) else more)
@@ -340,7 +334,7 @@ class SimulatedTracker:
         """Three normal draws for ``tick`` (two angles scaled to the precision, one spare)."""
         window, index = divmod(tick, 256)
         if self._noise_cache is None or self._noise_cache[0] != window:
-            table = _rng(self.seed, 6, window).normal(0.0, self.config.precision_deg, (256, 3))
+            table = self._scratch.at(self.seed, 6, window).normal(0.0, self.config.precision_deg, (256, 3))
             self._noise_cache = (window, table)
         return self._noise_cache[1][index]
 
@@ -416,7 +410,7 @@ class SimulatedTracker:
         c = self.config
         key = (plan.seed, plan.start_s)
         if self._fixations is None or self._fixations[0] != key or self._fixations[1][-1][0] < t_rel_s:
-            rng = _rng(self.seed, 7, plan.seed)
+            rng = self._scratch.at(self.seed, 7, plan.seed)  # drawn here, at once
             fixations, t = [], 0.0
             while t <= max(t_rel_s, 10.0):
                 r = plan.radius_deg * math.sqrt(rng.uniform())

@@ -17,7 +17,8 @@ import numpy as np
 
 from psyop.session.rows import JsonMapping, TrialRow
 from psyop.errors import UserError
-from psyop.session.gaze.simulated import keyed_rng, seed_for
+from psyop.session.gaze.keyed import KeyedGenerator, keyed_rng
+from psyop.session.gaze.simulated import seed_for
 from psyop.session.reach import HAND_HEIGHT_M
 from psyop.session.responses.base import Response, ResponseKind, score
 
@@ -47,9 +48,12 @@ class SimulatedObserver(ABC):
         self.participant = participant
         self._participant_rng = keyed_rng(seed_for("participant", participant), self.seed)
         self._participant_key = seed_for(participant)  # the trial streams' second key, once
+        self._trial_generator = KeyedGenerator()  # re-seeded per trial (each collect draws from it at once)
 
     def trial_rng(self, row: TrialRow) -> np.random.Generator:
-        return keyed_rng(self.seed, self._participant_key, int(row["trial_seed"]), 11)
+        """The trial's stream (``keyed_rng`` of the session, participant and trial seed), in a generator re-seeded
+        in place: draw from it at once; the next trial's call starts its own stream in the same object."""
+        return self._trial_generator.at(self.seed, self._participant_key, int(row["trial_seed"]), 11)
 
     @abstractmethod
     def collect(self, row: TrialRow, now_s: float) -> Response:

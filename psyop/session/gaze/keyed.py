@@ -1,0 +1,128 @@
+"""Keyed random streams: ``np.random.default_rng([k & 0xFFFFFFFF for k in keys])``, cheaper.
+
+The simulated eye and observers draw from one stream per (session, trial), (session, window) or
+(session, plan): thousands of short streams per session, each a few draws long. Building a
+``Generator`` for each costs about 25 us, most of it numpy's ``SeedSequence.generate_state`` (a Python
+loop over numpy scalars inside ``np.errstate``), while the draws themselves cost 1-2 us. The same
+streams, cheaper:
+
+- :func:`keyed_state` is the PCG64 state ``default_rng`` starts in: the SeedSequence's entropy pool
+  mixed by numpy itself (``SeedSequence(words).pool``), then ``generate_state(4, uint64)`` and PCG64's
+  seeding (``pcg64_set_seed``: ``state = ((inc + initstate) * M + inc) mod 2**128``) in Python integers;
+- :class:`KeyedGenerator` is one ``Generator`` put into that state in place (``bit_generator.state``), for
+  a caller that draws at once and keeps nothing;
+- :func:`keyed_uniforms` and :func:`keyed_poisson_uniforms` step PCG64 (XSL-RR output) in Python integers
+  for the draws that need no table: ``Generator.uniform(0, 1)`` is ``(next_uint64 >> 11) * 2**-53``, and
+  ``Generator.poisson(lam)`` for ``0 < lam < 10`` is numpy's multiplication method over those doubles.
+
+Every function is held to numpy's own streams in tests/session/test_keyed_rng.py (states, uniforms,
+normals and Poisson counts for thousands of keys). numpy documents PCG64 and SeedSequence as stable
+streams; a numpy that changed them would fail those tests, not shift the simulation silently.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_M32 = 0xFFFFFFFF
+_M64 = (1 << 64) - 1
+_M128 = (1 << 128) - 1
+_INIT_B, _MULT_B = 0x8B51F9DD, 0x58F38DED  # SeedSequence.generate_state's hash constants
+_PCG_MULT = (2549297995355413924 << 64) | 4865540595714422341  # PCG_DEFAULT_MULTIPLIER_128
+_DOUBLE = 1.0 / 9007199254740992.0  # 2**-53: next_double's scale
+
+
+def _words(keys: tuple[int, ...]) -> np.ndarray:
+    return np.array([k & _M32 for k in keys], dtype=np.uint32)
+
+
+def keyed_state(*keys: int) -> tuple[int, int]:
+    """The PCG64 ``(state, inc)`` that ``np.random.default_rng([k & 0xFFFFFFFF for k in keys])`` starts in.
+
+    Examples
+    --------
+    >>> state = np.random.default_rng([7, 8]).bit_generator.state["state"]
+    >>> keyed_state(7, 8) == (state["state"], state["inc"])
+    True
+    """
+    p0, p1, p2, p3 = np.random.SeedSequence(_words(keys)).pool.tolist()
+    h, out = _INIT_B, []
+    for v in (p0, p1, p2, p3, p0, p1, p2, p3):  # generate_state(4, uint64): 8 words from the cycled pool
+        v ^= h
+        h = (h * _MULT_B) & _M32
+        v = (v * h) & _M32
+        out.append(v ^ (v >> 16))
+    initstate = (out[0] | out[1] << 32) << 64 | (out[2] | out[3] << 32)  # little-endian uint64 pairs
+    initseq = (out[4] | out[5] << 32) << 64 | (out[6] | out[7] << 32)
+    inc = ((initseq << 1) | 1) & _M128
+    return (((inc + initstate) & _M128) * _PCG_MULT + inc) & _M128, inc
+
+
+def keyed_rng(*keys: int) -> np.random.Generator:
+    """A fresh ``np.random.default_rng([k & 0xFFFFFFFF for k in keys])`` (a caller that keeps the generator)."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(_words(keys))))
+
+
+class KeyedGenerator:
+    """One numpy ``Generator`` re-seeded in place: :meth:`at` puts it into the state :func:`keyed_rng` of the
+    same keys starts in and returns it. The next :meth:`at` re-seeds the same object, so it is for a caller
+    that draws at once and keeps nothing (each owner has its own)."""
+
+    def __init__(self) -> None:
+        self._bits = np.random.PCG64(0)
+        self._generator = np.random.Generator(self._bits)
+
+    def at(self, *keys: int) -> np.random.Generator:
+        state, inc = keyed_state(*keys)
+        self._bits.state = {"bit_generator": "PCG64", "state": {"state": state, "inc": inc},
+                            "has_uint32": 0, "uinteger": 0}
+        return self._generator
+
+
+def _next_double(state: int, inc: int) -> tuple[int, float]:
+    """One PCG64 step (``state * M + inc``) and its XSL-RR output as numpy's ``next_double``."""
+    state = (state * _PCG_MULT + inc) & _M128
+    high = state >> 64
+    word, rot = (high ^ (state & _M64)), high >> 58
+    word = ((word >> rot) | (word << ((-rot) & 63))) & _M64
+    return state, (word >> 11) * _DOUBLE
+
+
+def keyed_uniforms(count: int, *keys: int) -> list[float]:
+    """``keyed_rng(*keys).uniform(0, 1, count)`` as Python floats, the same numbers.
+
+    Examples
+    --------
+    >>> keyed_uniforms(3, 4, 5) == np.random.default_rng([4, 5]).uniform(0, 1, 3).tolist()
+    True
+    """
+    state, inc = keyed_state(*keys)
+    out = []
+    for _ in range(count):
+        state, u = _next_double(state, inc)
+        out.append(u)
+    return out
+
+
+def keyed_poisson_uniforms(lam: float, *keys: int) -> list[float]:
+    """``rng.uniform(0, 1, rng.poisson(lam))`` of ``rng = keyed_rng(*keys)``, as Python floats: the same
+    count and numbers. numpy's Poisson for ``0 < lam < 10`` multiplies doubles until their product falls to
+    ``exp(-lam)`` or below (``random_poisson_mult``); other ``lam`` go through the Generator itself."""
+    if not 0.0 < lam < 10.0:
+        rng = keyed_rng(*keys)
+        return rng.uniform(0, 1, int(rng.poisson(lam))).tolist()
+    state, inc = keyed_state(*keys)
+    limit, product, count = math.exp(-lam), 1.0, 0
+    while True:
+        state, u = _next_double(state, inc)
+        product *= u
+        if product <= limit:
+            break
+        count += 1
+    out = []
+    for _ in range(count):
+        state, u = _next_double(state, inc)
+        out.append(u)
+    return out
