@@ -59,7 +59,8 @@ def former_tracker(seed: int, config: Any = None) -> Any:
     """The simulated tracker as it was before issue 21: a numpy Generator built for every sample's plan
     offset, and event windows (blinks, NaN bursts, dropouts) searched with numpy masks. Same samples
     (tests/session/test_frame_cpu_equality.py); the benchmark's "before" gaze source."""
-    from psyop.session.gaze.simulated import SimulatedTracker, _EventTimes, _rng
+    from psyop.session.gaze.keyed import keyed_rng as _rng
+    from psyop.session.gaze.simulated import SimulatedTracker, _EventTimes
 
     class _FormerEventTimes(_EventTimes):
         def _starts(self, window: int) -> Any:

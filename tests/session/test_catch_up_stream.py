@@ -10,7 +10,7 @@ import pytest
 from psyop.optics.angles import offset_direction, offset_direction_in, offset_frame
 from psyop.session.gaze.plan import circling_target
 from psyop.session.gaze.pursuit import CatchUpStream, PursuitParams, catch_up_schedule
-from psyop.session.gaze.simulated import keyed_rng
+from psyop.session.gaze.keyed import keyed_rng
 
 
 @pytest.mark.parametrize("gain, threshold_deg, speed", [(0.9, 1.5, 90.0), (0.8, 1.0, -120.0), (0.95, 0.5, 45.0)])

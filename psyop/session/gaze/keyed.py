@@ -11,8 +11,8 @@ streams, cheaper:
   seeding (``pcg64_set_seed``: ``state = ((inc + initstate) * M + inc) mod 2**128``) in Python integers;
 - :class:`KeyedGenerator` is one ``Generator`` put into that state in place (``bit_generator.state``), for
   a caller that draws at once and keeps nothing;
-- :func:`keyed_uniforms` and :func:`keyed_poisson_uniforms` step PCG64 (XSL-RR output) in Python integers
-  for the draws that need no table: ``Generator.uniform(0, 1)`` is ``(next_uint64 >> 11) * 2**-53``, and
+- :func:`keyed_poisson_uniforms` steps PCG64 (XSL-RR output) in Python integers for a blink window's draws,
+  which need no table: ``Generator.uniform(0, 1)`` is ``(next_uint64 >> 11) * 2**-53``, and
   ``Generator.poisson(lam)`` for ``0 < lam < 10`` is numpy's multiplication method over those doubles.
 
 Every function is held to numpy's own streams in tests/session/test_keyed_rng.py (states, uniforms,
@@ -74,6 +74,11 @@ class KeyedGenerator:
         self._bits = np.random.PCG64(0)
         self._generator = np.random.Generator(self._bits)
 
+    @property
+    def generator(self) -> np.random.Generator:
+        """The generator, in whatever state the last :meth:`at` and the draws since left it."""
+        return self._generator
+
     def at(self, *keys: int) -> np.random.Generator:
         state, inc = keyed_state(*keys)
         self._bits.state = {"bit_generator": "PCG64", "state": {"state": state, "inc": inc},
@@ -90,26 +95,17 @@ def _next_double(state: int, inc: int) -> tuple[int, float]:
     return state, (word >> 11) * _DOUBLE
 
 
-def keyed_uniforms(count: int, *keys: int) -> list[float]:
-    """``keyed_rng(*keys).uniform(0, 1, count)`` as Python floats, the same numbers.
-
-    Examples
-    --------
-    >>> keyed_uniforms(3, 4, 5) == np.random.default_rng([4, 5]).uniform(0, 1, 3).tolist()
-    True
-    """
-    state, inc = keyed_state(*keys)
-    out = []
-    for _ in range(count):
-        state, u = _next_double(state, inc)
-        out.append(u)
-    return out
-
-
 def keyed_poisson_uniforms(lam: float, *keys: int) -> list[float]:
     """``rng.uniform(0, 1, rng.poisson(lam))`` of ``rng = keyed_rng(*keys)``, as Python floats: the same
     count and numbers. numpy's Poisson for ``0 < lam < 10`` multiplies doubles until their product falls to
-    ``exp(-lam)`` or below (``random_poisson_mult``); other ``lam`` go through the Generator itself."""
+    ``exp(-lam)`` or below (``random_poisson_mult``); other ``lam`` go through the Generator itself.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng([4, 5])
+    >>> keyed_poisson_uniforms(3.0, 4, 5) == rng.uniform(0, 1, rng.poisson(3.0)).tolist()
+    True
+    """
     if not 0.0 < lam < 10.0:
         rng = keyed_rng(*keys)
         return rng.uniform(0, 1, int(rng.poisson(lam))).tolist()

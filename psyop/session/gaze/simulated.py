@@ -78,9 +78,6 @@ class SimulatedTrackerConfig:
     raw_stream: str | None = None
 
 
-_rng = keyed_rng  # a fresh generator, for a caller that keeps it (psyop.session.gaze.keyed)
-
-
 @dataclass(frozen=True)
 class SampleBlock:
     """Many ticks' samples (:meth:`SimulatedTracker.samples_block`): times (s), fixation points (n, 3),
@@ -142,7 +139,7 @@ class SimulatedTracker:
     def __init__(self, seed: int, config: SimulatedTrackerConfig | None = None) -> None:
         self.config = c = config or SimulatedTrackerConfig()
         self.seed = int(seed) & 0xFFFFFFFF
-        rng = _rng(self.seed, 1)
+        rng = keyed_rng(self.seed, 1)
         self._error_dir = _unit2(rng)
         self._error_grow_dir = _unit2(rng)
         self._drift_dir = _unit2(rng)
@@ -152,8 +149,8 @@ class SimulatedTracker:
         self._noise_cache: tuple[int, np.ndarray] | None = None
         self._offset_cache: tuple[tuple[int, int], np.ndarray] | None = None  # the current plan's error offset
         self._offset_floats: tuple[tuple[int, int], tuple[float, float]] | None = None  # the same, as floats
-        # sample_at's noise: the window, its generator and the rows drawn so far (_noise_row)
-        self._noise_rows: tuple[int, np.random.Generator, np.ndarray] | None = None
+        # sample_at's noise: the window and the rows drawn so far from its stream in _noise_generator (_noise_row)
+        self._noise_rows: tuple[int, np.ndarray] | None = None
         # generators re-seeded in place (psyop.session.gaze.keyed): the noise rows' (drawn on as a window is read)
         # and a scratch one for the streams drawn at once (plan offsets, noise tables, free-viewing fixations)
         self._noise_generator, self._scratch = KeyedGenerator(), KeyedGenerator()
@@ -320,14 +317,15 @@ class SimulatedTracker:
         asked: its rows come from the window's generator in order (a normal draw holds no state between
         calls), so a prefix drawn now and the rows drawn on later equal the table :meth:`_noise` draws at once."""
         window, index = divmod(tick, 256)
-        rows = self._noise_rows
-        if rows is None or rows[0] != window:
-            rows = (window, self._noise_generator.at(self.seed, 6, window), np.empty((0, 3)))
-        if index >= len(rows[2]):
-            more = rows[1].normal(0.0, self.config.precision_deg, (index + 1 - len(rows[2]), 3))
-            rows = (window, rows[1], np.concatenate([rows[2], more]) if len(rows[2]) else more)
-        self._noise_rows = rows
-        n0, n1, n2 = rows[2][index].tolist()
+        if self._noise_rows is None or self._noise_rows[0] != window:
+            self._noise_generator.at(self.seed, 6, window)  # the window's stream, from its start
+            self._noise_rows = (window, np.empty((0, 3)))
+        drawn = self._noise_rows[1]
+        if index >= len(drawn):
+            more = self._noise_generator.generator.normal(0.0, self.config.precision_deg, (index + 1 - len(drawn), 3))
+            drawn = np.concatenate([drawn, more]) if len(drawn) else more
+            self._noise_rows = (window, drawn)
+        n0, n1, n2 = drawn[index].tolist()
         return n0, n1, n2
 
     def _noise(self, tick: int) -> np.ndarray:
@@ -368,7 +366,7 @@ class SimulatedTracker:
         key = (int(round(plan.start_s * 1e6)), plan.seed, id(plan.target))
         cached = self._catch_up_cache
         if cached is None or cached[0] != key:
-            rng = _rng(self.seed, 9, key[0] & 0xFFFFFFFF, plan.seed)
+            rng = keyed_rng(self.seed, 9, key[0] & 0xFFFFFFFF, plan.seed)  # kept by the stream: a fresh one
             # catch_up_schedule found as far as asked (the same saccades; psyop.session.gaze.pursuit)
             self._catch_up_cache = cached = (key, CatchUpStream(self._positions(plan), self._pursuit_params(), rng))
         return cached[1].through(until_rel_s)
