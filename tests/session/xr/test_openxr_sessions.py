@@ -104,7 +104,15 @@ def test_a_start_validation_waits_for_focus_and_the_session_completes(tmp_path):
     meta = json.loads((_session_dir(tmp_path) / "session.json").read_text())
     assert meta["status"] == "complete" and not meta.get("display_interruptions")
     points = pd.read_parquet(_session_dir(tmp_path) / "validation.parquet").query("point >= 0")
-    assert len(points) == 2 and (points["n_samples"] > 0).all()
+    assert len(points) == 2
+    # the validation asked for gaze (every frame it began asks once, so at least one sample) and measured each
+    # point from the samples of its dwell window; how many frames fall in a 0.2 s window depends on the machine's
+    # speed (point 0 got none under two busy loops with CI beside it), so only the accounting is asserted
+    gaze = pd.read_parquet(_session_dir(tmp_path) / "gaze.parquet").query("trial == -1")
+    assert len(gaze) >= 1
+    t = gaze["gaze_sample_t_s"].to_numpy()
+    for point in points.itertuples():
+        assert point.n_samples == int(((t >= point.start_s) & (t < point.end_s)).sum()), point
 
 
 def _inject_and_probe(tmp_path: Path, state: RemoteState, n_frames: int = 40, press_after_s: float | None = None
