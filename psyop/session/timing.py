@@ -24,6 +24,7 @@ offset and duration are null there too, and ``P_frames`` counts the frames drawn
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -71,6 +72,12 @@ def timing_fields(phases: Sequence[PhaseSpec]) -> list[pa.Field]:
     return fields + [pa.field(TIMING_OK, pa.bool_())]
 
 
+@functools.lru_cache(maxsize=256)
+def _phase_keys(label: str) -> tuple[str, ...]:
+    """The five per-phase column names of ``label``, in :data:`PHASE_COLUMNS` order."""
+    return tuple(f"{label}_{suffix}" for suffix, _ in PHASE_COLUMNS)
+
+
 @dataclass
 class TrialTiming:
     """One trial's shown frames: the timed phase (index into the plan's phases; -1: the response phase)
@@ -90,26 +97,41 @@ class TrialTiming:
     def columns(self, phases: Sequence[PhaseSpec], rule: TimingSection | None, measured: bool = True) -> JsonObject:
         """The trial's measured-timing columns (module docstring); ``measured``: every frame was drawn
         (False: the sampled regime, no onset, offset or duration)."""
+        first, last, count, dropped = self._by_phase()
         out: JsonObject = {}
         stimulus_dropped = 0
         for i, (phase, label) in enumerate(zip(phases, phase_labels(phases))):
             if label is None:
                 continue
-            # plain lists (a trial has a few frames; np.flatnonzero per phase was most of this call)
-            rows = [r for r, p in enumerate(self.phase_index) if p == i]
-            dropped = int(sum(self.missed[r] for r in rows))
-            if rows and measured:
-                last = rows[-1]
-                onset, offset = self.display_time_s[rows[0]], self.display_time_s[last]
-                until = (self.display_time_s[last + 1] if last + 1 < len(self.display_time_s)
-                         else offset + self.period_s[last])  # the next frame shown replaces the phase's last
-                out.update({f"{label}_onset_s": onset, f"{label}_offset_s": offset, f"{label}_duration_s": until - onset})
+            onset_key, offset_key, duration_key, frames_key, dropped_key = _phase_keys(label)
+            n, missed = count.get(i, 0), dropped.get(i, 0)
+            if n and measured:
+                end = last[i]
+                onset, offset = self.display_time_s[first[i]], self.display_time_s[end]
+                until = (self.display_time_s[end + 1] if end + 1 < len(self.display_time_s)
+                         else offset + self.period_s[end])  # the next frame shown replaces the phase's last
+                out[onset_key], out[offset_key], out[duration_key] = onset, offset, until - onset
             else:
-                out.update({f"{label}_onset_s": None, f"{label}_offset_s": None, f"{label}_duration_s": None})
-            out.update({f"{label}_frames": len(rows), f"{label}_dropped_frames": dropped})
-            stimulus_dropped += dropped if phase.show == "stimulus" else 0
+                out[onset_key] = out[offset_key] = out[duration_key] = None
+            out[frames_key], out[dropped_key] = n, missed
+            stimulus_dropped += missed if phase.show == "stimulus" else 0
         out[TIMING_OK] = None if rule is None else not rule.violated(stimulus_dropped)
         return out
+
+    def _by_phase(self) -> tuple[dict[int, int], dict[int, int], dict[int, int], dict[int, int]]:
+        """Per phase index, in one pass over the frames: its first and last frame, frame count and skipped
+        periods (a trial has a few frames; one list scan per phase was most of :meth:`columns`)."""
+        first: dict[int, int] = {}
+        last: dict[int, int] = {}
+        count: dict[int, int] = {}
+        dropped: dict[int, int] = {}
+        for r, (p, missed) in enumerate(zip(self.phase_index, self.missed)):
+            if p not in first:
+                first[p] = r
+            last[p] = r
+            count[p] = count.get(p, 0) + 1
+            dropped[p] = dropped.get(p, 0) + int(missed)
+        return first, last, count, dropped
 
     def stimulus_dropped(self, phases: Sequence[PhaseSpec]) -> int:
         """Display periods skipped over the trial's stimulus phases (what ``timing:`` rules on)."""

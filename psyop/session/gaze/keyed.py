@@ -30,6 +30,19 @@ _M32 = 0xFFFFFFFF
 _M64 = (1 << 64) - 1
 _M128 = (1 << 128) - 1
 _INIT_B, _MULT_B = 0x8B51F9DD, 0x58F38DED  # SeedSequence.generate_state's hash constants
+
+
+def _hash_pairs(init: int, mult: int, n: int) -> list[tuple[int, int]]:
+    """The (xor, multiply) constants of ``n`` successive ``generate_state`` hashes (they depend on the position only)."""
+    pairs, h = [], init
+    for _ in range(n):
+        pairs.append((h, (h * mult) & _M32))
+        h = pairs[-1][1]
+    return pairs
+
+
+(_A0, _B0), (_A1, _B1), (_A2, _B2), (_A3, _B3), (_A4, _B4), (_A5, _B5), (_A6, _B6), (_A7, _B7) = \
+    _hash_pairs(_INIT_B, _MULT_B, 8)
 _PCG_MULT = (2549297995355413924 << 64) | 4865540595714422341  # PCG_DEFAULT_MULTIPLIER_128
 _DOUBLE = 1.0 / 9007199254740992.0  # 2**-53: next_double's scale
 
@@ -48,14 +61,14 @@ def keyed_state(*keys: int) -> tuple[int, int]:
     True
     """
     p0, p1, p2, p3 = np.random.SeedSequence(_words(keys)).pool.tolist()
-    h, out = _INIT_B, []
-    for v in (p0, p1, p2, p3, p0, p1, p2, p3):  # generate_state(4, uint64): 8 words from the cycled pool
-        v ^= h
-        h = (h * _MULT_B) & _M32
-        v = (v * h) & _M32
-        out.append(v ^ (v >> 16))
-    initstate = (out[0] | out[1] << 32) << 64 | (out[2] | out[3] << 32)  # little-endian uint64 pairs
-    initseq = (out[4] | out[5] << 32) << 64 | (out[6] | out[7] << 32)
+    # generate_state(4, uint64): word i hashes pool[i % 4] with the i-th pair of hash constants (unrolled)
+    v0, v1 = ((p0 ^ _A0) * _B0) & _M32, ((p1 ^ _A1) * _B1) & _M32
+    v2, v3 = ((p2 ^ _A2) * _B2) & _M32, ((p3 ^ _A3) * _B3) & _M32
+    v4, v5 = ((p0 ^ _A4) * _B4) & _M32, ((p1 ^ _A5) * _B5) & _M32
+    v6, v7 = ((p2 ^ _A6) * _B6) & _M32, ((p3 ^ _A7) * _B7) & _M32
+    # little-endian uint64 pairs of the words (each word's final xorshift applied here)
+    initstate = ((v0 ^ (v0 >> 16)) | (v1 ^ (v1 >> 16)) << 32) << 64 | ((v2 ^ (v2 >> 16)) | (v3 ^ (v3 >> 16)) << 32)
+    initseq = ((v4 ^ (v4 >> 16)) | (v5 ^ (v5 >> 16)) << 32) << 64 | ((v6 ^ (v6 >> 16)) | (v7 ^ (v7 >> 16)) << 32)
     inc = ((initseq << 1) | 1) & _M128
     return (((inc + initstate) & _M128) * _PCG_MULT + inc) & _M128, inc
 
