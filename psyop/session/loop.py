@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from psyop.session.rows import JsonMapping, JsonObject, TrialRecord, TrialRow
+from psyop.session.rows import JsonMapping, JsonObject, TrialRecord, TrialRow, frame_records
 from psyop.adaptive.session import AdaptiveLevels
 from psyop.session.clock import Clock
 from psyop.session.events import EventKind, EventSink, SessionEvent
@@ -192,7 +192,7 @@ class TrialLoop:
     # session -------------------------------------------------------------------------
     def run(self, schedule: pd.DataFrame, completed: set[int]) -> SessionOutcome:
         # a trial the timing rule re-runs goes back in the queue, at the end of its block
-        queue = [r for r in schedule.to_dict("records") if int(r["trial"]) not in completed]
+        queue = [r for r in frame_records(schedule) if int(r["trial"]) not in completed]
         n_total = len(schedule)
         n_done = len(completed)
         recorded = set(completed)

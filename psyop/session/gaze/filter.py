@@ -39,6 +39,7 @@ class GazeConditioner:
         self._last: ConditionedGaze | None = None
         self._offset_az_deg = 0.0
         self._offset_el_deg = 0.0
+        self._target: tuple[bytes, tuple[float, float]] | None = None  # the last target and its angles
 
     def recalibrate(self, measured: GazeSample | None, target_direction: np.ndarray) -> float:
         """Set the drift correction from one sample taken while fixating ``target_direction``.
@@ -48,9 +49,16 @@ class GazeConditioner:
         if measured is None or not measured.valid or not is_usable(measured.fixation_m, measured.confidence, self.confidence_threshold):
             return math.nan
         m_az, m_el = direction_to_angles_deg(measured.direction())
-        t_az, t_el = direction_to_angles_deg(target_direction)
+        t_az, t_el = self._target_angles(target_direction)
         self._offset_az_deg, self._offset_el_deg = t_az - m_az, t_el - m_el
         return math.hypot(self._offset_az_deg, self._offset_el_deg)
+
+    def _target_angles(self, target_direction: np.ndarray) -> tuple[float, float]:
+        """``direction_to_angles_deg(target_direction)``, kept for the last target (every trial's cross is the same)."""
+        key = np.asarray(target_direction, dtype=np.float64).tobytes()  # bit for bit (a -0.0 is another target)
+        if self._target is None or self._target[0] != key:
+            self._target = (key, direction_to_angles_deg(target_direction))
+        return self._target[1]
 
     def correct(self, fixation_m: tuple[float, float, float]) -> tuple[float, float, float]:
         f = np.asarray(fixation_m, dtype=np.float64)
