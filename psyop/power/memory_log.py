@@ -78,13 +78,21 @@ class MemoryLog:
         by_column = list(zip(*self._rows)) if self._rows else [() for _ in self._names]
         columns = {name: list(values) for name, values in zip(self._names, by_column)}
         trials = pa.Table.from_pydict(columns, schema=self.trial_schema).to_pandas()
-        trials = trials.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
-        self.trials = trials.reset_index(drop=True)
+        if not _ascending(columns["trial"]):  # a re-run trial: its first record, by trial (else already so)
+            trials = trials.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
+            trials = trials.reset_index(drop=True)
+        self.trials = trials
         if self.keeps_samples:  # the stream in arrival order, as the durable log's salvage concatenates it
             self.gaze = (pa.concat_tables(self._gaze, promote_options="permissive").to_pandas() if self._gaze
                          else GAZE_SCHEMA.empty_table().to_pandas())
         self.metadata["status"] = status
         return self.trials, pd.DataFrame()
+
+
+def _ascending(values: Sequence[object]) -> bool:
+    """Whether ``values`` (trial numbers) strictly ascend: then dropping repeats and sorting changes nothing
+    (the frame keeps to_pandas' RangeIndex, as reset_index would give it)."""
+    return all(a < b for a, b in zip(values, values[1:]))  # type: ignore[operator]  # trial numbers: ints
 
 
 def analysis_trials(logs: Sequence[MemoryLog], quality: QualitySection | None = None) -> pd.DataFrame:

@@ -96,3 +96,25 @@ def test_quality_rules_exclude_the_same_trials_on_both_paths(tmp_path: Path) -> 
     results = [ReplicationResult(2, 0, tuple(study_tests(protocol, t)), len(t)) for t in (memory, durable)]
     assert repr(results[0]) == repr(results[1])
     assert power_table([results[0]]).to_csv(index=False) == power_table([results[1]]).to_csv(index=False)
+
+
+@pytest.mark.parametrize("trials", [[0, 1, 2, 5], [2, 0, 1], [0, 1, 1, 3], [3, 1, 3, 0], []],
+                         ids=["ascending", "out-of-order", "repeated", "both", "empty"])
+def test_finalise_keeps_each_trials_first_record_in_trial_order(trials):
+    """A timing re-run records a trial after later ones: finalise gives what drop_duplicates (first) and a
+    stable sort by trial give, with a RangeIndex, whether the records came in order (nothing to do) or not."""
+    import pyarrow as pa
+
+    from psyop.power.memory_log import MemoryLog
+    from psyop.session.log.layout import SessionPaths
+
+    schema = pa.schema([("trial", pa.int64()), ("response", pa.string()), ("level_D", pa.float64())])
+    log = MemoryLog(SessionPaths(Path("nowhere"), "study", "S01", 1), schema)
+    for k, trial in enumerate(trials):
+        log.append_trial({"trial": trial, "response": f"r{k}", "level_D": 0.25 * k}, None)
+    got, _ = log.finalise(status="complete")
+    table = pa.Table.from_pydict({"trial": trials, "response": [f"r{k}" for k in range(len(trials))],
+                                  "level_D": [0.25 * k for k in range(len(trials))]}, schema=schema).to_pandas()
+    want = table.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable").reset_index(drop=True)
+    pd.testing.assert_frame_equal(got, want, check_index_type=True)
+    assert isinstance(got.index, pd.RangeIndex)

@@ -51,3 +51,10 @@ def test_keyed_poisson_uniforms_are_numpys_draws():
             assert keyed_poisson_uniforms(lam, *keys) == expected, (keys, lam)
     counts = [len(keyed_poisson_uniforms(3.0, 9, w)) for w in range(400)]
     assert max(counts) >= 6 and min(counts) == 0  # the loop's both ends are exercised
+
+
+def test_keyed_uniform_is_the_streams_first_uniform():
+    from psyop.session.gaze.keyed import keyed_uniform
+
+    for keys in _cases(4, 3000):
+        assert keyed_uniform(*keys) == np.random.default_rng([k & 0xFFFFFFFF for k in keys]).uniform(), keys

@@ -108,6 +108,18 @@ def _next_double(state: int, inc: int) -> tuple[int, float]:
     return state, (word >> 11) * _DOUBLE
 
 
+def keyed_uniform(*keys: int) -> float:
+    """``keyed_rng(*keys).uniform()``: the stream's first double (``Generator.uniform(0, 1)`` is
+    ``0 + 1 * next_double``), stepped in Python integers.
+
+    Examples
+    --------
+    >>> keyed_uniform(4, 5) == np.random.default_rng([4, 5]).uniform()
+    True
+    """
+    return _next_double(*keyed_state(*keys))[1]
+
+
 def keyed_poisson_uniforms(lam: float, *keys: int) -> list[float]:
     """``rng.uniform(0, 1, rng.poisson(lam))`` of ``rng = keyed_rng(*keys)``, as Python floats: the same
     count and numbers. numpy's Poisson for ``0 < lam < 10`` multiplies doubles until their product falls to

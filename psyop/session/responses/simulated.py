@@ -17,7 +17,7 @@ import numpy as np
 
 from psyop.session.rows import JsonMapping, TrialRow
 from psyop.errors import UserError
-from psyop.session.gaze.keyed import KeyedGenerator, keyed_rng
+from psyop.session.gaze.keyed import KeyedGenerator, keyed_rng, keyed_uniform
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.reach import HAND_HEIGHT_M
 from psyop.session.responses.base import Response, ResponseKind, score
@@ -53,7 +53,11 @@ class SimulatedObserver(ABC):
     def trial_rng(self, row: TrialRow) -> np.random.Generator:
         """The trial's stream (``keyed_rng`` of the session, participant and trial seed), in a generator re-seeded
         in place: draw from it at once; the next trial's call starts its own stream in the same object."""
-        return self._trial_generator.at(self.seed, self._participant_key, int(row["trial_seed"]), 11)
+        return self._trial_generator.at(*self.trial_keys(row))
+
+    def trial_keys(self, row: TrialRow) -> tuple[int, int, int, int]:
+        """The keys of the trial's stream (:meth:`trial_rng`): session seed, participant, trial seed, 11."""
+        return self.seed, self._participant_key, int(row["trial_seed"]), 11
 
     @abstractmethod
     def collect(self, row: TrialRow, now_s: float) -> Response:
@@ -99,8 +103,8 @@ class Psychometric2AFC(SimulatedObserver):
         return 0.5 + (0.5 - self.lapse) * _phi((x - self.threshold_for(row)) / self.width_D)
 
     def collect(self, row: TrialRow, now_s: float) -> Response:
-        rng = self.trial_rng(row)
-        correct = bool(rng.uniform() < self.p_correct(row))
+        # the trial stream's one uniform (trial_rng(row).uniform(), without re-seeding a Generator)
+        correct = bool(keyed_uniform(*self.trial_keys(row)) < self.p_correct(row))
         right = int(row["correct_interval"])
         answer = right if correct else 3 - right
         return score(self.kind, row, str(answer))
