@@ -47,7 +47,9 @@ class MemoryLog:
         self.metadata: JsonObject = {}
         self._rows: list[tuple[object, ...]] = []  # each trial's values in schema order (None: not in the row)
         self._gaze: list[pa.Table] = []
-        self.trials: pd.DataFrame | None = None
+        #: after finalise: the trial table as arrow (None: it had repeated or unordered trials, converted at once)
+        self.arrow_trials: pa.Table | None = None
+        self._trials: pd.DataFrame | None = None
         self.gaze: pd.DataFrame | None = None
 
     def open(self, metadata: JsonMapping) -> set[int]:
@@ -73,20 +75,33 @@ class MemoryLog:
     def close(self) -> None:
         return None
 
-    def finalise(self, *, status: str, summary: JsonMapping | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
-        """The trial table as the durable log's salvage gives it (one row per trial, by trial)."""
+    def finalise(self, *, status: str, summary: JsonMapping | None = None) -> None:
+        """The trial table as the durable log's salvage gives it (one row per trial, by trial): kept as arrow
+        (:attr:`arrow_trials`) when the records came in ascending trial order, converted to pandas when
+        :attr:`trials` is first read (:func:`analysis_trials` converts every session's at once)."""
         by_column = list(zip(*self._rows)) if self._rows else [() for _ in self._names]
         columns = {name: list(values) for name, values in zip(self._names, by_column)}
-        trials = pa.Table.from_pydict(columns, schema=self.trial_schema).to_pandas()
-        if not _ascending(columns["trial"]):  # a re-run trial: its first record, by trial (else already so)
-            trials = trials.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
-            trials = trials.reset_index(drop=True)
-        self.trials = trials
+        table = pa.Table.from_pydict(columns, schema=self.trial_schema)
+        if _ascending(columns["trial"]):  # dropping repeats and sorting would change nothing
+            self.arrow_trials = table
+        else:  # a re-run trial: its first record, by trial (converted first: its dtypes see every record)
+            trials = table.to_pandas().drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable")
+            self._trials = trials.reset_index(drop=True)
         if self.keeps_samples:  # the stream in arrival order, as the durable log's salvage concatenates it
             self.gaze = (pa.concat_tables(self._gaze, promote_options="permissive").to_pandas() if self._gaze
                          else GAZE_SCHEMA.empty_table().to_pandas())
         self.metadata["status"] = status
-        return self.trials, pd.DataFrame()
+
+    @property
+    def finalised(self) -> bool:
+        return self.arrow_trials is not None or self._trials is not None
+
+    @property
+    def trials(self) -> pd.DataFrame | None:
+        """The trial table (None before finalise), as load_dataset reads one session's trials.parquet."""
+        if self._trials is None and self.arrow_trials is not None:
+            self._trials = self.arrow_trials.to_pandas()
+        return self._trials
 
 
 def _ascending(values: Sequence[object]) -> bool:
@@ -102,12 +117,10 @@ def analysis_trials(logs: Sequence[MemoryLog], quality: QualitySection | None = 
     left out, :func:`included`). The low-gaze count and warning of load_dataset and its attrs are
     not made: the power analysis reads none of them."""
     ordered = sorted(logs, key=lambda log: log.paths.trials_parquet)
-    frames = []
     for log in ordered:
-        if log.trials is None:
+        if not log.finalised:
             raise RuntimeError(f"{log.paths.directory}: the session was not finalised")
-        frames.append(log.trials)
-    trials = pd.concat(frames, ignore_index=True)
+    trials = concatenated_trials(ordered)
     if "participant" in trials:
         trials["participant"] = trials["participant"].astype(str)
     if "session" in trials:
@@ -116,6 +129,19 @@ def analysis_trials(logs: Sequence[MemoryLog], quality: QualitySection | None = 
         trials = trials[~trials["practice"].fillna(False).astype(bool)].reset_index(drop=True)
     trials = dc.drop_timeouts(trials)
     return trials if quality is None else included(trials, ordered, quality)
+
+
+def concatenated_trials(logs: Sequence[MemoryLog]) -> pd.DataFrame:
+    """``pd.concat([log.trials for log in logs], ignore_index=True)``, converted from one arrow table when
+    every log kept its arrow table and they share a schema: the same frame (a column's dtype is the one
+    pandas' concat gives the sessions' dtypes: an integer column with a null anywhere is float64, a bool
+    column with one is object, with the same values; tests/power/test_memory_log.py), for one to_pandas
+    instead of one per session (a twentieth of a detection replication)."""
+    tables = [log.arrow_trials for log in logs]
+    arrow = [t for t in tables if t is not None]
+    if logs and len(arrow) == len(tables) and all(t.schema.equals(arrow[0].schema) for t in arrow):
+        return pa.concat_tables(arrow).to_pandas()
+    return pd.concat([log.trials for log in logs], ignore_index=True)
 
 
 def included(trials: pd.DataFrame, logs: Sequence[MemoryLog], quality: QualitySection) -> pd.DataFrame:

@@ -112,9 +112,46 @@ def test_finalise_keeps_each_trials_first_record_in_trial_order(trials):
     log = MemoryLog(SessionPaths(Path("nowhere"), "study", "S01", 1), schema)
     for k, trial in enumerate(trials):
         log.append_trial({"trial": trial, "response": f"r{k}", "level_D": 0.25 * k}, None)
-    got, _ = log.finalise(status="complete")
+    log.finalise(status="complete")
+    got = log.trials
     table = pa.Table.from_pydict({"trial": trials, "response": [f"r{k}" for k in range(len(trials))],
                                   "level_D": [0.25 * k for k in range(len(trials))]}, schema=schema).to_pandas()
     want = table.drop_duplicates(subset="trial", keep="first").sort_values("trial", kind="stable").reset_index(drop=True)
     pd.testing.assert_frame_equal(got, want, check_index_type=True)
     assert isinstance(got.index, pd.RangeIndex)
+
+
+def _log(rows: list[dict], schema) -> "MemoryLog":
+    from psyop.power.memory_log import MemoryLog
+    from psyop.session.log.layout import SessionPaths
+
+    log = MemoryLog(SessionPaths(Path("nowhere"), "study", f"S{len(rows):02d}", 1), schema)
+    for row in rows:
+        log.append_trial(row, None)
+    log.finalise(status="complete")
+    return log
+
+
+def test_sessions_converted_at_once_equal_each_converted_then_concatenated():
+    """concatenated_trials converts the sessions' arrow tables at once: the frame pandas' concat of each
+    session's own conversion gives, where the sessions differ in which columns hold nulls (an int column
+    float64 in one and int64 in the other, a bool column object in one), in strings, lists and all-null
+    columns; and the per-session path where a session had a re-run trial."""
+    import pyarrow as pa
+
+    from psyop.power.memory_log import concatenated_trials
+
+    schema = pa.schema([("trial", pa.int64()), ("n", pa.int64()), ("ok", pa.bool_()), ("s", pa.string()),
+                        ("x", pa.float64()), ("hand", pa.list_(pa.float64())), ("none", pa.float64())])
+    a = [{"trial": 0, "n": 1, "ok": True, "s": "a", "x": 0.5, "hand": [1.0, 2.0]},
+         {"trial": 1, "n": None, "ok": None, "s": None, "x": None, "hand": None}]
+    b = [{"trial": 0, "n": 3, "ok": False, "s": "b", "x": 1.5, "hand": []},
+         {"trial": 2, "n": 4, "ok": True, "s": "c", "x": float("nan"), "hand": [3.0]}]
+    rerun = [{"trial": 1, "n": 5, "ok": True, "s": "d", "x": 2.0}, {"trial": 0, "n": 6, "ok": False, "s": "e", "x": 3.0}]
+    for sessions in ([a, b], [b, a], [b, b], [a], [a, rerun, b]):
+        logs = [_log(rows, schema) for rows in sessions]
+        want = pd.concat([log.arrow_trials.to_pandas() if log.arrow_trials is not None else log.trials
+                          for log in logs], ignore_index=True)
+        got = concatenated_trials(logs)
+        pd.testing.assert_frame_equal(got, want, check_index_type=True)
+        assert [str(t) for t in got.dtypes] == [str(t) for t in want.dtypes]

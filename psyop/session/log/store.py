@@ -50,7 +50,7 @@ class SessionLog(Protocol):
     def update_metadata(self, **fields: Any) -> None: ...  # Any: session.json fields, JSON values
     def update_run(self, **fields: Any) -> None: ...  # Any: this run's fields in session.json's runs, JSON values
     def close(self) -> None: ...
-    def finalise(self, *, status: str, summary: JsonMapping | None = None) -> tuple[pd.DataFrame, pd.DataFrame]: ...
+    def finalise(self, *, status: str, summary: JsonMapping | None = None) -> object: ...  # the runner reads nothing back
 
 
 class SessionStore:
