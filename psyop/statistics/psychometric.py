@@ -61,6 +61,7 @@ rows.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -69,7 +70,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import pandas as pd
 import psignifit
-from psignifit._parameter import masked_parameter_bounds, parameter_bounds, parameter_grid
+from psignifit._parameter import masked_parameter_bounds, parameter_bounds
 from psignifit._posterior import integral_weights
 from psignifit._priors import setup_priors
 from scipy import ndimage, optimize, special
@@ -391,6 +392,25 @@ def _t75_mesh(grid: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], np.nd
     return mesh, _t75_grid(grid), names
 
 
+def _isclose(a: float, b: float) -> bool:
+    """``np.isclose(a, b)`` (rtol 1e-5, atol 1e-8, NaN never close) for two scalars: NumPy's formula
+    ``|a - b| <= atol + rtol |b|`` and b finite, or a == b, without its array handling."""
+    return bool(a == b or (abs(a - b) <= 1e-8 + 1e-5 * abs(b) and math.isfinite(b)))
+
+
+def _allclose(a: np.ndarray, b: np.ndarray) -> bool:
+    """``np.allclose(a, b)`` (rtol 1e-5, atol 1e-8) written out: the same formula as :func:`_isclose`."""
+    with np.errstate(invalid="ignore"):
+        return bool(np.all((np.abs(a - b) <= 1e-8 + 1e-5 * np.abs(b)) & np.isfinite(b) | (a == b)))
+
+
+def _parameter_grid(bounds: dict[str, tuple[float, float]], steps: dict[str, int]) -> dict[str, np.ndarray]:
+    """psignifit's ``parameter_grid`` (``linspace`` over each bound, the bound's start alone where
+    the bound is a point) with :func:`_isclose` for its ``np.isclose``."""
+    return {name: np.array([bound[0]]) if _isclose(bound[0], bound[1]) else np.linspace(*bound, num=steps[name])
+            for name, bound in bounds.items()}
+
+
 def _marginal(post: np.ndarray, axis: int) -> np.ndarray:
     m = post.sum(axis=tuple(i for i in range(post.ndim) if i != axis))
     return m / m.sum()
@@ -399,8 +419,8 @@ def _marginal(post: np.ndarray, axis: int) -> np.ndarray:
 def _cut_edges(values: np.ndarray, marginal: np.ndarray, bound: tuple[float, float]) -> tuple[bool, bool]:
     """Whether a marginal holds more than :data:`CUT_MASS` at its first / last grid point
     while that point is not the parameter's bound: the grid cuts the posterior there."""
-    lo_cut = marginal[0] > CUT_MASS and values[0] > bound[0] and not np.isclose(values[0], bound[0])
-    hi_cut = marginal[-1] > CUT_MASS and values[-1] < bound[1] and not np.isclose(values[-1], bound[1])
+    lo_cut = marginal[0] > CUT_MASS and values[0] > bound[0] and not _isclose(values[0], bound[0])
+    hi_cut = marginal[-1] > CUT_MASS and values[-1] < bound[1] and not _isclose(values[-1], bound[1])
     return bool(lo_cut), bool(hi_cut)
 
 
@@ -452,7 +472,7 @@ def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict
             hi, done = values[-1] + move, False
         lo, hi = max(lo, bounds[name][0]), min(hi, bounds[name][1])
         new[name] = np.linspace(lo, hi, len(values)) if hi > lo else values
-    unchanged = all(np.allclose(np.atleast_1d(new[n]), np.atleast_1d(grid[n])) for n in names)
+    unchanged = all(_allclose(np.atleast_1d(new[n]), np.atleast_1d(grid[n])) for n in names)
     return new, done or unchanged
 
 
@@ -609,10 +629,10 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
         confP=(options.ci_level,),
     )
     bounds, priors = _bounds_and_priors(conf, data[:, 0], fixed)
-    sparse = parameter_grid(bounds, conf.steps_moving_bounds)
+    sparse = _parameter_grid(bounds, conf.steps_moving_bounds)
     post_sparse, _ = posterior_2afc(data, priors, sparse)
     tight = masked_parameter_bounds(sparse, post_sparse >= conf.max_bound_value)
-    dense_grid = parameter_grid(tight, conf.grid_steps)
+    dense_grid = _parameter_grid(tight, conf.grid_steps)
     dense_lp = log_posterior_2afc(data, priors, dense_grid)
     dense_post, grid_max = posterior_2afc(data, priors, dense_grid, dense_lp)
     dense_t75, names = _t75_grid(dense_grid), sorted(dense_grid)
@@ -820,7 +840,7 @@ def _edge_mass(grid, post, bounds, names) -> bool:
     for name in ("threshold", "width"):
         axis = names.index(name)
         marginal = _marginal(post, axis)
-        at_bound = np.isclose(grid[name][[0, -1]], bounds[name])
+        at_bound = np.array([_isclose(grid[name][0], bounds[name][0]), _isclose(grid[name][-1], bounds[name][1])])
         if (at_bound & (marginal[[0, -1]] > EDGE_MASS)).any():
             return True
     return False

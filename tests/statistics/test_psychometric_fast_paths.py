@@ -3,7 +3,8 @@
 The former implementations are kept here verbatim (``_old_*``): the 75 %-correct level and the
 predicted proportion correct through psignifit's own 'norm' sigmoid (``scipy.stats.norm``), the
 log posterior and posterior grid with NumPy temporaries, the MAP zoom through the normalised
-posterior, and the local maxima by ``maximum_filter`` over every axis. Each new path must give
+posterior, the local maxima by ``maximum_filter`` over every axis, and ``np.isclose`` / ``np.allclose`` /
+psignifit's ``parameter_grid`` for the grid checks. Each new path must give
 the same bits (``tobytes``) on many random grids, levels and parameters, edge values included
 (lapse 0 and 0.5, tiny and zero widths, extreme levels), and whole fits with the old functions
 patched back in must equal today's fits field for field.
@@ -19,6 +20,8 @@ import psignifit
 import pytest
 from scipy import ndimage, special
 from scipy.stats import norm
+
+from psignifit._parameter import parameter_grid
 
 from psyop.statistics import psychometric as psy
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
@@ -258,12 +261,59 @@ def test_local_maxima_is_maximum_filter():
         assert _same_bits(psy._local_maxima(values), _old_local_maxima(values)), shape
 
 
+# ---- closeness checks and psignifit's parameter grid --------------------------------------------------------------
+
+def _close_pairs(rng):
+    """Scalar pairs around numpy's tolerance edges, with zeros, infinities and NaN."""
+    edge = [0.0, -0.0, 1e-8, -1e-8, 5e-324, 1.0, -1.0, 1e300, np.inf, -np.inf, np.nan, 0.5, 0.25]
+    pairs = [(a, b) for a in edge for b in edge]
+    for _ in range(3000):
+        b = float(rng.choice([rng.uniform(-2, 2), 10.0 ** rng.uniform(-12, 12), 0.0]))
+        tol = 1e-8 + 1e-5 * abs(b)
+        a = b + float(rng.choice([-1, 1])) * tol * float(rng.choice([rng.uniform(0.0, 2.0), 1.0, np.nextafter(1.0, 2.0)]))
+        pairs.append((a, b))
+        pairs.append((np.float64(a), b))
+    pairs += [(1, 1), (0, 1e-9), (3, 3.00001)]
+    return pairs
+
+
+def test_isclose_and_allclose_are_numpys():
+    rng = np.random.default_rng(37)
+    pairs = _close_pairs(rng)
+    with np.errstate(invalid="ignore"):
+        for a, b in pairs:
+            assert psy._isclose(a, b) == bool(np.isclose(a, b)), (a, b)
+    values = np.array([b for _, b in pairs], float)
+    others = np.array([a for a, _ in pairs], float)
+    for _ in range(2000):
+        i = rng.integers(0, len(values), int(rng.integers(1, 6)))
+        a, b = others[i], values[i]
+        assert psy._allclose(a, b) == bool(np.allclose(a, b)), (a, b)
+        assert psy._allclose(b, b) == bool(np.allclose(b, b))
+        assert psy._allclose(a[:1], b) == bool(np.allclose(a[:1], b))
+
+
+def test_parameter_grid_is_psignifits():
+    rng = np.random.default_rng(38)
+    for _ in range(500):
+        bounds = {}
+        for name in ("threshold", "width", "lambda", "gamma", "eta"):
+            lo = float(rng.uniform(-1, 1))
+            hi = float(rng.choice([lo, lo + 1e-9, lo + 1e-5 * abs(lo), lo + rng.uniform(0, 2), np.nextafter(lo, 2.0)]))
+            bounds[name] = (lo, hi)
+        steps = {n: int(rng.integers(1, 40)) for n in bounds}
+        ours, theirs = psy._parameter_grid(bounds, steps), parameter_grid(bounds, steps)
+        assert list(ours) == list(theirs)
+        assert all(_same_bits(ours[n], theirs[n]) for n in bounds)
+
+
 # ---- whole fits with the former functions patched back in ---------------------------------------------------------
 
 OLD_FUNCTIONS = {
     "predicted_pc": _old_predicted_pc, "_t75": _old_t75, "log_posterior_2afc": _old_log_posterior_2afc,
     "posterior_2afc": _old_posterior_2afc, "_refine_map": _old_refine_map, "_local_maxima": _old_local_maxima,
     "_t75_mesh": lambda grid: _old_t75_mesh(grid, SIGMOID), "_t75_grid": lambda grid: _old_t75_mesh(grid, SIGMOID)[1],
+    "_isclose": np.isclose, "_allclose": np.allclose, "_parameter_grid": parameter_grid,
 }
 
 
