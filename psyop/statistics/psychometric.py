@@ -61,6 +61,7 @@ rows.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -69,7 +70,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import pandas as pd
 import psignifit
-from psignifit._parameter import masked_parameter_bounds, parameter_bounds, parameter_grid
+from psignifit._parameter import masked_parameter_bounds, parameter_bounds
 from psignifit._posterior import integral_weights
 from psignifit._priors import setup_priors
 from scipy import ndimage, optimize, special
@@ -224,9 +225,18 @@ def threshold_text(status: str, threshold_D: float, bound_D: float) -> str:
 
 
 def predicted_pc(level_D: np.ndarray, location_D: float, width_D: float, lapse: float) -> np.ndarray:
-    """2AFC proportion correct of psignifit's 'norm' sigmoid with guess rate 0.5."""
-    sigmoid = psignifit.sigmoids.sigmoid_by_name("norm", PC=0.5, alpha=0.05)
-    return np.asarray(sigmoid(level_D, location_D, width_D, GUESS_2AFC, lapse), float)
+    """2AFC proportion correct of psignifit's 'norm' sigmoid with guess rate 0.5.
+
+    psignifit's ``Gaussian(PC=0.5, alpha=0.05)(level_D, location_D, width_D, 0.5, lapse)`` with its
+    ``scipy.stats.norm`` calls written out (:func:`_norm_standard_parameters`, ``norm.cdf`` is
+    ``ndtr((x - loc) / scale)`` where scale > 0, NaN elsewhere): the same operations in the same order,
+    so the same numbers, without scipy.stats' per-call argument handling.
+    """
+    scale, loc = _norm_standard_parameters(location_D, width_D)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        value = np.where(scale > 0, special.ndtr((np.asarray(level_D) - loc) / scale), np.nan)
+        value = GUESS_2AFC + (1.0 - lapse - GUESS_2AFC) * value
+    return np.asarray(value, float)
 
 
 def aggregate_blocks(levels_D: np.ndarray, correct: np.ndarray) -> np.ndarray:
@@ -342,16 +352,63 @@ class GridPosterior:
     priors: dict[str, Callable[[np.ndarray], np.ndarray]] = field(default_factory=dict)
 
 
-def _t75_mesh(grid: dict[str, np.ndarray], sigmoid) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
+def _norm_standard_parameters(threshold_D, width_D) -> tuple[np.ndarray, np.ndarray]:
+    """psignifit's ``Gaussian(PC=0.5, alpha=0.05)._standard_parameters`` (sd ``scale`` and mean
+    ``loc`` of the cumulative normal) with ``scipy.stats.norm.ppf`` written out: ``scale = width /
+    (ppf(0.95) - ppf(0.05))``; ``loc = threshold - ppf(0.5, 0, scale)``, where ``ppf(0.5, 0, scale)``
+    is ``ndtri(0.5) * scale + 0`` for scale > 0 and NaN otherwise (scipy's bad-argument value)."""
+    scale = np.asarray(width_D, float) / _NORM_SPAN
+    with np.errstate(invalid="ignore"):
+        loc = threshold_D - np.where(scale > 0, _PPF_HALF * scale + 0, np.nan)
+    return scale, np.asarray(loc)
+
+
+def _t75_grid(grid: dict[str, np.ndarray]) -> np.ndarray:
+    """The 75 %-correct level of every grid point (axes in alphabetical order), ``+inf`` where the
+    curve never reaches it.
+
+    psignifit's ``Gaussian._inverse`` is ``norm.ppf(q, loc, scale)``: ``ndtri(q) * scale + loc`` for
+    0 < q < 1, scale > 0 and loc not NaN; with ``loc = threshold`` exactly there (``ndtri(0.5)`` is 0),
+    the same operations run here, each on the axes it depends on (``q`` on gamma and lambda only),
+    broadcast to the grid. Points psignifit's call left NaN or infinite are ``+inf`` as before.
+    """
     names = sorted(grid)  # psignifit orders posterior axes alphabetically
-    mesh = dict(zip(names, np.meshgrid(*[np.atleast_1d(grid[n]) for n in names], indexing="ij")))
-    gamma = mesh["gamma"]
+    sparse = dict(zip(names, np.meshgrid(*[np.atleast_1d(grid[n]) for n in names], indexing="ij", sparse=True)))
+    gamma, threshold, width = sparse["gamma"], sparse["threshold"], sparse["width"]
     with np.errstate(invalid="ignore", divide="ignore"):
-        scaled = (TARGET_PC - gamma) / (1.0 - mesh["lambda"] - gamma)
-        t75 = sigmoid._inverse(np.clip(scaled, 0.0, 1.0), mesh["threshold"], mesh["width"])
-    reachable = (scaled > 0.0) & (scaled < 1.0)
-    t75 = np.where(reachable & np.isfinite(t75), t75, np.inf)
-    return mesh, t75, names
+        scaled = (TARGET_PC - gamma) / (1.0 - sparse["lambda"] - gamma)
+        scale, loc = _norm_standard_parameters(threshold, width)
+        t75 = special.ndtri(np.clip(scaled, 0.0, 1.0)) * scale + loc
+    valid = (scaled > 0.0) & (scaled < 1.0) & (scale > 0) & (loc == loc) & np.isfinite(t75)
+    out = np.full(tuple(len(np.atleast_1d(grid[n])) for n in names), np.inf)
+    np.copyto(out, t75, where=valid)
+    return out
+
+
+def _t75_mesh(grid: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
+    """The full meshgrid of ``grid`` (axes in alphabetical order), :func:`_t75_grid` and the axis names."""
+    names = sorted(grid)
+    mesh = dict(zip(names, np.meshgrid(*[np.atleast_1d(grid[n]) for n in names], indexing="ij")))
+    return mesh, _t75_grid(grid), names
+
+
+def _isclose(a: float, b: float) -> bool:
+    """``np.isclose(a, b)`` (rtol 1e-5, atol 1e-8, NaN never close) for two scalars: NumPy's formula
+    ``|a - b| <= atol + rtol |b|`` and b finite, or a == b, without its array handling."""
+    return bool(a == b or (abs(a - b) <= 1e-8 + 1e-5 * abs(b) and math.isfinite(b)))
+
+
+def _allclose(a: np.ndarray, b: np.ndarray) -> bool:
+    """``np.allclose(a, b)`` (rtol 1e-5, atol 1e-8) written out: the same formula as :func:`_isclose`."""
+    with np.errstate(invalid="ignore"):
+        return bool(np.all((np.abs(a - b) <= 1e-8 + 1e-5 * np.abs(b)) & np.isfinite(b) | (a == b)))
+
+
+def _parameter_grid(bounds: dict[str, tuple[float, float]], steps: dict[str, int]) -> dict[str, np.ndarray]:
+    """psignifit's ``parameter_grid`` (``linspace`` over each bound, the bound's start alone where
+    the bound is a point) with :func:`_isclose` for its ``np.isclose``."""
+    return {name: np.array([bound[0]]) if _isclose(bound[0], bound[1]) else np.linspace(*bound, num=steps[name])
+            for name, bound in bounds.items()}
 
 
 def _marginal(post: np.ndarray, axis: int) -> np.ndarray:
@@ -362,8 +419,8 @@ def _marginal(post: np.ndarray, axis: int) -> np.ndarray:
 def _cut_edges(values: np.ndarray, marginal: np.ndarray, bound: tuple[float, float]) -> tuple[bool, bool]:
     """Whether a marginal holds more than :data:`CUT_MASS` at its first / last grid point
     while that point is not the parameter's bound: the grid cuts the posterior there."""
-    lo_cut = marginal[0] > CUT_MASS and values[0] > bound[0] and not np.isclose(values[0], bound[0])
-    hi_cut = marginal[-1] > CUT_MASS and values[-1] < bound[1] and not np.isclose(values[-1], bound[1])
+    lo_cut = marginal[0] > CUT_MASS and values[0] > bound[0] and not _isclose(values[0], bound[0])
+    hi_cut = marginal[-1] > CUT_MASS and values[-1] < bound[1] and not _isclose(values[-1], bound[1])
     return bool(lo_cut), bool(hi_cut)
 
 
@@ -415,14 +472,45 @@ def refine_posterior(grid: dict[str, np.ndarray], post: np.ndarray, bounds: dict
             hi, done = values[-1] + move, False
         lo, hi = max(lo, bounds[name][0]), min(hi, bounds[name][1])
         new[name] = np.linspace(lo, hi, len(values)) if hi > lo else values
-    unchanged = all(np.allclose(np.atleast_1d(new[n]), np.atleast_1d(grid[n])) for n in names)
+    unchanged = all(_allclose(np.atleast_1d(new[n]), np.atleast_1d(grid[n])) for n in names)
     return new, done or unchanged
 
 
 _NORM_SPAN = float(norm.ppf(0.95) - norm.ppf(0.05))  # psignifit 'norm' width: 5 %-95 % of the unscaled sigmoid
+_PPF_HALF = float(special.ndtri(0.5))  # 0.0: psignifit's Gaussian loc is threshold - ndtri(PC=0.5) * scale
 WIDTH_PER_SIGMA = 2.0 * float(norm.ppf(0.95))  # width (5 %-95 % of the cumulative normal) over its sigma, 3.2897...
 # _NORM_SPAN is the same quantity written ppf(0.95) - ppf(0.05); it is 1 ulp larger than WIDTH_PER_SIGMA and
 # kept as it is so the fits stay bit-identical.
+
+
+def _binomial_log_likelihood(psi: np.ndarray, k: np.ndarray, n: np.ndarray, overwrite: bool) -> np.ndarray:
+    """``sum over levels of k log(psi) + (n - k) log(1 - psi)``, a term 0 where its count is 0
+    (``psi`` has the levels on axis 0; ``k`` and ``n`` one count per level). The same operations as
+    ``np.where(k > 0, k * np.log(psi), 0.0) + np.where(n - k > 0, (n - k) * np.log(1.0 - psi), 0.0)``
+    summed over axis 0, in place: ``psi`` is overwritten when ``overwrite``."""
+    shape = (-1,) + (1,) * (psi.ndim - 1)
+    log_psi = np.log(psi)
+    log_psi *= k.reshape(shape)
+    log_psi[~(k > 0)] = 0.0
+    log_1m = np.subtract(1.0, psi, out=psi if overwrite else None)
+    np.log(log_1m, out=log_1m)
+    log_1m *= (n - k).reshape(shape)
+    log_1m[~(n - k > 0)] = 0.0
+    log_psi += log_1m
+    return log_psi.sum(axis=0)
+
+
+def _beta_binomial_log_likelihood(psi: np.ndarray, k: np.ndarray, n: np.ndarray, eta_var: np.ndarray,
+                                  binomial: np.ndarray) -> np.ndarray:
+    """psignifit's beta-binomial log likelihood where ``eta_var > 1e-9`` (``binomial`` elsewhere)."""
+    k = k.reshape((-1,) + (1,) * (psi.ndim - 1))
+    n = n.reshape(k.shape)
+    eta_prime = np.where(eta_var > 1e-9, 1.0 / np.where(eta_var > 1e-9, eta_var, 1.0) - 1.0, 1.0)
+    a, b = psi * eta_prime, (1.0 - psi) * eta_prime
+    beta_bin = np.where(k > 0, special.gammaln(k + a) - special.gammaln(a), 0.0) \
+        + np.where(n - k > 0, special.gammaln(n - k + b) - special.gammaln(b), 0.0) \
+        - special.gammaln(n + eta_prime) + special.gammaln(eta_prime)
+    return np.where(eta_var > 1e-9, beta_bin.sum(axis=0), binomial)
 
 
 def log_posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray]) -> np.ndarray:
@@ -431,34 +519,39 @@ def log_posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray]) ->
     Same model, priors and axis order (alphabetical: eta, gamma, lambda, threshold, width);
     psignifit evaluates its sigmoid through scalar ``scipy.stats`` calls whose overhead
     (~9 ms a call) dominated psyop's fits. ``test_log_posterior_matches_psignifit`` checks equality.
+    The arrays over levels x grid are computed in place (same operations, same order).
     """
     names = sorted(grid)
     axes = [np.atleast_1d(np.asarray(grid[n], float)) for n in names]
     mesh = dict(zip(names, np.meshgrid(*axes, indexing="ij", sparse=True)))
     eta_std, gamma, lam, thr, width = (mesh[n] for n in ("eta", "gamma", "lambda", "threshold", "width"))
     x = data[:, 0].reshape((-1,) + (1,) * len(names))
-    k = data[:, 1].reshape(x.shape)
-    n = data[:, 2].reshape(x.shape)
+    k, n = data[:, 1], data[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        psi = gamma + (1.0 - gamma - lam) * special.ndtr((x - thr) * _NORM_SPAN / width)
-        log_psi = np.where(k > 0, k * np.log(psi), 0.0)
-        log_1m = np.where(n - k > 0, (n - k) * np.log(1.0 - psi), 0.0)
+        z = x - thr
+        z *= _NORM_SPAN
+        z = z / width
+        special.ndtr(z, out=z)
+        psi = (1.0 - gamma - lam) * z
+        psi += gamma
         eta_var = eta_std ** 2
-        binomial = (log_psi + log_1m).sum(axis=0)
-        if np.any(eta_var > 1e-9):
-            eta_prime = np.where(eta_var > 1e-9, 1.0 / np.where(eta_var > 1e-9, eta_var, 1.0) - 1.0, 1.0)
-            a, b = psi * eta_prime, (1.0 - psi) * eta_prime
-            beta_bin = np.where(k > 0, special.gammaln(k + a) - special.gammaln(a), 0.0) \
-                + np.where(n - k > 0, special.gammaln(n - k + b) - special.gammaln(b), 0.0) \
-                - special.gammaln(n + eta_prime) + special.gammaln(eta_prime)
-            lp = np.where(eta_var > 1e-9, beta_bin.sum(axis=0), binomial)
-        else:
-            lp = binomial
-        lp = lp + np.log(priors["threshold"](thr)) + np.log(priors["width"](width)) \
-            + np.log(priors["lambda"](lam)) + np.log(priors["gamma"](gamma))
-        if np.any(eta_var > 1e-9) or len(axes[0]) > 1:
+        beta = bool(np.any(eta_var > 1e-9))
+        lp = _binomial_log_likelihood(psi, k, n, overwrite=not beta)
+        if beta:
+            lp = _beta_binomial_log_likelihood(psi, k, n, eta_var, lp)
+        lp += np.log(priors["threshold"](thr))
+        lp += np.log(priors["width"](width))
+        lp += np.log(priors["lambda"](lam))
+        lp += np.log(priors["gamma"](gamma))
+        if beta or len(axes[0]) > 1:
             lp = lp + np.log(priors["eta"](eta_std))
     return np.broadcast_to(lp, tuple(len(v) for v in axes))
+
+
+def _grid_argmax(grid: dict[str, np.ndarray], lp: np.ndarray) -> tuple[tuple[int, ...], dict[str, float]]:
+    """The index of the largest ``lp`` (first in C order) and the grid point there."""
+    imax = tuple(int(i) for i in np.unravel_index(int(np.argmax(lp)), lp.shape))
+    return imax, {n: float(np.atleast_1d(grid[n])[i]) for n, i in zip(sorted(grid), imax)}
 
 
 def posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray], log_posterior: np.ndarray | None = None
@@ -466,11 +559,12 @@ def posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray], log_po
     """psignifit's ``posterior_grid`` (normalised trapezoid mass per grid point, grid maximum)
     on :func:`log_posterior_2afc`."""
     lp = log_posterior if log_posterior is not None else log_posterior_2afc(data, priors, grid)
-    imax = np.unravel_index(int(np.argmax(lp)), lp.shape)
-    names = sorted(grid)
-    grid_max = {n: float(np.atleast_1d(grid[n])[i]) for n, i in zip(names, imax)}
-    p = np.exp(lp - lp[imax]) * integral_weights([np.atleast_1d(grid[n]) for n in names])
-    return p / p.sum(), grid_max
+    imax, grid_max = _grid_argmax(grid, lp)
+    p = lp - lp[imax]
+    np.exp(p, out=p)
+    p *= integral_weights([np.atleast_1d(grid[n]) for n in sorted(grid)])
+    p /= p.sum()
+    return p, grid_max
 
 
 def tabulate_priors(priors, bounds: dict[str, tuple[float, float]], points: int = 20001) -> dict:
@@ -534,15 +628,14 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
         grid_steps=grid_spec.grid_steps(), steps_moving_bounds=grid_spec.sparse_steps(),
         confP=(options.ci_level,),
     )
-    sigmoid = conf.make_sigmoid()
     bounds, priors = _bounds_and_priors(conf, data[:, 0], fixed)
-    sparse = parameter_grid(bounds, conf.steps_moving_bounds)
+    sparse = _parameter_grid(bounds, conf.steps_moving_bounds)
     post_sparse, _ = posterior_2afc(data, priors, sparse)
     tight = masked_parameter_bounds(sparse, post_sparse >= conf.max_bound_value)
-    dense_grid = parameter_grid(tight, conf.grid_steps)
+    dense_grid = _parameter_grid(tight, conf.grid_steps)
     dense_lp = log_posterior_2afc(data, priors, dense_grid)
     dense_post, grid_max = posterior_2afc(data, priors, dense_grid, dense_lp)
-    _, dense_t75, names = _t75_mesh(dense_grid, sigmoid)
+    dense_t75, names = _t75_grid(dense_grid), sorted(dense_grid)
 
     grid, post, n_ref, lp = dense_grid, dense_post, 0, dense_lp
     # a grid edge that cuts the mass moves out in steps of the dense grid's span (at most
@@ -560,11 +653,19 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
         post, grid_max = posterior_2afc(data, priors, new_grid, lp)
         grid, n_ref, n_moves = new_grid, n_ref + 1, n_moves + bool(cut)
     cut = grid_cuts_posterior(grid, post, bounds)
-    mesh, t75, names = _t75_mesh(grid, sigmoid)
+    mesh, t75, names = _t75_mesh(grid)
     modes = _find_modes(data, priors, grid, bounds, options.map_refinements, lp) if options.map_refinements else []
     grid_max = modes[0][1] if modes else grid_max
     return GridPosterior(mesh, post, t75, grid, bounds, grid_max, names, dense_grid, dense_post, dense_t75, n_ref,
                          tuple(modes), tuple(cut), n_moves, priors)
+
+
+def _local_maxima(values: np.ndarray) -> np.ndarray:
+    """``values == maximum_filter(values, size=3, mode="nearest")``: every point >= its 3^d grid
+    neighbourhood. The filter runs on the axes longer than 1 only (along an axis of length 1 its
+    'nearest' neighbourhood is the point itself), so the answer is the same."""
+    core = values.reshape([s for s in values.shape if s > 1] or [1])
+    return (core == ndimage.maximum_filter(core, size=3, mode="nearest")).reshape(values.shape)
 
 
 def _find_modes(data, priors, grid, bounds, zooms: int, lp: np.ndarray, max_starts: int = 4,
@@ -576,7 +677,7 @@ def _find_modes(data, priors, grid, bounds, zooms: int, lp: np.ndarray, max_star
     of a log unit apart can swap places on a grid, so psyop zooms from each candidate.
     """
     finite = np.where(np.isfinite(lp), lp, -np.inf)
-    is_max = (finite == ndimage.maximum_filter(finite, size=3, mode="nearest")) & (finite >= finite.max() + min_log_ratio)
+    is_max = _local_maxima(finite) & (finite >= finite.max() + min_log_ratio)
     starts = sorted(np.argwhere(is_max), key=lambda i: -finite[tuple(i)])[:max_starts]
     names = sorted(grid)
     steps = {n: (np.ptp(np.atleast_1d(grid[n])) / max(len(np.atleast_1d(grid[n])) - 1, 1)) for n in names}
@@ -615,20 +716,27 @@ def _shrink(grid: dict[str, np.ndarray], centre: dict[str, float], bounds, point
 
 
 def _refine_map(data, priors, local, grid_max) -> dict[str, float]:
-    """One zoom into the posterior mode: the posterior on the small grid ``local`` (plus the
-    current best point, so the posterior never decreases). Replaces psignifit's scalar
+    """One zoom into the posterior mode: the maximum of the posterior on the small grid ``local``
+    (plus the current best point, so the posterior never decreases). Replaces psignifit's scalar
     Nelder-Mead MAP search by vectorised grid evaluations."""
     local = {n: np.unique(np.append(v, grid_max[n])) if len(np.atleast_1d(v)) > 1 else v for n, v in local.items()}
-    _, best = posterior_2afc(data, priors, local)
-    return best
+    return _grid_argmax(local, log_posterior_2afc(data, priors, local))[1]
 
 
 def _t75(params: dict[str, float]) -> float:
-    """Level where the 2AFC curve of ``params`` reaches 75 % correct (inf if it never does)."""
-    scaled = (TARGET_PC - params["gamma"]) / (1.0 - params["lambda"] - params["gamma"])
+    """Level where the 2AFC curve of ``params`` reaches 75 % correct (inf if it never does).
+
+    ``norm.ppf(q)`` for 0 < q < 1 is ``ndtri(q) * 1 + 0`` in scipy; written out. A curve with
+    ``1 - lambda - gamma == 0`` (lapse 0.5 on a 2AFC grid's edge) is flat at the guess rate and never
+    reaches 75 %: inf (the fit's status is then ``lapse_at_bound``), not a ZeroDivisionError.
+    """
+    span = 1.0 - params["lambda"] - params["gamma"]
+    if span == 0.0:
+        return float("inf")
+    scaled = (TARGET_PC - params["gamma"]) / span
     if not 0.0 < scaled < 1.0:
         return float("inf")
-    return float(params["threshold"] + norm.ppf(scaled) * params["width"] / WIDTH_PER_SIGMA)
+    return float(params["threshold"] + (special.ndtri(scaled) + 0.0) * params["width"] / WIDTH_PER_SIGMA)
 
 
 def separated_peaks(post: np.ndarray, min_ratio: float = 0.1, max_dip: float = 0.75) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -643,7 +751,7 @@ def separated_peaks(post: np.ndarray, min_ratio: float = 0.1, max_dip: float = 0
     if p.size == 0 or p.max() <= 0:
         return []
     p = p / p.max()
-    is_max = (p == ndimage.maximum_filter(p, size=3, mode="nearest")) & (p >= min_ratio)
+    is_max = _local_maxima(p) & (p >= min_ratio)
     peaks = np.argwhere(is_max)
     if len(peaks) < 2:
         return []
@@ -732,7 +840,7 @@ def _edge_mass(grid, post, bounds, names) -> bool:
     for name in ("threshold", "width"):
         axis = names.index(name)
         marginal = _marginal(post, axis)
-        at_bound = np.isclose(grid[name][[0, -1]], bounds[name])
+        at_bound = np.array([_isclose(grid[name][0], bounds[name][0]), _isclose(grid[name][-1], bounds[name][1])])
         if (at_bound & (marginal[[0, -1]] > EDGE_MASS)).any():
             return True
     return False
