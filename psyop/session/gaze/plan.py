@@ -8,7 +8,7 @@ from functools import cached_property
 
 import numpy as np
 
-from psyop.optics.angles import fick_angles_deg, fick_direction, offset_direction_in, offset_frame
+from psyop.optics.angles import fick_direction, offset_frame
 from psyop.stimulus.placement import circle_position_deg
 
 
@@ -61,12 +61,23 @@ class CirclingTarget:
         return offset_frame(self.centre_deg[0], self.centre_deg[1], self.eccentricity_deg)
 
     def positions(self, t_rel_s: np.ndarray) -> np.ndarray:
-        """Fick (az, el) at each of ``t_rel_s``; shape (n, 2) (equal to calling it per time, to round-off)."""
-        polar = self.phase_deg + self.speed_deg_s * np.asarray(t_rel_s, dtype=np.float64)
-        d = offset_direction_in(self._frame, polar)  # offset_direction(*centre_deg, eccentricity_deg, polar)
-        az, el = fick_angles_deg(d)
-        return np.stack([np.asarray(az, dtype=np.float64).reshape(-1), np.asarray(el, dtype=np.float64).reshape(-1)],
-                        axis=-1)
+        """Fick (az, el) at each of ``t_rel_s``; shape (n, 2) (equal to calling it per time, to round-off).
+
+        ``fick_angles_deg(offset_direction_in(self._frame, polar))`` computed one direction component at a
+        time (each the same elementwise operations, so the same numbers: tests/session/test_circling_positions.py),
+        without the (n, 3) temporaries: the simulated eye evaluates thousands of times per pursuit."""
+        polar = self.phase_deg + self.speed_deg_s * np.asarray(t_rel_s, dtype=np.float64).reshape(-1)
+        ahead, sin_ecc, right, up = self._frame  # offset_direction(*centre_deg, eccentricity_deg, polar)
+        mer = np.radians(polar)
+        cos_mer, sin_mer = np.cos(mer), np.sin(mer)
+        se = sin_ecc.reshape(-1)[0]
+        x = ahead[0] + se * (cos_mer * right[0] + sin_mer * up[0])
+        y = ahead[1] + se * (cos_mer * right[1] + sin_mer * up[1])
+        z = ahead[2] + se * (cos_mer * right[2] + sin_mer * up[2])
+        out = np.empty((len(polar), 2))
+        np.degrees(np.arctan2(x, -z), out=out[:, 0])  # fick_angles_deg: azimuth, then elevation
+        np.degrees(np.arctan2(y, np.hypot(x, z)), out=out[:, 1])
+        return out
 
 
 def circling_target(eccentricity_deg: float = 16.0, speed_deg_s: float = 90.0, phase_deg: float = 0.0,
