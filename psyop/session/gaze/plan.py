@@ -12,7 +12,7 @@ from psyop.optics.angles import fick_direction, offset_frame
 from psyop.stimulus.placement import circle_position_deg
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: the loop makes one per phase of every trial
 class FixationPlan:
     """Where gaze should go from ``start_s`` (session clock) on.
 
