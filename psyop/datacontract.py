@@ -8,6 +8,7 @@ changes in one place. docs/architecture.md ("session -> data/") describes the sa
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -121,7 +122,7 @@ def typed_response(response: object) -> dict[str, object]:
         value = float(text)
     except ValueError:
         value = None
-    return {RESPONSE_VALUE: value if value is not None and np.isfinite(value) else None, OUTCOME: "answered"}
+    return {RESPONSE_VALUE: value if value is not None and math.isfinite(value) else None, OUTCOME: "answered"}
 
 
 def with_typed_response(trials: pd.DataFrame) -> pd.DataFrame:

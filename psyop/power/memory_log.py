@@ -57,8 +57,7 @@ class MemoryLog:
         return set()  # a fresh session: nothing to resume
 
     def append_trial(self, row: JsonMapping, frames: pa.Table | None, gaze: pa.Table | None = None) -> None:
-        get = row.get
-        self._rows.append(tuple([get(name) for name in self._names]))
+        self._rows.append(tuple(map(row.get, self._names)))  # each schema column's value, None where absent
         if self.keeps_samples and gaze is not None and gaze.num_rows:  # frames: nothing a replication reads
             self._gaze.append(gaze)
 

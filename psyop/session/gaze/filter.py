@@ -62,7 +62,7 @@ class GazeConditioner:
 
     def correct(self, fixation_m: tuple[float, float, float]) -> tuple[float, float, float]:
         f = np.asarray(fixation_m, dtype=np.float64)
-        distance = float(np.linalg.norm(f))
+        distance = float(np.sqrt(f.dot(f)))  # np.linalg.norm(f) of a 1-D float array, without its argument handling
         az, el = direction_to_angles_deg(f / distance)
         d = angles_to_direction(az + self._offset_az_deg, el + self._offset_el_deg) * distance
         return (float(d[0]), float(d[1]), float(d[2]))

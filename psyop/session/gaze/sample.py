@@ -45,7 +45,7 @@ class GazeSample:
     def direction(self) -> np.ndarray:
         """Unit gaze direction from the mid-point between the eyes."""
         f = np.asarray(self.fixation_m, dtype=np.float64)
-        return f / np.linalg.norm(f)
+        return f / np.sqrt(f.dot(f))  # np.linalg.norm(f) of a 1-D float array, without its argument handling
 
 
 @dataclass(frozen=True, slots=True)
