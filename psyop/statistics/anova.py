@@ -24,6 +24,7 @@ Degenerate data never produce a number that looks like a result:
 from __future__ import annotations
 
 import itertools
+import math
 import warnings
 from collections.abc import Sequence
 from contextlib import contextmanager
@@ -89,6 +90,8 @@ def cell_means(trials: pd.DataFrame, dv: str, within: Sequence[str], subject: st
 def find_incomplete_subjects(data: pd.DataFrame, dv: str, within: Sequence[str], subject: str) -> pd.DataFrame:
     """Subjects lacking a finite ``dv`` in some within-cell, with the missing cells named."""
     within = list(within)
+    if data.columns.is_unique and _is_complete_grid(data, dv, within, subject):
+        return pd.DataFrame([], columns=["subject", "reason"])  # every subject has every cell
     levels = [sorted(data[w].dropna().unique(), key=str) for w in within]
     complete = data[np.isfinite(pd.to_numeric(data[dv], errors="coerce"))]
     present = {tuple(r) for r in complete[[subject, *within]].itertuples(index=False)}
@@ -132,18 +135,49 @@ def _check_enough_subjects(kept: pd.DataFrame, subject: str, need: int, what: st
     return n
 
 
+def _is_complete_grid(data: pd.DataFrame, dv: str, within: Sequence[str], subject: str) -> bool:
+    """Whether ``data`` holds exactly one row with a finite ``dv`` for every subject and combination of
+    levels, with no missing subject or level and no categorical key (the usual complete design)."""
+    keys = data[[subject, *within]]
+    if any(isinstance(keys[c].dtype, pd.CategoricalDtype) for c in keys) or keys.isna().to_numpy().any():
+        return False
+    if not np.isfinite(pd.to_numeric(data[dv], errors="coerce")).all():
+        return False
+    n_cells = math.prod(int(keys[c].nunique()) for c in keys)
+    return len(data) == n_cells and not keys.duplicated().any()
+
+
+def _complete_grid_values(data: pd.DataFrame, dv: str, within: Sequence[str], subject: str
+                          ) -> tuple[np.ndarray, int] | None:
+    """``data.pivot_table(index=subject, columns=within, values=dv, aggfunc="first").to_numpy(float)``
+    and its number of first-factor levels for a complete design (:func:`_is_complete_grid`; None
+    otherwise): each value placed at its keys' sorted codes (``pd.factorize(sort=True)``, the
+    groupby's order), in the pivot's memory layout (row-major subject x cells, as its unstack builds it)."""
+    if not data.columns.is_unique or not _is_complete_grid(data, dv, within, subject):
+        return None
+    codes = [pd.factorize(data[c], sort=True) for c in (subject, *within)]
+    shape = tuple(len(uniques) for _, uniques in codes)
+    y = np.empty(shape, float)
+    y[tuple(c for c, _ in codes)] = data[dv].to_numpy(float)
+    return y.reshape(shape[0], -1), shape[1]
+
+
 def error_sums_of_squares(data: pd.DataFrame, dv: str, within: Sequence[str], subject: str) -> dict[str, float]:
     """Error sum of squares of each effect (the subject x effect interaction) of a complete design,
     keyed like pingouin's effects ('A', 'B', 'A * B'), plus 'total' (around the grand mean)."""
     within = list(within)
-    wide = data.pivot_table(index=subject, columns=within, values=dv, aggfunc="first", observed=True)
-    y = wide.to_numpy(float)
+    grid = _complete_grid_values(data, dv, within, subject)
+    if grid is None:
+        wide = data.pivot_table(index=subject, columns=within, values=dv, aggfunc="first", observed=True)
+        y = wide.to_numpy(float)
+        a = len(wide.columns.levels[0]) if hasattr(wide.columns, "levels") else 1
+    else:
+        y, a = grid
     total = float(((y - y.mean()) ** 2).sum())
     if len(within) == 1:
         r = y - y.mean(axis=1, keepdims=True) - y.mean(axis=0, keepdims=True) + y.mean()
         return {within[0]: float((r ** 2).sum()), "total": total}
-    a = len(wide.columns.levels[0]) if hasattr(wide.columns, "levels") else 1
-    y = y.reshape(len(wide), a, -1)  # subject x A x B (pivot_table sorts the column MultiIndex)
+    y = y.reshape(len(y), a, -1)  # subject x A x B (pivot_table sorts the column MultiIndex)
     b = y.shape[2]
     m_sa, m_sb, m_s = y.mean(axis=2), y.mean(axis=1), y.mean(axis=(1, 2))
     m_a, m_b, g = y.mean(axis=(0, 2)), y.mean(axis=(0, 1)), y.mean()
@@ -154,6 +188,14 @@ def error_sums_of_squares(data: pd.DataFrame, dv: str, within: Sequence[str], su
             - (m_ab - m_a[:, None] - m_b[None, :] + g)[None])
     return {within[0]: float(b * (r_a ** 2).sum()), within[1]: float(a * (r_b ** 2).sum()),
             f"{within[0]} * {within[1]}": float((r_ab ** 2).sum()), "total": total}
+
+
+def _only_columns(data: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
+    """``data[columns]`` when those are distinct columns of ``data`` (else ``data``): the test reads
+    nothing else, and pingouin's pivots and copies of a wide table (e.g. a fit table) cost more."""
+    if len(set(columns)) == len(columns) and data.columns.is_unique and all(c in data.columns for c in columns):
+        return data[columns]
+    return data
 
 
 def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: str = "participant") -> AnovaResult:
@@ -169,7 +211,8 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
         raise ValueError("more than one value per subject and cell; aggregate first (cell_means)")
     check_level_names(data, within, subject)
     dropped = find_incomplete_subjects(data, dv, within, subject)
-    kept = data[~data[subject].isin(dropped["subject"])].copy()
+    kept = _only_columns(data, [subject, *within, dv])
+    kept = kept[~kept[subject].isin(dropped["subject"])].copy()
     kept[dv] = kept[dv].astype(float)
     max_levels = max(kept[w].nunique() for w in within) if len(kept) else 0
     n = _check_enough_subjects(kept, subject, max(2, max_levels), f"an rm-ANOVA with {max_levels} levels", dropped)

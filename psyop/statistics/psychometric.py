@@ -523,8 +523,9 @@ def log_posterior_2afc(data: np.ndarray, priors, grid: dict[str, np.ndarray]) ->
     """
     names = sorted(grid)
     axes = [np.atleast_1d(np.asarray(grid[n], float)) for n in names]
-    mesh = dict(zip(names, np.meshgrid(*axes, indexing="ij", sparse=True)))
-    eta_std, gamma, lam, thr, width = (mesh[n] for n in ("eta", "gamma", "lambda", "threshold", "width"))
+    # the sparse 'ij' meshgrid's arrays (each axis's values along its own dimension), as reshaped views
+    eta_std, gamma, lam, thr, width = (v.reshape((1,) * i + (-1,) + (1,) * (len(axes) - i - 1))
+                                       for i, v in enumerate(axes))
     x = data[:, 0].reshape((-1,) + (1,) * len(names))
     k, n = data[:, 1], data[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -618,16 +619,32 @@ def _bounds_and_priors(conf, levels: np.ndarray, fixed: dict[str, float] | None
     return dict(cached[0]), dict(cached[1])
 
 
+#: (grid, fixed parameters, CI level) -> psignifit Configuration (read only, never modified)
+_CONFIGURATION_CACHE: dict[tuple, psignifit.Configuration] = {}
+
+
+def _configuration(grid_spec: GridSpec, fixed: dict[str, float] | None, ci_level: float) -> psignifit.Configuration:
+    """psignifit's 2AFC 'norm' Configuration for these grid steps, fixed parameters and CI level, built
+    once per distinct key: a fit only reads it (its steps, bound value and prior settings)."""
+    key = (grid_spec, tuple(sorted((fixed or {}).items())), ci_level)
+    conf = _CONFIGURATION_CACHE.get(key)
+    if conf is None:
+        if len(_CONFIGURATION_CACHE) > 256:
+            _CONFIGURATION_CACHE.clear()
+        conf = _CONFIGURATION_CACHE[key] = psignifit.Configuration(
+            experiment_type="2AFC", sigmoid="norm", verbose=False, fixed_parameters=fixed,
+            grid_steps=grid_spec.grid_steps(), steps_moving_bounds=grid_spec.sparse_steps(),
+            confP=(ci_level,),
+        )
+    return conf
+
+
 def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> GridPosterior:
     """psignifit's pipeline up to the dense-grid posterior, then the refined posterior and MAP."""
     grid_spec = options.grid
     fixed = {name: value for name, value in (("lambda", options.fixed_lambda), ("eta", options.fixed_eta))
              if value is not None} or None
-    conf = psignifit.Configuration(
-        experiment_type="2AFC", sigmoid="norm", verbose=False, fixed_parameters=fixed,
-        grid_steps=grid_spec.grid_steps(), steps_moving_bounds=grid_spec.sparse_steps(),
-        confP=(options.ci_level,),
-    )
+    conf = _configuration(grid_spec, fixed, options.ci_level)
     bounds, priors = _bounds_and_priors(conf, data[:, 0], fixed)
     sparse = _parameter_grid(bounds, conf.steps_moving_bounds)
     post_sparse, _ = posterior_2afc(data, priors, sparse)
@@ -711,16 +728,48 @@ def _shrink(grid: dict[str, np.ndarray], centre: dict[str, float], bounds, point
         step = (values[-1] - values[0]) / (len(values) - 1)
         lo = max(bounds[name][0], centre[name] - step)
         hi = min(bounds[name][1], centre[name] + step)
-        out[name] = np.linspace(lo, hi, points)
+        out[name] = _linspace(lo, hi, points)
     return out
+
+
+def _linspace(start: float, stop: float, num: int) -> np.ndarray:
+    """``np.linspace(start, stop, num)`` for two float scalars and ``num >= 2``: NumPy's own steps
+    (``arange(num) * step + start``, the last point ``stop``, and its ``/ div * delta`` where the step
+    underflows to 0) without its argument handling."""
+    delta = np.subtract(stop, start, dtype=float)
+    div = num - 1
+    y = np.arange(0, num, dtype=float)
+    step = delta / div
+    if step == 0:
+        y /= div
+        y *= delta
+    else:
+        y *= step
+    y += start
+    y[-1] = stop
+    return y
 
 
 def _refine_map(data, priors, local, grid_max) -> dict[str, float]:
     """One zoom into the posterior mode: the maximum of the posterior on the small grid ``local``
     (plus the current best point, so the posterior never decreases). Replaces psignifit's scalar
     Nelder-Mead MAP search by vectorised grid evaluations."""
-    local = {n: np.unique(np.append(v, grid_max[n])) if len(np.atleast_1d(v)) > 1 else v for n, v in local.items()}
+    local = {n: _with_point(v, grid_max[n]) if len(np.atleast_1d(v)) > 1 else v for n, v in local.items()}
     return _grid_argmax(local, log_posterior_2afc(data, priors, local))[1]
+
+
+def _with_point(values: np.ndarray, x: float) -> np.ndarray:
+    """``np.unique(np.append(values, x))``: for strictly increasing ``values`` and a finite, non-zero
+    ``x`` (no signed zero to pick between), ``x`` inserted at its sorted place unless already there;
+    otherwise NumPy's."""
+    values = np.asarray(values)
+    if values.dtype == np.float64 and values.ndim == 1 and math.isfinite(x) and x != 0.0 \
+            and bool((values[1:] > values[:-1]).all()):
+        i = int(np.searchsorted(values, x))
+        if i < len(values) and values[i] == x:
+            return values.copy()
+        return np.insert(values, i, x)
+    return np.unique(np.append(values, x))
 
 
 def _t75(params: dict[str, float]) -> float:

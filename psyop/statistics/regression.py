@@ -73,14 +73,17 @@ def linear_fit(data: pd.DataFrame, x: str, y: str) -> LinearFit:
     d = _clean(data, [x, y]).rename(columns={x: "x", y: "y"}).astype(float)
     if len(d) < 3:
         raise ValueError(f"need at least 3 complete rows for a line, have {len(d)}")
-    m = smf.ols("y ~ x", data=d).fit()
+    # the design matrix patsy builds for ``smf.ols("y ~ x")`` (C-ordered [1, x] columns), fitted directly:
+    # the same numbers without the formula machinery (tests/statistics/test_regression_direct_ols.py)
+    x_ = d["x"].to_numpy(float)
+    m = sm.OLS(d["y"].to_numpy(float), np.column_stack([np.ones_like(x_), x_])).fit()
     ci = m.conf_int()
     return LinearFit(
-        slope=float(m.params["x"]), slope_se=float(m.bse["x"]), slope_ci_low=float(ci.loc["x", 0]),
-        slope_ci_high=float(ci.loc["x", 1]), slope_p=float(m.pvalues["x"]),
-        intercept=float(m.params["Intercept"]), intercept_se=float(m.bse["Intercept"]),
-        intercept_ci_low=float(ci.loc["Intercept", 0]), intercept_ci_high=float(ci.loc["Intercept", 1]),
-        intercept_p=float(m.pvalues["Intercept"]), r2=float(m.rsquared), n=int(m.nobs),
+        slope=float(m.params[1]), slope_se=float(m.bse[1]), slope_ci_low=float(ci[1, 0]),
+        slope_ci_high=float(ci[1, 1]), slope_p=float(m.pvalues[1]),
+        intercept=float(m.params[0]), intercept_se=float(m.bse[0]),
+        intercept_ci_low=float(ci[0, 0]), intercept_ci_high=float(ci[0, 1]),
+        intercept_p=float(m.pvalues[0]), r2=float(m.rsquared), n=int(m.nobs),
     )
 
 
