@@ -9,10 +9,10 @@ protocol, so ``Any`` stands here, once, with that reason.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-import pandas as pd
+if TYPE_CHECKING:  # the command line's --help imports this module: no pandas or numpy at import
+    import pandas as pd
 
 __all__ = ["JsonMapping", "JsonObject", "TrialRecord", "TrialRow", "frame_records"]
 
@@ -35,10 +35,14 @@ def frame_records(frame: pd.DataFrame) -> list[TrialRecord]:
 
     Examples
     --------
+    >>> import pandas as pd
     >>> frame = pd.DataFrame({"trial": [0, 1], "level_D": [0.25, 0.5], "mode": pd.array(["a", "b"], dtype="str")})
     >>> frame_records(frame) == frame.to_dict("records")
     True
     """
+    import numpy as np
+    import pandas as pd
+
     plain = len(frame.columns) > 0 and frame.columns.is_unique and all(
         (isinstance(dtype, np.dtype) and dtype.kind in "biuf")
         or (isinstance(dtype, pd.StringDtype) and isinstance(dtype.na_value, float))  # NaN-missing strings
