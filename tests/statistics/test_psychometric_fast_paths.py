@@ -13,7 +13,6 @@ patched back in must equal today's fits field for field.
 from __future__ import annotations
 
 import math
-from dataclasses import fields
 
 import numpy as np
 import psignifit
@@ -25,9 +24,8 @@ from psignifit._parameter import parameter_grid
 
 from psyop.statistics import psychometric as psy
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
-from psyop.statistics.simulate import DETECTION_LEVELS_D, pc_2afc
+from fit_equality import LEVELS, fit_datasets, same_bits, same_fit
 
-LEVELS = np.array(DETECTION_LEVELS_D)
 SIGMOID = psignifit.sigmoids.sigmoid_by_name("norm", PC=0.5, alpha=0.05)
 
 
@@ -108,9 +106,6 @@ def _old_local_maxima(values):
 
 # ---- helpers ----------------------------------------------------------------------------------------------------
 
-def _same_bits(a, b) -> bool:
-    a, b = np.asarray(a), np.asarray(b)
-    return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
 
 
 def _widths(rng, n):
@@ -170,9 +165,9 @@ def test_t75_mesh_is_psignifits_inverse_bit_for_bit():
         old_mesh, old_t75, old_names = _old_t75_mesh(grid, SIGMOID)
         mesh, t75, names = psy._t75_mesh(grid)
         assert names == old_names
-        assert _same_bits(t75, old_t75), grid
-        assert _same_bits(psy._t75_grid(grid), old_t75)
-        assert all(_same_bits(mesh[n], old_mesh[n]) for n in names)
+        assert same_bits(t75, old_t75), grid
+        assert same_bits(psy._t75_grid(grid), old_t75)
+        assert all(same_bits(mesh[n], old_mesh[n]) for n in names)
 
 
 def test_t75_is_norm_ppf_bit_for_bit():
@@ -214,11 +209,11 @@ def test_predicted_pc_is_psignifits_sigmoid_bit_for_bit():
             as_float32 = levels.astype(np.float32)  # 1e308 -> inf
         for lv in (levels, as_float32, levels[:1].reshape(()), float(levels[0])):
             with np.errstate(invalid="ignore", over="ignore"):  # extreme levels over tiny widths
-                assert _same_bits(psy.predicted_pc(lv, location, width, lapse),
+                assert same_bits(psy.predicted_pc(lv, location, width, lapse),
                                   _old_predicted_pc(lv, location, width, lapse)), (lv, location, width, lapse)
     widths = _widths(rng, 5)
     with np.errstate(invalid="ignore"):  # a subnormal width's scale is 0
-            assert _same_bits(psy.predicted_pc(LEVELS[:, None], 0.3, widths, 0.02),
+            assert same_bits(psy.predicted_pc(LEVELS[:, None], 0.3, widths, 0.02),
                               _old_predicted_pc(LEVELS[:, None], 0.3, widths, 0.02))
 
 
@@ -231,13 +226,13 @@ def test_log_posterior_and_posterior_bit_for_bit():
         data = _random_data(rng)
         priors = _priors(data)
         grid = _fit_grid(rng, eta_free=i % 5 == 0)
-        assert _same_bits(psy.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid))
+        assert same_bits(psy.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid))
         post, best = psy.posterior_2afc(data, priors, grid)
         old_post, old_best = _old_posterior_2afc(data, priors, grid)
-        assert _same_bits(post, old_post) and best == old_best
+        assert same_bits(post, old_post) and best == old_best
         lp = _old_log_posterior_2afc(data, priors, grid)
         post, best = psy.posterior_2afc(data, priors, grid, lp)
-        assert _same_bits(post, _old_posterior_2afc(data, priors, grid, lp)[0]) and best == old_best
+        assert same_bits(post, _old_posterior_2afc(data, priors, grid, lp)[0]) and best == old_best
 
 
 @pytest.mark.filterwarnings("ignore:invalid value encountered in subtract:RuntimeWarning")
@@ -258,7 +253,7 @@ def test_local_maxima_is_maximum_filter():
         values = rng.integers(0, 4, shape).astype(float)  # many ties
         if rng.random() < 0.3:
             values[rng.random(shape) < 0.2] = -np.inf
-        assert _same_bits(psy._local_maxima(values), _old_local_maxima(values)), shape
+        assert same_bits(psy._local_maxima(values), _old_local_maxima(values)), shape
 
 
 # ---- closeness checks and psignifit's parameter grid --------------------------------------------------------------
@@ -304,7 +299,7 @@ def test_parameter_grid_is_psignifits():
         steps = {n: int(rng.integers(1, 40)) for n in bounds}
         ours, theirs = psy._parameter_grid(bounds, steps), parameter_grid(bounds, steps)
         assert list(ours) == list(theirs)
-        assert all(_same_bits(ours[n], theirs[n]) for n in bounds)
+        assert all(same_bits(ours[n], theirs[n]) for n in bounds)
 
 
 # ---- whole fits with the former functions patched back in ---------------------------------------------------------
@@ -317,24 +312,8 @@ OLD_FUNCTIONS = {
 }
 
 
-def _fit_datasets(rng, n):
-    out = []
-    for i in range(n):
-        sigma, thr, lapse = rng.uniform(0.05, 0.5), rng.uniform(-0.2, 1.2), rng.choice([0.0, 0.05, 0.2, 0.4])
-        n_per_level = int(rng.choice([5, 15, 40, 1000]))
-        out.append(np.c_[LEVELS, rng.binomial(n_per_level, pc_2afc(LEVELS, thr, sigma, lapse)), np.full(5, n_per_level)])
-    return out
 
 
-def _same_fit(a, b) -> bool:
-    for f in fields(a):
-        u, v = getattr(a, f.name), getattr(b, f.name)
-        if isinstance(u, float):
-            if not (_same_bits(np.float64(u), np.float64(v))):
-                return False
-        elif u != v:
-            return False
-    return True
 
 
 @pytest.mark.parametrize("options", [FitOptions(n_bootstrap=0, estimate_eta=False),
@@ -342,10 +321,10 @@ def _same_fit(a, b) -> bool:
                                      FitOptions(fixed_eta=None, n_bootstrap=0, estimate_eta=False)],
                          ids=["power", "coarse-eta-estimated", "eta-free"])
 def test_fits_equal_the_former_functions(monkeypatch, options):
-    datasets = _fit_datasets(np.random.default_rng(36), 8)
+    datasets = fit_datasets(np.random.default_rng(36), 8)
     with np.errstate(invalid="ignore"):
         new = [fit_psychometric(d, options) for d in datasets]
         for name, old in OLD_FUNCTIONS.items():
             monkeypatch.setattr(psy, name, old)
         old_fits = [fit_psychometric(d, options) for d in datasets]
-    assert all(_same_fit(a, b) for a, b in zip(new, old_fits))
+    assert all(same_fit(a, b) for a, b in zip(new, old_fits))

@@ -8,7 +8,6 @@ functions patched back in must equal today's field for field."""
 from __future__ import annotations
 
 import copy
-from dataclasses import fields
 
 import numpy as np
 import psignifit
@@ -17,9 +16,8 @@ from scipy import special
 
 from psyop.statistics import psychometric as psy
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
-from psyop.statistics.simulate import DETECTION_LEVELS_D, pc_2afc
+from fit_equality import LEVELS, fit_datasets, same_bits, same_fit
 
-LEVELS = np.array(DETECTION_LEVELS_D)
 
 
 # ---- the former implementations -----------------------------------------------------------------------------------
@@ -77,9 +75,6 @@ def _old_configuration(grid_spec, fixed, ci_level):
         grid_steps=grid_spec.grid_steps(), steps_moving_bounds=grid_spec.sparse_steps(), confP=(ci_level,))
 
 
-def _same_bits(a, b) -> bool:
-    a, b = np.asarray(a), np.asarray(b)
-    return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
 
 
 EDGES = [0.0, -0.0, 5e-324, -5e-324, 1e-310, 1e-300, 1e-16, 0.25, 0.5, 1.0, 1.0 + 2.2e-16, 3.0, 1e6, 1e300, -1e300]
@@ -92,8 +87,8 @@ def test_linspace_is_numpys():
     pairs += [(x, x + d) for x, d in zip(rng.uniform(-2, 2, 200), 10.0 ** rng.uniform(-320, 0, 200))]
     for lo, hi in pairs:
         for num in (2, 3, 9, 15, 16):
-            assert _same_bits(psy._linspace(lo, hi, num), np.linspace(lo, hi, num)), (lo, hi, num)
-            assert _same_bits(psy._linspace(np.float64(lo), np.float64(hi), num), np.linspace(lo, hi, num))
+            assert same_bits(psy._linspace(lo, hi, num), np.linspace(lo, hi, num)), (lo, hi, num)
+            assert same_bits(psy._linspace(np.float64(lo), np.float64(hi), num), np.linspace(lo, hi, num))
 
 
 def test_with_point_is_unique_of_append():
@@ -110,7 +105,7 @@ def test_with_point_is_unique_of_append():
               (np.linspace(1.0, 1.0 + 1e-15, 15), 1.0 + 5e-16), (np.array([0.1, 0.2]), np.float64(0.2))]
     for values, point in cases:
         ours, numpys = psy._with_point(values, point), np.unique(np.append(values, point))
-        assert _same_bits(ours, numpys), (values, point)
+        assert same_bits(ours, numpys), (values, point)
         assert ours is not values
 
 
@@ -149,7 +144,7 @@ def test_log_posterior_views_are_the_meshgrid():
         if i % 7 == 0:
             grid = {k: (float(v[0]) if i % 2 else list(v)) for k, v in grid.items()}  # scalars and lists
         new, old = psy.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid)
-        assert _same_bits(new, old) and new.strides == old.strides
+        assert same_bits(new, old) and new.strides == old.strides
 
 
 @pytest.mark.filterwarnings("ignore:invalid value encountered in subtract:RuntimeWarning")
@@ -163,7 +158,7 @@ def test_shrink_and_refine_map_bit_for_bit():
         bounds = {"eta": (0.0, 0.0), "gamma": (0.5, 0.5), "lambda": (0.0, 0.5), "threshold": (-0.5, 1.5),
                   "width": (0.01, 5.0)}
         new_box, old_box = psy._shrink(grid, best, bounds), _old_shrink(grid, best, bounds)
-        assert list(new_box) == list(old_box) and all(_same_bits(new_box[n], old_box[n]) for n in grid)
+        assert list(new_box) == list(old_box) and all(same_bits(new_box[n], old_box[n]) for n in grid)
         assert psy._refine_map(data, priors, old_box, best) == _old_refine_map(data, priors, old_box, best)
 
 
@@ -186,24 +181,8 @@ OLD_FUNCTIONS = {"_shrink": _old_shrink, "_refine_map": _old_refine_map, "log_po
                  "_configuration": _old_configuration}
 
 
-def _fit_datasets(rng, n):
-    out = []
-    for _ in range(n):
-        sigma, thr, lapse = rng.uniform(0.05, 0.5), rng.uniform(-0.2, 1.2), rng.choice([0.0, 0.05, 0.2, 0.4])
-        n_per_level = int(rng.choice([5, 15, 40, 1000]))
-        out.append(np.c_[LEVELS, rng.binomial(n_per_level, pc_2afc(LEVELS, thr, sigma, lapse)), np.full(5, n_per_level)])
-    return out
 
 
-def _same_fit(a, b) -> bool:
-    for f in fields(a):
-        u, v = getattr(a, f.name), getattr(b, f.name)
-        if isinstance(u, float):
-            if not _same_bits(np.float64(u), np.float64(v)):
-                return False
-        elif u != v:
-            return False
-    return True
 
 
 @pytest.mark.parametrize("options", [FitOptions(n_bootstrap=0, estimate_eta=False),
@@ -212,10 +191,10 @@ def _same_fit(a, b) -> bool:
                                      FitOptions(fixed_lambda=0.02, n_bootstrap=0, estimate_eta=False)],
                          ids=["power", "coarse-eta-estimated", "eta-free", "lambda-fixed"])
 def test_fits_equal_the_former_functions(monkeypatch, options):
-    datasets = _fit_datasets(np.random.default_rng(45), 10)
+    datasets = fit_datasets(np.random.default_rng(45), 10)
     with np.errstate(invalid="ignore"):
         new = [fit_psychometric(d, options) for d in datasets]
         for name, old in OLD_FUNCTIONS.items():
             monkeypatch.setattr(psy, name, old)
         old_fits = [fit_psychometric(d, options) for d in datasets]
-    assert all(_same_fit(a, b) for a, b in zip(new, old_fits))
+    assert all(same_fit(a, b) for a, b in zip(new, old_fits))
