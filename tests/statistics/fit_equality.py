@@ -41,3 +41,38 @@ def fit_datasets(rng: np.random.Generator, n: int) -> list[np.ndarray]:
         n_per_level = int(rng.choice([5, 15, 40, 1000]))
         out.append(np.c_[LEVELS, rng.binomial(n_per_level, pc_2afc(LEVELS, thr, sigma, lapse)), np.full(5, n_per_level)])
     return out
+
+
+def random_data(rng: np.random.Generator, n_levels: int | None = None) -> np.ndarray:
+    """Random (level, correct, trials) rows: 2-8 levels (some outside 0-1), 1-59 trials each, some rows with
+    no correct answer and some all correct."""
+    n_levels = int(rng.integers(2, 9)) if n_levels is None else n_levels
+    levels = np.sort(rng.choice(np.r_[np.linspace(0, 1, 11), rng.uniform(-0.5, 1.5, 5)], n_levels, replace=False))
+    n = rng.integers(1, 60, n_levels).astype(float)
+    p = rng.uniform(0.0, 1.0, n_levels)
+    k = rng.binomial(n.astype(int), p).astype(float)
+    k[rng.random(n_levels) < 0.2] = 0.0  # rows with no correct answer
+    full = rng.random(n_levels) < 0.3
+    k[full] = n[full]  # and rows all correct
+    return np.c_[levels, k, n]
+
+
+def fit_grid(rng: np.random.Generator, eta_free: bool = False) -> dict[str, np.ndarray]:
+    """A posterior grid over psignifit's usual parameter ranges."""
+    return {
+        "eta": np.sort(rng.uniform(0.0, 0.9, 3)) if eta_free else np.array([0.0]),
+        "gamma": np.array([0.5]),
+        "lambda": np.linspace(0.0, rng.uniform(0.05, 0.5), int(rng.integers(1, 9))),
+        "threshold": np.linspace(*np.sort(rng.uniform(-0.3, 1.3, 2)), int(rng.integers(1, 12))),
+        "width": np.linspace(*np.sort(rng.uniform(0.05, 3.0, 2)), int(rng.integers(1, 12))),
+    }
+
+
+def tabulated_priors(data: np.ndarray) -> dict:
+    """psignifit's tabulated 2AFC priors for the levels of ``data`` (psyop's cached tabulation)."""
+    import psignifit
+
+    from psyop.statistics import psychometric as psy
+
+    conf = psignifit.Configuration(experiment_type="2AFC", sigmoid="norm", verbose=False)
+    return psy._bounds_and_priors(conf, data[:, 0], None)[1]

@@ -24,7 +24,7 @@ from psignifit._parameter import parameter_grid
 
 from psyop.statistics import psychometric as psy
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
-from fit_equality import LEVELS, fit_datasets, same_bits, same_fit
+from fit_equality import LEVELS, fit_datasets, fit_grid, random_data, same_bits, same_fit, tabulated_priors
 
 SIGMOID = psignifit.sigmoids.sigmoid_by_name("norm", PC=0.5, alpha=0.05)
 
@@ -127,33 +127,10 @@ def _random_grid(rng, eta_free=False):
             "width": _widths(rng, n_width)}
 
 
-def _priors(data):
-    """psignifit's tabulated 2AFC priors over bounds that hold ``grid``."""
-    conf = psignifit.Configuration(experiment_type="2AFC", sigmoid="norm", verbose=False)
-    return psy._bounds_and_priors(conf, data[:, 0], None)[1]
 
 
-def _random_data(rng, n_levels=None):
-    n_levels = int(rng.integers(2, 9)) if n_levels is None else n_levels
-    levels = np.sort(rng.choice(np.r_[np.linspace(0, 1, 11), rng.uniform(-0.5, 1.5, 5)], n_levels, replace=False))
-    n = rng.integers(1, 60, n_levels).astype(float)
-    p = rng.uniform(0.0, 1.0, n_levels)
-    k = rng.binomial(n.astype(int), p).astype(float)
-    k[rng.random(n_levels) < 0.2] = 0.0  # rows with no correct answer
-    full = rng.random(n_levels) < 0.3
-    k[full] = n[full]  # and rows all correct
-    return np.c_[levels, k, n]
 
 
-def _fit_grid(rng, eta_free=False):
-    """A posterior grid over psignifit's usual parameter ranges."""
-    return {
-        "eta": np.sort(rng.uniform(0.0, 0.9, 3)) if eta_free else np.array([0.0]),
-        "gamma": np.array([0.5]),
-        "lambda": np.linspace(0.0, rng.uniform(0.05, 0.5), int(rng.integers(1, 9))),
-        "threshold": np.linspace(*np.sort(rng.uniform(-0.3, 1.3, 2)), int(rng.integers(1, 12))),
-        "width": np.linspace(*np.sort(rng.uniform(0.05, 3.0, 2)), int(rng.integers(1, 12))),
-    }
 
 
 # ---- the 75 %-correct level and the predicted proportion correct -----------------------------------------------
@@ -223,9 +200,9 @@ def test_predicted_pc_is_psignifits_sigmoid_bit_for_bit():
 def test_log_posterior_and_posterior_bit_for_bit():
     rng = np.random.default_rng(33)
     for i in range(150):
-        data = _random_data(rng)
-        priors = _priors(data)
-        grid = _fit_grid(rng, eta_free=i % 5 == 0)
+        data = random_data(rng)
+        priors = tabulated_priors(data)
+        grid = fit_grid(rng, eta_free=i % 5 == 0)
         assert same_bits(psy.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid))
         post, best = psy.posterior_2afc(data, priors, grid)
         old_post, old_best = _old_posterior_2afc(data, priors, grid)
@@ -239,9 +216,9 @@ def test_log_posterior_and_posterior_bit_for_bit():
 def test_refine_map_bit_for_bit():
     rng = np.random.default_rng(34)
     for _ in range(100):
-        data = _random_data(rng)
-        priors = _priors(data)
-        grid = _fit_grid(rng)
+        data = random_data(rng)
+        priors = tabulated_priors(data)
+        grid = fit_grid(rng)
         best = {n: float(rng.choice(np.atleast_1d(v))) for n, v in grid.items()}
         assert psy._refine_map(data, priors, grid, best) == _old_refine_map(data, priors, grid, best)
 

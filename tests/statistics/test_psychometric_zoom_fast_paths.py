@@ -16,7 +16,7 @@ from scipy import special
 
 from psyop.statistics import psychometric as psy
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
-from fit_equality import LEVELS, fit_datasets, same_bits, same_fit
+from fit_equality import LEVELS, fit_datasets, fit_grid, random_data, same_bits, same_fit, tabulated_priors
 
 
 
@@ -109,38 +109,18 @@ def test_with_point_is_unique_of_append():
         assert ours is not values
 
 
-def _random_data(rng):
-    n_levels = int(rng.integers(2, 9))
-    levels = np.sort(rng.choice(np.r_[np.linspace(0, 1, 11), rng.uniform(-0.5, 1.5, 5)], n_levels, replace=False))
-    n = rng.integers(1, 60, n_levels).astype(float)
-    k = rng.binomial(n.astype(int), rng.uniform(0.0, 1.0, n_levels)).astype(float)
-    k[rng.random(n_levels) < 0.2] = 0.0
-    full = rng.random(n_levels) < 0.3
-    k[full] = n[full]
-    return np.c_[levels, k, n]
 
 
-def _fit_grid(rng, eta_free=False):
-    return {
-        "eta": np.sort(rng.uniform(0.0, 0.9, 3)) if eta_free else np.array([0.0]),
-        "gamma": np.array([0.5]),
-        "lambda": np.linspace(0.0, rng.uniform(0.05, 0.5), int(rng.integers(1, 9))),
-        "threshold": np.linspace(*np.sort(rng.uniform(-0.3, 1.3, 2)), int(rng.integers(1, 12))),
-        "width": np.linspace(*np.sort(rng.uniform(0.05, 3.0, 2)), int(rng.integers(1, 12))),
-    }
 
 
-def _priors(data):
-    conf = psignifit.Configuration(experiment_type="2AFC", sigmoid="norm", verbose=False)
-    return psy._bounds_and_priors(conf, data[:, 0], None)[1]
 
 
 def test_log_posterior_views_are_the_meshgrid():
     rng = np.random.default_rng(43)
     for i in range(150):
-        data = _random_data(rng)
-        priors = _priors(data)
-        grid = _fit_grid(rng, eta_free=i % 5 == 0)
+        data = random_data(rng)
+        priors = tabulated_priors(data)
+        grid = fit_grid(rng, eta_free=i % 5 == 0)
         if i % 7 == 0:
             grid = {k: (float(v[0]) if i % 2 else list(v)) for k, v in grid.items()}  # scalars and lists
         new, old = psy.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid)
@@ -151,9 +131,9 @@ def test_log_posterior_views_are_the_meshgrid():
 def test_shrink_and_refine_map_bit_for_bit():
     rng = np.random.default_rng(44)
     for _ in range(100):
-        data = _random_data(rng)
-        priors = _priors(data)
-        grid = _fit_grid(rng)
+        data = random_data(rng)
+        priors = tabulated_priors(data)
+        grid = fit_grid(rng)
         best = {n: float(rng.choice(np.atleast_1d(v))) for n, v in grid.items()}
         bounds = {"eta": (0.0, 0.0), "gamma": (0.5, 0.5), "lambda": (0.0, 0.5), "threshold": (-0.5, 1.5),
                   "width": (0.01, 5.0)}
