@@ -90,7 +90,7 @@ def cell_means(trials: pd.DataFrame, dv: str, within: Sequence[str], subject: st
 def find_incomplete_subjects(data: pd.DataFrame, dv: str, within: Sequence[str], subject: str) -> pd.DataFrame:
     """Subjects lacking a finite ``dv`` in some within-cell, with the missing cells named."""
     within = list(within)
-    if data.columns.is_unique and _is_complete_grid(data, dv, within, subject):
+    if _is_complete_grid(data, dv, within, subject):
         return pd.DataFrame([], columns=["subject", "reason"])  # every subject has every cell
     levels = [sorted(data[w].dropna().unique(), key=str) for w in within]
     complete = data[np.isfinite(pd.to_numeric(data[dv], errors="coerce"))]
@@ -137,7 +137,10 @@ def _check_enough_subjects(kept: pd.DataFrame, subject: str, need: int, what: st
 
 def _is_complete_grid(data: pd.DataFrame, dv: str, within: Sequence[str], subject: str) -> bool:
     """Whether ``data`` holds exactly one row with a finite ``dv`` for every subject and combination of
-    levels, with no missing subject or level and no categorical key (the usual complete design)."""
+    levels, with no missing subject or level and no categorical key (the usual complete design); a frame
+    with repeated column names is never taken for one."""
+    if not data.columns.is_unique:
+        return False
     keys = data[[subject, *within]]
     if any(isinstance(keys[c].dtype, pd.CategoricalDtype) for c in keys) or keys.isna().to_numpy().any():
         return False
@@ -153,7 +156,7 @@ def _complete_grid_values(data: pd.DataFrame, dv: str, within: Sequence[str], su
     and its number of first-factor levels for a complete design (:func:`_is_complete_grid`; None
     otherwise): each value placed at its keys' sorted codes (``pd.factorize(sort=True)``, the
     groupby's order), in the pivot's memory layout (row-major subject x cells, as its unstack builds it)."""
-    if not data.columns.is_unique or not _is_complete_grid(data, dv, within, subject):
+    if not _is_complete_grid(data, dv, within, subject):
         return None
     codes = [pd.factorize(data[c], sort=True) for c in (subject, *within)]
     shape = tuple(len(uniques) for _, uniques in codes)
