@@ -32,6 +32,12 @@ from scipy import stats
 #: unreliable (Tipton 2015, "Small sample adjustments for robust variance estimation with
 #: meta-regression", Psychol. Methods 20:375: Satterthwaite df < 4 do not keep the nominal level).
 MIN_RELIABLE_DF = 4.0
+#: the smallest eigenvalue of C V C' relative to its largest below which the contrasts' covariance is taken as
+#: singular and the test refused. A covariance that is singular in exact arithmetic (2 clusters of the same design
+#: and 2 contrasts: the CR2 scores sum to zero) comes out of floating point with a smallest eigenvalue of a few
+#: 1e-16 of the largest, positive or negative by the last bits of the CPU's kernels; 1e-9 sits six orders of
+#: magnitude above that noise, so the same data are refused on every machine (tests/statistics/test_small_sample.py)
+SINGULAR_RATIO = 1e-9
 
 
 @dataclass(frozen=True)
@@ -97,8 +103,8 @@ def cr2_test(x: np.ndarray, y: np.ndarray, clusters: np.ndarray, contrasts: np.n
 
     Raises
     ------
-    ValueError : fewer than 2 clusters, a rank-deficient design, or C V C' not positive definite (a
-        contrast no cluster informs): the test cannot be computed.
+    ValueError : fewer than 2 clusters, a rank-deficient design, or C V C' singular (its smallest eigenvalue
+        not above :data:`SINGULAR_RATIO` of its largest: a contrast no cluster informs): the test cannot be computed.
     """
     x = np.asarray(x, float)
     y = np.asarray(y, float)
@@ -115,11 +121,12 @@ def cr2_test(x: np.ndarray, y: np.ndarray, clusters: np.ndarray, contrasts: np.n
     cb = c @ beta
     scores = g @ y  # q x J
     v = scores @ scores.T  # C V^CR2 C'
-    try:
-        chol = np.linalg.cholesky(v)
-    except np.linalg.LinAlgError as exc:
-        raise ValueError("the CR2 covariance of the contrasts is not positive definite; the test cannot be "
-                         "computed") from exc
+    eigenvalues = np.linalg.eigvalsh(v)
+    if not eigenvalues[0] > SINGULAR_RATIO * max(float(eigenvalues[-1]), 0.0):
+        raise ValueError(f"the CR2 covariance of the contrasts is singular (smallest eigenvalue {eigenvalues[0]:.3g} "
+                         f"of largest {eigenvalues[-1]:.3g}, ratio below {SINGULAR_RATIO:g}: with {n_clusters} "
+                         f"clusters the {q} contrast(s) are not all informed); the test cannot be computed")
+    chol = np.linalg.cholesky(v)
     z = np.linalg.solve(chol, cb)
     wald_q = float(z @ z)
     # P[s, t, j, k] = g_sj' g_tk ; Omega = sum_j P[:, :, j, j]
@@ -154,4 +161,4 @@ def low_df_note(df: float, what: str = "error") -> str:
             "unreliable (Tipton 2015); treat it as descriptive")
 
 
-__all__ = ["MIN_RELIABLE_DF", "ClusterRobustTest", "cr2_vcov", "cr2_test", "low_df_note"]
+__all__ = ["MIN_RELIABLE_DF", "SINGULAR_RATIO", "ClusterRobustTest", "cr2_vcov", "cr2_test", "low_df_note"]

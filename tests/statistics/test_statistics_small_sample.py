@@ -58,3 +58,40 @@ def test_one_cluster_is_refused():
     d, x = _design(3)
     with pytest.raises(ValueError, match="at least 2 clusters"):
         cr2_test(x, d["y"], np.zeros(len(d)), np.eye(4)[3])
+
+
+def _balanced_two_clusters(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Two participants with the same design rows (egocentric's: target fractions x two renderings), y random."""
+    xc = np.tile(np.repeat([-0.3, -0.1, 0.1, 0.3], 2), 2)
+    other = np.tile([0.0, 1.0], 8)
+    x = np.column_stack([np.ones(16), xc, other, xc * other])
+    return x, rng.normal(size=16), np.repeat(["S01", "S02"], 8)
+
+
+def test_two_balanced_clusters_refuse_two_contrasts_whatever_the_last_bits():
+    """Two clusters of the same design cannot inform two contrasts: the CR2 scores sum to zero in exact arithmetic,
+    so C V C' is singular and its smallest eigenvalue is rounding noise, of either sign by the CPU's kernels (an
+    AVX-512 machine refused the joint test where an AVX2 one returned p = 0.99999999999999). Refused on every draw,
+    with the last bits of x and y perturbed as another machine's kernels would perturb them."""
+    from psyop.statistics.small_sample import SINGULAR_RATIO, _g_vectors
+
+    rng = np.random.default_rng(39)
+    joint = np.eye(4)[2:]
+    for _ in range(200):
+        x, y, cl = _balanced_two_clusters(rng)
+        y = y * (1.0 + rng.uniform(-4, 4, size=y.shape) * np.finfo(float).eps)
+        g, _ = _g_vectors(x, cl, joint)
+        eigenvalues = np.linalg.eigvalsh((g @ y) @ (g @ y).T)
+        assert abs(eigenvalues[0]) < 1e-6 * SINGULAR_RATIO * eigenvalues[-1]  # noise, far below the threshold
+        with pytest.raises(ValueError, match="singular"):
+            cr2_test(x, y, cl, joint)
+        assert np.isfinite(cr2_test(x, y, cl, joint[1]).p)  # one contrast: informed, a number
+
+
+def test_an_informed_contrast_pair_is_not_refused():
+    """The threshold refuses only the singular case: two clusters of different designs inform both contrasts."""
+    rng = np.random.default_rng(40)
+    x, y, cl = _balanced_two_clusters(rng)
+    x[8:, 1] = x[8:, 1] * 1.7 + 0.05  # S02's targets at other distances
+    x[:, 3] = x[:, 1] * x[:, 2]
+    assert np.isfinite(cr2_test(x, y, cl, np.eye(4)[2:]).wald_q)
