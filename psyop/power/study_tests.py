@@ -42,6 +42,16 @@ class TestOutcome:
 
     __test__ = False  # not a pytest class
 
+    def same_as(self, other: TestOutcome) -> bool:
+        """Equal test, note and flag, and the same p value (two NaN p values are the same: a refused test)."""
+        return ((self.test, self.note, self.flag) == (other.test, other.note, other.flag)
+                and (self.p == other.p or (math.isnan(self.p) and math.isnan(other.p))))
+
+
+def same_outcomes(a: tuple[TestOutcome, ...] | list[TestOutcome], b: tuple[TestOutcome, ...] | list[TestOutcome]) -> bool:
+    """Two replications' outcomes are the same, test by test (:meth:`TestOutcome.same_as`)."""
+    return len(a) == len(b) and all(x.same_as(y) for x, y in zip(a, b))
+
 
 def _not_computed(test: str, exc: Exception) -> TestOutcome:
     return TestOutcome(test, math.nan, f"not computed: {exc}")
@@ -149,7 +159,7 @@ def reach_tests(trials: pd.DataFrame, reference: str = "disabled") -> list[TestO
         out += [_not_computed(n, exc) for n in REACH_PRIMARY]
     else:
         flag = f"fallback to {m.method}: {m.fallback_reason}" if m.fallback_reason else ""
-        out += [TestOutcome(n, float(p), flag=flag)
+        out += [TestOutcome(n, float(p), note=m.flag_text if math.isnan(p) else "", flag=flag)
                 for n, p in zip(REACH_PRIMARY, (m.slope_diff_p, m.intercept_diff_p, m.joint_p))]
     try:
         c = condition_interaction(t, "target_fraction", "reach_fraction", "rendering", reference)
