@@ -63,6 +63,16 @@ class SimulatedObserver(ABC):
     def collect(self, row: TrialRow, now_s: float) -> Response:
         """The simulated answer to ``row`` (at once: a simulated observer never waits)."""
 
+    def decision(self, row: TrialRow) -> tuple[float, float] | None:
+        """``(u, p)``: the trial's uniform draw and the probability it is compared with (the answer is the
+        probable one when ``u < p``), or None for an observer whose answer is not one such draw (reach).
+
+        ``u`` is exact on every machine (integers from the keyed stream, times 2**-53); ``p`` goes through
+        libm (``math.erf``) and numpy's normal draws, whose last bits may differ between CPUs and libm builds.
+        An answer can therefore differ between machines only where ``|u - p|`` is within those bits, about
+        1e-16: tests/session/test_observer_margins.py measures the margins of the shipped studies."""
+        return None
+
     def timed_out(self) -> None:
         return None
 
@@ -102,9 +112,13 @@ class Psychometric2AFC(SimulatedObserver):
         x = float(row[self.level_column])
         return 0.5 + (0.5 - self.lapse) * _phi((x - self.threshold_for(row)) / self.width_D)
 
-    def collect(self, row: TrialRow, now_s: float) -> Response:
+    def decision(self, row: TrialRow) -> tuple[float, float]:
         # the trial stream's one uniform (trial_rng(row).uniform(), without re-seeding a Generator)
-        correct = bool(keyed_uniform(*self.trial_keys(row)) < self.p_correct(row))
+        return keyed_uniform(*self.trial_keys(row)), self.p_correct(row)
+
+    def collect(self, row: TrialRow, now_s: float) -> Response:
+        u, p = self.decision(row)
+        correct = bool(u < p)
         right = int(row["correct_interval"])
         answer = right if correct else 3 - right
         return score(self.kind, row, str(answer))
@@ -142,8 +156,12 @@ class OrdinalAccuracy(SimulatedObserver):
             raise UserError(f"observer: no p_correct for mode={key[0]!r}, separation_D={key[1]}", "protocol observer")
         return float(np.clip(self.table[key] + self.participant_shift, 0.0, 1.0))
 
+    def decision(self, row: TrialRow) -> tuple[float, float]:
+        return float(self.trial_rng(row).uniform()), self.p_correct(row)
+
     def collect(self, row: TrialRow, now_s: float) -> Response:
-        correct = bool(self.trial_rng(row).uniform() < self.p_correct(row))
+        u, p = self.decision(row)
+        correct = bool(u < p)
         near = str(row["near_side"])
         other = "left" if near == "right" else "right"
         return score(self.kind, row, near if correct else other)
@@ -168,8 +186,12 @@ class PairwisePreference(SimulatedObserver):
                 raise UserError(f"observer: no strength for mode {mode!r}", "protocol observer")
         return self.strengths[a] / (self.strengths[a] + self.strengths[b])
 
+    def decision(self, row: TrialRow) -> tuple[float, float]:
+        return float(self.trial_rng(row).uniform()), self.p_a(row)
+
     def collect(self, row: TrialRow, now_s: float) -> Response:
-        return score(self.kind, row, "a" if self.trial_rng(row).uniform() < self.p_a(row) else "b")
+        u, p = self.decision(row)
+        return score(self.kind, row, "a" if u < p else "b")
 
 
 class Reach(SimulatedObserver):
@@ -264,8 +286,12 @@ class NcNulling(SimulatedObserver):
         z = (self.rendered_nc_mm(row) - self.own_nc_mm) / self.width_mm
         return self.lapse + (1.0 - 2.0 * self.lapse) * _phi(z)
 
+    def decision(self, row: TrialRow) -> tuple[float, float]:
+        return float(self.trial_rng(row).uniform()), self.p_against(row)
+
     def collect(self, row: TrialRow, now_s: float) -> Response:
-        return score(self.kind, row, "against" if self.trial_rng(row).uniform() < self.p_against(row) else "with")
+        u, p = self.decision(row)
+        return score(self.kind, row, "against" if u < p else "with")
 
 
 OBSERVERS: dict[str, type[SimulatedObserver]] = {
