@@ -12,14 +12,15 @@ JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 export MPLBACKEND := Agg
 export PYTHONHASHSEED := 0
 
-.PHONY: figures test lint bench power power-run clean venv sysdeps help
+.PHONY: figures test test-cross-cpu lint bench power power-run clean venv sysdeps help
 
 help:
 	@echo "make figures  - simulate sessions if data/ is empty, say which sessions are used, rebuild every figure and table"
 	@echo "                (MIX=1: allow a study to pool simulated and real sessions;"
 	@echo "                 POOL=1: pool a study's protocol versions; default: each analysed apart as <study>@<hash12>)"
 	@echo "make resimulate - delete the simulated sessions in data/ (refused if any is real), then make figures"
-	@echo "make test     - run make lint, then the whole test suite"
+	@echo "make test     - run make lint, then the whole test suite, then its cross_cpu tests with numpy and OpenBLAS narrowed to AVX2"
+	@echo "make test-cross-cpu - only the tests that depend on the CPU's float kernels, with AVX-512 and narrowed to AVX2"
 	@echo "make lint     - ruff and mypy over psyop/ (and lint-imports once pyproject.toml has a contract)"
 	@echo "make bench    - run the benchmarks; results in bench/"
 	@echo "make power    - power curves of the five shipped studies by simulation; results in power/"
@@ -62,8 +63,25 @@ lint: $(STAMP)
 	"$(VENV)/bin/mypy"
 	@if grep -q '^\[tool.importlinter\]' pyproject.toml; then "$(VENV)/bin/lint-imports"; fi
 
+# The tests whose results depend on the CPU's float kernels (marker cross_cpu) run a second time with numpy's
+# SIMD dispatch and OpenBLAS's kernel narrowed to AVX2, so a machine with AVX-512 also checks the machines
+# without it (and one without it repeats them); docs/architecture.md, "Reproducibility across CPUs".
+# x86-64 only: the names are x86 kernels.
+NARROW_CPU_ENV := NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR" OPENBLAS_CORETYPE=Haswell
+ifeq ($(shell uname -m),x86_64)
+CROSS_CPU_RUN = $(NARROW_CPU_ENV) "$(PY)" -m pytest -n $(JOBS) -q -m cross_cpu -p no:cacheprovider
+else
+CROSS_CPU_RUN = @echo "[psyop] not x86-64: the cross_cpu tests ran once, with this machine's kernels"
+endif
+
 test: lint $(STAMP) $(SYSDEPS_STAMP)
 	"$(PY)" -m pytest -n $(JOBS) -q
+	$(CROSS_CPU_RUN)
+
+# only the cross_cpu tests, both ways (the machine's widest kernels, then narrowed to AVX2)
+test-cross-cpu: $(STAMP) $(SYSDEPS_STAMP)
+	"$(PY)" -m pytest -n $(JOBS) -q -m cross_cpu
+	$(CROSS_CPU_RUN)
 
 bench: $(STAMP) $(SYSDEPS_STAMP)
 	@mkdir -p bench

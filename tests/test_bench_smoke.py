@@ -3,6 +3,8 @@ agreement check is tests/power/test_direct_pairing.py)."""
 
 from pathlib import Path
 
+import pytest
+
 
 def test_bench_adaptive_quick_writes_every_table(tmp_path: Path) -> None:
     from benchmarks import bench_adaptive
@@ -93,6 +95,7 @@ def test_bench_frame_cpu_quick_reports_every_protocol_before_and_after(tmp_path:
     assert "nan" not in report
 
 
+@pytest.mark.cross_cpu
 def test_bench_power_stages_quick_reports_both_paths_for_every_study(tmp_path: Path) -> None:
     from benchmarks import bench_power_stages
 
