@@ -8,9 +8,12 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from psyop.optics import rotation
+
+pytestmark = pytest.mark.cross_cpu
 
 
 def _former_rotation_matrix(orientation_wxyz: Sequence[float]) -> np.ndarray:

@@ -14,6 +14,7 @@ from psyop.optics.display import DisplayProfile, VIVE_PRO, display_profile_from_
 NC = 0.0076916
 
 
+@pytest.mark.cross_cpu
 @pytest.mark.parametrize("eye", ["left", "right"])
 @pytest.mark.parametrize("mode", ["conventional", "ocular", "reversed"])
 @pytest.mark.parametrize("fixation", [(0.1, -0.05, -0.8), (0.0, 0.0, -1e4, 0.0), (-0.3, 0.2, -0.4)])

@@ -10,6 +10,8 @@ from psyop.errors import UserError
 from psyop.power.direct import direct_trials, run_direct_replication
 from psyop.power.replicate import ReplicationTask, run_replication
 
+pytestmark = pytest.mark.cross_cpu
+
 ROOT = Path(__file__).resolve().parents[2]
 
 

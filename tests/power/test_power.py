@@ -39,6 +39,7 @@ def test_power_table_counts_and_clopper_pearson() -> None:
     table = power_table(results, alpha=0.05)
     slope = table[table["test"] == "slope"].iloc[0]
     assert slope["power"] == 0.5 and slope["n_significant"] == 2 and slope["n_replications"] == 4
+    # Clopper-Pearson for 2 of 4, given to 7 decimals (0.0675865, 0.9324135): abs=1e-6 is that rounding with room
     assert slope["ci_low"] == pytest.approx(0.0675865, abs=1e-6) and slope["ci_high"] == pytest.approx(0.9324135, abs=1e-6)
     anova = table[table["test"] == "anova"].iloc[0]
     assert anova["power"] == 0.0 and anova["n_not_computed"] == 4

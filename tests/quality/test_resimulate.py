@@ -23,6 +23,8 @@ from psyop.schedule import compile_schedule
 from psyop.session.log.record import SessionRecord
 from tests.session.session_helpers import small_protocol
 
+pytestmark = pytest.mark.cross_cpu  # rebuilt gaze stream against the recorded one, times exactly and positions to a tolerance
+
 AXES = [f"fixation_{a}_m" for a in "xyz"]
 
 

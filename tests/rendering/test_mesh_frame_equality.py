@@ -23,6 +23,8 @@ from psyop.session.plan import compile_plan
 from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
 from tests.rendering.former_mesh_pass import FormerMeshPass
 
+pytestmark = pytest.mark.cross_cpu  # mesh pass against the former pass, every pixel
+
 REPO = Path(__file__).resolve().parents[2]
 
 

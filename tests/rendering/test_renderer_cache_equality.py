@@ -19,6 +19,8 @@ from psyop.rendering.renderer import create_headless_context
 from psyop.rendering.scene import GridMaterial, NoiseTexture, Primitive, Shape, SineBorder
 from psyop.rendering.screen_bounds import screen_bounds_px
 
+pytestmark = pytest.mark.cross_cpu  # vectorised and cached against former paths, bit for bit
+
 IPD_M, NC_M = 0.064, 0.0076916
 
 

@@ -32,6 +32,7 @@ def test_stream_of_a_target_without_catch_ups_is_empty() -> None:
     assert CatchUpStream(target.positions, PursuitParams(1.0, 0.02, 1.5, 500.0, 8.0), keyed_rng(1)).through(5.0) == []
 
 
+@pytest.mark.cross_cpu
 def test_target_positions_equal_offset_direction_bit_for_bit() -> None:
     target = circling_target(12.0, -75.0, 200.0, (4.0, 1.5))
     t = np.arange(3000) * 0.0005

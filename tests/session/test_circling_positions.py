@@ -6,9 +6,12 @@ phases), random times (scalar, empty, thousands), and to calling the target one 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from psyop.optics.angles import fick_angles_deg, offset_direction_in
 from psyop.session.gaze.plan import circling_target
+
+pytestmark = pytest.mark.cross_cpu  # fast per-component positions against their definition, bit for bit
 
 
 def _by_definition(target, t_rel_s) -> np.ndarray:

@@ -27,6 +27,8 @@ from psyop.run.runner import SessionOptions, run_session
 from psyop.session.scene_renderer import WATCHED_CHECK_EVERY, SceneRenderer
 from tests.session.session_helpers import fast_protocol
 
+pytestmark = pytest.mark.cross_cpu  # cached against former scene path: scenes, images and tables equal
+
 HEADS = (((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)),  # no tracking: the scene object passes through
          ((0.01, -0.02, 0.005), (0.9990482, 0.0, 0.0436194, 0.0)))  # a tracked head, 5 deg yaw
 

@@ -21,6 +21,8 @@ from psyop.statistics.anova import (ANOVA_COLUMNS, AnovaResult, ZERO_SS_REL, Ano
                                     _quiet_pingouin, _row, check_level_names, error_sums_of_squares,
                                     find_incomplete_subjects, rm_anova)
 
+pytestmark = pytest.mark.cross_cpu  # fast paths against the former code beside them, bit for bit
+
 
 # ---- the former implementations ----------------------------------------------------------------------------------
 

@@ -26,6 +26,8 @@ from psyop.statistics import psychometric as psy
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
 from fit_equality import LEVELS, fit_datasets, fit_grid, random_data, same_bits, same_fit, tabulated_priors
 
+pytestmark = pytest.mark.cross_cpu  # fast paths against the former code beside them, bit for bit
+
 SIGMOID = psignifit.sigmoids.sigmoid_by_name("norm", PC=0.5, alpha=0.05)
 
 

@@ -18,6 +18,8 @@ from psyop.statistics import psychometric as psy
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
 from fit_equality import LEVELS, fit_datasets, fit_grid, random_data, same_bits, same_fit, tabulated_priors
 
+pytestmark = pytest.mark.cross_cpu  # fast paths against the former code beside them, bit for bit
+
 
 
 # ---- the former implementations -----------------------------------------------------------------------------------

@@ -18,6 +18,8 @@ import statsmodels.formula.api as smf
 
 from psyop.statistics.regression import LinearFit, _clean, linear_fit
 
+pytestmark = pytest.mark.cross_cpu
+
 
 def _old_linear_fit(data: pd.DataFrame, x: str, y: str) -> LinearFit:
     d = _clean(data, [x, y]).rename(columns={x: "x", y: "y"}).astype(float)

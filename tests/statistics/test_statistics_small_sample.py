@@ -12,6 +12,8 @@ import pytest
 from psyop.statistics.regression import mixed_condition_comparison
 from psyop.statistics.small_sample import MIN_RELIABLE_DF, cr2_test, cr2_vcov
 
+pytestmark = pytest.mark.cross_cpu
+
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "r"
 
 
