@@ -32,13 +32,23 @@ import msgpack
 import zmq
 
 
+#: the eye fields of Capture's binocular 3-D gaze datum ('gaze.3d.01.', Pupil Core Network API, gaze datum
+#: format; pupil_src/shared_modules/gaze_mapping/gazer_3d): maps keyed by the eye ids 0 and 1 as integers, and
+#: both eyes' pupil data in base_data
+BINOCULAR_FIELDS = {"eye_centers_3d": {0: [30.0, 10.0, -20.0], 1: [-30.0, 10.0, -20.0]},
+                    "gaze_normals_3d": {0: [0.0, 0.0, 1.0], 1: [0.1, 0.0, 0.995]},
+                    "base_data": [{"topic": "pupil.0.3d", "id": 0, "diameter": 41.0, "diameter_3d": 3.1, "confidence": 0.95},
+                                  {"topic": "pupil.1.3d", "id": 1, "diameter": 43.0, "diameter_3d": 3.3, "confidence": 0.95}]}
+
+
 class FakePupilCapture:
     def __init__(self, *, offset_s: float = 1000.0, drift: float = 0.0, rate_hz: float = 120.0,
                  point_mm: tuple[float, float, float] = (100.0, -50.0, 800.0), confidence: float = 0.95,
-                 skip_every: int = 0, low_confidence_every: int = 0) -> None:
+                 skip_every: int = 0, low_confidence_every: int = 0, binocular: bool = False) -> None:
         self.offset_s, self.drift, self.rate_hz = offset_s, drift, rate_hz
         self.point_mm, self.confidence = point_mm, confidence
         self.skip_every, self.low_confidence_every = skip_every, low_confidence_every
+        self.binocular = binocular  # publish Capture's binocular 3-D gaze datum (integer-keyed eye maps)
         self.t_delay_s = 0.0
         self.t_reply: str | None = None
         self.gaze_time_shift_s = 0.0
@@ -184,6 +194,8 @@ class FakePupilCapture:
             stamp = self.gaze_timestamp if self.gaze_timestamp is not None else self.pupil_time() + self.gaze_time_shift_s
             payload = {"topic": "gaze.3d.01.", "timestamp": stamp, "confidence": confidence,
                        "gaze_point_3d": list(self.point_mm), "norm_pos": [0.5, 0.5]}
+            if self.binocular:
+                payload.update(BINOCULAR_FIELDS)
             self._send([b"gaze.3d.01.", msgpack.packb(payload, use_bin_type=True)])
             self.sent += 1
         with self._pub_lock:

@@ -127,3 +127,28 @@ def test_session_stops_cleanly_when_pupil_disconnects_mid_trial(tmp_path: Path) 
     final = pd.read_parquet(session / "trials.parquet")
     assert final["trial"].tolist() == list(range(15))
     assert math.isfinite(final["drift_correction_deg"].iloc[-1])
+
+
+def test_capture_binocular_datum_with_integer_eye_keys_is_decoded_over_the_wire() -> None:
+    """Capture's binocular 3-D gaze keys its eye maps by the integers 0 and 1; msgpack's default
+    strict_map_key refused them, so every such datum was counted malformed. Through a real ZMQ/msgpack round
+    trip both eyes now reach the raw stream (eye 1 is the left eye)."""
+    import msgpack
+    from pupil_server import BINOCULAR_FIELDS
+
+    with pytest.raises(ValueError):  # what the client did before: msgpack's default refuses integer keys
+        msgpack.unpackb(msgpack.packb(BINOCULAR_FIELDS, use_bin_type=True), raw=False)
+    server = FakePupilCapture(binocular=True)
+    clock = RealClock()
+    client = PupilClient("127.0.0.1", server.port, clock=clock.now_s, n_sync=5)
+    try:
+        client.start()
+        wait_until(lambda: client.stats()["samples_received"] >= 5, what="5 binocular gaze messages")
+        assert client.stats()["malformed"] == 0
+        raw = client.drain_raw()
+        assert raw and all(s.left is not None and s.right is not None for s in raw)
+        assert raw[0].left is not None and raw[0].left.centre_m == pytest.approx((-0.03, -0.01, 0.02))
+        assert raw[0].right is not None and raw[0].right.pupil_diameter_mm == 3.1
+    finally:
+        client.close()
+        server.stop()

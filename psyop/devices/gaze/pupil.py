@@ -64,6 +64,17 @@ def _per_eye(payload: JsonObject, plural: str, singular: str, eye_id: int) -> tu
     return None
 
 
+def decode_message(frame: bytes) -> JsonObject:
+    """One msgpack frame of Pupil's IPC backbone, as Capture encodes it: a binocular datum's ``eye_centers_3d``
+    and ``gaze_normals_3d`` are maps keyed by the integers 0 and 1, which msgpack's default ``strict_map_key``
+    refuses. Raises msgpack's or ValueError's exceptions on a malformed frame; a frame that is not a map is a
+    ValueError."""
+    message = msgpack.unpackb(frame, raw=False, strict_map_key=False)
+    if not isinstance(message, dict):
+        raise ValueError(f"a Pupil message is a map, not {type(message).__name__}")
+    return message
+
+
 def pupil_eyes(payload: JsonObject) -> tuple[EyeSample | None, EyeSample | None]:
     """(left, right) eye parts of a Pupil ``gaze.3d`` datum (Pupil's eye 0 is the right eye,
     eye 1 the left): eyeball centre and gaze normal (world camera -> head space) and the pupil
@@ -258,7 +269,7 @@ class PupilClient:
                     continue
                 parts = sub.recv_multipart()
                 try:
-                    note = msgpack.unpackb(parts[1], raw=False)
+                    note = decode_message(parts[1])
                 except (IndexError, ValueError, msgpack.UnpackException):
                     continue
                 subject = str(note.get("subject", ""))
@@ -401,7 +412,7 @@ class PupilClient:
     def _handle(self, parts: list[bytes]) -> None:
         now = self._clock()
         try:
-            payload = msgpack.unpackb(parts[1], raw=False)
+            payload = decode_message(parts[1])
             pupil_t = float(payload["timestamp"])
             confidence = float(payload.get("confidence", 0.0))
             point = payload.get("gaze_point_3d") or (math.nan, math.nan, math.nan)
