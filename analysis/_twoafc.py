@@ -4,29 +4,47 @@ from the protocol its sessions ran (psyop.statistics.studies), or given on the c
 
 from __future__ import annotations
 
+import pandas as pd
+
 from psyop.errors import UserError
 from psyop.session.responses.base import ResponseKind
-from psyop.statistics.studies import StudyFacts
+from psyop.statistics.conditions import CELL_COLUMN, condition_of, describe, with_condition
+from psyop.statistics.studies import FactorFacts, StudyFacts
 
 #: Studies whose sessions carry no protocol (older logs, write_dataset without hashes): the paper's names.
 KNOWN_CONDITIONS = {"detection": "back_D", "discrimination": "offset_D"}
 
 
 def condition_column(facts: StudyFacts, given: str | None) -> str:
-    """``given``, else the protocol's one non-level factor; a UserError when there is none or several."""
+    """``given``, else the protocol's one non-level factor, else (several: numbers and words mixed, say)
+    the column of their crossed cells (psyop.statistics.conditions.CELL_COLUMN); a UserError when there is none."""
     if given:
         return given
     candidates = facts.condition_columns()
-    if len(candidates) == 1:
-        return candidates[0]
-    if not facts.factors and facts.name in KNOWN_CONDITIONS:
+    if not candidates and not facts.factors and facts.name in KNOWN_CONDITIONS:
         return KNOWN_CONDITIONS[facts.name]
     if not candidates:
         raise UserError(f"study {facts.name!r}: no condition factor besides the level factor {facts.level_factor!r} "
                         "(its sessions record no protocol, or the design has one factor); give --condition-column",
                         facts.name)
-    raise UserError(f"study {facts.name!r} has several condition factors ({', '.join(candidates)}); give "
-                    "--condition-column NAME for the one to fit thresholds over", facts.name)
+    return condition_of(candidates)
+
+
+def with_condition_column(trials: pd.DataFrame, facts: StudyFacts, condition: str) -> pd.DataFrame:
+    """``trials`` with the crossed-cell column added when ``condition`` is it (several condition factors)."""
+    if condition != CELL_COLUMN:
+        return trials
+    try:
+        return with_condition(trials, facts.condition_columns())
+    except ValueError as exc:
+        raise UserError(f"study {facts.name!r}: {exc}; give --condition-column", facts.name) from None
+
+
+def condition_facts(facts: StudyFacts, condition: str) -> FactorFacts:
+    """The condition's name, description and unit for labels (the crossed cells say which factors they cross)."""
+    if condition == CELL_COLUMN and len(facts.condition_columns()) > 1:
+        return FactorFacts(CELL_COLUMN, describe(facts.condition_columns()), None)
+    return facts.factor(condition)
 
 
 def level_column(facts: StudyFacts, given: str | None) -> str:

@@ -8,9 +8,15 @@ make still decides what is out of date: its dry run (the command given, run with
 every target downstream of one. This then runs that list. A recipe line
 ``__analyse__ analysis/NAME.py ARGS`` runs NAME's ``main`` in this process exactly as
 ``python analysis/NAME.py ARGS`` does (same argv, same outputs; each script stays runnable alone);
-any other recipe line (``echo``, ``mkdir -p``) runs in bash, as make would run it. As make with
-figures.mk's ``.DELETE_ON_ERROR``: the first step that fails stops the run, its target (its
-``--out``) is deleted if the step changed it, and the exit status is 2.
+any other recipe line (``echo``, ``mkdir -p``) runs in bash, as make would run it.
+
+One study's failure does not stop the others (as ``make -k`` with figures.mk's ``.DELETE_ON_ERROR``):
+a step that fails has its target (its ``--out``) deleted if the step changed it and its error said in
+one line; every step whose target depends on a failed (or skipped) target, by make's own rules (its
+database, ``make -p -q``), is skipped with one line saying why; every other step still runs. The
+summary (``analysis/results_table.py``) collects what the others built: it runs even when some
+study failed, told which (``PSYOP_FAILED_STUDIES``), and says so instead of reading their old
+results. At the end each failure is listed again, one line each, and the exit status is 2.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ import shlex
 import subprocess
 import sys
 import traceback
+from types import TracebackType
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -30,6 +37,11 @@ from pathlib import Path
 MARK = "__analyse__"
 #: make's exit status when a recipe failed
 FAILED_EXIT = 2
+#: scripts that collect every study's results: run even when some study failed (told which, in
+#: :data:`FAILED_STUDIES_ENV`), as a summary of what was built
+COLLECTORS = frozenset({"results_table.py"})
+#: the environment variable naming (comma-separated) the studies whose analysis failed in this run
+FAILED_STUDIES_ENV = "PSYOP_FAILED_STUDIES"
 
 
 @dataclass(frozen=True)
@@ -47,6 +59,16 @@ class Step:
                 return Path(self.argv[i + 1])
             if arg.startswith("--out="):
                 return Path(arg.removeprefix("--out="))
+        return None
+
+    @property
+    def study(self) -> str | None:
+        """The study the step analyses (its ``--study``), None when it names none."""
+        for i, arg in enumerate(self.argv):
+            if arg == "--study" and i + 1 < len(self.argv):
+                return self.argv[i + 1]
+            if arg.startswith("--study="):
+                return arg.removeprefix("--study=")
         return None
 
 
@@ -90,8 +112,9 @@ def run_script(step: Step) -> int:
             return done.code or 0
         print(done.code, file=sys.stderr)
         return 1
-    except Exception:  # noqa: BLE001 - what `python script.py` would do: the traceback, status 1
-        traceback.print_exc()
+    except Exception as exc:  # noqa: BLE001 - a bug: one line naming it and where; the script alone gives the traceback
+        print(f"{step.script.name}: internal error: {_where(exc)}{type(exc).__name__}: {exc} (run it alone for the "
+              f"traceback: python {shlex.join([str(step.script), *step.argv])})", file=sys.stderr)
         return 1
     finally:
         sys.argv = saved_argv
@@ -113,29 +136,100 @@ def _delete_if_changed(target: Path | None, before: tuple[int, int] | None) -> N
         target.unlink()
 
 
-def run_plan(plan: Sequence[Step | str]) -> int:
-    """Run every step in order; stop at the first failure (its changed target deleted)."""
+def _where(exc: BaseException) -> str:
+    """'study_figures.py:59: ' (the innermost frame of ``exc``'s traceback), '' without one."""
+    tb: TracebackType | None = exc.__traceback__
+    frames = traceback.extract_tb(tb) if tb is not None else []
+    return f"{Path(frames[-1].filename).name}:{frames[-1].lineno}: " if frames else ""
+
+
+def prerequisites(make_argv: Sequence[str]) -> dict[str, set[str]]:
+    """Every target's prerequisites, by make's database (``make -p -q``: runs nothing); {} when it cannot be read."""
+    argv = [a for a in make_argv if a not in ("-n", "--dry-run", "--just-print", "--recon")]
+    done = subprocess.run([*argv, "-p", "-q", f"ANALYSE={MARK}"], capture_output=True, text=True)
+    rules: dict[str, set[str]] = {}
+    for line in done.stdout.splitlines():
+        if not line or line[0] in "#\t " or ":" not in line or "=" in line.split(":", 1)[0]:
+            continue
+        target, _, rest = line.partition(":")
+        if rest.startswith(("=", ":")):
+            continue  # a variable (`X := ...`) or a double-colon rule
+        rules.setdefault(target.strip(), set()).update(p for p in rest.split() if p != "|")
+    return rules
+
+
+@dataclass
+class _Run:
+    """What a run of the plan has done so far: the failed and skipped targets, each failure's line."""
+
+    rules: dict[str, set[str]]
+    broken: set[str]
+    failures: list[str]
+    failed_studies: list[str]
+
+    def blocked_by(self, step: Step) -> set[str]:
+        """The failed or skipped targets ``step``'s target depends on (by make's rules or its arguments)."""
+        needs = set(self.rules.get(str(step.target), set())) if step.target is not None else set()
+        needs |= {a for a in step.argv if a in self.broken}
+        return needs & self.broken
+
+    def fail(self, step: Step, status: int) -> None:
+        what = f"study {step.study}: " if step.study else ""
+        self.failures.append(f"{what}{step.script.name} -> {step.target or '(no --out)'} (exit {status})")
+        if step.study and step.study not in self.failed_studies:
+            self.failed_studies.append(step.study)
+        if step.target is not None:
+            self.broken.add(str(step.target))
+
+
+def _run_shell(line: str, state: _Run) -> None:
+    sys.stdout.flush()
+    status = subprocess.run(["bash", "-c", line]).returncode
+    if status:
+        print(f"batch.py: *** [{line}] Error {status}", file=sys.stderr)
+        state.failures.append(f"[{line}] (exit {status})")
+
+
+def _run_step(step: Step, state: _Run) -> None:
+    blocked = state.blocked_by(step)
+    if blocked and step.script.name not in COLLECTORS:
+        print(f"batch.py: skipped {step.target or step.script} ({step.script.name}): it needs "
+              f"{', '.join(sorted(blocked))}, which failed above", file=sys.stderr)
+        if step.target is not None:
+            state.broken.add(str(step.target))
+        return
+    target = step.target
+    before = _stamp(target)
+    os.environ[FAILED_STUDIES_ENV] = ",".join(state.failed_studies)
+    try:
+        status = run_script(step)
+    except KeyboardInterrupt:
+        _delete_if_changed(target, before)
+        raise
+    finally:
+        os.environ.pop(FAILED_STUDIES_ENV, None)
+    sys.stdout.flush()
+    if status:
+        print(f"batch.py: *** [{target or step.script}] Error {status} ({step.script})", file=sys.stderr)
+        _delete_if_changed(target, before)
+        state.fail(step, status)
+
+
+def run_plan(plan: Sequence[Step | str], rules: dict[str, set[str]] | None = None) -> int:
+    """Run every step in order; a failed step's changed target is deleted and the steps that depend on
+    it (``rules``: make's prerequisites) are skipped, the others run; 2 when anything failed."""
+    state = _Run(rules or {}, set(), [], [])
     for step in plan:
         if isinstance(step, str):
-            sys.stdout.flush()
-            status = subprocess.run(["bash", "-c", step]).returncode
-            if status:
-                print(f"batch.py: *** [{step}] Error {status}", file=sys.stderr)
-                return FAILED_EXIT
-            continue
-        target = step.target
-        before = _stamp(target)
-        try:
-            status = run_script(step)
-        except KeyboardInterrupt:
-            _delete_if_changed(target, before)
-            raise
-        sys.stdout.flush()
-        if status:
-            print(f"batch.py: *** [{target or step.script}] Error {status} ({step.script})", file=sys.stderr)
-            _delete_if_changed(target, before)
-            return FAILED_EXIT
-    return 0
+            _run_shell(step, state)
+        else:
+            _run_step(step, state)
+    if not state.failures:
+        return 0
+    print(f"batch.py: {len(state.failures)} step(s) failed (the others ran):", file=sys.stderr)
+    for line in state.failures:
+        print(f"batch.py: *** {line}", file=sys.stderr)
+    return FAILED_EXIT
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -148,7 +242,8 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(dry_run.stderr)
         return dry_run.returncode
     sys.stderr.write(dry_run.stderr)
-    return run_plan(parse_plan(dry_run.stdout))
+    plan = parse_plan(dry_run.stdout)
+    return run_plan(plan, prerequisites(argv) if plan else {})
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from _common import out_path, parser, provenance, read_fits, require_columns, results_file, run, write_json
 import fit_psychometric
-from _twoafc import check_two_interval, condition_column, level_column
+from _twoafc import check_two_interval, condition_column, condition_facts, level_column
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import caption, plot_thresholds
@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     who = f"{n} of {len(everyone)} participants" + (f" (no usable fit: {', '.join(without)})" if without else "")
     mean_note = low_df_note(float(n - 1), "participant") if n > 1 else ""
     mean_note = f" [{mean_note.replace('p-value', 'interval')}]" if mean_note else ""
-    cond_label = facts.factor(cond).label
+    cond_label = condition_facts(facts, cond).label
     key_mean = ("detection threshold (mean over subjects and back distances)" if cond == "back_D"
                 else f"{args.study} threshold (mean over subjects and {cond_label})")
     payload = {

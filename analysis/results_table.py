@@ -12,6 +12,7 @@ study's results go to results/<study>_summary.md: a user's study never changes a
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -38,6 +39,25 @@ def study_results(results: Path) -> list[tuple[Path, dict]]:
         if isinstance(payload, dict) and "analysis" in payload and "study" in payload:
             found.append((path, payload))
     return found
+
+
+def failed_studies() -> list[str]:
+    """The studies whose analysis failed earlier in this run (analysis/batch.py sets
+    ``PSYOP_FAILED_STUDIES``): their results here are from an earlier run, so they are not read."""
+    return [s for s in os.environ.get("PSYOP_FAILED_STUDIES", "").split(",") if s]
+
+
+def failed_lines(failed: list[str], results: Path) -> list[str]:
+    """The summary's section naming the studies not analysed in this run; each one's
+    results/<study>_summary.md says so too (no statistics from an earlier run stay beside it)."""
+    if not failed:
+        return []
+    for study in failed:
+        write_text(results / f"{study}_summary.md", f"# Statistics of study {study}\n\n**Not analysed**: its analysis "
+                   "failed in the last `make figures` (its error is in that run's output); no statistics.\n")
+    return ["## Studies not analysed", "",
+            *(f"- {s}: its analysis failed in this run (the error is above in the run's output); its results "
+              "are left out of this summary" for s in failed), ""]
 
 
 def split_paper(found: list[tuple[Path, dict]], hashes: dict[str, str]) -> tuple[dict[str, dict], list[tuple[Path, dict]]]:
@@ -165,7 +185,11 @@ def main(argv: list[str] | None = None) -> int:
                    "(protocols/<name>.yaml); their hashes pick the paper's results")
     args = p.parse_args(argv)
     out = args.out or args.results / "summary.md"
-    found = study_results(args.results)
+    failed = failed_studies()
+    found = [(path, payload) for path, payload in study_results(args.results) if payload["study"] not in failed]
+    not_analysed = failed_lines(failed, args.results)
+    for study in failed:
+        print(f"[psyop] {study}: not in the summary (its analysis failed in this run)", file=sys.stderr)
     if not found:
         raise UserError("no study results here; run the analysis scripts first (make figures)", str(args.results))
     studies, others = split_paper(found, paper_hashes(args.protocols))
@@ -188,6 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {r['study'].split('_')[0]} | {r['statistic']} | {r['paper']} | {r['psyop']} | {r['agrees']} "
                      f"| {r['criteria']} |")
     lines.append("")
+    lines += not_analysed
     lines += versions_lines([p for _, p in found])
     lines += _methods(studies)
     lines += quality_lines(args.results, sorted({str(s.get("study")) for s in studies.values()}))

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from _common import out_path, parser, read_fits, require_columns, results_file, run
 import fit_psychometric
-from _twoafc import check_two_interval, condition_column, level_column
+from _twoafc import check_two_interval, condition_column, level_column, with_condition_column
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_psychometric_grid
@@ -39,9 +39,10 @@ def main(argv: list[str] | None = None) -> int:
     level = level_column(facts, args.level_column or (first.get("level_column") if len(fits) else None))
     require_columns(fits, [cond, "participant"], str(fits_path), "give --condition-column")
     ds = load_dataset(args.data, args.study)
-    require_columns(ds.trials, [cond, level, "correct"], str(args.data / args.study),
+    trials = with_condition_column(ds.trials, facts, cond)
+    require_columns(trials, [cond, level, "correct"], str(args.data / args.study),
                     "give --condition-column / --level-column naming the study's factors")
-    answered = ds.trials[ds.trials["correct"].notna()].copy()
+    answered = trials[trials["correct"].notna()].copy()
     answered["correct"] = answered["correct"].astype(bool)
     blocks = (answered.groupby(["participant", cond, level])["correct"].agg(["sum", "size"])
               .rename(columns={"sum": "n_correct", "size": "n_total"}).reset_index())

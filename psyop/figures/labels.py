@@ -23,10 +23,20 @@ def mode_label(mode: str) -> str:
     return MODE_LABELS.get(str(mode), str(mode).replace("_", " "))
 
 
-def condition_label(column: str, value: float) -> str:
-    """('back_D', 1.0) -> 'back surface at 1 D'."""
+def condition_label(column: str, value: object) -> str:
+    """('back_D', 1.0) -> 'back surface at 1 D'; a level of words as it is: ('mode', 'ocular') -> 'mode ocular'.
+
+    Examples
+    --------
+    >>> condition_label("back_D", 1.0), condition_label("mode", "ocular"), condition_label("size_deg", 2.5)
+    ('back surface at 1 D', 'mode ocular', 'size deg 2.5')
+    """
+    from psyop.statistics.conditions import CELL_COLUMN, level_text
+
     template = CONDITION_LABELS.get(column)
-    return template.format(v=value) if template else f"{column.replace('_', ' ')} {value:g}"
+    if template and isinstance(value, (int, float)):
+        return template.format(v=value)
+    return level_text(value) if column == CELL_COLUMN else f"{column.replace('_', ' ')} {level_text(value)}"
 
 
 def participant_label(participant: str) -> str:

@@ -18,6 +18,7 @@ import pandas as pd
 from matplotlib.lines import Line2D
 
 from psyop.figures.labels import STYLE, condition_label, mode_label, participant_label
+from psyop.statistics.conditions import level_text, numeric_levels
 from psyop.statistics.psychometric import USABLE_STATUSES, predicted_pc
 
 MODE_COLOURS = {"conventional": "#7f7f7f", "ocular": "#1f77b4", "reversed": "#ff7f0e",
@@ -51,12 +52,12 @@ def _usable(fits: pd.DataFrame) -> pd.Series:
 
 
 def _draw_participant_thresholds(ax, fits: pd.DataFrame, usable: pd.Series, condition_column: str,
-                                 jitter: dict, ymax: float) -> tuple[int, int, int]:
-    """Each participant's threshold and CI (or censored bound); returns the counts of clipped CIs,
-    open CIs and censored fits for the legend."""
+                                 jitter: dict, ymax: float, where: dict) -> tuple[int, int, int]:
+    """Each participant's threshold and CI (or censored bound) at its condition's x (``where``);
+    returns the counts of clipped CIs, open CIs and censored fits for the legend."""
     n_clipped = n_open = n_censored = 0
     for (_, r), ok in zip(fits.iterrows(), usable):
-        x = r[condition_column] + jitter[r["participant"]]
+        x = where[r[condition_column]] + jitter[r["participant"]]
         status = r.get("status", "ok")
         if status in ("censored_below", "censored_above", "lapse_at_bound"):
             below = status == "censored_below"
@@ -78,6 +79,34 @@ def _draw_participant_thresholds(ax, fits: pd.DataFrame, usable: pd.Series, cond
             ax.annotate("", (x, ymax), (x, ymax * 0.93), arrowprops=dict(arrowstyle="->", color=SUBJECT_GREY, lw=0.9))
             n_open += 1
     return n_clipped, n_open, n_censored
+
+
+def condition_positions(conditions: pd.Series) -> tuple[list, dict, list[str]]:
+    """The conditions in order, each one's x and tick label: numbers at their value (``1``, ``2.5``),
+    words (or crossed cells) one apart in sorted order, labelled as they are.
+
+    Examples
+    --------
+    >>> condition_positions(pd.Series([2.0, 1.0, 2.0]))
+    ([1.0, 2.0], {1.0: 1.0, 2.0: 2.0}, ['1', '2'])
+    >>> condition_positions(pd.Series(["reversed", "ocular"]))
+    (['ocular', 'reversed'], {'ocular': 0, 'reversed': 1}, ['ocular', 'reversed'])
+    """
+    if numeric_levels(conditions):
+        numbers = sorted({float(c) for c in conditions})
+        return numbers, {c: c for c in numbers}, [level_text(c) for c in numbers]
+    words = sorted({str(c) for c in conditions})
+    return words, {c: i for i, c in enumerate(words)}, words
+
+
+def _condition_ticks(fig: plt.Figure, ax: plt.Axes, xs: list[float], ticks: list[str]) -> None:
+    """Tick labels at the conditions; a crossed cell's factors one per line ("back_D=1" over "mode=ocular"),
+    with room made under the axes for them."""
+    lines = [t.replace(", ", "\n") for t in ticks]
+    ax.set_xticks(xs, lines)
+    extra = max((t.count("\n") for t in lines), default=0)
+    if extra:
+        fig.subplots_adjust(bottom=0.11 + 0.05 * extra)
 
 
 def _threshold_handles(n_clipped: int, n_open: int, n_censored: int, level_unit: str) -> list:
@@ -109,23 +138,25 @@ def plot_thresholds(fits: pd.DataFrame, condition_column: str, xlabel: str, titl
     """
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(5.0, 4.0))
-        conds = sorted(fits[condition_column].unique())
+        conds, where, ticks = condition_positions(fits[condition_column])
+        xs_cond = [where[c] for c in conds]
         subjects = sorted(fits["participant"].unique())
         jitter = dict(zip(subjects, np.linspace(-0.15, 0.15, max(len(subjects), 1))))
         usable = _usable(fits)
         top = max([0.0] + [float(v) for v in fits["threshold_ci_high_D"] if np.isfinite(v)]
                   + [float(v) for v in fits.get("threshold_bound_D", pd.Series(dtype=float)) if np.isfinite(v)])
         ymax = max(1.0, top * 1.1)
-        n_clipped, n_open, n_censored = _draw_participant_thresholds(ax, fits, usable, condition_column, jitter, ymax)
+        n_clipped, n_open, n_censored = _draw_participant_thresholds(ax, fits, usable, condition_column, jitter, ymax,
+                                                                     where)
         ok = fits[usable]
         means = ok.groupby(condition_column)["threshold_D"].agg(["mean", _sem]).reindex(conds)
-        ax.errorbar(conds, means["mean"], yerr=means["_sem"], fmt="s-", color="k", ms=6, capsize=4, lw=1.5, zorder=3)
+        ax.errorbar(xs_cond, means["mean"], yerr=means["_sem"], fmt="s-", color="k", ms=6, capsize=4, lw=1.5, zorder=3)
         handles = _threshold_handles(n_clipped, n_open, n_censored, level_unit)
         if line is not None:
-            xs = np.linspace(min(conds) - 0.2, max(conds) + 0.2, 50)
+            xs = np.linspace(min(xs_cond) - 0.2, max(xs_cond) + 0.2, 50)
             ax.plot(xs, line[1] + line[0] * xs, "--", color="#1f77b4", lw=1.2, zorder=2)
             handles.append(Line2D([], [], color="#1f77b4", ls="--", label=f"linear fit: {line[0]:.2f} x + {line[1]:.2f} {level_unit}"))
-        ax.set_xticks(conds, [f"{c:g}" for c in conds])
+        _condition_ticks(fig, ax, xs_cond, ticks)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(f"threshold ({level_unit})")
         ax.set_ylim(0.0, ymax)
@@ -168,7 +199,7 @@ def plot_psychometric_grid(blocks: pd.DataFrame, fits: pd.DataFrame, condition_c
     status is not 'ok' names its status in the panel; ``level_label`` labels the level axis.
     """
     subjects = sorted(fits["participant"].unique())
-    conds = sorted(fits[condition_column].unique())
+    conds = condition_positions(fits[condition_column])[0]
     keys = ["participant", condition_column]
     block_of = {key: b for key, b in blocks.groupby(keys, sort=False)}
     fit_of = {key: f.iloc[0] for key, f in fits.groupby(keys, sort=False)}

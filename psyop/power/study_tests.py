@@ -64,13 +64,21 @@ def _level_factor(protocol: Protocol) -> str:
     return response.level_factor
 
 
-def threshold_condition(protocol: Protocol) -> str:
-    """The crossed factor thresholds are compared over (first non-level, non-adaptive factor)."""
+def condition_factors(protocol: Protocol) -> list[str]:
+    """The design's factors other than the level factor, in the protocol's order."""
     level = _level_factor(protocol)
-    for name in protocol.design.factors:
-        if name != level:
-            return name
-    raise UserError("a threshold study needs a condition factor besides the level factor", "protocol design")
+    return [name for name in protocol.design.factors if name != level]
+
+
+def threshold_condition(protocol: Protocol) -> str:
+    """The condition thresholds are compared over: the one factor besides the level factor, or the crossed
+    cells of several (psyop.statistics.conditions: analysis/fit_psychometric.py compares the same)."""
+    from psyop.statistics.conditions import condition_of
+
+    try:
+        return condition_of(condition_factors(protocol))
+    except ValueError as exc:
+        raise UserError(str(exc), "protocol design") from None
 
 
 def power_fit_options() -> FitOptions:
@@ -85,26 +93,32 @@ def power_fit_options() -> FitOptions:
 
 def two_interval_tests(protocol: Protocol, trials: pd.DataFrame,
                        options: FitOptions | None = None) -> list[TestOutcome]:
-    """The rm-ANOVA of thresholds over the condition and the slope of threshold on it; ``options``:
-    the psignifit fit options (default :func:`power_fit_options`)."""
+    """The rm-ANOVA of thresholds over the condition and, when its levels are numbers, the slope of threshold
+    on it; ``options``: the psignifit fit options (default :func:`power_fit_options`). The condition is one
+    factor of numbers or words, or the crossed cells of several (:func:`threshold_condition`)."""
     from psyop.statistics.anova import rm_anova
     from psyop.statistics.psychometric import fit_psychometric_table, usable_for_analysis
     from psyop.statistics.regression import linear_fit
+
+    from psyop.statistics.conditions import describe, numeric_levels, with_condition
 
     condition = threshold_condition(protocol)
     level = _level_factor(protocol)
     options = power_fit_options() if options is None else options
     groups = ["participant", condition]
+    trials = with_condition(trials, condition_factors(protocol))
     # only the columns the fit reads: boolean selections of the whole trial table (38 columns, string
     # ones among them) were 30 % of a detection replication's analysis; the fit table is the same
     fits = fit_psychometric_table(trials[[*groups, level, "correct"]], level, groups, options=options, n_jobs=1)
     clean, _ = usable_for_analysis(fits)  # the documented status rule (censored etc. left out)
     out = []
-    name = f"rm-ANOVA: threshold ~ {condition}"
+    name = f"rm-ANOVA: threshold ~ {describe(condition_factors(protocol))}"
     try:
         out.append(TestOutcome(name, float(rm_anova(clean, "threshold_D", condition).table.iloc[0]["p_gg"])))
     except ValueError as exc:
         out.append(_not_computed(name, exc))
+    if not numeric_levels(trials[condition]):
+        return out  # levels of words (or crossed cells): no slope over them, as the analysis reports none
     name = f"regression slope: threshold ~ {condition}"
     try:
         out.append(TestOutcome(name, float(linear_fit(clean, condition, "threshold_D").slope_p)))

@@ -50,16 +50,61 @@ def test_batch_builds_what_one_process_per_script_builds_and_only_what_is_out_of
     assert _batch(tmp_path, "out/parallax.png").stdout.splitlines() == ["[psyop] out/parallax.png"]
 
 
-def test_a_failing_step_deletes_its_changed_target_and_stops_the_run(tmp_path: Path) -> None:
+def test_a_failing_step_deletes_its_changed_target_skips_what_depends_on_it_and_the_rest_runs(tmp_path: Path) -> None:
+    """As make -k with .DELETE_ON_ERROR: one study's failure does not stop the others (issue 41)."""
     bad = tmp_path / "bad.py"
     bad.write_text("import sys\nfrom pathlib import Path\nPath(sys.argv[sys.argv.index('--out') + 1]).write_text('half')\n"
                    "sys.exit(1)\n")
-    _makefile(tmp_path, f"out/half.png: {bad}\n\t@mkdir -p out\n\t@$(ANALYSE) $< --out $@\n"
-                        "out/after.png: out/half.png out/parallax.png\n\t@$(ANALYSE) " f"{ROOT}/analysis/supp_linearity.py --out $@\n")
-    done = _batch(tmp_path, "out/after.png")
+    _makefile(tmp_path, f"out/half.png: {bad}\n\t@mkdir -p out\n\t@$(ANALYSE) $< --study broken --out $@\n"
+                        "out/after.png: out/half.png out/parallax.png\n\t@$(ANALYSE) " f"{ROOT}/analysis/supp_linearity.py --out $@\n"
+                        "all: out/after.png out/parallax.png\n")
+    done = _batch(tmp_path, "all")
     assert done.returncode == 2
     assert "Deleting file 'out/half.png'" in done.stderr and "Error 1" in done.stderr, done.stderr
     assert not (tmp_path / "out" / "half.png").exists() and not (tmp_path / "out" / "after.png").exists()
+    assert "skipped out/after.png (supp_linearity.py): it needs out/half.png, which failed above" in done.stderr
+    assert (tmp_path / "out" / "parallax.png").is_file()  # independent of the failed step: built
+    assert done.stderr.splitlines()[-1] == "batch.py: *** study broken: bad.py -> out/half.png (exit 1)"
+
+
+def test_a_script_that_crashes_is_one_line_naming_the_error_and_the_others_run(tmp_path: Path) -> None:
+    crash = tmp_path / "crash.py"
+    crash.write_text("import sys\n'a' + 1.5\n")
+    _makefile(tmp_path, f"out/crash.png: {crash}\n\t@mkdir -p out\n\t@$(ANALYSE) $< --study words --out $@\n"
+                        "all: out/crash.png out/parallax.png\n")
+    done = _batch(tmp_path, "all")
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert "crash.py: internal error: crash.py:2: TypeError: can only concatenate str" in done.stderr
+    assert (tmp_path / "out" / "parallax.png").is_file() and (tmp_path / "out" / "linearity.png").is_file()
+
+
+def test_the_summary_runs_after_a_failed_study_and_leaves_it_out(tmp_path: Path) -> None:
+    """results_table.py (a collector) runs though a study failed, told which (PSYOP_FAILED_STUDIES): its old
+    results are not read, and the summary says it was not analysed."""
+    sys.path.insert(0, str(ROOT / "analysis"))
+    try:
+        import batch
+    finally:
+        sys.path.remove(str(ROOT / "analysis"))
+    seen = {}
+
+    def fake_run(step):
+        seen[step.script.name] = os.environ.get(batch.FAILED_STUDIES_ENV)
+        return 2 if step.script.name == "fit_psychometric.py" else 0
+
+    plan = batch.parse_plan("__analyse__ analysis/fit_psychometric.py --study words --out r/words_fits.csv\n"
+                            "__analyse__ analysis/fig_detection_thresholds.py --study words --fits r/words_fits.csv "
+                            "--out f/words.png\n"
+                            "__analyse__ analysis/fig_realism.py --study realism --out f/realism.png\n"
+                            "__analyse__ analysis/results_table.py --out r/summary.md\n")
+    rules = {"f/words.png": {"r/words_fits.csv"}, "r/summary.md": {"f/words.png", "f/realism.png"}}
+    original = batch.run_script
+    batch.run_script = fake_run
+    try:
+        assert batch.run_plan(plan, rules) == batch.FAILED_EXIT
+    finally:
+        batch.run_script = original
+    assert seen == {"fit_psychometric.py": "", "fig_realism.py": "words", "results_table.py": "words"}
 
 
 def test_a_plan_that_cannot_be_made_runs_nothing(tmp_path: Path) -> None:
