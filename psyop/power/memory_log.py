@@ -4,8 +4,9 @@ A replication's sessions are throwaway: nobody resumes, recovers or reads them a
 analysis. :class:`MemoryLog` is what ``run_session`` records into for them (its
 ``store_factory``): each trial row, converted with the session's own trial schema exactly as the
 durable :class:`~psyop.session.log.store.SessionStore` converts it, is kept in memory; frames are
-never kept, raw gaze samples only for a protocol with ``quality:`` rules (``keep_gaze``: the rules'
-measures read them; otherwise the loop does not even build them, ``keeps_samples`` false), and
+never kept, raw gaze samples and gaze validations only for a protocol with ``quality:`` rules
+(``keep_gaze``: the rules' measures read them; otherwise the loop does not even build them,
+``keeps_samples`` false; a validation's attempts are kept in the log, never in a file), and
 nothing is written, fsynced or locked. :func:`analysis_trials` then hands the sessions' tables to
 the analysis as :func:`psyop.statistics.dataset.load_dataset` would have read them back from their
 trials.parquet files (same order, same types, practice and timed-out trials left out, and what the
@@ -27,6 +28,7 @@ import pyarrow as pa
 from psyop import datacontract as dc
 from psyop.session.log.layout import SessionPaths
 from psyop.session.log.schema import GAZE_SCHEMA
+from psyop.session.log.validation_log import VALIDATION_SCHEMA
 from psyop.records import JsonMapping, JsonObject
 
 if TYPE_CHECKING:
@@ -47,6 +49,9 @@ class MemoryLog:
         self.metadata: JsonObject = {}
         self._rows: list[tuple[object, ...]] = []  # each trial's values in schema order (None: not in the row)
         self._gaze: list[pa.Table] = []
+        self._validations: list[pa.Table] = []  # each validation attempt's rows, as log/validation-NNN.psylog holds them
+        #: after finalise, with ``keep_gaze``: the attempts as validation.parquet would hold them (None: none ran)
+        self.validations: pd.DataFrame | None = None
         #: after finalise: the trial table as arrow (None: it had repeated or unordered trials, converted at once)
         self.arrow_trials: pa.Table | None = None
         self._trials: pd.DataFrame | None = None
@@ -64,6 +69,11 @@ class MemoryLog:
     def append_gaze(self, gaze: pa.Table, key: int = -1) -> None:
         if self.keeps_samples and gaze.num_rows:  # samples after the last trial, as the durable log keeps them
             self._gaze.append(gaze)
+
+    def validation_recorder(self) -> _MemoryValidations | None:
+        """Where the session's gaze validations keep their attempts (psyop.session.validation.gaze_validator):
+        in this log, not in a file under :attr:`paths` (no such folder); None when it keeps no samples."""
+        return _MemoryValidations(self._validations) if self.keeps_samples else None
 
     def update_metadata(self, **fields: Any) -> None:  # Any: session.json values (JSON)
         self.metadata.update(fields)
@@ -89,6 +99,8 @@ class MemoryLog:
         if self.keeps_samples:  # the stream in arrival order, as the durable log's salvage concatenates it
             self.gaze = (pa.concat_tables(self._gaze, promote_options="permissive").to_pandas() if self._gaze
                          else GAZE_SCHEMA.empty_table().to_pandas())
+        if self.keeps_samples and self._validations:  # as recorded_validations reads the segments back
+            self.validations = pa.concat_tables(self._validations, promote_options="permissive").to_pandas()
         self.metadata["status"] = status
 
     @property
@@ -101,6 +113,21 @@ class MemoryLog:
         if self._trials is None and self.arrow_trials is not None:
             self._trials = self.arrow_trials.to_pandas()
         return self._trials
+
+
+class _MemoryValidations:
+    """A :class:`~psyop.session.validation.ValidationRecorder` into a list: each attempt's rows as arrow, converted
+    as :class:`~psyop.session.log.validation_log.ValidationLog` converts them before writing."""
+
+    def __init__(self, tables: list[pa.Table]) -> None:
+        self._tables = tables
+
+    def append(self, rows: pd.DataFrame, key: int) -> None:
+        self._tables.append(pa.Table.from_pandas(rows[VALIDATION_SCHEMA.names], schema=VALIDATION_SCHEMA,
+                                                 preserve_index=False))
+
+    def close(self) -> None:
+        return None
 
 
 def _ascending(values: Sequence[object]) -> bool:
@@ -158,9 +185,12 @@ def included(trials: pd.DataFrame, logs: Sequence[MemoryLog], quality: QualitySe
 def session_measures(log: MemoryLog, plans: dict[tuple[object, object], SessionPlan]) -> pd.DataFrame:
     """The per-trial quality measures of one in-memory session, computed as
     psyop.quality.session.measure_session computes them from the finalised files (the plan of the
-    recorded protocol text, the simulated tracker's nominal rate and stream, the same measure calls);
+    recorded protocol text, the simulated tracker's nominal rate and stream, the same measure calls,
+    the gaze validations the session kept in memory for the ``validation_*`` measures);
     ``plans`` caches the compiled plan per protocol text."""
+    from psyop.protocol.validation import VALIDATION_MEASURES
     from psyop.quality.session import cached_plan, stream_measures, stream_of
+    from psyop.quality.validation import trial_validation_measures
     from psyop.session.log.record import record_of
 
     if log.trials is None or log.gaze is None:
@@ -169,6 +199,9 @@ def session_measures(log: MemoryLog, plans: dict[tuple[object, object], SessionP
     meta_path = Path(log.paths.directory) / dc.SESSION_METADATA_FILE
     s = stream_of(cached_plan(meta, meta_path, plans), record_of(meta, meta_path), log.trials, log.gaze)
     measures, _ = stream_measures(s)
+    validation = trial_validation_measures(s.trials, log.validations)  # NaN: no gaze_validation
+    for name in VALIDATION_MEASURES:
+        measures[name] = validation[name].to_numpy()
     measures.insert(0, "session", s.session)
     measures.insert(0, "participant", s.participant)
     return measures

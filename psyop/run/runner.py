@@ -331,7 +331,7 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
         phases=plan.phases, clock=clock, gaze=gaze, responses=bundle.responses,
         renderer=renderer, display=bundle.display, store=store, config=config, pose=bundle.pose,
         response=plan.response, announce=announce, adaptive=adaptive, events=bundle.events,
-        validator=gaze_validator(plan.protocol.gaze_validation, opened.paths, store),
+        validator=gaze_validator(plan.protocol.gaze_validation, store),
     )
     if loop.validator is not None:
         bundle.stack.callback(loop.validator.close)

@@ -28,7 +28,7 @@ from psyop.protocol.validation import GazeValidation, ValidationRequirement
 from psyop.session.events import SessionEvent
 from psyop.session.gaze.plan import FixationPlan
 from psyop.session.log.raw_gaze import raw_gaze_table
-from psyop.session.log.validation_log import VALIDATION_SCHEMA, ValidationLog
+from psyop.session.log.validation_log import VALIDATION_SCHEMA, ValidationRecorder
 from psyop.session.phases import PhaseSpec
 
 if TYPE_CHECKING:
@@ -37,7 +37,6 @@ if TYPE_CHECKING:
     from psyop.session.events import EventSink
     from psyop.session.frames import Display, DisplayInterrupted, FrameRenderer
     from psyop.session.gaze.sample import GazeSource
-    from psyop.session.log.layout import SessionPaths
     from psyop.session.log.store import SessionLog
 
 
@@ -175,11 +174,11 @@ def overall_row(points: pd.DataFrame, requirement: ValidationRequirement | None)
 
 @dataclass
 class GazeValidator:
-    """Runs the protocol's validations for one run of the loop; ``log`` (None: a log that keeps no samples,
-    e.g. psyop power's) makes each attempt durable."""
+    """Runs the protocol's validations for one run of the loop; ``log`` keeps each attempt (durable in the session
+    folder, or in psyop power's in-memory log; None: a log that keeps no samples, so nothing reads them)."""
 
     validation: GazeValidation
-    log: ValidationLog | None = None
+    log: ValidationRecorder | None = None
     n_run: int = 0  # validations run so far in this run (numbers the records)
 
     def close(self) -> None:
@@ -264,11 +263,11 @@ class GazeValidator:
         return rows
 
 
-def gaze_validator(validation: GazeValidation | None, paths: SessionPaths, store: SessionLog) -> GazeValidator | None:
+def gaze_validator(validation: GazeValidation | None, store: SessionLog) -> GazeValidator | None:
     """The validator of a run whose log ``store`` is open (None: the protocol has no ``gaze_validation:``)."""
     if validation is None:
         return None
-    return GazeValidator(validation, ValidationLog(paths, store.run_index) if store.keeps_samples else None)
+    return GazeValidator(validation, store.validation_recorder())
 
 
 def hold_target(loop: ValidationHost, phase: TargetPhase, start_s: float) -> None:

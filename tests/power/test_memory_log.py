@@ -162,3 +162,41 @@ def test_sessions_converted_at_once_equal_each_converted_then_concatenated():
         got = concatenated_trials(logs)
         pd.testing.assert_frame_equal(got, want, check_index_type=True)
         assert [str(t) for t in got.dtypes] == [str(t) for t in want.dtypes]
+
+
+@pytest.mark.parametrize("shape", ["validated", "words", "mixed"])
+def test_protocols_psyop_does_not_ship_run_on_both_paths_alike(tmp_path: Path, shape: str) -> None:
+    """issue 41: gaze validation with quality: rules (the validation kept in memory, never in a file under the
+    replication's scratch name: it failed with "validation-000.psylog: No such file or directory"), a condition
+    factor of words, and numbers and words crossed: the in-memory path gives the durable path's table and tests."""
+    from tests import unshipped_protocols
+
+    kwargs = {"validation_max_deg": 0.6} if shape == "validated" else {}  # excludes one of the two
+    task = _task(unshipped_protocols.write(tmp_path, shape, **kwargs))
+    protocol, memory = replication_trials(task)
+    _, durable = replication_trials_durable(task)
+    pd.testing.assert_frame_equal(memory, durable, check_exact=True)
+    tests = study_tests(protocol, memory)
+    results = [ReplicationResult(2, 0, tuple(study_tests(protocol, t)), len(t)) for t in (memory, durable)]
+    assert repr(results[0]) == repr(results[1])
+    assert power_table([results[0]]).to_csv(index=False) == power_table([results[1]]).to_csv(index=False)
+    names = [t.test for t in tests]
+    if shape == "mixed":  # thresholds over the crossed cells; no slope over words
+        assert names == ["rm-ANOVA: threshold ~ the crossed cells of back_D x mode"]
+    else:
+        assert names == ["rm-ANOVA: threshold ~ mode"]
+    if shape == "validated":  # the participant rule on the validation's error was measured and applied
+        assert durable.attrs["n_quality_excluded"] > 0 and memory["participant"].nunique() == 1
+
+
+def test_psyop_power_runs_on_a_protocol_with_gaze_validation_and_quality_rules(tmp_path: Path) -> None:
+    """The command that failed with a path inside its own scratch folder (issue 41) now reports power."""
+    from psyop.cli import main as cli_main
+    from tests import unshipped_protocols
+
+    protocol = unshipped_protocols.write(tmp_path, "validated")
+    out = tmp_path / "power"
+    assert cli_main(["power", str(protocol), "--participants", "2", "--replications", "1", "--jobs", "1",
+                     "--no-progress", "--no-checkpoint", "--out", str(out)]) == 0
+    table = pd.read_csv(out / "power.csv")
+    assert list(table["test"]) == ["rm-ANOVA: threshold ~ mode"]

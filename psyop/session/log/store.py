@@ -23,7 +23,7 @@ from psyop.session.log.layout import SessionPaths, check_inside_root, stale_temp
 from psyop.session.log.record import MAX_METADATA_BYTES as MAX_METADATA_BYTES, read_metadata, record_of
 from psyop.session.log.schema import FRAME_SCHEMA, GAZE_SCHEMA
 from psyop.session.signals import interrupts_deferred
-from psyop.session.log.validation_log import recorded_validations
+from psyop.session.log.validation_log import ValidationLog, ValidationRecorder, recorded_validations
 from psyop.session.log.stream import DurableStreamWriter, is_legacy_ipc, read_segment, read_stream_tolerant
 
 #: session.json keys that must match when a session is resumed (also written into the log).
@@ -51,6 +51,7 @@ class SessionLog(Protocol):
     def update_run(self, **fields: Any) -> None: ...  # Any: this run's fields in session.json's runs, JSON values
     def close(self) -> None: ...
     def finalise(self, *, status: str, summary: JsonMapping | None = None) -> object: ...  # the runner reads nothing back
+    def validation_recorder(self) -> ValidationRecorder | None: ...  # None: no samples kept, nothing reads them
 
 
 class SessionStore:
@@ -63,6 +64,10 @@ class SessionStore:
     """
 
     keeps_samples = True  # every trial's frames and raw gaze samples are logged with it
+
+    def validation_recorder(self) -> ValidationLog:
+        """This run's gaze validation attempts, durable in the session folder (log/validation-NNN.psylog)."""
+        return ValidationLog(self.paths, self.run_index)
 
     def __init__(self, paths: SessionPaths, trial_schema: pa.Schema, *, fsync: bool = True) -> None:
         self.paths = paths

@@ -8,6 +8,8 @@ writes neither. docs/data.md "validation.parquet".
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import pandas as pd
 import pyarrow as pa
 
@@ -25,6 +27,14 @@ VALIDATION_SCHEMA = pa.schema([
     ("left_mean_error_deg", pa.float64()), ("right_mean_error_deg", pa.float64()),
     ("passed", pa.bool_()),
 ])
+
+
+class ValidationRecorder(Protocol):
+    """What keeps a run's validation attempts: :class:`ValidationLog` (durable, validation.parquet at finalisation),
+    or a log's own in-memory record (psyop power's MemoryLog)."""
+
+    def append(self, rows: pd.DataFrame, key: int) -> None: ...
+    def close(self) -> None: ...
 
 
 class ValidationLog:
