@@ -5,9 +5,10 @@ frame of it on a real one).
 
 Measures (:data:`TRIAL_MEASURES`): data loss against the nominal rate and the longest gap; accuracy
 (mean and max angular error) on fixation (cross) and pursuit phases, before and after drift correction
-(the trial's median error over the last 0.25 s of its first cross phase removed); precision (pymovements'
-``rms_s2s`` and ``std_rms``) over fixation phases outside saccades; pursuit gain (median eye velocity along the
-target's over its speed, smooth samples from 0.1 s into a pursuit phase), lag (median angle between eye and target
+(the trial's median error over the last 0.25 s of its first cross phase removed); precision (RMS-S2S and SD
+as pymovements' ``rms_s2s`` and ``std_rms``, within each contiguous fixation segment of a fixation phase:
+successive grid ticks with valid samples outside saccades; pooled over the segments: :class:`_Precision`);
+pursuit gain (median eye velocity along the target's over its speed, smooth samples from 0.1 s into a pursuit phase), lag (median angle between eye and target
 velocity over the target velocity's turning rate) and catch-up saccades per second of pursuit.
 """
 
@@ -40,8 +41,8 @@ TRIAL_MEASURES: dict[str, str] = {
     "accuracy_pursuit_mean_deg": "mean angular error to the pursuit target (deg)",
     "accuracy_pursuit_max_deg": "largest angular error to the pursuit target (deg)",
     "accuracy_pursuit_corrected_mean_deg": "mean error to the pursuit target after drift correction (deg)",
-    "precision_rms_s2s_deg": "RMS sample-to-sample displacement on the cross (deg)",
-    "precision_sd_deg": "radial SD of the samples on the cross (deg)",
+    "precision_rms_s2s_deg": "RMS sample-to-sample displacement on the cross, within fixation segments (deg)",
+    "precision_sd_deg": "radial SD of the samples on the cross about each fixation segment's mean, pooled (deg)",
     "pursuit_gain": "median eye velocity along the target's / target speed in smooth pursuit",
     "pursuit_lag_s": "how late the eye's velocity follows the target's (s)",
     "catch_up_saccades_per_s": "saccades per second of pursuit",
@@ -72,17 +73,39 @@ def _eye_errors(grid: GazeGrid, sel: np.ndarray, centre_deg: tuple[float, float]
     return out
 
 
-def _precision(az: np.ndarray, el: np.ndarray) -> tuple[float, float]:
-    """pymovements' rms_s2s and std_rms of these samples (NaN with fewer than 3)."""
-    ok = np.isfinite(az)
-    if ok.sum() < 3:
-        return math.nan, math.nan
-    import polars as pl
-    from pymovements.measure.samples import rms_s2s, std_rms
+@dataclass
+class _Precision:
+    """Sums over contiguous fixation segments (runs of successive grid ticks, each with a valid sample
+    outside a saccade): squared sample-to-sample displacements and their count, squared deviations from
+    each segment's own mean and their degrees of freedom (a segment of n samples: n - 1 of each)."""
 
-    frame = pl.DataFrame({"position": np.stack([az[ok], el[ok]], axis=1).tolist()})
-    out = frame.select(rms_s2s(column="position"), std_rms(column="position"))
-    return float(out["rms_s2s"][0]), float(out["std_rms"][0])
+    s2s_sq_deg2: float = 0.0
+    n_steps: int = 0
+    deviation_sq_deg2: float = 0.0
+
+    def add(self, index: np.ndarray, az: np.ndarray, el: np.ndarray) -> None:
+        """Add the samples at grid ``index`` (ascending) with Fick ``az``, ``el`` (deg), split into segments
+        wherever a tick is missing between two of them."""
+        if len(index) == 0:
+            return
+        starts = np.flatnonzero(np.diff(index) != 1) + 1
+        same = np.diff(index) == 1
+        self.s2s_sq_deg2 += float(np.sum((np.diff(az)[same]) ** 2 + (np.diff(el)[same]) ** 2))
+        self.n_steps += int(same.sum())
+        segment = np.zeros(len(index), dtype=np.int64)
+        segment[starts] = 1
+        segment = np.cumsum(segment)
+        counts = np.bincount(segment)
+        for values in (az, el):
+            means = np.bincount(segment, weights=values) / counts
+            self.deviation_sq_deg2 += float(np.sum((values - means[segment]) ** 2))
+
+    def measures(self) -> tuple[float, float]:
+        """(RMS-S2S, SD) in deg, pooled over the segments: sqrt(sum of squared steps / steps) and
+        sqrt(sum of squared deviations from the segment means / sum of (n - 1)); NaN with fewer than 2 steps."""
+        if self.n_steps < 2:
+            return math.nan, math.nan
+        return math.sqrt(self.s2s_sq_deg2 / self.n_steps), math.sqrt(self.deviation_sq_deg2 / self.n_steps)
 
 
 def _saccade_masks(t_s: np.ndarray, events: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -116,8 +139,7 @@ class _TrialParts:
     fix_corr: list[np.ndarray] = field(default_factory=list)
     pur_err: list[np.ndarray] = field(default_factory=list)
     pur_corr: list[np.ndarray] = field(default_factory=list)
-    fix_az: list[np.ndarray] = field(default_factory=list)
-    fix_el: list[np.ndarray] = field(default_factory=list)
+    precision: _Precision = field(default_factory=_Precision)
     per_eye: dict[str, list[np.ndarray]] = field(default_factory=lambda: {"left": [], "right": []})
     speed_ratio: list[np.ndarray] = field(default_factory=list)
     angle_diff: list[np.ndarray] = field(default_factory=list)
@@ -153,8 +175,7 @@ def _cross_phase(parts: _TrialParts, grid: GazeGrid, s: _Samples, fplan: Fixatio
     if parts.offset is not None:
         parts.fix_corr.append(_err(s.az - parts.offset[0], s.el - parts.offset[1], taz, tel))
     still = ~in_saccade[s.sel]
-    parts.fix_az.append(s.az[still])
-    parts.fix_el.append(s.el[still])
+    parts.precision.add(np.flatnonzero(s.sel)[still], s.az[still], s.el[still])
 
 
 def _pursuit_phase(parts: _TrialParts, s: _Samples, target: Callable[[float], tuple[float, float]], t0: float,
@@ -195,8 +216,7 @@ def _summary(parts: _TrialParts) -> dict[str, float]:
                accuracy_pursuit_corrected_mean_deg=_stat(parts.pur_corr, np.mean),
                accuracy_fixation_left_mean_deg=_stat(parts.per_eye["left"], np.mean),
                accuracy_fixation_right_mean_deg=_stat(parts.per_eye["right"], np.mean))
-    rms, sd = _precision(np.concatenate(parts.fix_az) if parts.fix_az else np.zeros(0),
-                         np.concatenate(parts.fix_el) if parts.fix_el else np.zeros(0))
+    rms, sd = parts.precision.measures()
     out.update(precision_rms_s2s_deg=rms, precision_sd_deg=sd)
     out["pursuit_gain"] = _stat(parts.speed_ratio, np.median)
     # the eye's velocity direction is the target's turned back by (turning rate x lag): lag = -angle / rate
