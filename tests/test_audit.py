@@ -145,10 +145,10 @@ def test_identical_intervals_at_a_non_zero_level_fail(ctx, tmp_path):
 
 def test_the_audit_api_takes_the_sessions_default_ipd_like_the_cli():
     """The issue's small things: a 64 mm default beside the sessions' 63 mm; AuditSettings() was 64 mm."""
-    from psyop.cli.render import DEFAULT_IPD_MM
-    from psyop.session.plan import DEFAULT_IPD_M
+    from psyop.cli.render import ipd_arg_m
+    from psyop.optics.ranges import DEFAULT_IPD_M
 
-    assert AuditSettings().ipd_m == DEFAULT_IPD_M == DEFAULT_IPD_MM / 1000.0
+    assert AuditSettings().ipd_m == DEFAULT_IPD_M == ipd_arg_m(None)
 
 
 def test_bad_options_exit_2(tmp_path, capsys):

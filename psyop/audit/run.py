@@ -30,7 +30,7 @@ from psyop.audit.masks import FrameMeasurer
 from psyop.audit.meshes import MeshCheck
 from psyop.audit.occlusion import hidden_by
 from psyop.errors import UserError
-from psyop.session.plan import DEFAULT_IPD_M
+from psyop.optics.ranges import DEFAULT_IPD_M, IPD_M
 
 if TYPE_CHECKING:
     import moderngl
@@ -73,8 +73,8 @@ class AuditSettings:
             raise UserError(f"--samples must be in 2..32, got {self.samples_per_axis}")
         if not 1 <= self.gazes <= 64:
             raise UserError(f"--gazes must be in 1..64, got {self.gazes}")
-        if not (math.isfinite(self.ipd_m) and 0.04 <= self.ipd_m <= 0.08):
-            raise UserError(f"--ipd-mm must be in 40..80 mm, got {self.ipd_m * 1000:g}")
+        if not IPD_M.contains(self.ipd_m):
+            raise UserError(f"--ipd-mm must be in {IPD_M.describe(1000.0, 'mm')}, got {self.ipd_m * 1000:g}")
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from psyop.cli.render import DEFAULT_IPD_MM
+from psyop.cli.render import ipd_arg_m
 from psyop.errors import UserError
 
 
@@ -38,9 +38,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--samples", type=int, default=16,
                         help="rays per axis in edge pixels (S x S; the session uses 32; default 16)")
     parser.add_argument("--seed", type=int, default=0, help="schedule seed that picks each condition's trial")
-    parser.add_argument("--ipd-mm", type=float, default=DEFAULT_IPD_MM,
-                        help=f"interpupillary distance when the protocol takes it from the tracker "
-                             f"(default {DEFAULT_IPD_MM:g}, the sessions' default)")
+    parser.add_argument("--ipd-mm", type=float, default=None,
+                        help="interpupillary distance when the protocol takes it from the tracker "
+                             "(default: the sessions' default, psyop.optics.ranges.DEFAULT_IPD_M)")
     parser.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
     parser.add_argument("--level", type=float, action="append", default=None, metavar="VALUE",
                         help="audit the adaptive factor at this level (repeatable; default: its range's min, "
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.sheet is not None and not str(args.sheet).lower().endswith(".png"):
         raise UserError(f"--sheet must name a .png file, got {args.sheet!r}")
-    settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=args.ipd_mm / 1000.0, seed=args.seed,
+    settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=ipd_arg_m(args.ipd_mm), seed=args.seed,
                              levels=tuple(args.level or ()))
     from psyop.mesh.load import MeshFiles
 

@@ -24,9 +24,18 @@ if TYPE_CHECKING:
     from psyop.protocol.model import Protocol
     from psyop.rendering.scene import Scene
 
-#: The sessions' default interpupillary distance (psyop.session.plan.DEFAULT_IPD_M, checked by
-#: tests/test_cli.py; not imported here so that ``psyop --help`` stays light).
-DEFAULT_IPD_MM = 63.0
+
+def ipd_arg_m(ipd_mm: float | None) -> float:
+    """``--ipd-mm`` in metres, checked against psyop.optics.ranges.IPD_M (None: DEFAULT_IPD_M; imported
+    here, not at parser build, so that ``psyop --help`` stays light)."""
+    from psyop.optics.ranges import DEFAULT_IPD_M, IPD_M
+
+    if ipd_mm is None:
+        return DEFAULT_IPD_M
+    if not IPD_M.contains(ipd_mm / 1000.0):
+        raise UserError(f"--ipd-mm must be in {IPD_M.describe(1000.0, 'mm')}, got {ipd_mm:g}")
+    return ipd_mm / 1000.0
+
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -61,9 +70,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--level", type=float, default=None, metavar="VALUE",
                         help="the adaptive factor's level for this trial (an adaptive protocol's level is chosen "
                              "while the session runs; default: the procedure's start level)")
-    parser.add_argument("--ipd-mm", type=float, default=DEFAULT_IPD_MM,
-                        help=f"interpupillary distance when the protocol takes it from the tracker "
-                             f"(default {DEFAULT_IPD_MM:g}, the sessions' default)")
+    parser.add_argument("--ipd-mm", type=float, default=None,
+                        help="interpupillary distance when the protocol takes it from the tracker "
+                             "(default: the sessions' default, psyop.optics.ranges.DEFAULT_IPD_M)")
     parser.add_argument("--antialiasing", choices=("adaptive", "none", "msaa", "supersample"), default="adaptive")
     parser.add_argument("--crop", default=None, metavar="X0,Y0,W,H",
                         help="render only this pixel window of the full frame (same rays as the full frame)")
@@ -170,7 +179,7 @@ def _mode_and_text(args: argparse.Namespace, protocol: Protocol, row: dict) -> t
     if args.phase == "response":
         from psyop.session.plan import compile_plan
 
-        response = compile_plan(protocol, tracker_ipd_m=args.ipd_mm / 1000.0).response
+        response = compile_plan(protocol, tracker_ipd_m=ipd_arg_m(args.ipd_mm)).response
         return args.mode or response.phase.mode, response.participant_text
     return args.mode or interval_mode(protocol, row, args.interval), None
 
@@ -191,20 +200,18 @@ class _View:
 
 
 def _view(args: argparse.Namespace, protocol: Protocol, row: dict, mode: str, az: float, el: float) -> _View:
-    import numpy as np
-
     from psyop.optics.camera import make_eye_camera
     from psyop.protocol import resolve_display_profile, resolve_eye_model
-    from psyop.protocol.display import FixedIpd, rendering_nc_rule
+    from psyop.optics.nodal import eye_centre_m
+    from psyop.protocol.display import protocol_ipd_m, rendering_nc_rule
     from psyop.rendering.builders import direction_from_angles
     from psyop.schedule import interval_values
 
     eye = args.eye or (protocol.eyes if protocol.eyes in ("right", "left") else "right")
     display = resolve_display_profile(protocol.display)
     eye_model = resolve_eye_model(protocol.display)
-    ipd_spec = protocol.display.ipd
-    ipd_m = float(ipd_spec.mm) / 1000.0 if isinstance(ipd_spec, FixedIpd) else args.ipd_mm / 1000.0
-    centre = np.array([ipd_m / 2.0 if eye == "right" else -ipd_m / 2.0, 0.0, 0.0])
+    ipd_m = protocol_ipd_m(protocol.display.ipd, ipd_arg_m(args.ipd_mm))
+    centre = eye_centre_m(eye, ipd_m)
     fixation = centre + direction_from_angles(az, el) * args.fixation_m
     nc_rule = rendering_nc_rule(protocol.display)
     nc_m = eye_model.nc_m if nc_rule is None else nc_rule.nc_m_for(eye_model.nc_m, interval_values(row, args.interval))

@@ -26,6 +26,7 @@ import pandas as pd
 from psyop import datacontract as dc
 from psyop.errors import UserError
 from psyop.optics.display import DisplayProfile
+from psyop.optics.nodal import eye_centre_m
 from psyop.records import JsonMapping
 
 #: The raw gaze stream of a session (every tracker sample), finalised beside trials.parquet.
@@ -109,11 +110,6 @@ def display_from_metadata(meta: JsonMapping, where: str) -> DisplayProfile:
                               left_tangents=None if left is None else tuple(left))
     except (TypeError, ValueError) as exc:
         raise UserError(f"session.json's display profile is not usable: {exc}", where) from exc
-
-
-def eye_centre_m(eye: str, ipd_m: float) -> np.ndarray:
-    """The eye's centre of rotation in head space (psyop.optics.rig convention)."""
-    return np.array([(-0.5 if eye == "left" else 0.5) * float(ipd_m), 0.0, 0.0])
 
 
 def gaze_on_image_px(fixation_m: np.ndarray, display: DisplayProfile, eye: str, ipd_m: float) -> np.ndarray:

@@ -37,6 +37,7 @@ from psyop.optics.nodal import (
     Eye,
     RenderingMode,
     eye_centre_m,
+    eye_centre_x_m,
     gaze_direction_single,
     gaze_from_fixation,
     parse_eye,
@@ -206,7 +207,7 @@ def make_eye_camera(
     mode_ = parse_mode(mode)
     # Scalar per-frame path (plain floats); eye_camera_arrays is its vectorised twin and the
     # tests check that both agree.
-    cx = (-0.5 if eye_ is Eye.LEFT else 0.5) * float(ipd_m)
+    cx = eye_centre_x_m(eye_, ipd_m)
     direction, valid = gaze_direction_single(fix, cx, fallback_direction)
     ox, oy, oz = _mode_offset_m(mode_, nc_m, direction)
     l, r, b, t = display.frustum_tangents(eye_.value)

@@ -68,10 +68,15 @@ def parse_mode(mode: RenderingMode | str) -> RenderingMode:
         raise ValueError(f"rendering mode must be one of {[m.value for m in RenderingMode]}, got {mode!r}") from None
 
 
+def eye_centre_x_m(eye: Eye | str, ipd_m: float) -> float:
+    """The x of ``eye``'s centre of rotation in head space: -ipd/2 (left), +ipd/2 (right); the one place
+    psyop derives the eye centres from the ipd (rig, camera, validation, export, render)."""
+    return (-0.5 if parse_eye(eye) is Eye.LEFT else 0.5) * float(ipd_m)
+
+
 def eye_centre_m(eye: Eye | str, ipd_m: float) -> np.ndarray:
     """Centre of rotation of ``eye`` in head space: (-/+ ipd/2, 0, 0)."""
-    sign = -1.0 if parse_eye(eye) is Eye.LEFT else 1.0
-    return np.array([sign * 0.5 * float(ipd_m), 0.0, 0.0])
+    return np.array([eye_centre_x_m(eye, ipd_m), 0.0, 0.0])
 
 
 def fixation_at_infinity(direction: ArrayLike) -> np.ndarray:

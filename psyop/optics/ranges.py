@@ -43,7 +43,11 @@ class ValidRange:
 #: Distance NC from the eye's centre of rotation to its front nodal point (schematic eyes:
 #: 5.6-9.2 mm; 30 mm and more is a unit error).
 NC_M = ValidRange("nc_m", "m", 0.0, 0.03, low_inclusive=False)
-#: Inter-pupillary distance (adult range with margin: 5th-95th percentile is about 55-70 mm).
+#: Inter-pupillary distance (adult range with margin: 5th-95th percentile is about 55-70 mm): the one bound of
+#: every ipd psyop takes (protocol ``ipd: {mm: ...}``, the eye rig, ``psyop audit`` / ``psyop render --ipd-mm``).
 IPD_M = ValidRange("ipd_m", "m", 0.040, 0.090, high_inclusive=True)
+#: The ipd a session uses when neither the protocol nor the tracker gives one (and ``psyop audit`` / ``psyop
+#: render`` for a protocol that takes it from the tracker), m.
+DEFAULT_IPD_M = 0.063
 #: A depth in dioptres: 0 = optical infinity, 100 D = 1 cm from the eye.
 DEPTH_D = ValidRange("depth_D", "D", 0.0, 100.0, high_inclusive=True)

@@ -18,11 +18,10 @@ from numpy.typing import ArrayLike
 from psyop.optics.camera import EyeCamera, ViewGeometry, make_eye_camera, make_view_camera
 from psyop.optics.display import DisplayProfile
 from psyop.optics.eye_models import EyeModel
+from psyop.optics.nodal import eye_centre_m
 from psyop.optics.ranges import IPD_M, NC_M
 from psyop.records import TrialRow
 
-#: the interpupillary distance a session uses when neither the protocol nor the tracker gives one, m
-DEFAULT_IPD_M = 0.063
 
 EYE_NAMES: tuple[str, ...] = ("left", "right")
 
@@ -124,7 +123,7 @@ class EyeRig:
         """This eye's centre of rotation C in head space, metres."""
         if eye not in EYE_NAMES:
             raise ValueError(f"eye must be left or right, got {eye!r}")
-        return np.array([(-0.5 if eye == "left" else 0.5) * self.ipd_m, 0.0, 0.0])
+        return eye_centre_m(eye, self.ipd_m)
 
     def camera(self, display: DisplayProfile, eye: str, fixation_m: ArrayLike, mode: str,
                row: TrialRow | None = None, **kwargs: float) -> EyeCamera:

@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from psyop.optics.ranges import IPD_M, NC_M
+from psyop.optics.ranges import DEFAULT_IPD_M, IPD_M, NC_M
 from psyop.protocol.base import Integer, Number, StrictModel
 from psyop.protocol.scene import FactorRef
 
@@ -111,6 +111,12 @@ class FixedIpd(StrictModel):
     @property
     def ipd_m(self) -> float:
         return self.mm / 1000.0
+
+
+def protocol_ipd_m(ipd: Literal["tracker"] | FixedIpd, fallback_m: float = DEFAULT_IPD_M) -> float:
+    """The ipd (m) a protocol's ``display.ipd`` gives: its fixed one, else ``fallback_m`` (the tracker's where
+    known, else the sessions' default psyop.optics.ranges.DEFAULT_IPD_M)."""
+    return ipd.ipd_m if isinstance(ipd, FixedIpd) else float(fallback_m)
 
 
 class RenderingNc(StrictModel):

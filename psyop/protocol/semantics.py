@@ -604,8 +604,7 @@ class _Checker:
     def check_validation_points(self) -> None:
         """Every validation point inside each seen eye's field of view (at the protocol's ipd, else the
         sessions' default: a tracker's ipd is known only when the session starts)."""
-        from psyop.optics.rig import DEFAULT_IPD_M
-        from psyop.protocol.display import FixedIpd, resolve_display_profile
+        from psyop.protocol.display import protocol_ipd_m, resolve_display_profile
         from psyop.protocol.validation import points_off_display
 
         validation = self.p.gaze_validation
@@ -615,8 +614,7 @@ class _Checker:
             display = resolve_display_profile(self.p.display)
         except (ValueError, KeyError):
             return  # the display's own error is reported where it is checked
-        ipd = self.p.display.ipd
-        ipd_m = ipd.mm / 1000.0 if isinstance(ipd, FixedIpd) else DEFAULT_IPD_M
+        ipd_m = protocol_ipd_m(self.p.display.ipd)
         eyes = ("left", "right") if self.p.eyes == "stereo" else (self.p.eyes,)
         for index, message in points_off_display(validation, display, eyes, ipd_m):
             self.add(("gaze_validation", "points_deg", index), message)

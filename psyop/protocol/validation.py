@@ -18,6 +18,7 @@ from pydantic import Field, field_validator
 
 from psyop.optics.angles import fick_direction
 from psyop.optics.display import DisplayProfile
+from psyop.optics.nodal import eye_centre_x_m
 from psyop.protocol.base import Integer, Number, StrictModel
 
 #: the default point set: 9 points, a 3 x 3 grid over +-15 deg (centre first)
@@ -124,7 +125,7 @@ def points_off_display(validation: GazeValidation, display: DisplayProfile, eyes
     for index, (az_deg, el_deg) in enumerate(validation.points_deg):
         target_m = fick_direction(float(az_deg), float(el_deg)) * float(validation.distance_m)
         for eye in eyes:
-            x_m = target_m[0] - (-ipd_m / 2 if eye == "left" else ipd_m / 2)
+            x_m = target_m[0] - eye_centre_x_m(eye, ipd_m)
             forward_m = -float(target_m[2])
             left, right, bottom, top = display.frustum_tangents(eye)
             if forward_m <= 0:

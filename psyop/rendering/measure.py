@@ -18,15 +18,17 @@ import numpy as np
 
 from psyop.optics.camera import EyeCamera, make_eye_camera
 from psyop.optics.display import VIVE_PRO, DisplayProfile
+from psyop.optics.nodal import eye_centre_m
 from psyop.rendering.builders import detection_stimulus, direction_from_angles, ordinal_stimulus
 from psyop.rendering.camera_math import crop_camera, project_points_px
 from psyop.rendering.exact import border_x_px, visible_back_area_px
 from psyop.rendering.renderer import Renderer, RenderSettings
 from psyop.rendering.scene import Scene, Solid
 
-IPD_M = 0.064
+#: the measurement's fixed geometry (not a session's ipd, which is psyop.optics.ranges'): 64 mm apart
+FIXTURE_IPD_M = 0.064
 NC_M = 0.0076916  # Gullstrand-Emsley relaxed eye, DESIGN.md
-RIGHT_CENTRE_M = np.array([IPD_M / 2.0, 0.0, 0.0])
+RIGHT_CENTRE_M = eye_centre_m("right", FIXTURE_IPD_M)
 GAZE_DEG = (16.0 * math.cos(0.7), 16.0 * math.sin(0.7))
 
 
@@ -35,7 +37,7 @@ def right_eye_camera(az_deg: float, el_deg: float, mode: str, display: DisplayPr
     """Camera of ``eye`` fixating 0.5 m away in direction (az, el) from the *right* eye's centre
     (64 mm IPD, Gullstrand-Emsley NC)."""
     fixation = RIGHT_CENTRE_M + direction_from_angles(az_deg, el_deg) * 0.5
-    return make_eye_camera(display, eye, fixation, IPD_M, NC_M, mode, near_m, far_m)
+    return make_eye_camera(display, eye, fixation, FIXTURE_IPD_M, NC_M, mode, near_m, far_m)
 
 
 @dataclass(frozen=True)

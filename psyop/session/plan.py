@@ -25,8 +25,8 @@ from psyop.adaptive.session import AdaptivePlan, adaptive_plan
 from psyop.datacontract import TIMEOUT_RESPONSE
 from psyop.errors import UserError
 from psyop.optics.display import DisplayProfile
-from psyop.optics.ranges import IPD_M
-from psyop.optics.rig import DEFAULT_IPD_M, EyeRig
+from psyop.optics.ranges import DEFAULT_IPD_M, IPD_M
+from psyop.optics.rig import EyeRig
 from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer

@@ -229,7 +229,7 @@ def scene_origin_m(protocol: Protocol, eye_centre_m: ArrayLike) -> np.ndarray:
 
     Monocular (``eyes: left`` / ``right``): the viewing eye's centre of rotation
     ``eye_centre_m``. Stereo: the head origin (midway between the eyes' centres, which lie at
-    (-+ipd/2, 0, 0)), whichever eye is being rendered, so both eyes see one world-fixed scene.
+    psyop.optics.nodal.eye_centre_m), whichever eye is being rendered, so both eyes see one world-fixed scene.
     """
     if str(getattr(protocol, "eyes", "right")) == "stereo":
         return np.zeros(3)

@@ -19,7 +19,7 @@ from psyop.protocol.loader import load_protocol
 from psyop.rendering import Renderer, RenderSettings
 from psyop.rendering.builders import direction_from_angles
 from psyop.rendering.camera_math import crop_camera, project_points_px
-from psyop.rendering.measure import IPD_M, NC_M, RIGHT_CENTRE_M
+from psyop.rendering.measure import FIXTURE_IPD_M as IPD_M, NC_M, RIGHT_CENTRE_M
 from psyop.rendering.mesh_exact import exact_coverage
 from psyop.stimulus import build_scene
 
