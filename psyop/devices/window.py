@@ -14,6 +14,12 @@ its flip (a swap that waited for a later vertical blank) took longer than a peri
 slot current at the clock's time, and the slots it skipped are counted (``missed_frames``); the flip
 timestamps give ``display_flip_period_s`` and the flips that came more than half a period after
 their frame's slot ended (``flips_late``).
+
+Escape ends the session as Ctrl-C does (exit 130, the trial in progress discarded, the session
+resumable): the key callback, which glfw calls from C through ctypes (an exception raised there is
+printed and dropped), only notes the press; the window raises :class:`EscapePressed` (a
+KeyboardInterrupt) from the next ``begin_frame`` or ``poll``, in the loop's own Python frames, where
+Ctrl-C would have arrived. Events are pumped at every frame, so Escape works in every phase.
 """
 
 from __future__ import annotations
@@ -30,6 +36,10 @@ if TYPE_CHECKING:
 
     from psyop.optics.display import DisplayProfile
     from psyop.session.clock import Clock
+
+
+class EscapePressed(KeyboardInterrupt):
+    """Escape was pressed in the session window: the session ends as on Ctrl-C (psyop.session.loop)."""
 
 
 class GlfwWindow:
@@ -57,6 +67,7 @@ class GlfwWindow:
         self._clock = clock
         self._period_s = 1.0 / float(display_profile.refresh_hz)
         self._keys: list[tuple[str, float]] = []
+        self.escape_pressed = False  # set by the key callback; acted on by _pump (never raised from a callback)
         glfw.set_key_callback(self._window.handle, self._on_key)
         self.shade = 0.5
         self.scale = scale
@@ -81,16 +92,23 @@ class GlfwWindow:
             name = {self._glfw.KEY_LEFT: "left", self._glfw.KEY_RIGHT: "right", self._glfw.KEY_SPACE: "space",
                     self._glfw.KEY_ENTER: "enter", self._glfw.KEY_KP_1: "kp_1", self._glfw.KEY_KP_2: "kp_2",
                     self._glfw.KEY_ESCAPE: "escape"}.get(key, "")
+        if name == "escape":  # noted only: an exception raised here would be lost in ctypes (module docstring)
+            self.escape_pressed = True
+            return
         self._keys.append((name, self._clock.now_s()))
-        if name == "escape":
-            raise KeyboardInterrupt  # ends the session cleanly (the trial in progress is discarded)
+
+    def _pump(self) -> None:
+        """Deliver the window system's pending events (key presses into the queue); Escape ends the session."""
+        self._glfw.poll_events()
+        if self.escape_pressed:
+            raise EscapePressed("Escape pressed in the session window")
 
     def inject_key(self, name: str) -> None:
         """Queue a key press as if typed (for tests and scripted demos)."""
         self._keys.append((name, self._clock.now_s()))
 
     def poll(self) -> list[tuple[str, float]]:
-        self._glfw.poll_events()
+        self._pump()
         keys, self._keys = self._keys, []
         return keys
 
@@ -100,7 +118,8 @@ class GlfwWindow:
     def begin_frame(self, not_before_s: float) -> FrameRequest:
         """Wait on the session clock until ``not_before_s``. Real clock: the frame due now (module
         docstring); virtual clock: the frame is shown at the next flip (predicted from the flips so far
-        once there are enough of them)."""
+        once there are enough of them). Escape pressed since the last frame ends the session here."""
+        self._pump()
         self._clock.sleep_until(not_before_s)
         self._index += 1
         if not self._clock.virtual:
