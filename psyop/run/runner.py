@@ -179,6 +179,8 @@ class _Opened:
     store: SessionLog
     metadata: JsonObject = field(default_factory=dict)
     mesh_files: MeshFiles | None = None  # the session's models, read once for session.json and the scene
+    #: session.json ``timing_reruns`` of the earlier runs (a resume keeps them and counts max_reruns over them)
+    earlier_reruns: list[JsonObject] = field(default_factory=list)
 
 
 def run_session(
@@ -243,7 +245,8 @@ def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], opt
              else store_factory(paths, schema))
     source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
     mesh_files = options.mesh_files if options.mesh_files is not None else MeshFiles(source or Path.cwd())
-    opened = _Opened(plan, paths, seed, schedule, clock, store, mesh_files=mesh_files)
+    opened = _Opened(plan, paths, seed, schedule, clock, store, mesh_files=mesh_files,
+                     earlier_reruns=list(record.timing_reruns) if record is not None else [])
     opened.metadata = _metadata(protocol, opened, options, participant_index, protocol_sha256)
     return opened
 
@@ -296,6 +299,11 @@ def _announcer(plan: SessionPlan, responses_spec: str) -> Callable[[str], None] 
     return announce
 
 
+def _notice(text: str) -> None:
+    """One line on the experimenter's console (stderr), e.g. a trial the timing rule runs again."""
+    print(f"psyop run: {text}", file=sys.stderr, flush=True)
+
+
 def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[SessionOutcome, TrialLoop]:
     """Start the tracker, open the log, make the renderer (closed first by ``bundle``) and run the loop."""
     plan, clock, store, gaze = opened.plan, opened.clock, opened.store, bundle.gaze
@@ -331,8 +339,9 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
         phases=plan.phases, clock=clock, gaze=gaze, responses=bundle.responses,
         renderer=renderer, display=bundle.display, store=store, config=config, pose=bundle.pose,
         response=plan.response, announce=announce, adaptive=adaptive, events=bundle.events,
-        validator=gaze_validator(plan.protocol.gaze_validation, store),
+        validator=gaze_validator(plan.protocol.gaze_validation, store), notice=_notice,
     )
+    loop.timing_reruns = list(opened.earlier_reruns)
     if loop.validator is not None:
         bundle.stack.callback(loop.validator.close)
     bundle.after_tracker_closed = lambda: store.append_gaze(
@@ -355,6 +364,9 @@ def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: Sessi
                                "scope": "the trials this run recorded (psyop timing: the whole session)"}
     if loop.display_interruptions:
         summary["display_interruptions"] = loop.display_interruptions
+    timing = opened.plan.protocol.timing
+    if timing is not None and timing.on_violation == "rerun":  # attempts this run discarded (session.json timing_reruns)
+        summary["timing_reruns"] = loop.reruns_this_run()
     # the display as it really was, per run (a resume may run on another headset): docs/data.md
     opened.store.update_run(display_used=display_used(bundle, opened.plan.display, opened.plan.rig.eyes,
                                                       options.window_scale))

@@ -49,8 +49,13 @@ from psyop.protocol.timing import TimingSection
 from psyop.schedule.rows import interval_values
 from psyop.datacontract import typed_response
 from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, FixationPoint, ResponsePlan, SessionPlan
-from psyop.session.progress import session_progress
+from psyop.session.progress import Progress, session_progress
 from psyop.session.responses.base import Response, ResponseSource
+
+
+class TimingStopped(Exception):
+    """The protocol's ``timing.max_rerun_share`` is spent: the session stops (exit 3, resumable) rather than
+    discarding trial after trial; the message names the rule and what to change."""
 
 
 class TrialState(str, Enum):
@@ -125,7 +130,8 @@ def gaze_ok(valid: int, total: int, min_share: float) -> bool | None:
 
 @dataclass
 class SessionOutcome:
-    status: str  # complete | interrupted | tracker_lost | device_error | display_lost | validation_failed
+    #: complete | interrupted | tracker_lost | device_error | display_lost | validation_failed | timing_stopped
+    status: str
     n_recorded: int
     n_scheduled: int
     message: str
@@ -157,6 +163,7 @@ class TrialLoop:
         adaptive: AdaptiveLevels | None = None,
         events: tuple[EventSink, ...] = (),
         validator: GazeValidator | None = None,
+        notice: Callable[[str], None] | None = None,
     ) -> None:
         self.identity = dict(identity)  # study, participant, session
         self.phases = phases
@@ -166,6 +173,7 @@ class TrialLoop:
         self.adaptive = adaptive  # adaptive levels: chosen before each trial from the logged history
         self.events = events  # outside recorders told of trial starts, phases, responses, ends (events.py)
         self.validator = validator  # the protocol's gaze validations (psyop.session.validation); None: none
+        self.notice = notice  # one console line per timing rerun (the experimenter's console); None: silent
         self._last_block: int | None = None  # the block of the last trial this run ran (None: none yet)
         self.clock, self.gaze, self.responses = clock, gaze, responses
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
@@ -187,68 +195,84 @@ class TrialLoop:
         self._timing = TrialTiming()  # the trial in progress's shown frames (psyop.session.timing)
         self.session_timing = SessionTiming(self.frame_period_s)  # this run's recorded trials: summary.frame_timing
         #: attempts discarded by the protocol's timing rule (re-run at the end of their block), as session.json records them
+        #: (a resume starts from the earlier runs' list: psyop.run.runner)
         self.timing_reruns: list[JsonObject] = []
+        self.n_scheduled = 0  # the schedule's trials (run() sets it): timing.max_rerun_share's base
+        self._last_trial = -1  # the trial last given to the log (the message of a Ctrl-C during its write)
 
     # session -------------------------------------------------------------------------
     def run(self, schedule: pd.DataFrame, completed: set[int]) -> SessionOutcome:
         # a trial the timing rule re-runs goes back in the queue, at the end of its block
         queue = [r for r in frame_records(schedule) if int(r["trial"]) not in completed]
         n_total = len(schedule)
-        n_done = len(completed)
+        self.n_scheduled = n_total
         recorded = set(completed)
-        bar = session_progress(n_total, n_done, f"{self.identity['study']} sub-{self.identity['participant']}",
+        bar = session_progress(n_total, len(recorded), f"{self.identity['study']} sub-{self.identity['participant']}",
                                enabled=self.config.progress)
         status, message = "complete", f"all {n_total} trials recorded"
-        n_stopped = self._record_stops(schedule, recorded, -1)
-        record: TrialRecord = {"trial": -1}
         try:
-            while queue:
-                planned = row = queue.pop(0)
-                bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
-                if self.adaptive is not None and self.adaptive.stopped(row):  # met the stop rule: not run, not logged
-                    bar.update(1)
-                    continue
-                row = self.adaptive.fill(row) if self.adaptive is not None else row
-                self._validate_before(row)
-                self.current_trial = int(row["trial"])
-                record, frames = self._run_trial_on_display(row)
-                if self._rerun_for_timing(planned, record, queue):
-                    continue
-                if self.adaptive is not None:
-                    record = self.adaptive.complete(record)
-                self.state = TrialState.RECORD
-                with interrupts_deferred():  # Ctrl-C (or SIGTERM) never tears a record half-written
-                    self._store_trial(record, frames)
-                    recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
-                    n_done += 1
-                n_stopped = self._recorded(record, schedule, recorded, n_stopped)
-                bar.update(1)
+            self._run_queue(queue, schedule, recorded, bar)
             self._validate("end", -1)
-            if n_done < n_total:
-                message = (f"{n_done} of {n_total} trials recorded; the other {n_total - n_done} were not run: "
-                           "their conditions met the adaptive stop rule (session.json adaptive_stop)")
-        except KeyboardInterrupt:
-            status = "interrupted"
-            message = (f"interrupted just after trial {record['trial']} was recorded, {n_done}/{n_total} recorded"
-                       if self.state is TrialState.RECORD and int(record["trial"]) in recorded else
-                       f"interrupted during trial (state {self.state.value}); that trial was discarded, "
-                       f"{n_done}/{n_total} recorded")
-        except TrackerLost as exc:
-            status = "tracker_lost"
-            message = f"{exc}; the trial in progress was discarded, {n_done}/{n_total} recorded"
-        except ConnectionError as exc:
-            status = "device_error"
-            message = f"{exc}; the trial in progress was discarded, {n_done}/{n_total} recorded"
-        except DisplayInterrupted as exc:
-            status = "display_lost"
-            message = f"{exc.reason}; the trial in progress was discarded, {n_done}/{n_total} recorded"
-        except ValidationStopped as exc:
-            status, message = "validation_failed", f"{exc}; {n_done}/{n_total} recorded"
+            if len(recorded) < n_total:
+                message = (f"{len(recorded)} of {n_total} trials recorded; the other {n_total - len(recorded)} were "
+                           "not run: their conditions met the adaptive stop rule (session.json adaptive_stop)")
+        except (KeyboardInterrupt, TrackerLost, ConnectionError, DisplayInterrupted, ValidationStopped,
+                TimingStopped) as exc:
+            status, message = self._stopped(exc, recorded, n_total)
         finally:
             bar.close()
+        n_reruns = self.reruns_this_run()
+        if n_reruns:  # the console's end line and session.json's summary count them
+            message += (f"; {n_reruns} attempt(s) discarded by the timing rule and run again "
+                        "(session.json timing_reruns)")
         latency = latency_summary(np.array(self._ages), self.frame_period_s)
         latency["n_frames_held"] = self._n_held
-        return SessionOutcome(status, n_done, n_total, message, latency)
+        return SessionOutcome(status, len(recorded), n_total, message, latency)
+
+    def _run_queue(self, queue: list[TrialRecord], schedule: pd.DataFrame, recorded: set[int], bar: Progress) -> None:
+        """Run the queued trials into the log, each recorded one added to ``recorded``."""
+        n_stopped = self._record_stops(schedule, recorded, -1)
+        while queue:
+            planned = row = queue.pop(0)
+            bar.set_postfix(trial=int(row["trial"]), block=int(row.get("block", 0)))
+            if self.adaptive is not None and self.adaptive.stopped(row):  # met the stop rule: not run, not logged
+                bar.update(1)
+                continue
+            row = self.adaptive.fill(row) if self.adaptive is not None else row
+            self._validate_before(row)
+            self.current_trial = int(row["trial"])
+            record, frames = self._run_trial_on_display(row)
+            if self._rerun_for_timing(planned, record, queue):
+                continue
+            if self.adaptive is not None:
+                record = self.adaptive.complete(record)
+            self.state = TrialState.RECORD
+            self._last_trial = int(record["trial"])
+            with interrupts_deferred():  # Ctrl-C (or SIGTERM) never tears a record half-written
+                self._store_trial(record, frames)
+                recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
+            n_stopped = self._recorded(record, schedule, recorded, n_stopped)
+            bar.update(1)
+
+    def _stopped(self, exc: BaseException, recorded: set[int], n_total: int) -> tuple[str, str]:
+        """The outcome's status and message when ``exc`` stopped the session."""
+        counted = f"{len(recorded)}/{n_total} recorded"
+        discarded = f"the trial in progress was discarded, {counted}"
+        if isinstance(exc, KeyboardInterrupt):  # Ctrl-C, a stop signal, or Escape in the window (its own words)
+            why = f"{exc}: " if str(exc) else ""
+            if self.state is TrialState.RECORD and self._last_trial in recorded:
+                return "interrupted", f"{why}interrupted just after trial {self._last_trial} was recorded, {counted}"
+            return "interrupted", (f"{why}interrupted during trial (state {self.state.value}); that trial was "
+                                   f"discarded, {counted}")
+        if isinstance(exc, TrackerLost):
+            return "tracker_lost", f"{exc}; {discarded}"
+        if isinstance(exc, ConnectionError):
+            return "device_error", f"{exc}; {discarded}"
+        if isinstance(exc, DisplayInterrupted):
+            return "display_lost", f"{exc.reason}; {discarded}"
+        if isinstance(exc, TimingStopped):
+            return "timing_stopped", f"{exc}; {discarded}"
+        return "validation_failed", f"{exc}; {counted}"
 
     def _validate_before(self, row: TrialRow) -> None:
         """The protocol's validation before this trial: at the run's first trial (``start``) or when the
@@ -311,25 +335,47 @@ class TrialLoop:
     def _rerun_for_timing(self, planned: TrialRow, record: TrialRecord, queue: list[TrialRecord]) -> bool:
         """Whether the protocol's ``timing: {on_violation: rerun}`` discards this attempt: its intervals dropped
         more frames than allowed and the trial has reruns left. Then the attempt is recorded in session.json
-        (``timing_reruns``: trial, dropped frames, why), announced (a ``timing_rerun`` event), its raw gaze
-        kept (gaze.parquet, like any discarded trial's) and the trial queued again at the end of its block."""
+        (``timing_reruns``: trial, dropped frames, why), announced (a ``timing_rerun`` event and one console
+        line), its raw gaze kept (gaze.parquet, like any discarded trial's) and the trial queued again at the end
+        of its block. A rerun beyond ``timing.max_rerun_share`` of the schedule (this run) raises TimingStopped."""
         rule, trial = self.config.timing, int(record["trial"])
         if rule is None or rule.on_violation != "rerun" or record.get("timing_ok") is not False:
             return False
-        if sum(r["trial"] == trial for r in self.timing_reruns) >= rule.max_reruns:
+        n_before = sum(r["trial"] == trial for r in self.timing_reruns)
+        if n_before >= rule.max_reruns:
             return False  # kept, flagged (timing_ok false)
         dropped = self._timing.stimulus_dropped(self.phases)
         reason = rule.describe(dropped)
+        self._stop_for_reruns(rule, trial, dropped, reason)
         self.timing_reruns.append({"trial": trial, "dropped_frames": dropped, "reason": reason,
                                    "at_s": self.clock.now_s(), "run": self.store.run_index})
         self.store.update_metadata(timing_reruns=list(self.timing_reruns))
         self._emit("timing_rerun", record, self.clock.now_s(), reason)
+        if self.notice is not None:
+            self.notice(f"trial {trial} discarded, to be run again at the end of its block (rerun {n_before + 1} "
+                        f"of at most {rule.max_reruns}): {reason}")
         if self.store.keeps_samples:
             self.store.append_gaze(self.raw_gaze(trial), key=trial)
         block = planned.get("block", 0)
         at = max((i + 1 for i, r in enumerate(queue) if r.get("block", 0) == block), default=0)
         queue.insert(at, dict(planned))
         return True
+
+    def reruns_this_run(self) -> int:
+        """Attempts this run discarded for the timing rule (session.json ``timing_reruns`` of this run)."""
+        return sum(r.get("run") == self.store.run_index for r in self.timing_reruns)
+
+    def _stop_for_reruns(self, rule: TimingSection, trial: int, dropped: int, reason: str) -> None:
+        """Raise TimingStopped when one more rerun would exceed ``timing.max_rerun_share`` of the schedule
+        (this run's reruns); the attempt is then discarded like an interrupted trial (a resume runs it) and
+        recorded in session.json ``timing_stop``."""
+        limit = rule.rerun_limit(self.n_scheduled)
+        if limit is None or self.reruns_this_run() + 1 <= limit:
+            return
+        self.store.update_metadata(timing_stop={"trial": trial, "dropped_frames": dropped, "reason": reason,
+                                                "at_s": self.clock.now_s(), "run": self.store.run_index,
+                                                "reruns": self.reruns_this_run(), "limit": limit})
+        raise TimingStopped(rule.stop_message(limit, self.n_scheduled, reason))
 
     def _record_stops(self, schedule: pd.DataFrame, recorded: set[int], n_stopped: int) -> int:
         """Write session.json's ``adaptive_stop`` whenever another condition has stopped (so the
@@ -349,7 +395,7 @@ class TrialLoop:
         sampled = (trial in self.config.sampled_trials) or (trial % max(1, self.config.sample_every_n_trials) == 0)
         start_s = self.clock.now_s()
         self._emit("trial_start", row, start_s)
-        self._timing, self._pending = TrialTiming(), None
+        self._timing, self._pending = TrialTiming(start_s=start_s), None
         valid, total, drift_deg = self._present(row, frames, start_s, sampled)
         self.state = TrialState.RESPONSE
         response = self._await_response(row, frames)

@@ -9,8 +9,16 @@ phase, whose length is the participant's):
 - ``P_duration_s``: how long the phase was on the display: from its first frame's display time to the
   display time of the next frame shown (the next phase's first, or the response phase's; the last
   frame's display period when no frame follows);
-- ``P_frames``: frames shown; ``P_dropped_frames``: display periods skipped before them (a frame drawn
-  late counts the periods it skipped in the phase it belongs to).
+- ``P_frames``: frames shown; ``P_dropped_frames``: the display periods inside the phase's nominal span
+  (its start to its end: the trial's start plus the durations before it, as the loop times it) without a new
+  frame. A frame shown ``m`` periods late skipped the slots ``display_time_s - k * period``, k = 1..m; each
+  skipped slot counts in the phase whose span holds it (:func:`skipped_by_span`), so a stall that begins in a
+  blank and ends in the next interval counts in each for the periods it covered there.
+
+The trial's start is :attr:`TrialTiming.start_s` when the loop gives it, else the slot its first frame was
+asked for (``display_time_s - missed * period``: the trial's start exactly on the headless display and the
+window; a headset's runtime counts its skipped periods from the previous predicted display time, so there the
+periods since the last trial fall into the first phase).
 
 A phase with no frame (a frame so late that the whole phase passed) has null onset, offset and duration
 and 0 frames. The sampled regime of a simulated session (a virtual clock and an observer that needs no
@@ -78,15 +86,45 @@ def _phase_keys(label: str) -> tuple[str, ...]:
     return tuple(f"{label}_{suffix}" for suffix, _ in PHASE_COLUMNS)
 
 
+def phase_bounds_s(start_s: float, phases: Sequence[PhaseSpec]) -> np.ndarray:
+    """The nominal starts of ``phases`` from ``start_s`` and the end of the last (s, len(phases) + 1 values)."""
+    return float(start_s) + np.concatenate([[0.0], np.cumsum([float(p.duration_s) for p in phases])])
+
+
+def skipped_by_span(display_time_s: Sequence[float], period_s: Sequence[float], missed: Sequence[int],
+                    bounds_s: np.ndarray) -> np.ndarray:
+    """Skipped display periods per span of ``bounds_s`` (:func:`phase_bounds_s`): index 0 before the first
+    phase, 1..K the K phases, K + 1 after the last (the response phase). A frame shown ``m`` periods late
+    skipped the slots ``display_time_s - k * period_s``, k = 1..m; a slot at a phase's end (within 1e-9 s, the
+    loop's own tolerance) is the next phase's.
+
+    Examples
+    --------
+    >>> skipped_by_span([0.0, 1.0], [0.1, 0.1], [0, 9], np.array([0.0, 0.55, 1.2])).tolist()
+    [0, 5, 4, 0]
+    """
+    m = np.asarray(missed, dtype=np.int64).reshape(-1)
+    out = np.zeros(len(bounds_s) + 1, dtype=np.int64)
+    if not len(m) or not m.any():
+        return out
+    frame = np.repeat(np.arange(len(m)), m)
+    k = np.arange(int(m.sum())) - np.repeat(np.cumsum(m) - m, m) + 1
+    slots = np.asarray(display_time_s, dtype=np.float64)[frame] - k * np.asarray(period_s, dtype=np.float64)[frame]
+    span = np.searchsorted(bounds_s, slots + 1e-9, side="right")
+    return out + np.bincount(span, minlength=len(out))
+
+
 @dataclass
 class TrialTiming:
     """One trial's shown frames: the timed phase (index into the plan's phases; -1: the response phase)
-    each belongs to, its display time, display period and skipped periods."""
+    each belongs to, its display time, display period and skipped periods; ``start_s``: the trial's start
+    (None: the slot its first frame was asked for, module docstring)."""
 
     phase_index: list[int] = field(default_factory=list)
     display_time_s: list[float] = field(default_factory=list)
     period_s: list[float] = field(default_factory=list)
     missed: list[int] = field(default_factory=list)
+    start_s: float | None = None
 
     def add(self, phase_index: int, display_time_s: float, period_s: float, missed: int) -> None:
         self.phase_index.append(phase_index)
@@ -94,17 +132,26 @@ class TrialTiming:
         self.period_s.append(period_s)
         self.missed.append(missed)
 
+    def skipped(self, phases: Sequence[PhaseSpec]) -> np.ndarray:
+        """:func:`skipped_by_span` of this trial: [before its start, each of ``phases``, the response phase]."""
+        if not any(self.missed):
+            return np.zeros(len(phases) + 2, dtype=np.int64)
+        start = self.start_s if self.start_s is not None else \
+            self.display_time_s[0] - self.missed[0] * self.period_s[0]
+        return skipped_by_span(self.display_time_s, self.period_s, self.missed, phase_bounds_s(start, phases))
+
     def columns(self, phases: Sequence[PhaseSpec], rule: TimingSection | None, measured: bool = True) -> JsonObject:
         """The trial's measured-timing columns (module docstring); ``measured``: every frame was drawn
         (False: the sampled regime, no onset, offset or duration)."""
-        first, last, count, dropped = self._by_phase()
+        first, last, count = self._by_phase()
+        skipped = self.skipped(phases)
         out: JsonObject = {}
         stimulus_dropped = 0
         for i, (phase, label) in enumerate(zip(phases, phase_labels(phases))):
             if label is None:
                 continue
             onset_key, offset_key, duration_key, frames_key, dropped_key = _phase_keys(label)
-            n, missed = count.get(i, 0), dropped.get(i, 0)
+            n, missed = count.get(i, 0), int(skipped[i + 1])
             if n and measured:
                 end = last[i]
                 onset, offset = self.display_time_s[first[i]], self.display_time_s[end]
@@ -118,30 +165,40 @@ class TrialTiming:
         out[TIMING_OK] = None if rule is None else not rule.violated(stimulus_dropped)
         return out
 
-    def _by_phase(self) -> tuple[dict[int, int], dict[int, int], dict[int, int], dict[int, int]]:
-        """Per phase index, in one pass over the frames: its first and last frame, frame count and skipped
-        periods (a trial has a few frames; one list scan per phase was most of :meth:`columns`)."""
+    def _by_phase(self) -> tuple[dict[int, int], dict[int, int], dict[int, int]]:
+        """Per phase index, in one pass over the frames: its first and last frame and frame count (a trial has
+        a few frames; one list scan per phase was most of :meth:`columns`)."""
         first: dict[int, int] = {}
         last: dict[int, int] = {}
         count: dict[int, int] = {}
-        dropped: dict[int, int] = {}
-        for r, (p, missed) in enumerate(zip(self.phase_index, self.missed)):
+        for r, p in enumerate(self.phase_index):
             if p not in first:
                 first[p] = r
             last[p] = r
             count[p] = count.get(p, 0) + 1
-            dropped[p] = dropped.get(p, 0) + int(missed)
-        return first, last, count, dropped
+        return first, last, count
 
     def stimulus_dropped(self, phases: Sequence[PhaseSpec]) -> int:
-        """Display periods skipped over the trial's stimulus phases (what ``timing:`` rules on)."""
-        return int(sum(m for i, m in zip(self.phase_index, self.missed) if i >= 0 and phases[i].show == "stimulus"))
+        """Display periods skipped inside the trial's stimulus phases (what ``timing:`` rules on)."""
+        skipped = self.skipped(phases)
+        return int(sum(skipped[i + 1] for i, p in enumerate(phases) if p.show == "stimulus"))
+
+
+def dropped_by_kind(skipped: np.ndarray, phases: Sequence[PhaseSpec]) -> dict[str, int]:
+    """:func:`skipped_by_span` counts by phase kind (``show``; ``response`` after the last timed phase,
+    ``before_trial`` before the first), kinds with none left out."""
+    kinds = ["before_trial", *(p.show for p in phases), "response"]
+    out: dict[str, int] = {}
+    for kind, n in zip(kinds, skipped.tolist()):
+        if n:
+            out[kind] = out.get(kind, 0) + int(n)
+    return out
 
 
 @dataclass
 class SessionTiming:
     """What the run's recorded trials showed: frame intervals (successive display times within a trial)
-    and skipped periods by phase kind, for session.json ``summary.frame_timing``."""
+    and skipped periods by the kind of phase whose span held them, for session.json ``summary.frame_timing``."""
 
     refresh_period_s: float
     intervals_s: list[np.ndarray] = field(default_factory=list)
@@ -152,9 +209,10 @@ class SessionTiming:
         if trial.display_time_s:
             self.intervals_s.append(np.diff(np.asarray(trial.display_time_s, dtype=np.float64)))
         self.n_frames += len(trial.display_time_s)
-        for i, missed in zip(trial.phase_index, trial.missed):
-            kind = phases[i].show if i >= 0 else "response"
-            self.dropped_by_kind[kind] = self.dropped_by_kind.get(kind, 0) + int(missed)
+        for i in set(trial.phase_index):  # every kind shown is listed, 0 when nothing was skipped
+            self.dropped_by_kind.setdefault(phases[i].show if i >= 0 else "response", 0)
+        for kind, n in dropped_by_kind(trial.skipped(phases), phases).items():
+            self.dropped_by_kind[kind] = self.dropped_by_kind.get(kind, 0) + n
 
     def summary(self) -> JsonObject:
         intervals = np.concatenate(self.intervals_s) if self.intervals_s else np.zeros(0)
@@ -175,16 +233,28 @@ def interval_summary(intervals_s: np.ndarray, n_frames: int, dropped_by_kind: Ma
             "dropped_frames_by_kind": {k: int(v) for k, v in sorted(dropped_by_kind.items())}}
 
 
-def frames_summary(frames: pd.DataFrame, phase_kinds: Mapping[str, str], refresh_period_s: float) -> JsonObject:
-    """:func:`interval_summary` of a finalised frames.parquet (every run of the session); ``phase_kinds``:
-    phase name -> ``show`` (session.json ``phases``; any other name is the response phase)."""
+def frames_summary(frames: pd.DataFrame, phases: Sequence[PhaseSpec], refresh_period_s: float,
+                   starts_s: Mapping[int, float] | None = None) -> JsonObject:
+    """:func:`interval_summary` of a finalised frames.parquet (every run of the session); ``phases``: the timed
+    phases (session.json ``phases``; a frame of any other name is the response phase's); ``starts_s``: trial ->
+    its start (trials.parquet ``trial_start_s``; a trial without one starts at its first frame's asked slot).
+    Skipped periods count by the kind of phase whose span held them (:class:`TrialTiming`)."""
     if not len(frames):
         return interval_summary(np.zeros(0), 0, {}, refresh_period_s)
     ordered = frames.sort_values(["trial", "frame"], kind="stable")
     intervals = ordered.groupby("trial", sort=False)["display_time_s"].diff().to_numpy(dtype=np.float64)
-    kinds = ordered["phase"].map(lambda name: phase_kinds.get(str(name), "response"))
+    kind_of = {p.name: p.show for p in phases}
+    dropped = dict.fromkeys(sorted({kind_of.get(str(n), "response") for n in ordered["phase"].unique()}), 0)
     missed = ordered["display_missed_frames"].fillna(0).astype(np.int64)
-    dropped = {str(k): int(v) for k, v in missed.groupby(kinds.to_numpy()).sum().items()}
+    for trial, rows in ordered.assign(missed=missed).groupby("trial", sort=False):
+        if not rows["missed"].any():
+            continue
+        timing = TrialTiming(display_time_s=rows["display_time_s"].astype(float).tolist(),
+                             period_s=rows["display_period_s"].astype(float).tolist(),
+                             missed=rows["missed"].astype(int).tolist(),
+                             start_s=(starts_s or {}).get(int(str(trial))))
+        for kind, n in dropped_by_kind(timing.skipped(phases), phases).items():
+            dropped[kind] = dropped.get(kind, 0) + n
     return interval_summary(intervals, len(ordered), dropped, refresh_period_s)
 
 
@@ -261,7 +331,9 @@ def session_report(directory: str, meta: JsonObject, trials: pd.DataFrame, frame
     phases = [_recorded_phase(p) for p in meta.get("phases") or []]
     display = meta.get("display") or {}
     period_s = 1.0 / float(display["refresh_hz"]) if display.get("refresh_hz") else float("nan")
-    summary = frames_summary(frames, {p.name: p.show for p in phases}, period_s)
+    starts = ({int(t): float(s) for t, s in zip(trials["trial"], trials["trial_start_s"])}
+              if "trial_start_s" in trials else {})
+    summary = frames_summary(frames, phases, period_s, starts)
     ordered = frames.sort_values(["trial", "frame"], kind="stable") if len(frames) else frames
     intervals = (ordered.groupby("trial", sort=False)["display_time_s"].diff().dropna().to_numpy(dtype=np.float64)
                  if len(ordered) else np.zeros(0))
@@ -283,7 +355,7 @@ _DESCRIPTIONS = {"onset_s": ("display time of the phase's first frame (session c
                  "offset_s": ("display time of the phase's last frame (session clock)", "s"),
                  "duration_s": ("the phase's measured duration: first frame's display time to the next frame shown", "s"),
                  "frames": ("frames shown in the phase", None),
-                 "dropped_frames": ("display periods skipped before the phase's frames", None)}
+                 "dropped_frames": ("display periods inside the phase's nominal span without a new frame", None)}
 
 
 def timing_column_description(name: str, phase_names: Sequence[str]) -> JsonObject | None:

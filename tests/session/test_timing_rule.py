@@ -37,6 +37,9 @@ def _run(tmp_path: Path, timing: str, clock: str = "real") -> Path:
     ("timing: {max_dropped_frames: 2}\n", "on_violation"),
     ("timing: {max_dropped_frames: 2, on_violation: rerun, max_dropped: 3}\n", "max_dropped"),
     ("timing: {max_dropped_frames: true, on_violation: flag}\n", "boolean"),
+    ("timing: {max_dropped_frames: 2, on_violation: rerun, max_rerun_share: 1.5}\n", "must be at most 1"),
+    ("timing: {max_dropped_frames: 2, on_violation: rerun, max_rerun_share: 0}\n", "greater than 0"),
+    ("timing: {max_dropped_frames: 2, on_violation: flag, max_rerun_share: 0.2}\n", "use it with on_violation: rerun"),
 ])
 def test_a_bad_timing_section_is_one_located_line_exit_2(tmp_path: Path, text: str, says: str) -> None:
     path = timing_protocol(tmp_path, text)

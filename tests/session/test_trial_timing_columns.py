@@ -1,5 +1,5 @@
-"""TrialTiming.columns (psyop.session.timing) in one pass over the frames, held to its earlier definition
-(one list scan per phase, kept here as ``_columns_by_scan``) for random trials: phases with no frame, one
+"""TrialTiming.columns (psyop.session.timing) in one pass over the frames, held to a plain definition
+(one list scan per phase and one skipped slot at a time, kept here as ``_columns_by_scan``) for random trials: phases with no frame, one
 frame, late frames counted in later phases, the response phase's frames (-1), repeated phase names, the
 sampled regime (measured False), with and without a timing rule. Same keys, same order, same values."""
 
@@ -18,6 +18,18 @@ PHASES = [PhaseSpec("cross", 1.0, "cross", "cross"), PhaseSpec("stimulus", 2.0, 
           PhaseSpec("dark", 0.3, "off", "none"), PhaseSpec("blank", 0.25, "blank", "none")]
 
 
+def _skipped_in(timing: TrialTiming, phases, i: int) -> int:
+    """Skipped slots (before a frame m periods late: its display time less 1..m periods) inside phase i's
+    nominal span (the trial's start: the first frame's asked slot), one slot at a time."""
+    if not any(timing.missed):
+        return 0
+    start = timing.display_time_s[0] - timing.missed[0] * timing.period_s[0]
+    begin = start + sum(p.duration_s for p in phases[:i])
+    end = begin + phases[i].duration_s
+    return sum(begin - 1e-9 <= d - k * p < end - 1e-9
+               for d, p, m in zip(timing.display_time_s, timing.period_s, timing.missed) for k in range(1, m + 1))
+
+
 def _columns_by_scan(timing: TrialTiming, phases, rule, measured=True) -> dict:
     out: dict = {}
     stimulus_dropped = 0
@@ -25,7 +37,7 @@ def _columns_by_scan(timing: TrialTiming, phases, rule, measured=True) -> dict:
         if label is None:
             continue
         rows = [r for r, p in enumerate(timing.phase_index) if p == i]
-        dropped = int(sum(timing.missed[r] for r in rows))
+        dropped = _skipped_in(timing, phases, i)
         if rows and measured:
             last = rows[-1]
             onset, offset = timing.display_time_s[rows[0]], timing.display_time_s[last]

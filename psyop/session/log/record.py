@@ -53,8 +53,15 @@ class SessionRecord(BaseModel):
     #: ``--tracker sim``'s fault rates; None: another tracker, or not recorded (a session before psyop
     #: recorded them, or a value that is not two rates)
     sim_tracker_faults: SimTrackerFaults | None = None
+    #: the attempts the protocol's timing rule discarded in earlier runs (psyop.session.loop writes them)
+    timing_reruns: list[JsonObject] = Field(default_factory=list)
     #: the whole file as read (the store merges and writes it back as it was)
     raw: Mapping[str, Any] = Field(default_factory=dict, exclude=True)  # Any: JSON values of every field
+
+    @field_validator("timing_reruns", mode="before")
+    @classmethod
+    def _reruns_or_none(cls, value: object) -> list[object]:
+        return [r for r in value if isinstance(r, dict)] if isinstance(value, list) else []
 
     @field_validator("participant_index", mode="before")
     @classmethod
