@@ -21,7 +21,7 @@ from psyop.protocol.loader import load_protocol
 from psyop.rendering import Renderer, RenderSettings, Scene
 from psyop.rendering.builders import direction_from_angles
 from psyop.rendering.camera_math import crop_camera, project_points_px
-from psyop.rendering.measure import IPD_M, NC_M, RIGHT_CENTRE_M
+from psyop.rendering.measure import FIXTURE_IPD_M as IPD_M, NC_M, RIGHT_CENTRE_M
 
 TEASER = Path(__file__).resolve().parents[2] / "protocols" / "examples" / "teaser.yaml"
 SIZE_PX = (96, 160)  # width, height: the candle and the bottle beside it

@@ -24,7 +24,7 @@ from psyop.stimulus import build_scene
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "tests"))
-from protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_PENCIL, EGOCENTRIC_MESH_ROOM
+from protocol_texts import EGOCENTRIC_BOX_ROOM, EGOCENTRIC_MESH_PENCIL, EGOCENTRIC_MESH_ROOM  # noqa: E402 - tests/ put on the path just above
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from psyop.rendering import Renderer, RenderSettings, Scene, Solid
 from psyop.rendering.builders import direction_from_angles, frontoparallel_disc
 from psyop.rendering.camera_math import crop_camera, pixel_rays, project_points_px
 from psyop.rendering.exact_coverage import projected_area_px
-from psyop.rendering.measure import IPD_M, NC_M, RIGHT_CENTRE_M, right_eye_camera
+from psyop.rendering.measure import FIXTURE_IPD_M as IPD_M, NC_M, RIGHT_CENTRE_M, right_eye_camera
 from psyop.rendering.mesh_exact import exact_coverage
 from psyop.rendering.mesh_scene import MeshInstance, model_matrix
 from psyop.rendering.scene import Primitive, Shape
@@ -58,7 +58,9 @@ def test_mesh_quad_and_disc_equal_the_analytic_primitives(gl_context, mode):
         assert abs(_red(mesh).sum() - exact) / exact < 0.01
         assert abs(_red(analytic).sum() - exact) / exact < 0.01
         diff = np.abs(_red(mesh) - _red(analytic))
-        partial = lambda x: (x > 1e-6) & (x < 1 - 1e-6)
+        def partial(x: np.ndarray) -> np.ndarray:
+            return (x > 1e-6) & (x < 1 - 1e-6)
+
         assert diff.max() <= 0.5 + 1e-6  # edge pixels only: 4 MSAA samples vs the analytic grid
         assert not np.any((diff > 1e-6) & ~partial(_red(analytic)) & ~partial(_red(mesh)))
 

@@ -22,7 +22,7 @@ from psyop.optics.display import VIVE_PRO
 from psyop.protocol.loader import parse_protocol
 from psyop.rendering import Renderer, RenderSettings
 from psyop.rendering.camera_math import crop_camera, project_points_px
-from psyop.rendering.measure import IPD_M, NC_M, RIGHT_CENTRE_M
+from psyop.rendering.measure import FIXTURE_IPD_M as IPD_M, NC_M, RIGHT_CENTRE_M
 from psyop.rendering.mesh_exact import exact_coverage
 from psyop.stimulus import build_scene
 from tests.protocol_texts import EGOCENTRIC_MESH_PENCIL as PENCIL

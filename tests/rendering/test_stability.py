@@ -12,7 +12,7 @@ from psyop.optics.camera import make_eye_camera
 from psyop.optics.display import symmetric_profile
 from psyop.rendering import Renderer, Scene, Solid
 from psyop.rendering.builders import frontoparallel_disc, frontoparallel_rect
-from psyop.rendering.measure import IPD_M, NC_M
+from psyop.rendering.measure import FIXTURE_IPD_M as IPD_M, NC_M
 from psyop.rendering.measure import RIGHT_CENTRE_M as RIGHT_EYE_CENTRE_M
 
 # The Vive Pro's full field of view at a tenth of its resolution: every eccentricity up to the

@@ -104,11 +104,9 @@ def test_render_command_rejects_bad_input(tmp_path, capsys):
 
 def test_render_gaze_takes_a_negative_azimuth_the_polar_form_and_the_sessions_ipd(tmp_path):
     """``--gaze-deg -12,0`` used to fail ("expected one argument"); the default ipd was 64 mm where sessions use 63."""
-    from psyop.cli.render import DEFAULT_IPD_MM
     from psyop.optics.angles import fick_direction
-    from psyop.session.plan import DEFAULT_IPD_M
+    from psyop.optics.ranges import DEFAULT_IPD_M  # the one default (render and sessions alike)
 
-    assert DEFAULT_IPD_MM == pytest.approx(DEFAULT_IPD_M * 1000.0)
     sides = []
     for option, value in (("--gaze-deg", "-12,0"), ("--gaze-polar-deg", "12,180")):
         out = tmp_path / f"{option.strip('-')}.png"
@@ -118,7 +116,7 @@ def test_render_gaze_takes_a_negative_azimuth_the_polar_form_and_the_sessions_ip
         sides.append(json.loads(Path(str(out) + ".json").read_text()))
     assert sides[0]["gaze_deg"] == [-12.0, 0.0]
     assert sides[1]["gaze_deg"] == pytest.approx([-12.0, 0.0], abs=1e-12)
-    assert sides[0]["ipd_m"] == pytest.approx(0.063)
+    assert sides[0]["ipd_m"] == pytest.approx(DEFAULT_IPD_M) == pytest.approx(0.063)
     fixation = np.array(sides[0]["fixation_m"]) - np.array(sides[0]["eye_centre_m"])
     assert _angle_deg(fixation, fick_direction(-12.0, 0.0)) < 1e-9
 
