@@ -21,7 +21,7 @@ help:
 	@echo "make resimulate - delete the simulated sessions in data/ (refused if any is real), then make figures"
 	@echo "make test     - run make lint, then the whole test suite, then its cross_cpu tests with numpy and OpenBLAS narrowed to AVX2"
 	@echo "make test-cross-cpu - only the tests that depend on the CPU's float kernels, with AVX-512 and narrowed to AVX2"
-	@echo "make lint     - ruff and mypy over psyop/ (and lint-imports once pyproject.toml has a contract)"
+	@echo "make lint     - ruff over the repository, mypy over psyop/ (and lint-imports once pyproject.toml has a contract)"
 	@echo "make bench    - run the benchmarks; results in bench/"
 	@echo "make power    - power curves of the five shipped studies by simulation; results in power/"
 	@echo "                (POWER_REPLICATIONS=N simulated studies per sample size, default $(POWER_REPLICATIONS))"
@@ -59,7 +59,7 @@ $(SYSDEPS_STAMP): | $(STAMP)
 # contract when pyproject.toml declares one; any finding fails make test (docs/architecture.md,
 # "Types and lint").
 lint: $(STAMP)
-	"$(VENV)/bin/ruff" check psyop
+	"$(VENV)/bin/ruff" check .
 	"$(VENV)/bin/mypy"
 	@if grep -q '^\[tool.importlinter\]' pyproject.toml; then "$(VENV)/bin/lint-imports"; fi
 

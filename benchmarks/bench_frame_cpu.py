@@ -159,7 +159,7 @@ def _setup(protocol: Any, ctx: Any, scale: float, before: bool, seed: int,
     # the loop's own plan for the phase (pursuit of the circling target, free viewing)
     planner = TrialLoop.__new__(TrialLoop)
     planner.config, planner.gaze = LoopConfig(), gaze
-    planner._set_plan(phase, row, 1.0)  # noqa: SLF001 - the loop's fixation plan, started at 1 s
+    planner._set_plan(phase, row, 1.0)
     pose = SimulatedPose(seed) if head_tracked else None  # `--pose sim`, the default (a headset tracks too)
     variant = _Variant("before" if before else "after", renderer, gaze, GazeConditioner(), pose, PoseConditioner())
     return variant, row, phase, mode_for(phase, row)
@@ -175,7 +175,7 @@ def _frame(v: _Variant, row: Any, phase: Any, mode: str) -> float:
     head = v.head_conditioner.condition(v.pose.head(now_s) if v.pose is not None else None)
     v.renderer.render(row, phase, mode, t_in_phase, gaze.fixation_m, head_pose=(head.position_m, head.orientation_wxyz))
     elapsed = time.thread_time() - start
-    v.renderer._renderer.finish()  # noqa: SLF001 - the GPU wait, outside the timed region
+    v.renderer._renderer.finish()
     return elapsed * 1e3
 
 
@@ -201,7 +201,7 @@ def measure(text: str, ctx: Any, scale: float, frames: int, block: int = 8, seed
                 for v in (variants if rep % 2 == 0 else variants[::-1]):
                     times[v.name] += [_frame(v, row, phase, mode) for _ in range(block)]
             eyes = len(variants[0].renderer.eyes)
-            n_prims = len(variants[1].renderer._renderer.scene.primitives)  # noqa: SLF001
+            n_prims = len(variants[1].renderer._renderer.scene.primitives)
             size = f"{variants[0].renderer.display.width_px}x{variants[0].renderer.display.height_px}"
         finally:
             for v in variants:

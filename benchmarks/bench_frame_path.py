@@ -50,9 +50,7 @@ def _median_ms(fn, n: int) -> float:
 
 
 def _session_vs_bare(scale: float, n: int) -> dict[str, float]:
-    from psyop.optics import VIVE_PRO
     from psyop.protocol import load_protocol
-    from psyop.rendering import Renderer
     from psyop.schedule import compile_schedule
     from psyop.session.phases import PhaseSpec
     from psyop.session.plan import compile_plan
@@ -65,10 +63,10 @@ def _session_vs_bare(scale: float, n: int) -> dict[str, float]:
     session.settings = dataclasses.replace(session.settings, reuse_tolerance_px=None)  # every frame renders
     try:
         session.render(row, phase, "ocular", 0.0, MOVING[0])  # warm-up: compile, allocate
-        renderer = session._renderer  # noqa: SLF001 - the same renderer, context and eye
+        renderer = session._renderer
         eye = session.eyes[0]
         # the session's own scenes at each frame's time (built here, so the bare render only uploads them)
-        scenes = [session._scene(row, phase, t, eye) for t in TIMES_S]  # noqa: SLF001
+        scenes = [session._scene(row, phase, t, eye) for t in TIMES_S]
         cams = [session.rig.camera(session.display, eye, f, "ocular") for f in MOVING]
 
         def bare(k: int) -> None:
@@ -112,7 +110,6 @@ def _session_vs_bare(scale: float, n: int) -> dict[str, float]:
 
 
 def _stereo_reuse(scale: float, n_frames: int) -> tuple[int, int]:
-    from psyop.optics import VIVE_PRO
     from psyop.protocol import load_protocol
     from psyop.schedule import compile_schedule
     from psyop.session.phases import PhaseSpec
@@ -126,7 +123,7 @@ def _stereo_reuse(scale: float, n_frames: int) -> tuple[int, int]:
     try:
         for _ in range(n_frames // 2):  # a still gaze: every frame after each eye's first may be reused
             session.render(row, phase, "ocular", 0.0, (0.0, -0.1, -0.8))
-        stats = session._renderer.stats  # noqa: SLF001
+        stats = session._renderer.stats
         return stats.frames_skipped, stats.frames_requested
     finally:
         session.close()

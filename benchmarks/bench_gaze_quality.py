@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from psyop.optics.angles import fick_angles_deg
 from psyop.protocol import load_protocol
 from psyop.quality.events import EventMethod, detect_events
 from psyop.quality.measures import trial_measures

@@ -70,7 +70,7 @@ def run(out_dir: Path, quick: bool) -> str:
     try:
         ages = _pupil_age_ms(1.0 if quick else 5.0)
         age_line = f"| Pupil loopback fake: gaze sample age at use | median {np.median(ages):.2f} ms, p99 {np.percentile(ages, 99):.2f} ms ({len(ages)} frames) |"
-    except Exception as exc:  # the fake needs zmq; report instead of failing the whole bench
+    except Exception as exc:  # noqa: BLE001 - the fake needs zmq; report instead of failing the whole bench
         age_line = f"| Pupil loopback fake: gaze sample age at use | not measured ({exc}) |"
     lines = [
         "## Durations moved out of the test suite",

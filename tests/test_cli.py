@@ -24,7 +24,7 @@ def test_help_lists_every_discovered_command() -> None:
     result = run_cli("--help")
     assert result.returncode == 0
     parser = build_parser()
-    commands = next(a for a in parser._actions if a.dest == "command").choices  # noqa: SLF001
+    commands = next(a for a in parser._actions if a.dest == "command").choices
     for name in commands:
         assert name in result.stdout
 

@@ -19,10 +19,10 @@ from psyop.cli import main as cli_main
 from psyop.session.log.layout import SessionPaths
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_adaptive_session import adaptive_detection  # noqa: E402
+from test_adaptive_session import adaptive_detection
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "session"))
-from kill_helpers import kill_once, run_args  # noqa: E402
+from kill_helpers import kill_once, run_args
 
 SEED = 9
 COMPARED = ["trial", "condition", "level_D", "correct", "response", "adaptive_procedure", "adaptive_trials",

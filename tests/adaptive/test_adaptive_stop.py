@@ -18,7 +18,7 @@ from psyop.protocol import load_protocol
 from psyop.session.log.layout import SessionPaths
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_adaptive_session import adaptive_detection  # noqa: E402
+from test_adaptive_session import adaptive_detection
 
 QUEST_STOP = "{procedure: quest_plus, start: 0.5, min: 0, max: 1.5, grid_points: 51, target_sd: 0.1}"
 REPETITIONS = 60

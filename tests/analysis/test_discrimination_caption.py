@@ -8,7 +8,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "analysis"))
 
-from fig_discrimination_thresholds import line_caption  # noqa: E402
+from fig_discrimination_thresholds import line_caption
 
 
 def test_the_caption_names_both_lines_with_their_df_and_flags() -> None:

@@ -8,20 +8,20 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-import pytest  # noqa: E402
-from matplotlib.text import Text  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.text import Text
 
-from psyop.figures.optics_figures import parallax_below_mar_deg, plot_parallax_vs_eccentricity  # noqa: E402
-from psyop.figures.study_figures import (  # noqa: E402
+from psyop.figures.optics_figures import parallax_below_mar_deg, plot_parallax_vs_eccentricity
+from psyop.figures.study_figures import (
     SIMULATED_LABEL, plot_ordinal, plot_preferences, plot_psychometric_grid, plot_reach, plot_thresholds,
 )
-from psyop.statistics import simulate as sim  # noqa: E402
-from psyop.statistics.anova import cell_means, posthoc_paired  # noqa: E402
-from psyop.statistics.binomial import pairwise_preferences  # noqa: E402
-from psyop.statistics.regression import linear_fits_by  # noqa: E402
+from psyop.statistics import simulate as sim
+from psyop.statistics.anova import cell_means, posthoc_paired
+from psyop.statistics.binomial import pairwise_preferences
+from psyop.statistics.regression import linear_fits_by
 
 
 def _texts(fig) -> list[Text]:

@@ -16,6 +16,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from psyop.power.memory_log import MemoryLog
 from psyop.power.replicate import (
     ReplicationResult,
     ReplicationTask,
@@ -128,8 +129,7 @@ def test_finalise_keeps_each_trials_first_record_in_trial_order(trials):
     assert isinstance(got.index, pd.RangeIndex)
 
 
-def _log(rows: list[dict], schema) -> "MemoryLog":
-    from psyop.power.memory_log import MemoryLog
+def _log(rows: list[dict], schema) -> MemoryLog:
     from psyop.session.log.layout import SessionPaths
 
     log = MemoryLog(SessionPaths(Path("nowhere"), "study", f"S{len(rows):02d}", 1), schema)

@@ -22,7 +22,7 @@ import pytest
 from psyop.power.run import PowerRun, run_power
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "session"))
-from session_helpers import wait_until  # noqa: E402
+from session_helpers import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 DASK = Path(sys.executable).with_name("dask")

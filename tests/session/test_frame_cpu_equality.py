@@ -74,16 +74,16 @@ def test_cached_scenes_give_the_same_scenes_images_and_checks(tmp_path: Path, na
                 checks = {flag: r.render(row, phase, mode, t, fixation, head_pose=head) for flag, r in renderers.items()}
                 assert checks[True] == checks[False], (row["trial"], phase.name, t)
                 fast, former = renderers[True], renderers[False]
-                if former._renderer is None:  # noqa: SLF001 - nothing drawn yet (cameras only)
-                    assert fast._renderer is None  # noqa: SLF001
+                if former._renderer is None:
+                    assert fast._renderer is None
                     continue
-                assert _scene_key(fast._renderer.scene) == _scene_key(former._renderer.scene)  # noqa: SLF001
+                assert _scene_key(fast._renderer.scene) == _scene_key(former._renderer.scene)
                 for eye in plan.rig.eyes:
-                    if eye in former._renderer._eyes:  # noqa: SLF001
+                    if eye in former._renderer._eyes:
                         assert np.array_equal(fast._renderer.image(eye), former._renderer.image(eye)), \
-                            (row["trial"], phase.name, t, eye)  # noqa: SLF001
+                            (row["trial"], phase.name, t, eye)
                         n_images += 1
-        a, b = renderers[True]._renderer.stats, renderers[False]._renderer.stats  # noqa: SLF001
+        a, b = renderers[True]._renderer.stats, renderers[False]._renderer.stats
         assert (a.frames_rendered, a.frames_skipped, a.invalid_cameras) == \
                (b.frames_rendered, b.frames_skipped, b.invalid_cameras)
         assert n_images > 0
@@ -167,7 +167,7 @@ def test_the_simulated_tracker_gives_its_former_samples_bit_for_bit() -> None:
         for step in range(700):
             now = step / 110.0  # not the 120 Hz tick: samples repeat and skip like a 90 Hz loop's
             for plan in plans:
-                if plan.start_s <= now and plan not in tracker._plans:  # noqa: SLF001
+                if plan.start_s <= now and plan not in tracker._plans:
                     tracker.set_plan(plan)
             keys[i].append(_sample_key(tracker.latest(now)))
         keys[i] += [_sample_key(r) for r in tracker.drain_raw()]

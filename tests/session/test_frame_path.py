@@ -98,7 +98,7 @@ def test_image_surfaces_are_decoded_once_per_session(tmp_path: Path, monkeypatch
         interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)
         for k in range(5):
             assert renderer.render(row, interval, "ocular", 0.05 * k, (0.032, 0.0, -1.0)).ok
-        textures = [p.material for p in renderer._renderer.scene.primitives  # noqa: SLF001
+        textures = [p.material for p in renderer._renderer.scene.primitives
                     if isinstance(p.material, ImageTexture)]
         assert textures and float(textures[0].pixels[..., 0].min()) == 1.0  # the decoded file is in the scene
     finally:

@@ -47,7 +47,7 @@ def test_an_unfinished_finalisation_is_incomplete_and_recover_finishes_it(tmp_pa
 
     listed = _psyop("sessions", str(data))
     assert listed.returncode == 0, listed.stderr
-    assert "1 incomplete" in listed.stdout and f"psyop recover" in listed.stdout and str(session) in listed.stdout
+    assert "1 incomplete" in listed.stdout and "psyop recover" in listed.stdout and str(session) in listed.stdout
     assert "delete" not in listed.stdout + listed.stderr
 
     with pytest.raises(UserError) as refused:  # the analysis does not read half-sealed files: it says how to finish

@@ -160,7 +160,7 @@ def test_gaps_and_reconnects_are_counted(tmp_path: Path) -> None:
 
         wait_until(lambda: pylsl.resolve_byprop("name", name, 1, 0.2), what="the outlet to be visible")
         gaze.start()
-        wait_until(lambda: first.have_consumers(), what="the inlet to connect")
+        wait_until(first.have_consumers, what="the inlet to connect")
         t0 = pylsl.local_clock()
         push(first, t0, 60, skip=range(20, 40))  # 20 samples (0.2 s) never sent
         wait_until(lambda: gaze.stats()["samples_received"] >= 40, what="40 samples")

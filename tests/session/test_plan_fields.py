@@ -17,7 +17,7 @@ import pytest
 from session_helpers import PROTOCOLS, small_protocol
 
 from psyop.errors import UserError
-from psyop.protocol import load_protocol, parse_protocol
+from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.clock import VirtualClock
 from psyop.session.frames import HeadlessDisplay
@@ -133,7 +133,7 @@ def test_realism_blank_draws_the_grid() -> None:
     renderer = SceneRenderer(plan, scale=0.25)
     try:
         check = renderer.render(row, blank, plan.mode_for(blank, row), 0.2, STRAIGHT_AHEAD_M)
-        image = renderer._renderer.image(renderer.last_eye)  # noqa: SLF001
+        image = renderer._renderer.image(renderer.last_eye)
     finally:
         renderer.close()
     assert check.checked and check.ok
@@ -157,7 +157,7 @@ def _cross_width_px(target_size_deg: float) -> int:
     renderer = SceneRenderer(plan, scale=0.5)
     try:
         renderer.render({"trial": 0, "trial_seed": 1}, recal, "conventional", 0.0, STRAIGHT_AHEAD_M)
-        image = renderer._renderer.image(renderer.last_eye)  # noqa: SLF001
+        image = renderer._renderer.image(renderer.last_eye)
     finally:
         renderer.close()
     white = np.all(image > 0.6, axis=2)

@@ -23,7 +23,7 @@ def _measured_minus_true(config: SimulatedPoseConfig, n: int = 300) -> np.ndarra
     for trial in range(n):
         row = {"trial": trial, "trial_seed": 1000 + trial, "rendering": "enabled", "target_fraction": 0.75}
         true = observer.collect(row, 0.0)
-        measured, _ = loop._track_reach(row, true, end_s=5.0 * (trial + 1))  # noqa: SLF001
+        measured, _ = loop._track_reach(row, true, end_s=5.0 * (trial + 1))
         errors.append(measured.reach_m - true.reach_m)
     return np.array(errors)
 

@@ -58,15 +58,15 @@ def _response_frames(plan, gl_context) -> dict[str, tuple[np.ndarray, np.ndarray
         check = renderer.render(row, phase, phase.mode, 0.2, fixation)
         assert check.checked and check.ok
         renderer.render(row, phase, phase.mode, 0.4, fixation)
-        assert renderer._texts.rasterisations == 1  # noqa: SLF001  (once per session, not per frame)
+        assert renderer._texts.rasterisations == 1
         out = {}
         for eye in plan.rig.eyes:
             camera = plan.rig.camera(renderer.display, eye, fixation, phase.mode)
-            seen = renderer._renderer.image(eye).copy()  # noqa: SLF001
+            seen = renderer._renderer.image(eye).copy()
             with Renderer(blank_scene(), ctx=gl_context, settings=renderer.settings) as blank:
                 blank.render(camera)
                 without = blank.image(eye).copy()
-            shown = renderer._texts.image(PROMPT)  # noqa: SLF001  (the cached image, at the display's density)
+            shown = renderer._texts.image(PROMPT)
             panel = text_scene(shown, scene_origin_m(plan.protocol, plan.rig.centre_m(eye))).primitives[0]
             c, u, v = (np.asarray(x, dtype=np.float64) for x in (panel.centre_m, panel.half_u_m, panel.half_v_m))
             corners = np.array([c - u - v, c + u - v, c - u + v, c + u + v])

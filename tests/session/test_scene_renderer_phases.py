@@ -30,7 +30,7 @@ def _image(renderer: SceneRenderer, show: str, name: str) -> np.ndarray:
     protocol_row = compile_schedule(renderer.protocol, 1).iloc[0].to_dict()
     check = renderer.render(protocol_row, PhaseSpec(name, 0.5, show, "cross"), "conventional", 0.1, STRAIGHT_AHEAD_M)
     assert check.checked and check.ok
-    return renderer._renderer.image(renderer.last_eye)  # noqa: SLF001
+    return renderer._renderer.image(renderer.last_eye)
 
 
 def test_recalibration_phase_shows_a_white_cross_at_the_eye_straight_ahead(watched: SceneRenderer) -> None:
@@ -71,7 +71,7 @@ def test_stimulus_follows_the_tracked_head_and_the_cross_does_not(watched: Scene
 
     def image(phase: PhaseSpec, pose) -> np.ndarray:
         watched.render(row, phase, "conventional", 0.5, STRAIGHT_AHEAD_M, head_pose=pose)
-        return watched._renderer.image(watched.last_eye).copy()  # noqa: SLF001
+        return watched._renderer.image(watched.last_eye).copy()
 
     assert not np.array_equal(image(interval, still), image(interval, turned))
     cross = PhaseSpec("recalibration", 0.5, "cross", "cross")

@@ -29,7 +29,7 @@ from psyop.session.log.layout import SessionPaths
 from psyop.session.log.schema import TIMING_COLUMNS
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "adaptive"))
-from test_adaptive_session import adaptive_detection  # noqa: E402
+from test_adaptive_session import adaptive_detection
 
 SEED = 7
 
