@@ -31,8 +31,9 @@ def _legacy_compile(protocol: Any) -> tuple:
 
     columns_by_kind = {"two_interval": ("mode_interval1", "mode_interval2"), "left_right_nearer": ("mode",),
                        "pairwise_preference": ("mode_a", "mode_b"), "reach": ("rendering",)}
-    kind = {"two_interval": ResponseKind.TWO_INTERVAL,  # noqa: F841 - the former code looked it up: its cost is measured "left_right_nearer": ResponseKind.NEAR_SIDE,
-            "pairwise_preference": ResponseKind.PREFERENCE, "reach": ResponseKind.REACH}[protocol.response.kind]
+    kind = {  # noqa: F841 - the former code looked it up: its cost is measured
+        "two_interval": ResponseKind.TWO_INTERVAL, "left_right_nearer": ResponseKind.NEAR_SIDE,
+        "pairwise_preference": ResponseKind.PREFERENCE, "reach": ResponseKind.REACH}[protocol.response.kind]
 
     def duration(phase: Any) -> float:
         for name in ("duration_s", "min_duration_s", "expected_s"):
