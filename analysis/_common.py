@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from psyop.session.responses.base import ResponseKind
 
 
 class _Parser(argparse.ArgumentParser):
@@ -87,17 +86,17 @@ def provenance(facts, analysis: str, pool_protocols: bool = False) -> dict:
                         f"{', '.join(h[:12] for h in hashes)}); analyse each version apart with --study "
                         f"{' / '.join(unit_name(facts.name, h) for h in hashes)} (as `make figures` does) or pool "
                         "them on purpose with --pool-protocols (`make figures POOL=1`)", facts.name)
-    return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind.value, "protocol_sha256": hashes,
+    return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind.name, "protocol_sha256": hashes,
             "protocols_pooled": len(hashes) > 1, "study_folder": facts.folder,
             "study_protocol_versions": list(facts.folder_protocol_sha256)}
 
 
-def require_kind(facts, kind: ResponseKind, script: str) -> None:
-    """A UserError when the study's responses are of another kind than this script analyses."""
-    if facts.kind is not kind:
+def require_kind(facts, kind: str, script: str) -> None:
+    """A UserError when the study's responses are of another kind (psyop.protocol.kinds) than this script analyses."""
+    if facts.kind.name != kind:
         from psyop.errors import UserError
 
-        raise UserError(f"study {facts.name!r} has {facts.kind.value} responses; {script} analyses {kind.value} studies "
+        raise UserError(f"study {facts.name!r} has {facts.kind.name} responses; {script} analyses {kind} studies "
                         "(`python -m psyop studies DATA` lists each study's kind and its scripts)", facts.name)
 
 

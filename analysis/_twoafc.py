@@ -7,7 +7,6 @@ from __future__ import annotations
 import pandas as pd
 
 from psyop.errors import UserError
-from psyop.session.responses.base import ResponseKind
 from psyop.statistics.conditions import CELL_COLUMN, condition_of, describe, with_condition
 from psyop.statistics.studies import FactorFacts, StudyFacts
 
@@ -53,6 +52,6 @@ def level_column(facts: StudyFacts, given: str | None) -> str:
 
 
 def check_two_interval(facts: StudyFacts, script: str) -> None:
-    if facts.kind is not ResponseKind.TWO_INTERVAL:
-        raise UserError(f"study {facts.name!r} has {facts.kind.value} responses; {script} analyses two-interval "
+    if facts.kind.name != "two_interval":
+        raise UserError(f"study {facts.name!r} has {facts.kind.name} responses; {script} analyses two-interval "
                         "(2AFC) studies (`python -m psyop studies DATA` lists each study's kind)", facts.name)

@@ -20,7 +20,6 @@ from psyop.figures.study_figures import plot_reach
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.formatting import format_condition_comparison, format_mixed_comparison
 from psyop.statistics.regression import condition_interaction, linear_fits_by, mixed_condition_comparison
-from psyop.session.responses.base import ResponseKind
 from psyop.statistics.studies import study_facts
 
 
@@ -30,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
                    "first level)")
     args = p.parse_args(argv)
     facts = study_facts(args.data, args.study)
-    require_kind(facts, ResponseKind.REACH, "fig_egocentric_reach.py")
+    require_kind(facts, "reach", "fig_egocentric_reach.py")
     rendering = facts.response_column("rendering_factor", "rendering")
     target = facts.response_column("target_factor", "target_fraction")
     ds = load_dataset(args.data, args.study)

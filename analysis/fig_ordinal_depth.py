@@ -16,7 +16,6 @@ from psyop.figures.study_figures import plot_ordinal
 from psyop.statistics.anova import cell_means, posthoc_paired, rm_anova
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.formatting import format_anova, format_ttest
-from psyop.session.responses.base import ResponseKind
 from psyop.statistics.studies import study_facts
 
 
@@ -28,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--separation-column", default=None, help="default: the response's separation_factor")
     args = p.parse_args(argv)
     facts = study_facts(args.data, args.study)
-    require_kind(facts, ResponseKind.NEAR_SIDE, "fig_ordinal_depth.py")
+    require_kind(facts, "left_right_nearer", "fig_ordinal_depth.py")
     sep = args.separation_column or facts.response_column("separation_factor", "separation_D")
     ds = load_dataset(args.data, args.study)
     require_columns(ds.trials, ["mode", sep, "correct"], str(args.data / args.study),

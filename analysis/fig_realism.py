@@ -15,7 +15,6 @@ from psyop.figures.study_figures import plot_preferences
 from psyop.statistics.binomial import pairwise_preferences
 from psyop.statistics.dataset import load_dataset
 from psyop.statistics.formatting import format_binomial
-from psyop.session.responses.base import ResponseKind
 from psyop.statistics.studies import study_facts
 
 #: Which mode of a pair is written first (the paper's: ocular over conventional, reversed over
@@ -43,7 +42,7 @@ def study_pairs(mode_a, mode_b) -> list[tuple[str, str]]:
 def main(argv: list[str] | None = None) -> int:
     args = parser(__doc__, "figures/{study}_preferences.png", study="realism").parse_args(argv)
     facts = study_facts(args.data, args.study)
-    require_kind(facts, ResponseKind.PREFERENCE, "fig_realism.py")
+    require_kind(facts, "pairwise_preference", "fig_realism.py")
     ds = load_dataset(args.data, args.study)
     require_columns(ds.trials, ["mode_a", "mode_b", "chosen_mode"], str(args.data / args.study),
                     "a pairwise-preference log has mode_a, mode_b and chosen_mode")

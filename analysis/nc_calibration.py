@@ -16,7 +16,6 @@ import sys
 import numpy as np
 from _common import out_path, parser, provenance, require_columns, require_kind, results_file, run, write_csv, write_json
 
-from psyop.session.responses.base import ResponseKind
 from psyop.statistics.studies import study_facts
 
 
@@ -31,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     from psyop.statistics.nulling import fit_nulling, nulling_blocks, pss_text
 
     facts = study_facts(args.data, args.study)
-    require_kind(facts, ResponseKind.WITH_AGAINST, "nc_calibration.py")
+    require_kind(facts, "with_against", "nc_calibration.py")
     ds = load_dataset(args.data, args.study)
     trials = ds.trials
     require_columns(trials, [args.level_column, "response", "participant"], str(args.data / args.study),

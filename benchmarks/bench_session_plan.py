@@ -27,13 +27,13 @@ STUDIES = ("detection", "discrimination", "ordinal", "egocentric", "realism")
 def _legacy_compile(protocol: Any) -> tuple:
     from psyop.protocol import resolve_display_profile, resolve_eye_model
     from psyop.session.phases import PhaseSpec
-    from psyop.session.responses.base import ResponseKind
+    from psyop.protocol.kinds import KINDS
 
     columns_by_kind = {"two_interval": ("mode_interval1", "mode_interval2"), "left_right_nearer": ("mode",),
                        "pairwise_preference": ("mode_a", "mode_b"), "reach": ("rendering",)}
     kind = {  # noqa: F841 - the former code looked it up: its cost is measured
-        "two_interval": ResponseKind.TWO_INTERVAL, "left_right_nearer": ResponseKind.NEAR_SIDE,
-        "pairwise_preference": ResponseKind.PREFERENCE, "reach": ResponseKind.REACH}[protocol.response.kind]
+        "two_interval": KINDS["two_interval"], "left_right_nearer": KINDS["left_right_nearer"],  # (the former enum)
+        "pairwise_preference": KINDS["pairwise_preference"], "reach": KINDS["reach"]}[protocol.response.kind]
 
     def duration(phase: Any) -> float:
         for name in ("duration_s", "min_duration_s", "expected_s"):

@@ -132,8 +132,8 @@ def test_a_user_study_gets_its_own_rules_and_never_a_paper_figure(built_tree: Pa
 
 
 def test_a_session_json_with_an_unknown_response_kind_is_one_line_naming_it(tmp_path) -> None:
-    """The analysis dispatches on psyop's closed set of response kinds (psyop.session.responses.base
-    .ResponseKind, one match per consumer); a kind it does not know is refused naming the file."""
+    """The analysis dispatches on the kind session.json records (psyop.protocol.kinds); a kind it does not
+    know is refused naming the file."""
     import json
 
     import pytest

@@ -24,44 +24,23 @@ from __future__ import annotations
 import argparse
 import hashlib
 import os
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, assert_never
+from typing import TYPE_CHECKING
 
-from psyop.session.responses.base import ResponseKind
+from psyop.protocol.kinds.base import AnalysisTarget, ResponseKindSpec, StudyInputs
 
 if TYPE_CHECKING:
     from psyop.statistics.studies import StudyFacts
 
 #: Sessions of this shipped protocol (by hash) get the linear-fit thresholds figure.
 LINEAR_FIT_PROTOCOLS = ("discrimination.yaml",)
-def kind_name(kind: ResponseKind) -> str:
-    """How ``psyop studies`` and make's progress lines name a response kind."""
-    match kind:
-        case ResponseKind.TWO_INTERVAL:
-            return "two-interval"
-        case ResponseKind.NEAR_SIDE:
-            return "left/right nearer"
-        case ResponseKind.PREFERENCE:
-            return "pairwise preference"
-        case ResponseKind.REACH:
-            return "reach"
-        case ResponseKind.WITH_AGAINST:
-            return "with/against (NC calibration)"
-        case _:
-            assert_never(kind)
+def kind_name(kind: ResponseKindSpec) -> str:
+    """How ``psyop studies`` and make's progress lines name a response kind (its label)."""
+    return kind.label
 
 
-@dataclass(frozen=True)
-class Target:
-    """One output of a study's analysis: the file (relative to $(FIGDIR) or $(RESULTS)), the script
-    and its extra make prerequisites and arguments."""
-
-    output: str
-    script: str
-    prerequisites: str
-    arguments: str
-    kind: str = "figure"  # figure (in $(FIGDIR)) or fits (in $(RESULTS))
+#: one output of a study's analysis (psyop.protocol.kinds.base.AnalysisTarget)
+Target = AnalysisTarget
 
 
 def make_escaped(path: Path) -> str:
@@ -78,46 +57,19 @@ def make_escaped(path: Path) -> str:
     return text
 
 
-def targets_for(study: str, kind: ResponseKind, linear_fit: bool, trials: str = "", adaptive: bool = False) -> list[Target]:
-    """The analysis of one study, by its response kind; ``trials`` is its sessions' trials.parquet
-    files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces); ``adaptive``
-    (a two-interval study whose levels a staircase or QUEST+ placed) adds its track plot.
+def targets_for(study: str, kind: ResponseKindSpec, linear_fit: bool, trials: str = "", adaptive: bool = False
+                ) -> list[Target]:
+    """The analysis of one study, as its response kind declares it (psyop.protocol.kinds); ``trials`` is its
+    sessions' trials.parquet files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces);
+    ``adaptive`` (a study whose levels a staircase or QUEST+ placed) adds what the kind draws of it.
 
     Examples
     --------
-    >>> [t.output for t in targets_for("mine", ResponseKind.NEAR_SIDE, False)]
+    >>> from psyop.protocol.kinds import kind_named
+    >>> [t.output for t in targets_for("mine", kind_named("left_right_nearer"), False)]
     ['mine_depth.png']
     """
-    common = f'--study {study} --data "$(DATA)" --results "$(RESULTS)"'
-    match kind:
-        case ResponseKind.TWO_INTERVAL:
-            return _two_interval_targets(study, linear_fit, trials, adaptive)
-        case ResponseKind.NEAR_SIDE:
-            figure = ("depth", "analysis/fig_ordinal_depth.py")
-        case ResponseKind.REACH:
-            figure = ("reach", "analysis/fig_egocentric_reach.py")
-        case ResponseKind.PREFERENCE:
-            figure = ("preferences", "analysis/fig_realism.py")
-        case ResponseKind.WITH_AGAINST:
-            figure = ("pss", "analysis/nc_calibration.py")
-        case _:
-            assert_never(kind)
-    return [Target(f"{study}_{figure[0]}.png", figure[1], f"{trials} $(DRAW_SRC)", common)]
-
-
-def _two_interval_targets(study: str, linear_fit: bool, trials: str, adaptive: bool) -> list[Target]:
-    """A two-interval study's fits, threshold figure, psychometric panels and (adaptive) track plot."""
-    fits = f"$(RESULTS)/{study}_fits.csv"
-    common = f'--study {study} --data "$(DATA)" --results "$(RESULTS)"'
-    script = "analysis/fig_discrimination_thresholds.py" if linear_fit else "analysis/fig_detection_thresholds.py"
-    return [Target(f"{study}_fits.csv", "analysis/fit_psychometric.py", f"$(STATS_SRC) {trials}",
-                       f"{common} --n-jobs $(JOBS)", kind="fits"),
-                Target(f"{study}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"'),
-                Target(f"supp_psychometric_{study}.png", "analysis/supp_psychometric_functions.py",
-                       f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"')] + ([
-                Target(f"{study}_tracks.png", "analysis/adaptive_tracks.py",
-                       f"{fits} {trials} $(DRAW_SRC) psyop/figures/adaptive_figures.py", f'{common} --fits "{fits}"')]
-                if adaptive else [])
+    return kind.targets(StudyInputs(study, trials, linear_fit, adaptive))
 
 
 def analysis_units(data: Path, pool_protocols: bool) -> list[tuple[StudyFacts, list[Path]]]:
@@ -158,7 +110,7 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
     for facts, sessions in analysis_units(data, pool_protocols):
         uses_linear = bool(facts.protocol_sha256) and set(facts.protocol_sha256) <= linear
         prerequisites = " ".join(make_escaped(p) for p in sessions)
-        adaptive = facts.kind is ResponseKind.TWO_INTERVAL and _adaptive(sessions)
+        adaptive = _adaptive(sessions)
         targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive) + [Target(  # issue 27
             f"{facts.name}_gaze_quality.png", "analysis/gaze_quality.py", f"{prerequisites} $(QUALITY_SRC)",
             f'--study {facts.name} --data "$(DATA)" --results "$(RESULTS)"')]

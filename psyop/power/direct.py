@@ -25,7 +25,6 @@ def direct_trials(task: ReplicationTask) -> pd.DataFrame:
     from psyop.protocol import parse_protocol
     from psyop.schedule import compile_schedule
     from psyop.session.plan import compile_plan
-    from psyop.session.responses.base import ResponseKind
     from psyop.session.responses.simulated import make_observer
 
     protocol = apply_effects(parse_protocol(task.protocol_text, task.protocol_name), task.effects)
@@ -37,7 +36,7 @@ def direct_trials(task: ReplicationTask) -> pd.DataFrame:
     if params is None:
         raise UserError("the direct re-simulation needs the protocol's simulated observer (an observer: section)",
                         "protocol observer")
-    if plan.kind is ResponseKind.REACH or plan.adaptive is not None:
+    if plan.kind.needs_hand_pose or plan.adaptive is not None:
         raise UserError("the direct re-simulation covers constant stimuli answered from the trial row only",
                         "protocol design")
     frames = []

@@ -15,13 +15,19 @@ Every field of every protocol model is listed here with the part of psyop that r
 - ``quality``: the exclusion rules at analysis time (psyop.quality.rules);
 - ``timing``: the session loop's dropped-frame rule (psyop.session.loop, psyop.protocol.timing);
 - ``gaze_validation``: the session's gaze validations (psyop.session.validation);
-- ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``).
+- ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``);
+- ``kinds``: a response kind's own module (psyop.protocol.kinds): each kind lists the users of its models'
+  fields in its ``fields`` (merged here).
 
 tests/protocol/test_protocol_fields.py walks the pydantic schema and checks that every field is
 listed, and that each listed field's name appears in its user's source.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
+
+from psyop.protocol.kinds import KINDS
 
 USERS: dict[str, tuple[str, ...]] = {
     "plan": ("psyop/session/plan.py",),
@@ -39,6 +45,8 @@ USERS: dict[str, tuple[str, ...]] = {
     "quality": ("psyop/quality/rules.py", "psyop/protocol/quality.py"),
     "timing": ("psyop/session/loop.py", "psyop/protocol/timing.py"),
     "gaze_validation": ("psyop/session/validation.py",),
+    # the response kinds' own modules (columns, checks, scoring): psyop.protocol.kinds
+    "kinds": tuple(f"psyop/protocol/kinds/{p.name}" for p in sorted(Path(__file__).with_name("kinds").glob("*.py"))),
 }
 
 _SCENE_COMMON = {"id": "stimulus", "kind": "validation"}
@@ -116,24 +124,6 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "AdaptiveLevel": {k: "adaptive" for k in ("procedure", "start", "min", "max", "grid_points", "rule", "step_sizes",
                                               "target", "target_sd", "min_trials")},
     "Randomisation": {"kind": "schedule", "by": "schedule", "block_order": "schedule"},
-    "TwoIntervalResponse": {"kind": "plan", "question": "plan", "test": "schedule", "reference": "schedule",
-                            "level_factor": "plan", "order": "schedule"},
-    "IntervalSpec": {"mode": "schedule", "set": "schedule"},
-    "ModeFromFactor": {"factor": "schedule"},
-    "LeftRightNearerResponse": {"kind": "plan", "question": "plan", "mode": "schedule", "separation_factor": "plan",
-                                "near_side": "schedule"},
-    "PairwisePreferenceResponse": {"kind": "plan", "question": "plan", "pair_factor": "schedule", "order": "schedule"},
-    "ReachResponse": {"kind": "plan", "question": "plan", "rendering_factor": "schedule", "target_factor": "schedule",
-                      "modes": "schedule", "average_last_samples": "plan"},
-    "Psychometric2afc": {k: "observer" for k in ("kind", "level_column", "threshold_D", "width_D", "lapse",
-                                                 "threshold_slope", "threshold_offset_column", "between_subject_sd_D")},
-    "OrdinalAccuracy": {"kind": "observer", "p_correct": "observer", "between_subject_sd": "observer"},
-    "PairwisePreference": {"kind": "observer", "strength": "observer"},
-    "Reach": {"kind": "observer", "arm_reach_m": "observer", "arm_reach_sd_m": "observer", "by_condition": "observer",
-              "slope_sd": "observer", "intercept_sd_m": "observer", "max_reach_fraction": "observer"},
-    "ReachCondition": {"slope": "observer", "intercept_m": "observer", "noise_sd_m": "observer"},
-    "WithAgainstResponse": {"kind": "plan", "question": "plan", "nc_factor": "schedule"},
-    "NcNulling": {k: "observer" for k in ("kind", "nc_mm", "width_mm", "lapse", "between_subject_sd_mm")},
     "QualitySection": {"trials": "quality", "participants": "quality", "min_included_trials": "quality",
                        "min_included_trials_reason": "quality"},
     "QualityRule": {"measure": "quality", "max": "quality", "min": "quality", "reason": "quality"},
@@ -149,5 +139,11 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                                             "participants", "error_centre_deg", "error_per_15deg", "drift_start_deg",
                                             "drift_deg_per_min")},
 }
-for _observer in ("Psychometric2afc", "OrdinalAccuracy", "PairwisePreference", "Reach", "NcNulling"):
-    FIELD_USERS[_observer]["eye"] = "tracker"  # observer: eye: (psyop.protocol.simulated_eye)
+# the models shared by kinds (psyop.protocol.kinds.base), then each kind's own (its ``fields``)
+FIELD_USERS["IntervalSpec"] = {"mode": "kinds", "set": "kinds"}
+FIELD_USERS["ModeFromFactor"] = {"factor": "kinds"}
+for _kind in KINDS.values():
+    for _model, _users in _kind.fields.items():
+        FIELD_USERS[_model] = dict(_users)
+    for _observer in _kind.observer_models:
+        FIELD_USERS[_observer.__name__]["eye"] = "tracker"  # observer: eye: (psyop.protocol.simulated_eye)

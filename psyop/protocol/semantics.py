@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path as FsPath
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, TypeGuard, assert_never
+from typing import TYPE_CHECKING
 
 from pydantic import BaseModel
 
@@ -22,12 +22,11 @@ from psyop.optics.ranges import DEPTH_D
 from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
-from psyop.protocol.observer import OrdinalAccuracy, PairwisePreference, Psychometric2afc, Reach
+from psyop.protocol.kinds import kind_of
+from psyop.protocol.kinds.two_interval import TwoIntervalResponse
 from psyop.protocol.primitive_count import primitive_count
-from psyop.protocol.response import (LeftRightNearerResponse, ModeFromFactor, PairwisePreferenceResponse,
-                                     ReachResponse, TwoIntervalResponse, WithAgainstResponse)
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, LevelRef, Mesh,
-                                  PinkNoiseSurface, ReachMesh, ReachTarget, RenderingMode, Room, SinusoidalBorder,
+                                  PinkNoiseSurface, ReachMesh, ReachTarget, Room, SinusoidalBorder,
                                   TargetField,
                                   centre_eccentricity_deg)
 from psyop.protocol.trial import Blank, Interval, ResponsePhase
@@ -153,7 +152,7 @@ class _Checker:
     def check_adaptive(self, name: str, path: Loc) -> None:
         """The procedures model a 2AFC psychometric function of the response's level."""
         response = self.p.response
-        if response.kind != "two_interval" or response.level_factor != name:
+        if not isinstance(response, TwoIntervalResponse) or response.level_factor != name:
             self.add(path + ("adaptive",), f"adaptive procedures place the level of a two_interval response; "
                                            f"'{name}' must be response.level_factor of a two_interval response")
         adaptive = [n for n, f in self.factors.items() if f.adaptive is not None]
@@ -410,99 +409,15 @@ class _Checker:
         if intervals != needed:
             self.add(("trial", "phases"), f"a {response.kind} response needs {needed} interval phase(s), "
                                           f"but trial.phases has {intervals}; add or remove '- kind: interval'")
-        path: Loc = ("response",)
-        match response:  # one arm per kind (psyop.protocol.response); mypy names a missing one
-            case TwoIntervalResponse():
-                self.check_two_interval(response, path)
-            case LeftRightNearerResponse():
-                if isinstance(response.mode, ModeFromFactor):
-                    self.mode_factor(response.mode.factor, path + ("mode", "factor"))
-                self.factor_exists(response.separation_factor, path + ("separation_factor",), numeric=True)
-            case PairwisePreferenceResponse():
-                self.check_pairwise_preference(response, path)
-            case ReachResponse():
-                self.check_reach(response, path)
-            case WithAgainstResponse():
-                self.check_with_against(response, path)
-            case _:
-                assert_never(response)
+        kind_of(response).check(response, self, ("response",))
         if response.kind != "with_against" and self.p.display.rendering_nc is not None \
                 and self.p.display.rendering_nc.signed:
             self.add(("display", "rendering_nc", "signed"), "a signed rendering NC sets each trial's mode from its "
                                                            "sign: only a with_against response reads it; remove signed")
 
-    def check_two_interval(self, response: TwoIntervalResponse, path: Loc) -> None:
-        """The level factor and every factor an interval sets are numeric factors; a mode factor names modes."""
-        self.factor_exists(response.level_factor, path + ("level_factor",), numeric=True)
-        for role, spec in (("test", response.test), ("reference", response.reference)):
-            for key in spec.set:
-                self.factor_exists(key, path + (role, "set", key), numeric=True)
-            if isinstance(spec.mode, ModeFromFactor):
-                self.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
-
-    def check_pairwise_preference(self, response: PairwisePreferenceResponse, path: Loc) -> None:
-        """Every pair level is two different rendering modes written ``a|b``."""
-        if self.factor_exists(response.pair_factor, path + ("pair_factor",), numeric=False):
-            for level in self.factors[response.pair_factor].all_levels():
-                parts = str(level).split("|")
-                if len(parts) != 2 or parts[0] == parts[1] or not set(parts) <= set(RENDERING_MODES):
-                    self.add(("design", "factors", response.pair_factor, "levels"),
-                             f"pair level '{level}' must be two different modes written 'a|b' with modes from "
-                             f"{', '.join(RENDERING_MODES)}")
-
-    def check_reach(self, response: ReachResponse, path: Loc) -> None:
-        """Every level of the rendering factor has a mode; the target factor is numeric."""
-        if self.factor_exists(response.rendering_factor, path + ("rendering_factor",), numeric=False):
-            for level in self.factors[response.rendering_factor].all_levels():
-                if level not in response.modes:
-                    self.add(path + ("modes",), f"rendering level '{level}' has no mode; add '{level}: ocular' "
-                                                "(or conventional/reversed) under modes")
-        self.factor_exists(response.target_factor, path + ("target_factor",), numeric=True)
-
-    def check_with_against(self, response: WithAgainstResponse, path: Loc) -> None:
-        """NC nulling: the response's ``nc_factor`` is the signed factor ``display.rendering_nc`` reads."""
-        if not self.factor_exists(response.nc_factor, path + ("nc_factor",), numeric=True):
-            return
-        nc = self.p.display.rendering_nc
-        value = None if nc is None else (nc.mm if nc.mm is not None else nc.scale)
-        if nc is None or not isinstance(value, FactorRef) or value.factor != response.nc_factor or not nc.signed:
-            self.add(path + ("nc_factor",), f"a with_against response renders each trial with the signed NC of "
-                                            f"'{response.nc_factor}': set display.rendering_nc: {{mm: {{factor: "
-                                            f"{response.nc_factor}}}, signed: true}}")
-
-    def check_level_factor_levels(self) -> None:
-        """A threshold needs its level to vary: a fixed two_interval level factor needs at least two levels
-        in every level set (else every fit is ``no_fit`` after a full session)."""
-        response = self.p.response
-        if response.kind != "two_interval" or response.level_factor not in self.factors:
-            return
-        factor = self.factors[response.level_factor]
-        for values in factor.level_sets():
-            if len(values) < 2:
-                key = "levels_by" if factor.levels_by is not None else "levels"
-                self.add(("design", "factors", response.level_factor, key),
-                         f"the level factor '{response.level_factor}' has one level ({values[0]!r}) here: a threshold "
-                         "needs the level to vary; give at least two levels (five or more for a psychometric fit, "
-                         "e.g. {start: 0, step: 0.25, count: 5}) or make it adaptive")
-                return
-
-    def check_pair_orders(self) -> None:
-        """``a|b`` and ``b|a`` are one comparison (``order`` already counterbalances which is shown first)."""
-        response = self.p.response
-        if response.kind != "pairwise_preference" or response.pair_factor not in self.factors:
-            return
-        seen: dict[frozenset[str], str] = {}
-        factor = self.factors[response.pair_factor]
-        for index, level in enumerate(factor.all_levels()):
-            parts = frozenset(str(level).split("|"))
-            if parts in seen:
-                path: Loc = ("design", "factors", response.pair_factor, "levels")
-                if isinstance(factor.levels, list):
-                    path += (index,)
-                self.add(path, f"pair '{level}' is '{seen[parts]}' written in the other order: both are one "
-                               f"comparison (response.order: {response.order} already sets which is shown first); "
-                               f"remove '{level}'")
-            seen.setdefault(parts, str(level))
+    def check_kind_design(self) -> None:
+        """The design checks only the response's kind needs (psyop.protocol.kinds)."""
+        kind_of(self.p.response).check_design(self.p.response, self)
 
     def used_factors(self) -> set[str]:
         """Every factor some part of the protocol reads: the scene (any ``{factor: ...}``), the response's
@@ -625,59 +540,13 @@ class _Checker:
             return
         path: Loc = ("observer",)
         response = self.p.response
-        if observer.kind != response.observer_kind:
+        kind = kind_of(response)
+        accepted = kind.observer_kinds()
+        if observer.kind not in accepted:
             self.add(path + ("kind",), f"a {observer.kind} observer cannot answer a {response.kind} response; use "
-                                       f"kind: {response.observer_kind}")
+                                       f"kind: {' or '.join(accepted) if accepted else '(none: this kind has no observer)'}")
             return
-        # the kinds fit (checked above), so each observer arm sees its own response kind
-        if isinstance(observer, Psychometric2afc) and isinstance(response, TwoIntervalResponse):
-            level_factor = response.level_factor
-            if self.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
-                    observer.level_column != level_factor:
-                self.add(path + ("level_column",), f"the observer reads '{observer.level_column}' as its level, but "
-                                                   f"the response's level factor is '{level_factor}'; set level_column: "
-                                                   f"{level_factor}")
-            if observer.threshold_offset_column is not None:
-                self.factor_exists(observer.threshold_offset_column, path + ("threshold_offset_column",), numeric=True)
-        elif isinstance(observer, OrdinalAccuracy) and isinstance(response, LeftRightNearerResponse):
-            self.check_ordinal_observer(observer, response, path)
-        elif isinstance(observer, PairwisePreference) and isinstance(response, PairwisePreferenceResponse):
-            if response.pair_factor in self.factors:
-                modes = {m for level in self.factors[response.pair_factor].all_levels() for m in str(level).split("|")}
-                for mode in sorted(modes - set(observer.strength)):
-                    self.add(path + ("strength",), f"no strength for mode '{mode}'; add '{mode}: 1.0' under strength")
-        elif isinstance(observer, Reach) and isinstance(response, ReachResponse):
-            if response.rendering_factor in self.factors:
-                levels = self.factors[response.rendering_factor].all_levels()
-                for level in levels:
-                    if level not in observer.by_condition:
-                        self.add(path + ("by_condition",), f"no reach model for rendering '{level}'; add it")
-
-    def check_ordinal_observer(self, observer: OrdinalAccuracy, response: LeftRightNearerResponse, path: Loc) -> None:
-        """p_correct must give a probability for every (mode, separation) a trial can have."""
-        if isinstance(response.mode, ModeFromFactor):
-            if response.mode.factor not in self.factors:
-                return
-            modes = [str(m) for m in self.factors[response.mode.factor].all_levels()]
-        else:
-            modes = [response.mode]
-        if response.separation_factor not in self.factors:
-            return
-        separations = self.factors[response.separation_factor].all_levels()
-        for mode in modes:
-            given = observer.p_correct.get(mode) if _is_mode(mode) else None  # else: reported by mode_factor
-            if given is None:
-                self.add(path + ("p_correct",), f"no p_correct for mode '{mode}'; add '{mode}: {{separation: p}}'")
-                continue
-            for separation in separations:
-                if not any(_same(separation, key) for key in given):
-                    self.add(path + ("p_correct", mode), f"no p_correct for {response.separation_factor} = "
-                                                         f"{separation} in mode '{mode}'; add '{separation}: p'")
-
-
-def _is_mode(name: str) -> TypeGuard[RenderingMode]:
-    """``name`` is a rendering mode (a mode factor's level, checked by ``mode_factor``)."""
-    return name in RENDERING_MODES
+        kind.check_observer(observer, response, self, path)
 
 
 def _in_order(sub: Loc, loc: Loc) -> bool:
@@ -722,8 +591,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
     checker.check_primitive_limit()
     checker.check_mesh_budget(conditions)
     checker.check_response()
-    checker.check_level_factor_levels()
-    checker.check_pair_orders()
+    checker.check_kind_design()
     checker.check_rendering_nc(conditions)
     checker.check_unused_factors()
     checker.check_observer()

@@ -283,9 +283,7 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
 
 def _simulated(options: SessionOptions, plan: SessionPlan) -> bool:
     """session.json's ``simulated`` (:meth:`SessionOptions.simulated_for` the plan's response kind)."""
-    from psyop.session.responses.base import ResponseKind
-
-    return options.simulated_for(plan.kind is ResponseKind.REACH)
+    return options.simulated_for(plan.kind.needs_hand_pose)
 
 
 def _announcer(plan: SessionPlan, responses_spec: str) -> Callable[[str], None] | None:

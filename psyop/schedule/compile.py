@@ -9,23 +9,21 @@ Columns are described in docs/architecture.md ("the trial table") and docs/proto
 
 from __future__ import annotations
 
-from typing import assert_never
-
 import numpy as np
 import pandas as pd
 
 from psyop.errors import UserError
 from psyop.protocol.conditions import condition_label, expand_conditions
 from psyop.protocol.model import Protocol
-from psyop.protocol.response import (LeftRightNearerResponse, ModeFromFactor, PairwisePreferenceResponse,
-                                     ReachResponse, TwoIntervalResponse, WithAgainstResponse)
-from psyop.protocol.scene import FixationTarget, RenderingMode, SinusoidalBorder
+from psyop.protocol.kinds import kind_of
+from psyop.protocol.kinds.base import ScheduleInput
+from psyop.protocol.scene import FixationTarget, SinusoidalBorder
 from psyop.schedule.counterbalance import latin_square_order
 from psyop.schedule.counts import expected_duration_s, trial_count  # noqa: F401 - re-exported
 from psyop.records import JsonObject
 
 #: Independent random streams derived from the user's seed (adding a stream never changes others).
-_STREAM_ORDER, _STREAM_SEEDS, _STREAM_COUNTERBALANCE, _STREAM_STIMULUS, _STREAM_PRACTICE = range(5)
+_STREAM_ORDER, _STREAM_SEEDS, _STREAM_COUNTERBALANCE, _STREAM_STIMULUS, _STREAM_PRACTICE, _STREAM_KIND = range(6)
 
 
 def _rng(seed: int, stream: int) -> np.random.Generator:
@@ -88,12 +86,6 @@ def _column(values: list[float | str]) -> np.ndarray:
     return np.array([float(v) for v in values], dtype=np.float64)
 
 
-def _mode_values(mode: RenderingMode | ModeFromFactor, columns: dict[str, np.ndarray], n: int) -> np.ndarray:
-    if isinstance(mode, ModeFromFactor):
-        return columns[mode.factor].astype(object)
-    return np.full(n, mode, dtype=object)
-
-
 def compile_schedule(protocol: Protocol, seed: int, participant_index: int | None = None) -> pd.DataFrame:
     """The trial table for one participant session of ``protocol``, drawn with ``seed``.
 
@@ -138,90 +130,10 @@ def compile_schedule(protocol: Protocol, seed: int, participant_index: int | Non
     if any(f.adaptive is not None for f in design.factors.values()):
         columns["adaptive"] = np.ones(n, dtype=bool)
 
-    columns.update(_response_columns(protocol, columns, binary, n))
+    kind_input = ScheduleInput(protocol, columns, binary, cond_index, columns["practice"], _rng(seed, _STREAM_KIND))
+    columns.update(kind_of(protocol.response).columns(protocol.response, kind_input))
     columns.update(_stimulus_columns(protocol, n, _rng(seed, _STREAM_STIMULUS)))
     return pd.DataFrame(columns)
-
-
-def _response_columns(protocol: Protocol, columns: dict[str, np.ndarray], binary: np.ndarray, n: int
-                      ) -> dict[str, np.ndarray]:
-    """The response kind's columns (psyop.protocol.response); ``binary``: the counterbalanced choice."""
-    response = protocol.response
-    match response:  # one arm per kind (psyop.protocol.response); mypy names a missing one
-        case TwoIntervalResponse():
-            return _two_interval_columns(response, columns, binary, n)
-        case LeftRightNearerResponse():
-            mode = _mode_values(response.mode, columns, n)
-            return {"mode": mode, "mode_interval1": mode, "near_side": np.where(binary, "right", "left").astype(object)}
-        case PairwisePreferenceResponse():
-            return _pairwise_preference_columns(response, columns, binary)
-        case ReachResponse():
-            return _reach_columns(response, columns)
-        case WithAgainstResponse():
-            return with_against_columns(protocol, columns[response.nc_factor])
-        case _:
-            assert_never(response)
-
-
-def _two_interval_columns(response: TwoIntervalResponse, columns: dict[str, np.ndarray], binary: np.ndarray, n: int
-                          ) -> dict[str, np.ndarray]:
-    """Each interval's mode, the correct interval and the factors an interval overrides, per interval."""
-    out: dict[str, np.ndarray] = {}
-    # binary False: the test stimulus comes first
-    test_first = ~binary
-    test_mode = _mode_values(response.test.mode, columns, n)
-    reference_mode = _mode_values(response.reference.mode, columns, n)
-    out["mode_interval1"] = np.where(test_first, test_mode, reference_mode)
-    out["mode_interval2"] = np.where(test_first, reference_mode, test_mode)
-    out["correct_interval"] = np.where(test_first, 1, 2).astype(np.int64)
-    for name in sorted(set(response.test.set) | set(response.reference.set)):
-        test_value = np.full(n, response.test.set[name]) if name in response.test.set else columns[name]
-        ref_value = np.full(n, response.reference.set[name]) if name in response.reference.set else columns[name]
-        out[f"{name}_interval1"] = np.where(test_first, test_value, ref_value).astype(np.float64)
-        out[f"{name}_interval2"] = np.where(test_first, ref_value, test_value).astype(np.float64)
-    return out
-
-
-def _pairwise_preference_columns(response: PairwisePreferenceResponse, columns: dict[str, np.ndarray],
-                                 binary: np.ndarray) -> dict[str, np.ndarray]:
-    """The two modes in shown order (``binary`` True: the pair's second mode first)."""
-    out: dict[str, np.ndarray] = {}
-    pairs = columns[response.pair_factor]
-    first = np.array([p.split("|")[0] for p in pairs], dtype=object)
-    second = np.array([p.split("|")[1] for p in pairs], dtype=object)
-    out["mode_a"] = np.where(binary, second, first)
-    out["mode_b"] = np.where(binary, first, second)
-    if response.pair_factor != "pair":
-        out["pair"] = pairs
-    out["mode_interval1"] = out["mode_a"]
-    out["mode_interval2"] = out["mode_b"]
-    return out
-
-
-def _reach_columns(response: ReachResponse, columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The mode of each trial's rendering level, and the rendering/target columns under their standard names."""
-    out: dict[str, np.ndarray] = {}
-    rendering = columns[response.rendering_factor]
-    mode = np.array([response.modes[str(r)] for r in rendering], dtype=object)
-    out["mode"] = mode
-    out["mode_interval1"] = mode
-    if response.rendering_factor != "rendering":
-        out["rendering"] = rendering
-    if response.target_factor != "target_fraction":
-        out["target_fraction"] = columns[response.target_factor]
-    return out
-
-
-def with_against_columns(protocol: Protocol, levels: np.ndarray) -> dict[str, np.ndarray]:
-    """A nulling trial's mode from the sign of its NC level (> 0 ocular, 0 conventional, < 0 reversed) and
-    ``rendered_nc_mm``, the signed NC it is rendered with in mm (a ``scale`` level times the eye model's NC)."""
-    from psyop.protocol.display import resolve_eye_model
-
-    levels = np.asarray(levels, dtype=np.float64)
-    nc = protocol.display.rendering_nc
-    scale_mm = resolve_eye_model(protocol.display).nc_m * 1000.0 if nc is not None and nc.scale is not None else 1.0
-    mode = np.where(levels > 0, "ocular", np.where(levels < 0, "reversed", "conventional")).astype(object)
-    return {"mode": mode, "mode_interval1": mode, "rendered_nc_mm": levels * scale_mm}
 
 
 def _stimulus_columns(protocol: Protocol, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:

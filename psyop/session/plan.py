@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from collections.abc import Mapping
-from typing import Any, assert_never
+from typing import Any
 
 from psyop.adaptive.session import AdaptivePlan, adaptive_plan
 from psyop.datacontract import TIMEOUT_RESPONSE
@@ -30,13 +30,14 @@ from psyop.optics.rig import EyeRig
 from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
-from psyop.protocol.response import (LeftRightNearerResponse, PairwisePreferenceResponse, ReachResponse, ResponseModel,
-                                     TwoIntervalResponse, WithAgainstResponse)
+from psyop.protocol.kinds import kind_of
+from psyop.protocol.kinds.base import KindResponse, ResponseKindSpec
+from psyop.protocol.kinds.left_right_nearer import LeftRightNearerResponse
+from psyop.protocol.kinds.reach import ReachResponse
 from psyop.protocol.scene import FixationTarget
 from psyop.protocol.trial import Blank, DriftRecalibration, Interval, ResponsePhase
 from psyop.schedule.rows import mode_column
 from psyop.session.phases import PhaseSpec, mode_for
-from psyop.session.responses.base import ResponseKind
 from psyop.stimulus.placement import centre_angles_deg
 
 #: ipd used when the protocol says ``ipd: tracker`` and the tracker reports none (recorded as such).
@@ -47,21 +48,9 @@ __all__ = ["DEFAULT_IPD_M", "TIMEOUT_RESPONSE", "FixationPath", "ResponsePlan", 
            "session_response_kind"]
 
 
-def session_response_kind(response: ResponseModel) -> ResponseKind:
-    """The session's response kind (what the response sources and the log read) of the protocol's response."""
-    match response:  # one arm per kind (psyop.protocol.response); mypy names a missing one
-        case TwoIntervalResponse():
-            return ResponseKind.TWO_INTERVAL
-        case LeftRightNearerResponse():
-            return ResponseKind.NEAR_SIDE
-        case PairwisePreferenceResponse():
-            return ResponseKind.PREFERENCE
-        case ReachResponse():
-            return ResponseKind.REACH
-        case WithAgainstResponse():
-            return ResponseKind.WITH_AGAINST
-        case _:
-            assert_never(response)
+def session_response_kind(response: KindResponse) -> ResponseKindSpec:
+    """The kind (psyop.protocol.kinds) of the protocol's response: what the response sources and the log read."""
+    return kind_of(response)
 
 
 @dataclass(frozen=True)
@@ -169,14 +158,13 @@ class ResponsePlan:
     Both are recorded in session.json. ``phase``: what the display shows while
     waiting (blank, or off for blind reaching)."""
 
-    kind: ResponseKind
-    protocol_kind: str
+    kind: ResponseKindSpec
     question: str
     prompt: str | None = None
     timeout_s: float | None = None
     display_off: bool = False
     average_last_samples: int = 10
-    level_factor: str | None = None  # two_interval: the factor whose level the observer must detect
+    level_factor: str | None = None  # the factor a psychometric function is fitted over (two_interval, yes_no)
     phase: PhaseSpec = field(default_factory=lambda: PhaseSpec("response", 0.0, "blank", "none"))
 
     @property
@@ -191,7 +179,7 @@ class ResponsePlan:
         return None
 
     def as_dict(self) -> dict[str, Any]:  # Any: session.json values
-        return {"kind": self.kind.value, "protocol_kind": self.protocol_kind, "question": self.question,
+        return {"kind": self.kind.name, "question": self.question,
                 "prompt": self.prompt, "timeout_s": self.timeout_s, "display_off": self.display_off,
                 "average_last_samples": self.average_last_samples, "level_factor": self.level_factor}
 
@@ -215,7 +203,7 @@ class SessionPlan:
     min_valid_gaze_share: float = 0.5
 
     @property
-    def kind(self) -> ResponseKind:
+    def kind(self) -> ResponseKindSpec:
         return self.response.kind
 
     @property
@@ -241,7 +229,7 @@ class SessionPlan:
     def metadata(self) -> dict[str, Any]:  # Any: session.json values
         """The plan as session.json records it."""
         return {
-            "response_kind": self.kind.value,
+            "response_kind": self.kind.name,
             "response": self.response.as_dict(),
             "phases": [dict(p.__dict__, primitives=None if p.primitives is None else list(p.primitives))
                        for p in self.phases],
@@ -352,14 +340,13 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
     r = protocol.response
     display_off = bool(response_phase.display_off) if response_phase is not None else False
     response = ResponsePlan(
-        kind=session_response_kind(r),
-        protocol_kind=r.kind,
+        kind=kind_of(r),
         question=r.question,
         prompt=response_phase.prompt if response_phase is not None else None,
         timeout_s=float(response_phase.timeout_s) if response_phase is not None and response_phase.timeout_s else None,
         display_off=display_off,
         average_last_samples=int(r.average_last_samples) if isinstance(r, ReachResponse) else 10,
-        level_factor=r.level_factor if isinstance(r, TwoIntervalResponse) else None,
+        level_factor=r.level(),
         phase=PhaseSpec("response", 0.0, "off" if display_off else "blank", "none"),
     )
     return SessionPlan(study=protocol.study.name, protocol=protocol, phases=phases, response=response,

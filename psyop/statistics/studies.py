@@ -19,7 +19,8 @@ import yaml
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
-from psyop.session.responses.base import ResponseKind
+from psyop.protocol.kinds import KINDS, kind_named
+from psyop.protocol.kinds.base import ResponseKindSpec
 from psyop.statistics.protocol_versions import session_hash, split_unit, unit_trials_files
 
 #: Units by factor-name suffix (docs/protocols.md: a numeric factor says its unit in its name).
@@ -70,7 +71,7 @@ class StudyFacts:
     ``level_factor``: the 2AFC level factor (None for other kinds)."""
 
     name: str
-    kind: ResponseKind
+    kind: ResponseKindSpec
     protocol_sha256: tuple[str, ...] = ()
     factors: dict[str, FactorFacts] = field(default_factory=dict)
     level_factor: str | None = None
@@ -118,34 +119,39 @@ def unit_of(name: str) -> str | None:
     return None
 
 
-def _kind_from_columns(path: Path) -> ResponseKind:
-    from psyop.session.responses.base import response_kind
+#: Sessions whose session.json records no ``response_kind`` (psyop.statistics.dataset.write_dataset without one,
+#: for tests and demos) are told by the columns only the paper's kinds have; every session psyop runs records it.
+_KIND_COLUMNS: tuple[tuple[frozenset[str], str], ...] = (
+    (frozenset({"correct_interval"}), "two_interval"), (frozenset({"near_side"}), "left_right_nearer"),
+    (frozenset({"mode_a", "mode_b"}), "pairwise_preference"), (frozenset({"target_fraction"}), "reach"),
+    (frozenset({"rendered_nc_mm"}), "with_against"),
+    # tables without the schedule's columns (psyop.statistics.simulate): a 2AFC level, or a mode, and correct
+    (frozenset({"correct", "level_D"}), "two_interval"), (frozenset({"correct", "mode"}), "left_right_nearer"))
 
+
+def _kind_from_columns(path: Path) -> ResponseKindSpec:
+    """The kind of a trial log whose session.json records none (:data:`_KIND_COLUMNS`)."""
     try:
-        columns = pq.read_schema(path).names
+        columns = set(pq.read_schema(path).names)
     except Exception as exc:  # any unreadable parquet is bad input here (re-raised as UserError)
         raise UserError(f"unreadable trial log ({exc})", str(path)) from exc
-    try:
-        return response_kind(columns)
-    except Exception as exc:  # re-raised as UserError below
-        # tables without the schedule's columns (psyop.statistics.simulate): a 2AFC level, or a mode, and correct
-        if "correct" in columns and "level_D" in columns:
-            return ResponseKind.TWO_INTERVAL
-        if "correct" in columns and "mode" in columns:
-            return ResponseKind.NEAR_SIDE
-        raise UserError(f"no response kind in its columns ({exc})", str(path)) from exc
+    for needed, name in _KIND_COLUMNS:
+        if needed <= columns:
+            return kind_named(name)
+    raise UserError("its session.json records no response_kind and its columns are none of the paper's kinds; "
+                    f"record the kind (response_kind: one of {', '.join(KINDS)}) in its session.json", str(path))
 
 
-def _recorded_kind(value: object, meta_path: Path) -> ResponseKind | None:
+def _recorded_kind(value: object, meta_path: Path) -> ResponseKindSpec | None:
     """session.json's ``response_kind`` (None: not recorded); a UserError naming the file for a kind psyop
     does not know."""
     if value is None:
         return None
     try:
-        return ResponseKind(value)
-    except ValueError:
-        known = ", ".join(k.value for k in ResponseKind)
-        raise UserError(f"response_kind {value!r} is not one psyop analyses ({known})", str(meta_path)) from None
+        return kind_named(str(value))
+    except KeyError:
+        raise UserError(f"response_kind {value!r} is not one psyop analyses ({', '.join(KINDS)})",
+                        str(meta_path)) from None
 
 
 def _protocol_factors(text: str) -> tuple[dict[str, FactorFacts], str | None, dict[str, str]]:
@@ -178,15 +184,16 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
     >>> _ = write_dataset(root, {"s": pd.DataFrame({"participant": ["1"], "session": [1], "pair": ["a|b"],
     ...                                              "mode_a": ["a"], "mode_b": ["b"]})}, simulated=True)
     >>> study_facts(root, "s").kind
-    <ResponseKind.PREFERENCE: 'preference'>
+    <response kind pairwise_preference>
     """
     files = unit_trials_files(data_root, study)
     if not files:
         raise UserError(f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
                         str(Path(data_root)))
     hashes: list[str] = []
-    kind: ResponseKind | None = None
+    kind: ResponseKindSpec | None = None
     text: str | None = None
+    recorded_level: str | None = None
     for trials in files:
         meta_path = trials.parent / dc.SESSION_METADATA_FILE
         if not meta_path.exists():
@@ -200,9 +207,13 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
             hashes.append(sha)
         kind = kind or _recorded_kind(meta.get("response_kind"), meta_path)
         text = text or meta.get("protocol_text")
+        response = meta.get("response")
+        if isinstance(response, dict) and isinstance(response.get("level_factor"), str):
+            recorded_level = recorded_level or response["level_factor"]
     kind = kind or _kind_from_columns(files[0])
     factors, level, fields = _protocol_factors(text) if text else ({}, None, {})
-    if kind is ResponseKind.TWO_INTERVAL and level is None:
+    level = recorded_level or level  # the session plan's record (every kind with a level), else the protocol's
+    if kind.name == "two_interval" and level is None:
         level = "level_D"
     folder = split_unit(study)[0]
     everything = tuple(sorted(hashes)) if folder == study else \

@@ -59,6 +59,22 @@ SESSION_JSON_EXCLUDED = ("finalised", "runs", "host", "python", "packages", "fin
 ADDED_SESSION_KEYS = {"sim_tracker_faults": {"dropout_rate_hz": 0.0, "nan_burst_rate_hz": 0.0}}
 
 
+def as_recorded_kind(meta: dict) -> dict:
+    """session.json with its response kind spelled as 26cd3cb spelled it. Since issue 40 a kind has one spelling
+    (psyop.protocol.kinds: ``response_kind`` and ``response.kind`` are the protocol's ``kind:``, and the
+    duplicate ``response.protocol_kind`` is gone); 26cd3cb wrote the session-side spelling (the kind's first
+    ``former_names``) in both and the protocol's in ``protocol_kind``. A current record must use the one
+    spelling (asserted), and is compared in the recorded form."""
+    from psyop.protocol.kinds import KINDS
+
+    name = meta["response_kind"]
+    assert name in KINDS and meta["response"]["kind"] == name and "protocol_kind" not in meta["response"], \
+        (name, meta["response"])
+    former = (KINDS[name].former_names or (name,))[0]
+    response = {"kind": former, "protocol_kind": name, **{k: v for k, v in meta["response"].items() if k != "kind"}}
+    return {**meta, "response_kind": former, "response": response}
+
+
 def measured_timing_columns(study: str) -> tuple[str, ...]:
     """The measured-timing columns of ``study``'s trials.parquet: exactly psyop.session.timing's for its phases."""
     return tuple(timing_column_names(compile_plan(load_protocol(ROOT / "protocols" / f"{study}.yaml")).phases))
@@ -75,7 +91,7 @@ def simulate(study: str, data_root: Path) -> Path:
 def kept_session_json(session: Path) -> dict:
     """session.json less the fields :data:`SESSION_JSON_EXCLUDED`, :data:`ADDED_SESSION_KEYS`, the timing summary
     and the :data:`ADDED_MODELS` records; ``rendering`` (how images were checked) kept under ``_rendering``."""
-    meta = json.loads((session / "session.json").read_text())
+    meta = as_recorded_kind(json.loads((session / "session.json").read_text()))
     kept = {k: v for k, v in meta.items() if k not in SESSION_JSON_EXCLUDED and k not in ADDED_SESSION_KEYS}
     if isinstance(kept.get("summary"), dict):
         kept["summary"] = {k: v for k, v in kept["summary"].items() if k != TIMING_SUMMARY}

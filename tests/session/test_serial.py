@@ -17,7 +17,7 @@ from psyop.protocol import load_protocol
 from psyop.schedule import compile_schedule
 from psyop.session.clock import RealClock
 from psyop.devices.gaze.serial_source import SerialGazeSource, parse_gaze_line
-from psyop.session.responses.base import ResponseKind
+from psyop.protocol.kinds import kind_named
 from psyop.devices.responses.serial_box import SerialResponseBox
 from psyop.run.runner import SessionOptions, run_session
 
@@ -114,7 +114,7 @@ def test_session_with_serial_tracker_and_garbage_completes(tmp_path: Path) -> No
 def test_serial_response_box_maps_buttons_and_skips_garbage() -> None:
     device = PtyDevice()
     clock = RealClock()
-    box = SerialResponseBox(device.path, ResponseKind.TWO_INTERVAL, clock=clock.now_s)
+    box = SerialResponseBox(device.path, kind_named("two_interval"), clock=clock.now_s)
     row = {"correct_interval": 2}
     try:
         assert box.collect(row, clock.now_s()) is None  # prompt shown

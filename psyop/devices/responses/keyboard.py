@@ -1,27 +1,17 @@
 """Keyboard responses through a small event interface (a window supplies the events).
 
-Keys per response kind: 2AFC interval '1'/'2' (or left/right arrows); near side
-left/right arrows (or 'l'/'r'); preference '1'/'a' for the first and '2'/'b' for the
-second stimulus; reach: 'space' confirms and the reach is read from the hand pose; NC nulling
-'w' (or left) for with the eye, 'a' (or right) for against it.
+The keys are raw input; the response kind (psyop.protocol.kinds, carried by the session plan) maps each to
+an answer (its ``keys``) and scores it. A kind whose answer is a hand position (reach) has its keys confirm
+and the reach read from the hand pose. docs/protocols.md lists each kind's keys.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Protocol
 
 from psyop.session.rows import TrialRow
-from psyop.session.responses.base import Response, ResponseKind, score
-
-KEYMAPS: dict[ResponseKind, dict[str, str]] = {
-    ResponseKind.TWO_INTERVAL: {"1": "1", "2": "2", "left": "1", "right": "2", "kp_1": "1", "kp_2": "2"},
-    ResponseKind.NEAR_SIDE: {"left": "left", "right": "right", "l": "left", "r": "right"},
-    ResponseKind.PREFERENCE: {"1": "a", "2": "b", "a": "a", "b": "b", "left": "a", "right": "b"},
-    ResponseKind.REACH: {"space": "confirm", "enter": "confirm"},
-    ResponseKind.WITH_AGAINST: {"w": "with", "a": "against", "left": "with", "right": "against"},
-}
-
+from psyop.session.responses.base import Response, ResponseKindSpec, score
 
 class KeyEvents(Protocol):
     """Source of key presses: ``poll`` returns (key name, time on the session clock) pairs."""
@@ -34,10 +24,11 @@ class KeyboardResponses:
 
     needs_images = True
 
-    def __init__(self, events: KeyEvents, kind: ResponseKind, *, reach_m: Callable[[], float] | None = None) -> None:
+    def __init__(self, events: KeyEvents, kind: ResponseKindSpec, *, reach_m: Callable[[], float] | None = None,
+                 keymap: Mapping[str, str] | None = None) -> None:
         self.events = events
         self.kind = kind
-        self.keymap = KEYMAPS[kind]
+        self.keymap = kind.keys if keymap is None else keymap  # raw input name -> the kind's answer
         self._reach_m = reach_m
         self._prompt_s: float | None = None
         self.early_presses = 0  # answer keys pressed before the response phase (ignored, never a negative time)
@@ -54,7 +45,7 @@ class KeyboardResponses:
                 continue
             rt = t_s - self._prompt_s
             self._prompt_s = None
-            if self.kind is ResponseKind.REACH:
+            if self.kind.needs_hand_pose:
                 if self._reach_m is None:
                     raise RuntimeError("reach responses need a hand-pose source")
                 reach = float(self._reach_m())

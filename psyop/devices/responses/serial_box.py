@@ -1,7 +1,7 @@
 """A serial response box: each button press arrives as one line ``B<button>``.
 
-Buttons '1'/'2' (or 'L'/'R', 'A'/'B') map onto the trial's answer the same way as the
-keyboard's keys. Garbage bytes and unknown lines are counted and skipped.
+The button is raw input; the response kind (psyop.protocol.kinds) maps it to an answer (its ``buttons``;
+docs/protocols.md lists them) and scores it. Garbage bytes and unknown lines are counted and skipped.
 """
 
 from __future__ import annotations
@@ -10,23 +10,15 @@ import queue
 from collections.abc import Callable
 
 from psyop.session.rows import TrialRow
-from psyop.session.responses.base import Response, ResponseKind, score
+from psyop.session.responses.base import Response, ResponseKindSpec, score
 from psyop.devices.serial_lines import SerialLineReader
-
-BUTTONS: dict[ResponseKind, dict[str, str]] = {
-    ResponseKind.TWO_INTERVAL: {"1": "1", "2": "2", "L": "1", "R": "2"},
-    ResponseKind.NEAR_SIDE: {"L": "left", "R": "right", "1": "left", "2": "right"},
-    ResponseKind.PREFERENCE: {"1": "a", "2": "b", "A": "a", "B": "b", "L": "a", "R": "b"},
-    ResponseKind.WITH_AGAINST: {"1": "with", "2": "against", "L": "with", "R": "against"},
-}
-
 
 class SerialResponseBox:
     needs_images = True
 
-    def __init__(self, url: str, kind: ResponseKind, *, clock: Callable[[], float], baudrate: int = 115200) -> None:
-        if kind not in BUTTONS:
-            raise ValueError(f"a response box cannot give {kind.value} responses")
+    def __init__(self, url: str, kind: ResponseKindSpec, *, clock: Callable[[], float], baudrate: int = 115200) -> None:
+        if not kind.buttons:
+            raise ValueError(f"a response box cannot give {kind.name} responses")
         self.kind = kind
         self._presses: queue.Queue[tuple[str, float]] = queue.Queue()
         self._reader = SerialLineReader(url, self._on_line, clock, baudrate=baudrate)
@@ -35,7 +27,7 @@ class SerialResponseBox:
 
     def _on_line(self, text: str, arrival_s: float) -> bool:
         text = text.strip()
-        if len(text) != 2 or text[0] != "B" or text[1] not in BUTTONS[self.kind]:
+        if len(text) != 2 or text[0] != "B" or text[1] not in self.kind.buttons:
             return False
         self._presses.put((text[1], arrival_s))
         return True
@@ -52,7 +44,7 @@ class SerialResponseBox:
             if self._reader.error:
                 raise ConnectionError(self._reader.error) from None
             return None
-        r = score(self.kind, row, BUTTONS[self.kind][button])
+        r = score(self.kind, row, self.kind.buttons[button])
         rt = t_s - self._prompt_s
         self._prompt_s = None
         return Response(r.response, r.correct, r.reach_m, r.chosen_mode, rt)

@@ -22,7 +22,7 @@ from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample
 from psyop.session.gaze.sync import ClockSync
 from psyop.session.pose import PoseSample
 from psyop.session.reach import horizontal_reach_m
-from psyop.session.responses.base import ResponseKind
+from psyop.session.responses.base import ResponseKindSpec
 from psyop.devices.responses.keyboard import KeyboardResponses
 from psyop.devices.xr.runtime import HANDS, XR_EXIT_CODE, rotate
 
@@ -171,12 +171,11 @@ class OpenXRPose:
 
 
 class XrButtons:
-    """Key-like events from the controllers' select buttons, once per input sync: the left hand's is
-    'left', the right hand's 'right' (for a reach, either is 'space': confirm), each at the time
-    the runtime saw the press."""
+    """Raw events from the controllers' select buttons, once per input sync: the left hand's is 'left', the
+    right hand's 'right', each at the time the runtime saw the press (the response kind gives them meaning)."""
 
-    def __init__(self, display: OpenXRDisplay, kind: ResponseKind) -> None:
-        self.display, self.runtime, self.kind = display, display.runtime, kind
+    def __init__(self, display: OpenXRDisplay) -> None:
+        self.display, self.runtime = display, display.runtime
         self._seen_sync = -1
 
     def poll(self) -> list[tuple[str, float]]:
@@ -185,18 +184,17 @@ class XrButtons:
             return []
         self._seen_sync = rt.sync_count
         presses = rt.select_presses()  # the runtime's own press times: a response time is not frame-quantised
-        events = sorted((self.display.to_session_s(t_ns), "space" if self.kind is ResponseKind.REACH else hand)
+        events = sorted((self.display.to_session_s(t_ns), hand)
                         for hand, t_ns in presses.items())
         return [(name, t_s) for t_s, name in events[:1]]
 
 
 class OpenXRResponses(KeyboardResponses):
-    """Answers from the controllers (XrButtons through the keyboard's key map: 2AFC left = 1,
-    right = 2; near side left/right; preference left = a, right = b; a reach is confirmed by
-    either, its distance from the right controller's grip)."""
+    """Answers from the controllers: XrButtons' 'left' / 'right' through the response kind's ``controller`` map
+    (docs/protocols.md lists it); a reach is confirmed by either, its distance from the right controller's grip."""
 
     @classmethod
-    def on_display(cls, built: Display | None, kind: ResponseKind) -> "OpenXRResponses":
+    def on_display(cls, built: Display | None, kind: ResponseKindSpec) -> "OpenXRResponses":
         display = _openxr_display(built, "--responses")
         display.needs_controller = True  # the first trial waits for one (OpenXRDisplay._wait_for_controller)
 
@@ -207,4 +205,4 @@ class OpenXRResponses(KeyboardResponses):
             pose = rt.locate(rt.hand_spaces["right"], rt.world, t_ns)
             return horizontal_reach_m(pose.position_m) if pose.valid else math.nan
 
-        return cls(XrButtons(display, kind), kind, reach_m=right_hand_reach_m)
+        return cls(XrButtons(display), kind, reach_m=right_hand_reach_m, keymap=kind.controller)

@@ -4,6 +4,6 @@ in :mod:`psyop.devices.responses`).
 Every source turns one trial (its schedule row) into a :class:`Response`.
 """
 
-from psyop.session.responses.base import Response, ResponseKind, ResponseSource, response_kind
+from psyop.session.responses.base import Response, ResponseKindSpec, ResponseSource
 
-__all__ = ["Response", "ResponseKind", "ResponseSource", "response_kind"]
+__all__ = ["Response", "ResponseKindSpec", "ResponseSource"]

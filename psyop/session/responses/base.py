@@ -1,41 +1,16 @@
-"""The response record and the interface every response source implements."""
+"""The response record and the interface every response source implements; a response is scored by its kind
+(psyop.protocol.kinds), which the session plan carries."""
 
 from __future__ import annotations
 
-from psyop.session.rows import TrialRow
-
 import math
 from dataclasses import dataclass
-from enum import Enum
 from typing import Protocol
 
+from psyop.protocol.kinds.base import ResponseKindSpec
+from psyop.session.rows import TrialRow
 
-class ResponseKind(str, Enum):
-    """What a trial asks for, decided from the schedule's columns (architecture contract)."""
-
-    TWO_INTERVAL = "2afc_interval"  # '1' or '2'
-    NEAR_SIDE = "near_side"  # 'left' or 'right'
-    PREFERENCE = "preference"  # 'a' or 'b'
-    REACH = "reach"  # a distance in metres
-    WITH_AGAINST = "with_against"  # 'with' or 'against' (NC nulling)
-
-
-def response_kind(columns: set[str] | list[str]) -> ResponseKind:
-    cols = set(columns)
-    if "correct_interval" in cols:
-        return ResponseKind.TWO_INTERVAL
-    if "near_side" in cols:
-        return ResponseKind.NEAR_SIDE
-    if {"mode_a", "mode_b"} <= cols:
-        return ResponseKind.PREFERENCE
-    if "target_fraction" in cols:
-        return ResponseKind.REACH
-    if "rendered_nc_mm" in cols:
-        return ResponseKind.WITH_AGAINST
-    raise ValueError(
-        "cannot tell the response type from the schedule: expected one of the columns "
-        "correct_interval, near_side, mode_a/mode_b, target_fraction or rendered_nc_mm"
-    )
+__all__ = ["Response", "ResponseKindSpec", "ResponseSource", "score"]
 
 
 @dataclass(frozen=True)
@@ -50,16 +25,10 @@ class Response:
     extras: tuple[tuple[str, float], ...] = ()  # extra trial-log values, e.g. hand position
 
 
-def score(kind: ResponseKind, row: TrialRow, answer: str, reach_m: float | None = None) -> Response:
-    """Fill ``correct`` / ``chosen_mode`` / ``reach_m`` from a raw answer."""
-    if kind is ResponseKind.TWO_INTERVAL:
-        return Response(answer, correct=answer == str(int(row["correct_interval"])))
-    if kind is ResponseKind.NEAR_SIDE:
-        return Response(answer, correct=answer == str(row["near_side"]))
-    if kind is ResponseKind.PREFERENCE:
-        chosen = str(row["mode_a"] if answer == "a" else row["mode_b"])
-        return Response(answer, chosen_mode=chosen)
-    return Response(answer, reach_m=reach_m)
+def score(kind: ResponseKindSpec, row: TrialRow, answer: str, reach_m: float | None = None) -> Response:
+    """The response ``answer`` (a value of the kind's key map, or a reach's distance as text) scored by its kind."""
+    scored = kind.score(row, answer)
+    return Response(answer, correct=scored.correct, reach_m=reach_m, chosen_mode=scored.chosen_mode)
 
 
 class ResponseSource(Protocol):

@@ -20,7 +20,9 @@ from psyop.errors import UserError
 from psyop.session.gaze.keyed import KeyedGenerator, keyed_rng, keyed_uniform
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.reach import HAND_HEIGHT_M
-from psyop.session.responses.base import Response, ResponseKind, score
+from psyop.protocol.kinds import KINDS, kind_named
+from psyop.protocol.kinds.base import ObserverBase, ResponseKindSpec, observer_kind_name
+from psyop.session.responses.base import Response, score
 
 
 def _phi(z: float) -> float:
@@ -89,7 +91,7 @@ class Psychometric2AFC(SimulatedObserver):
     and varies between participants with sd ``between_subject_sd_D``.
     """
 
-    kind = ResponseKind.TWO_INTERVAL
+    kind = kind_named("two_interval")
 
     def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         super().__init__(params, seed=seed, participant=participant)
@@ -131,7 +133,7 @@ class OrdinalAccuracy(SimulatedObserver):
     list of ``{mode, separation_D, p}`` records.
     """
 
-    kind = ResponseKind.NEAR_SIDE
+    kind = kind_named("left_right_nearer")
 
     def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         super().__init__(params, seed=seed, participant=participant)
@@ -170,7 +172,7 @@ class OrdinalAccuracy(SimulatedObserver):
 class PairwisePreference(SimulatedObserver):
     """Bradley-Terry: p(choose a) = s_a / (s_a + s_b) with a positive strength per mode."""
 
-    kind = ResponseKind.PREFERENCE
+    kind = kind_named("pairwise_preference")
 
     def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         super().__init__(params, seed=seed, participant=participant)
@@ -207,7 +209,7 @@ class Reach(SimulatedObserver):
     ``reach_m`` is its horizontal distance (psyop.session.reach).
     """
 
-    kind = ResponseKind.REACH
+    kind = kind_named("reach")
 
     def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         super().__init__(params, seed=seed, participant=participant)
@@ -258,7 +260,7 @@ class NcNulling(SimulatedObserver):
     schedule's ``rendered_nc_mm``. Rendered below its own NC the scene lags the eye's parallax: 'with'.
     Each participant's NC is ``nc_mm`` + N(0, ``between_subject_sd_mm``), drawn once (:attr:`own_nc_mm`)."""
 
-    kind = ResponseKind.WITH_AGAINST
+    kind = kind_named("with_against")
 
     def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
         from psyop.optics.rig import NcRule
@@ -303,9 +305,43 @@ OBSERVERS: dict[str, type[SimulatedObserver]] = {
 }
 
 
+class DeclaredObserver(SimulatedObserver):
+    """An observer a response kind declares (psyop.protocol.kinds): its model answers each trial from the
+    participant's draws (drawn once from the participant stream) and the trial's one keyed uniform."""
+
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str) -> None:
+        super().__init__(params, seed=seed, participant=participant)
+        self.kind, model = declared_observer(str(params.get("kind")))
+        self.model = model.model_validate({k: v for k, v in params.items() if k in model.model_fields})
+        self.participant_state = self.model.participant_draws(self._participant_rng)
+
+    def decision(self, row: TrialRow) -> tuple[float, float] | None:
+        p = self.model.probability(row, self.participant_state)
+        return None if p is None else (keyed_uniform(*self.trial_keys(row)), p)
+
+    def collect(self, row: TrialRow, now_s: float) -> Response:
+        u = keyed_uniform(*self.trial_keys(row))
+        return score(self.kind, row, self.model.answer(row, self.participant_state, u))
+
+
+def declared_observer(name: str) -> tuple[ResponseKindSpec, type[ObserverBase]]:
+    """The kind and model of the declared observer ``name`` (a KeyError when no kind declares one)."""
+    for kind in KINDS.values():
+        for model in kind.observer_models:
+            if model.declared and observer_kind_name(model) == name:
+                return kind, model
+    raise KeyError(name)
+
+
 def make_observer(params: JsonMapping, *, seed: int, participant: str) -> SimulatedObserver:
     """Build the observer named by ``params['kind']`` (or ``type``/``model``)."""
     name = params.get("kind") or params.get("type") or params.get("model")
-    if name not in OBSERVERS:
-        raise UserError(f"observer: unknown kind {name!r}; expected one of {sorted(OBSERVERS)}", "protocol observer")
-    return OBSERVERS[name](params, seed=seed, participant=participant)
+    if name in OBSERVERS:
+        return OBSERVERS[name](params, seed=seed, participant=participant)
+    try:
+        declared_observer(str(name))
+    except KeyError:
+        known = sorted(OBSERVERS) + sorted(observer_kind_name(m) for k in KINDS.values() for m in k.observer_models
+                                           if m.declared)
+        raise UserError(f"observer: unknown kind {name!r}; expected one of {known}", "protocol observer") from None
+    return DeclaredObserver(params, seed=seed, participant=participant)

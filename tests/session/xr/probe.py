@@ -54,12 +54,12 @@ def main() -> None:
 
 def _cameras(plan, display, n_frames: int) -> list[dict]:
     from psyop.devices.xr.tracking import OpenXRGaze, OpenXRPose, OpenXRResponses
-    from psyop.session.responses.base import ResponseKind
+    from psyop.protocol.kinds import kind_named
 
     gaze = OpenXRGaze.on_display(display) if display.runtime.gaze_space is not None else None
     pose = OpenXRPose.on_display(display, "right")
     aim = OpenXRPose.on_display(display, "right:aim")
-    buttons = OpenXRResponses.on_display(display, ResponseKind.TWO_INTERVAL)
+    buttons = OpenXRResponses.on_display(display, kind_named("two_interval"))
     rt = display.runtime
     stage = rt._reference_space(rt.xr.ReferenceSpaceType.STAGE)  # where the runtime puts LOCAL's origin
     frames = []

@@ -1,0 +1,266 @@
+"""What a response kind is: one object that owns everything a protocol's ``response:`` section means.
+
+A kind (:class:`ResponseKindSpec`, one module per kind in this package, found by
+:mod:`psyop.protocol.kinds`) owns
+
+- its protocol model (:attr:`~ResponseKindSpec.model`, the ``response:`` section) and the simulated observer
+  models it accepts (:attr:`~ResponseKindSpec.observer_models`, the ``observer:`` section);
+- the checks that need the whole protocol (:meth:`~ResponseKindSpec.check`, :meth:`~ResponseKindSpec.check_design`,
+  :meth:`~ResponseKindSpec.check_observer`);
+- the schedule columns it adds (:meth:`~ResponseKindSpec.columns`);
+- how raw input becomes an answer: a key (:attr:`~ResponseKindSpec.keys`), a response-box button
+  (:attr:`~ResponseKindSpec.buttons`), an OpenXR controller's select button (:attr:`~ResponseKindSpec.controller`);
+  devices emit only the raw, time-stamped input, as PsychoPy's ``BaseResponse(t, value)`` does;
+- how an answer is scored (:meth:`~ResponseKindSpec.score`);
+- its analysis in ``make figures`` (:meth:`~ResponseKindSpec.targets`) and its name in ``psyop studies``.
+
+Its one spelling, :attr:`~ResponseKindSpec.name`, is the protocol's ``kind:``, session.json's ``response_kind``
+and what the analysis reads. This module is imported by the protocol layer, so it imports nothing above it:
+the checker is the structural :class:`Checks`, the analysis targets are data (:class:`AnalysisTarget`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar, Literal, Protocol
+
+import numpy as np
+from pydantic import Field
+
+from psyop.protocol.base import Number, StrictModel
+from psyop.protocol.design import Design, Factor
+from psyop.protocol.display import DisplaySpec
+from psyop.protocol.scene import RenderingMode
+from psyop.protocol.simulated_eye import SimulatedEye
+from psyop.records import Loc, TrialRow
+
+
+#: How an order or side is assigned. ``balanced``: within each condition, as evenly as possible
+#: (an odd count gets its extra trial on a seeded random side). ``random``: a fair coin per trial.
+Counterbalance = Literal["balanced", "random"]
+
+
+class ModeFromFactor(StrictModel):
+    """The rendering mode is the trial's level of a factor whose levels are mode names."""
+
+    factor: str
+
+
+def mode_factor_of(mode: RenderingMode | ModeFromFactor) -> set[str]:
+    """The factor a mode is read from ({} for a fixed mode)."""
+    return {mode.factor} if isinstance(mode, ModeFromFactor) else set()
+
+
+class IntervalSpec(StrictModel):
+    """One stimulus of a trial: its rendering mode and factor overrides (``set: {level_D: 0}`` shows the
+    reference with the level at 0)."""
+
+    mode: RenderingMode | ModeFromFactor
+    set: dict[str, Number] = Field(default_factory=dict)
+
+
+class KindResponse(StrictModel):
+    """What every kind's ``response:`` model has: its ``kind`` and ``question``, how many interval phases a
+    trial needs, how its counterbalanced choice is drawn, and which factors it reads."""
+
+    kind: str
+    question: str
+    intervals_needed: ClassVar[int] = 1
+
+    @property
+    def counterbalance(self) -> Counterbalance:
+        """How the schedule's counterbalanced 0/1 choice is drawn (kinds without one: balanced and unused)."""
+        return "balanced"
+
+    def interval_specs(self) -> tuple[IntervalSpec, ...]:
+        """The per-interval specs (none for most kinds)."""
+        return ()
+
+    def factors_read(self) -> set[str]:
+        """The design factors this response reads (a factor nothing reads is refused at validation)."""
+        return set()
+
+    def level(self) -> str | None:
+        """The factor whose level a psychometric function is fitted over (None: the kind has none)."""
+        return None
+
+
+class ObserverBase(StrictModel):
+    """What every simulated observer has: ``eye``, the simulated eye and tracker (psyop.protocol.simulated_eye).
+
+    A kind's own observer answers through :meth:`participant_draws` and :meth:`answer`, which the session's
+    simulated-observer source (psyop.session.responses.simulated) calls with seeded draws; the paper's five
+    observers are implemented there instead (:attr:`declared` False)."""
+
+    kind: str
+    eye: SimulatedEye | None = None
+    #: this model answers through :meth:`answer` (False: psyop.session.responses.simulated implements it)
+    declared: ClassVar[bool] = False
+
+    def participant_draws(self, rng: np.random.Generator) -> dict[str, float]:
+        """What varies between simulated participants, drawn once per participant from ``rng``."""
+        return {}
+
+    def answer(self, row: TrialRow, participant: Mapping[str, float], u: float) -> str:
+        """The answer (a value of the kind's key map) to trial ``row``, from the participant's draws and ``u``,
+        the trial's one uniform draw in [0, 1) (exact on every machine)."""
+        raise NotImplementedError(f"{type(self).__name__} answers in psyop.session.responses.simulated")
+
+    def probability(self, row: TrialRow, participant: Mapping[str, float]) -> float | None:
+        """For a binary answer: p of the answer given when ``u < p`` (the margin tests read it); else None."""
+        return None
+
+
+class ProtocolParts(Protocol):
+    """The parts of a protocol (psyop.protocol.model.Protocol) a kind reads beside its own section."""
+
+    @property
+    def display(self) -> DisplaySpec: ...
+
+    @property
+    def design(self) -> Design: ...
+
+
+class Checks(Protocol):
+    """The part of the protocol checker (psyop.protocol.semantics) a kind's checks use."""
+
+    @property
+    def p(self) -> ProtocolParts: ...
+
+    @property
+    def factors(self) -> Mapping[str, Factor]: ...
+
+    def add(self, path: tuple[str | int | float, ...], message: str) -> None: ...
+
+    def factor_exists(self, name: str, path: Loc, *, numeric: bool | None = None) -> bool: ...
+
+    def mode_factor(self, name: str, path: Loc) -> None: ...
+
+
+@dataclass(frozen=True)
+class ScheduleInput:
+    """What a kind's schedule columns are drawn from: the protocol, the design columns so far (one entry per
+    trial, practice first), the counterbalanced 0/1 choice per trial (:data:`Counterbalance`), the trials'
+    condition indices, and the kind's own seeded stream (independent of every other stream of the schedule)."""
+
+    protocol: ProtocolParts
+    columns: Mapping[str, np.ndarray]
+    binary: np.ndarray
+    condition: np.ndarray
+    practice: np.ndarray
+    rng: np.random.Generator
+
+    @property
+    def n(self) -> int:
+        return int(self.binary.size)
+
+
+@dataclass(frozen=True)
+class Scored:
+    """An answer as the kind scores it: whether it was correct (None: no correct answer), the rendering mode
+    chosen (preference kinds), and its number (``response_value``; None where the answer is no number)."""
+
+    correct: bool | None = None
+    chosen_mode: str | None = None
+
+
+@dataclass(frozen=True)
+class AnalysisTarget:
+    """One output of a study's analysis in ``make figures``: the file (relative to $(FIGDIR) or $(RESULTS)),
+    the script and its extra make prerequisites and arguments."""
+
+    output: str
+    script: str
+    prerequisites: str
+    arguments: str
+    kind: str = "figure"  # figure (in $(FIGDIR)) or fits (in $(RESULTS))
+
+
+@dataclass(frozen=True)
+class StudyInputs:
+    """What a kind's analysis targets are built from: the study (or protocol version) name, its sessions'
+    trials.parquet files as make prerequisites, whether it is a linear-fit (discrimination) study, and
+    whether an adaptive procedure placed its levels."""
+
+    study: str
+    trials: str = ""
+    linear_fit: bool = False
+    adaptive: bool = False
+
+    @property
+    def common_arguments(self) -> str:
+        return f'--study {self.study} --data "$(DATA)" --results "$(RESULTS)"'
+
+
+class ResponseKindSpec(ABC):
+    """One response kind (see the module docstring). Subclasses set the class attributes and implement
+    :meth:`columns`; the other methods have the defaults of a kind without them."""
+
+    #: the one spelling: the protocol's ``kind:``, session.json's ``response_kind``, the analysis's kind
+    name: ClassVar[str]
+    #: session.json spellings of this kind written before it had one (read, never written)
+    former_names: ClassVar[tuple[str, ...]] = ()
+    #: how ``psyop studies`` and make's progress lines name it
+    label: ClassVar[str]
+    model: ClassVar[type[KindResponse]]
+    observer_models: ClassVar[tuple[type[ObserverBase], ...]] = ()
+    #: keyboard key name (lower case) -> answer
+    keys: ClassVar[Mapping[str, str]] = {}
+    #: serial response-box button (the character after ``B``) -> answer; empty: a box cannot answer it
+    buttons: ClassVar[Mapping[str, str]] = {}
+    #: OpenXR controller select button ('left' / 'right' hand) -> answer
+    controller: ClassVar[Mapping[str, str]] = {}
+    #: the answer is a hand position read when the participant confirms (keys map to 'confirm')
+    needs_hand_pose: ClassVar[bool] = False
+    #: who reads each field of this kind's models (model name -> field -> user of psyop.protocol.fields:
+    #: ``kinds`` for this module, ``plan``, ``observer``, ...); a test checks each user's source names it
+    fields: ClassVar[Mapping[str, Mapping[str, str]]] = {}
+
+    def __repr__(self) -> str:
+        return f"<response kind {self.name}>"
+
+    @abstractmethod
+    def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
+        """The schedule columns of this kind (psyop.schedule.compile adds them to every trial)."""
+
+    def check(self, response: KindResponse, checks: Checks, path: Loc) -> None:
+        """Checks of the ``response:`` section against the design (psyop.protocol.semantics)."""
+        return None
+
+    def check_design(self, response: KindResponse, checks: Checks) -> None:
+        """Checks of the design's factors that only this kind needs."""
+        return None
+
+    def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
+        """Checks of the ``observer:`` section (its kind is one of :attr:`observer_models`)."""
+        return None
+
+    def score(self, row: TrialRow, answer: str) -> Scored:
+        """``answer`` (one of the values of :attr:`keys`) scored against the trial ``row``."""
+        return Scored()
+
+    @abstractmethod
+    def targets(self, study: StudyInputs) -> list[AnalysisTarget]:
+        """The study's analysis in ``make figures``."""
+
+    def observer_kinds(self) -> tuple[str, ...]:
+        """The ``observer: kind:`` names this response accepts."""
+        return tuple(observer_kind_name(m) for m in self.observer_models)
+
+
+def observer_kind_name(model: type[ObserverBase]) -> str:
+    """The one value of an observer model's ``kind: Literal[...]`` field (what ``observer: kind:`` names)."""
+    annotation = model.model_fields["kind"].annotation
+    values: tuple[object, ...] = tuple(getattr(annotation, "__args__", ()))
+    name = values[0] if len(values) == 1 else None
+    if not isinstance(name, str):
+        raise TypeError(f"{model.__name__}.kind must be a Literal of one name")
+    return name
+
+
+def figure_target(study: StudyInputs, suffix: str, script: str) -> AnalysisTarget:
+    """A study's one figure ``<study>_<suffix>.png`` drawn by ``script`` from its trials."""
+    return AnalysisTarget(f"{study.study}_{suffix}.png", script, f"{study.trials} $(DRAW_SRC)",
+                          study.common_arguments)

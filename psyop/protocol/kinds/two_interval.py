@@ -1,0 +1,166 @@
+"""``two_interval``: which of two intervals showed more (two-interval forced choice; detection and
+discrimination). Columns ``mode_interval1/2``, ``correct_interval``, the level column and
+``<factor>_interval1/2`` for the factors an interval overrides; a psychometric fit per condition."""
+
+from __future__ import annotations
+
+from typing import ClassVar, Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from psyop.protocol.base import Number
+from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, IntervalSpec, KindResponse,
+                                       ModeFromFactor, ObserverBase, ResponseKindSpec, ScheduleInput, Scored,
+                                       StudyInputs, mode_factor_of)
+from psyop.protocol.kinds.modes import mode_values
+from psyop.records import Loc, TrialRow
+
+
+class TwoIntervalResponse(KindResponse):
+    """Two-interval forced choice; the ``test`` interval is the correct answer."""
+
+    kind: Literal["two_interval"]
+    intervals_needed: ClassVar[int] = 2
+    question: str = "Which interval showed more relative motion?"
+    test: IntervalSpec
+    reference: IntervalSpec
+    level_factor: str = "level_D"
+    order: Counterbalance = "balanced"
+
+    @property
+    def counterbalance(self) -> Counterbalance:
+        """How the interval order (test first or second) is assigned."""
+        return self.order
+
+    def level(self) -> str | None:
+        return self.level_factor
+
+    def interval_specs(self) -> tuple[IntervalSpec, ...]:
+        """The intervals' specs: (test, reference)."""
+        return (self.test, self.reference)
+
+    def factors_read(self) -> set[str]:
+        """The factors this response reads: the level, each interval's mode factor and ``set:`` keys."""
+        used = {self.level_factor}
+        for spec in self.interval_specs():
+            used |= mode_factor_of(spec.mode) | set(spec.set)
+        return used
+
+
+class Psychometric2afc(ObserverBase):
+    """p(correct) = 0.5 + (0.5 - lapse) * Phi((level - t) / width_D + z75), where t =
+    threshold_D + threshold_slope * row[threshold_offset_column] is the 75 % point (without lapse);
+    each simulated participant's threshold is shifted by N(0, between_subject_sd_D)."""
+
+    kind: Literal["psychometric_2afc"]
+    level_column: str = "level_D"
+    threshold_D: Number = Field(gt=0)
+    width_D: Number = Field(gt=0)
+    lapse: Number = Field(default=0.0, ge=0, lt=0.5)
+    threshold_slope: Number = 0.0
+    threshold_offset_column: str | None = None
+    between_subject_sd_D: Number = Field(default=0.0, ge=0)
+
+    @model_validator(mode="after")
+    def _offset(self) -> "Psychometric2afc":
+        if self.threshold_slope != 0.0 and self.threshold_offset_column is None:
+            raise ValueError("threshold_slope needs threshold_offset_column (the column it multiplies)")
+        return self
+
+
+def interval_columns(test: IntervalSpec, reference: IntervalSpec, schedule: ScheduleInput, test_first: np.ndarray
+                     ) -> dict[str, np.ndarray]:
+    """Each interval's mode, the correct interval and the factors an interval overrides, per interval."""
+    out: dict[str, np.ndarray] = {}
+    columns, n = schedule.columns, schedule.n
+    test_mode = mode_values(test.mode, columns, n)
+    reference_mode = mode_values(reference.mode, columns, n)
+    out["mode_interval1"] = np.where(test_first, test_mode, reference_mode)
+    out["mode_interval2"] = np.where(test_first, reference_mode, test_mode)
+    out["correct_interval"] = np.where(test_first, 1, 2).astype(np.int64)
+    for name in sorted(set(test.set) | set(reference.set)):
+        test_value = np.full(n, test.set[name]) if name in test.set else columns[name]
+        ref_value = np.full(n, reference.set[name]) if name in reference.set else columns[name]
+        out[f"{name}_interval1"] = np.where(test_first, test_value, ref_value).astype(np.float64)
+        out[f"{name}_interval2"] = np.where(test_first, ref_value, test_value).astype(np.float64)
+    return out
+
+
+class TwoInterval(ResponseKindSpec):
+    name = "two_interval"
+    former_names = ("2afc_interval",)
+    label = "two-interval"
+    model = TwoIntervalResponse
+    observer_models = (Psychometric2afc,)
+    keys = {"1": "1", "2": "2", "left": "1", "right": "2", "kp_1": "1", "kp_2": "2"}
+    buttons = {"1": "1", "2": "2", "L": "1", "R": "2"}
+    controller = {"left": "1", "right": "2"}
+    fields = {"TwoIntervalResponse": {"kind": "plan", "question": "plan", "test": "kinds", "reference": "kinds",
+                                      "level_factor": "plan", "order": "kinds"},
+              "Psychometric2afc": {k: "observer" for k in ("kind", "level_column", "threshold_D", "width_D", "lapse",
+                                                           "threshold_slope", "threshold_offset_column",
+                                                           "between_subject_sd_D")}}
+
+    def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
+        assert isinstance(response, TwoIntervalResponse)
+        # binary False: the test stimulus comes first
+        return interval_columns(response.test, response.reference, schedule, ~schedule.binary)
+
+    def check(self, response: KindResponse, checks: Checks, path: Loc) -> None:
+        """The level factor and every factor an interval sets are numeric factors; a mode factor names modes."""
+        assert isinstance(response, TwoIntervalResponse)
+        checks.factor_exists(response.level_factor, path + ("level_factor",), numeric=True)
+        for role, spec in (("test", response.test), ("reference", response.reference)):
+            for key in spec.set:
+                checks.factor_exists(key, path + (role, "set", key), numeric=True)
+            if isinstance(spec.mode, ModeFromFactor):
+                checks.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
+
+    def check_design(self, response: KindResponse, checks: Checks) -> None:
+        """A threshold needs its level to vary: a fixed level factor needs at least two levels in every level
+        set (else every fit is ``no_fit`` after a full session)."""
+        assert isinstance(response, TwoIntervalResponse)
+        if response.level_factor not in checks.factors:
+            return
+        factor = checks.factors[response.level_factor]
+        for values in factor.level_sets():
+            if len(values) < 2:
+                key = "levels_by" if factor.levels_by is not None else "levels"
+                checks.add(("design", "factors", response.level_factor, key),
+                           f"the level factor '{response.level_factor}' has one level ({values[0]!r}) here: a threshold "
+                           "needs the level to vary; give at least two levels (five or more for a psychometric fit, "
+                           "e.g. {start: 0, step: 0.25, count: 5}) or make it adaptive")
+                return
+
+    def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
+        assert isinstance(observer, Psychometric2afc) and isinstance(response, TwoIntervalResponse)
+        level_factor = response.level_factor
+        if checks.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
+                observer.level_column != level_factor:
+            checks.add(path + ("level_column",), f"the observer reads '{observer.level_column}' as its level, but "
+                                                 f"the response's level factor is '{level_factor}'; set level_column: "
+                                                 f"{level_factor}")
+        if observer.threshold_offset_column is not None:
+            checks.factor_exists(observer.threshold_offset_column, path + ("threshold_offset_column",), numeric=True)
+
+    def score(self, row: TrialRow, answer: str) -> Scored:
+        return Scored(correct=answer == str(int(row["correct_interval"])))
+
+    def targets(self, study: StudyInputs) -> list[AnalysisTarget]:
+        """The fits, threshold figure, psychometric panels and (adaptive) track plot."""
+        name, trials, common = study.study, study.trials, study.common_arguments
+        fits = f"$(RESULTS)/{name}_fits.csv"
+        script = "analysis/fig_discrimination_thresholds.py" if study.linear_fit else \
+            "analysis/fig_detection_thresholds.py"
+        return [AnalysisTarget(f"{name}_fits.csv", "analysis/fit_psychometric.py", f"$(STATS_SRC) {trials}",
+                               f"{common} --n-jobs $(JOBS)", kind="fits"),
+                AnalysisTarget(f"{name}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"'),
+                AnalysisTarget(f"supp_psychometric_{name}.png", "analysis/supp_psychometric_functions.py",
+                               f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"')] + ([
+                AnalysisTarget(f"{name}_tracks.png", "analysis/adaptive_tracks.py",
+                               f"{fits} {trials} $(DRAW_SRC) psyop/figures/adaptive_figures.py",
+                               f'{common} --fits "{fits}"')] if study.adaptive else [])
+
+
+KIND = TwoInterval()
