@@ -1,4 +1,8 @@
-"""2AFC psychometric functions with psignifit 4.3 (cumulative normal on linear diopters).
+"""nAFC and yes/no psychometric functions with psignifit 4.3 (cumulative normal on linear diopters).
+
+The default (``FitOptions()``) is 2AFC: guess rate fixed at 0.5, threshold at 75 % correct.
+Other response kinds (:class:`FitOptions` ``experiment`` and ``guess``; section "Response kinds"
+below) run the same pipeline with psignifit's grid for their guess rate.
 
 Why not simply ``psignifit.psignifit``: its last step refines the MAP with a Nelder-Mead
 search whose objective calls ``scipy.stats.norm.ppf`` on scalars; that step is most of a
@@ -54,6 +58,42 @@ percentile under the fitted model, kept as a number but never unflagged).
 Analyses use :func:`usable_for_analysis` (statuses in :data:`USABLE_STATUSES`) and report
 how many fits of each other status they left out.
 
+Response kinds (:class:`FitOptions`; :func:`nafc_options`, :func:`yes_no_options`):
+
+- **nAFC** (``experiment="nAFC"``, ``guess=1/n``, n = 2..8; psignifit's "nAFC" with gamma fixed
+  at 1/n): rows are ``[level, n_correct, n_total]``. ``threshold_D`` is the level where the MAP
+  curve (lapse included) reaches ``target_p = guess + (1 - guess) / 2`` (0.75 for 2AFC, 0.625 for
+  4AFC), its CI the posterior percentiles of that level. The statuses read as above with
+  ``target_p`` for 75 %: ``lapse_at_bound`` is a MAP lapse >= ``1 - target_p`` = (1 - guess) / 2
+  (0.25 for 2AFC, 0.375 for 4AFC; psignifit's lapse bound is 0.5), ``censored_*`` the MAP
+  ``target_p`` point beyond the tested levels, ``no_upper_bound`` >= 2.5 % of the posterior on
+  curves that never reach ``target_p``. ``guess=0.5`` is the 2AFC path above, bit for bit.
+- **yes/no** (``experiment="yes/no"``): rows are ``[level, n_yes, n_total]``. The guess
+  (false-alarm) rate is fixed (``guess`` in [0, 1)) or free (``guess=None``: a grid parameter like
+  the lapse, psignifit's yes/no bounds [0, 0.5] and prior Beta(1, 10), 20 dense / 10 sparse grid
+  steps, its psignifit default; the posterior then has four free axes, and the CI marginalises over
+  the guess rate). ``threshold_D`` is the 50 % point of the unscaled sigmoid (psignifit's
+  'threshold' parameter, ``location_D``): the level where the MAP curve is halfway between its
+  guess rate and ``1 - lapse``; ``target_p = guess + (1 - guess - lapse) / 2`` of the MAP curve
+  (a fitted number when the guess or lapse is free). ``guess`` reports the MAP guess rate (or the
+  fixed one). Statuses:
+
+  ``lapse_at_bound``: the MAP curve has no midpoint, i.e. it is flat or falling
+  (``guess + lapse >= 1``). The midpoint is relative to the fitted asymptotes, so a large lapse
+  alone (an observer who never says "yes" more than half the time) does not censor it: with
+  psignifit's bounds (guess <= 0.5, lapse <= 0.5) this happens only at their common corner, or with
+  a fixed guess >= 0.5; read the ``lapse`` and ``guess`` fields for an absolute criterion.
+  ``censored_below``: the MAP midpoint lies below the lowest level (e.g. all "yes": the curve has
+  risen before the tested range); ``censored_above``: above the highest level (e.g. "yes" at the
+  guess rate throughout: the curve has not started to rise); ``bimodal``, ``posterior_at_grid_edge``
+  as above (the guess axis's edges are prior bounds, not cuts); ``no_upper_bound``: >= 2.5 % of the
+  posterior on flat or falling curves, which psignifit's bounds practically exclude, so a yes/no CI
+  is finite. ``all_correct`` is "all yes".
+
+  A fit's ``guess`` and ``target_p`` are new fields at the end of :class:`PsychometricFit`
+  (defaults 0.5 and 0.75); :func:`fit_psychometric_table` adds them as columns only for options
+  other than 2AFC, so 2AFC tables keep their columns.
+
 Input rows are checked (:func:`validate_blocks`): NaN levels or counts, negative,
 non-integer counts and n_correct > n_total raise :class:`InvalidPsychometricData` naming the
 rows.
@@ -63,6 +103,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
@@ -84,6 +125,9 @@ from psyop.statistics.goodness import deviance_test
 EDGE_MASS = 1e-3
 TARGET_PC = 0.75
 GUESS_2AFC = 0.5
+#: Response kinds (:class:`FitOptions` ``experiment``) and the nAFC choices allowed.
+EXPERIMENTS = ("nAFC", "yes/no")
+NAFC_CHOICES = range(2, 9)
 #: A 2AFC curve with lapse >= this never reaches 75 % correct.
 LAPSE_NO_THRESHOLD = 0.25
 #: The refined posterior grid is refined again until each axis's central 95 % spans this many points.
@@ -104,6 +148,10 @@ USABLE_STATUSES = ("ok", "no_upper_bound")
 
 class InvalidPsychometricData(UserError):
     """Rows of ``[level, n_correct, n_total]`` that cannot be fitted, named by row."""
+
+
+class InvalidFitOptions(UserError):
+    """A :class:`FitOptions` that names no fit: an unknown response kind or a guess rate it cannot have."""
 
 
 @dataclass(frozen=True)
@@ -166,11 +214,71 @@ class FitOptions:
     map_refinements: int = 4
     #: at most this many posterior-grid refinements for the credible interval
     posterior_refinements: int = 3
+    #: response kind (module docstring, "Response kinds"): "nAFC" (proportion correct, guess fixed at
+    #: 1/n) or "yes/no" (proportion of "yes" answers)
+    experiment: str = "nAFC"
+    #: guess rate: nAFC 1/n for n = 2..8 (0.5: 2AFC, the default; 0.25: 4AFC); yes/no a fixed
+    #: false-alarm rate in [0, 1), or None: free (estimated on the grid like the lapse)
+    guess: float | None = GUESS_2AFC
+
+    def __post_init__(self) -> None:
+        where = "FitOptions"
+        if self.experiment not in EXPERIMENTS:
+            raise InvalidFitOptions(f"experiment must be one of {EXPERIMENTS}, got {self.experiment!r}", where)
+        g = self.guess
+        if g is None:
+            if self.experiment != "yes/no":
+                raise InvalidFitOptions("a free guess rate (guess=None) needs experiment='yes/no'; an nAFC guess "
+                                        "rate is 1/n", where)
+            return
+        if isinstance(g, bool) or not isinstance(g, (int, float, np.floating, np.integer)) \
+                or not 0.0 <= float(g) < 1.0:
+            raise InvalidFitOptions(f"guess rate must be a number in [0, 1) or None (free, yes/no), got {g!r}", where)
+        if self.experiment == "nAFC":
+            n = _nafc_choices(float(g))
+            if n is None:
+                raise InvalidFitOptions(
+                    f"an nAFC guess rate is 1/n for n = 2..8, got {g!r}; for another fixed guess rate use "
+                    "experiment='yes/no'", where)
+            object.__setattr__(self, "guess", 1.0 / n)  # psignifit's 1/n exactly (0.5 for 2AFC)
+        if self.experiment == "yes/no" and self.fixed_lambda is not None and not float(g) + self.fixed_lambda < 1.0:
+            raise InvalidFitOptions(f"guess + fixed_lambda must be < 1, got {g!r} + {self.fixed_lambda!r}", where)
+
+    @property
+    def target_p(self) -> float | None:
+        """nAFC: the proportion correct at threshold, ``guess + (1 - guess) / 2`` (0.75 for 2AFC); yes/no:
+        None (the threshold is the midpoint of the fitted curve, whose proportion depends on the fit)."""
+        if self.experiment == "yes/no":
+            return None
+        assert self.guess is not None
+        g = float(self.guess)
+        return g + (1.0 - g) / 2.0
+
+
+def _nafc_choices(guess: float) -> int | None:
+    """n where ``guess`` is 1/n (to 1e-9) for n in :data:`NAFC_CHOICES`, else None."""
+    if guess <= 0.0:
+        return None
+    n = int(round(1.0 / guess))
+    return n if n in NAFC_CHOICES and abs(guess - 1.0 / n) <= 1e-9 else None
+
+
+def nafc_options(n: int, **kwargs) -> FitOptions:
+    """:class:`FitOptions` for an n-alternative forced choice (guess 1/n, threshold at ``(1 + 1/n) / 2``)."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n not in NAFC_CHOICES:
+        raise InvalidFitOptions(f"nAFC needs n = 2..8 choices, got {n!r}", "FitOptions")
+    return FitOptions(experiment="nAFC", guess=1.0 / int(n), **kwargs)
+
+
+def yes_no_options(guess: float | None = None, **kwargs) -> FitOptions:
+    """:class:`FitOptions` for yes/no responses: guess (false-alarm) rate fixed, or free (None)."""
+    return FitOptions(experiment="yes/no", guess=guess, **kwargs)
 
 
 @dataclass(frozen=True)
 class PsychometricFit:
-    """One 2AFC psychometric fit. Levels in diopters; NaN where the status allows no number."""
+    """One psychometric fit (2AFC by default; nAFC or yes/no, module docstring). Levels in diopters;
+    NaN where the status allows no number."""
 
     status: str
     threshold_D: float
@@ -190,6 +298,11 @@ class PsychometricFit:
     level_min_D: float
     level_max_D: float
     flags: tuple[str, ...]
+    #: guess rate: the fixed one, or the MAP of a free yes/no guess rate
+    guess: float = GUESS_2AFC
+    #: proportion (correct, or "yes") of the MAP curve at ``threshold_D``'s definition: nAFC
+    #: ``guess + (1 - guess) / 2``; yes/no ``guess + (1 - guess - lapse) / 2``
+    target_p: float = TARGET_PC
 
     @property
     def ci_width_D(self) -> float:
@@ -209,8 +322,8 @@ class PsychometricFit:
         return threshold_text(self.status, self.threshold_D, self.threshold_bound_D)
 
     def proportion_correct(self, level_D: np.ndarray) -> np.ndarray:
-        """The fitted 2AFC curve (guess 0.5, fitted lapse) at ``level_D``."""
-        return predicted_pc(np.asarray(level_D, float), self.location_D, self.width_D, self.lapse)
+        """The fitted curve (the fit's guess rate and lapse) at ``level_D``: proportion correct, or "yes"."""
+        return predicted_pc(np.asarray(level_D, float), self.location_D, self.width_D, self.lapse, self.guess)
 
 
 def threshold_text(status: str, threshold_D: float, bound_D: float) -> str:
@@ -224,10 +337,11 @@ def threshold_text(status: str, threshold_D: float, bound_D: float) -> str:
     return f"{threshold_D:.2f} D"
 
 
-def predicted_pc(level_D: np.ndarray, location_D: float, width_D: float, lapse: float) -> np.ndarray:
-    """2AFC proportion correct of psignifit's 'norm' sigmoid with guess rate 0.5.
+def predicted_pc(level_D: np.ndarray, location_D: float, width_D: float, lapse: float,
+                 guess: float = GUESS_2AFC) -> np.ndarray:
+    """Proportion correct (or "yes") of psignifit's 'norm' sigmoid with guess rate ``guess`` (2AFC: 0.5).
 
-    psignifit's ``Gaussian(PC=0.5, alpha=0.05)(level_D, location_D, width_D, 0.5, lapse)`` with its
+    psignifit's ``Gaussian(PC=0.5, alpha=0.05)(level_D, location_D, width_D, guess, lapse)`` with its
     ``scipy.stats.norm`` calls written out (:func:`_norm_standard_parameters`, ``norm.cdf`` is
     ``ndtr((x - loc) / scale)`` where scale > 0, NaN elsewhere): the same operations in the same order,
     so the same numbers, without scipy.stats' per-call argument handling.
@@ -235,7 +349,7 @@ def predicted_pc(level_D: np.ndarray, location_D: float, width_D: float, lapse: 
     scale, loc = _norm_standard_parameters(location_D, width_D)
     with np.errstate(invalid="ignore", divide="ignore"):
         value = np.where(scale > 0, special.ndtr((np.asarray(level_D) - loc) / scale), np.nan)
-        value = GUESS_2AFC + (1.0 - lapse - GUESS_2AFC) * value
+        value = guess + (1.0 - lapse - guess) * value
     return np.asarray(value, float)
 
 
@@ -285,13 +399,15 @@ def validate_blocks(data: np.ndarray, source: str = "psychometric data") -> np.n
     return arr
 
 
-def _no_fit(data: np.ndarray, flags: tuple[str, ...]) -> PsychometricFit:
+def _no_fit(data: np.ndarray, flags: tuple[str, ...], options: FitOptions = FitOptions()) -> PsychometricFit:
     nan = float("nan")
     levels = data[:, 0] if len(data) else np.array([nan])
+    target = options.target_p
     return PsychometricFit(
         "no_fit", nan, nan, nan, nan, nan, nan, nan, nan, nan, nan, nan,
         n_levels=len(data), n_trials=int(data[:, 2].sum()) if len(data) else 0,
         level_min_D=float(np.min(levels)), level_max_D=float(np.max(levels)), flags=("no_fit", *flags),
+        guess=nan if options.guess is None else float(options.guess), target_p=nan if target is None else target,
     )
 
 
@@ -363,9 +479,10 @@ def _norm_standard_parameters(threshold_D, width_D) -> tuple[np.ndarray, np.ndar
     return scale, np.asarray(loc)
 
 
-def _t75_grid(grid: dict[str, np.ndarray]) -> np.ndarray:
-    """The 75 %-correct level of every grid point (axes in alphabetical order), ``+inf`` where the
-    curve never reaches it.
+def _t75_grid(grid: dict[str, np.ndarray], target: float | None = TARGET_PC) -> np.ndarray:
+    """The 75 %-correct level (``target``: another proportion; None: the midpoint between the guess rate
+    and ``1 - lambda``, the yes/no threshold) of every grid point (axes in alphabetical order), ``+inf``
+    where the curve never reaches it (a flat or falling curve has no midpoint).
 
     psignifit's ``Gaussian._inverse`` is ``norm.ppf(q, loc, scale)``: ``ndtri(q) * scale + loc`` for
     0 < q < 1, scale > 0 and loc not NaN; with ``loc = threshold`` exactly there (``ndtri(0.5)`` is 0),
@@ -376,7 +493,10 @@ def _t75_grid(grid: dict[str, np.ndarray]) -> np.ndarray:
     sparse = dict(zip(names, np.meshgrid(*[np.atleast_1d(grid[n]) for n in names], indexing="ij", sparse=True)))
     gamma, threshold, width = sparse["gamma"], sparse["threshold"], sparse["width"]
     with np.errstate(invalid="ignore", divide="ignore"):
-        scaled = (TARGET_PC - gamma) / (1.0 - sparse["lambda"] - gamma)
+        if target is None:
+            scaled = np.where(1.0 - sparse["lambda"] - gamma > 0.0, 0.5, np.nan)
+        else:
+            scaled = (target - gamma) / (1.0 - sparse["lambda"] - gamma)
         scale, loc = _norm_standard_parameters(threshold, width)
         t75 = special.ndtri(np.clip(scaled, 0.0, 1.0)) * scale + loc
     valid = (scaled > 0.0) & (scaled < 1.0) & (scale > 0) & (loc == loc) & np.isfinite(t75)
@@ -385,11 +505,19 @@ def _t75_grid(grid: dict[str, np.ndarray]) -> np.ndarray:
     return out
 
 
-def _t75_mesh(grid: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
+def _t75_mesh(grid: dict[str, np.ndarray], target: float | None = TARGET_PC
+              ) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
     """The full meshgrid of ``grid`` (axes in alphabetical order), :func:`_t75_grid` and the axis names."""
     names = sorted(grid)
     mesh = dict(zip(names, np.meshgrid(*[np.atleast_1d(grid[n]) for n in names], indexing="ij")))
-    return mesh, _t75_grid(grid), names
+    return mesh, _t75_grid(grid, target), names
+
+
+def _target_kwargs(target: float | None) -> dict[str, float | None]:
+    """The threshold-level keyword of :func:`_t75`, :func:`_t75_grid`, :func:`_t75_mesh`: none for the
+    2AFC 75 % (the 2AFC path calls them with their former arguments, which the fast-path tests patch
+    the former definitions into), ``{"target": target}`` otherwise."""
+    return {} if target == TARGET_PC else {"target": target}
 
 
 def _isclose(a: float, b: float) -> bool:
@@ -623,28 +751,51 @@ def _bounds_and_priors(conf, levels: np.ndarray, fixed: dict[str, float] | None
 _CONFIGURATION_CACHE: dict[tuple, psignifit.Configuration] = {}
 
 
-def _configuration(grid_spec: GridSpec, fixed: dict[str, float] | None, ci_level: float) -> psignifit.Configuration:
-    """psignifit's 2AFC 'norm' Configuration for these grid steps, fixed parameters and CI level, built
-    once per distinct key: a fit only reads it (its steps, bound value and prior settings)."""
-    key = (grid_spec, tuple(sorted((fixed or {}).items())), ci_level)
+def _configuration(grid_spec: GridSpec, fixed: dict[str, float] | None, ci_level: float,
+                   experiment: str = "2AFC") -> psignifit.Configuration:
+    """psignifit's 'norm' Configuration (``experiment``: psignifit's type, "2AFC", "4AFC", "yes/no") for
+    these grid steps, fixed parameters and CI level, built once per distinct key: a fit only reads it
+    (its steps, bound value and prior settings). A yes/no guess axis has psignifit's default steps."""
+    key = (grid_spec, tuple(sorted((fixed or {}).items())), ci_level) + (() if experiment == "2AFC" else (experiment,))
     conf = _CONFIGURATION_CACHE.get(key)
     if conf is None:
         if len(_CONFIGURATION_CACHE) > 256:
             _CONFIGURATION_CACHE.clear()
-        conf = _CONFIGURATION_CACHE[key] = psignifit.Configuration(
-            experiment_type="2AFC", sigmoid="norm", verbose=False, fixed_parameters=fixed,
-            grid_steps=grid_spec.grid_steps(), steps_moving_bounds=grid_spec.sparse_steps(),
-            confP=(ci_level,),
-        )
+        with warnings.catch_warnings():
+            # psignifit warns of a fixed yes/no guess rate above 0.2; the caller chose it
+            warnings.filterwarnings("ignore", message="You have fixed the guess rate gamma")
+            conf = _CONFIGURATION_CACHE[key] = psignifit.Configuration(
+                experiment_type=experiment, sigmoid="norm", verbose=False, fixed_parameters=fixed,
+                grid_steps=grid_spec.grid_steps(), steps_moving_bounds=grid_spec.sparse_steps(),
+                confP=(ci_level,),
+            )
     return conf
+
+
+def _psignifit_experiment(options: FitOptions) -> str:
+    """psignifit's experiment type for ``options``: "2AFC" .. "8AFC" or "yes/no"."""
+    if options.experiment == "yes/no":
+        return "yes/no"
+    assert options.guess is not None
+    return f"{_nafc_choices(float(options.guess))}AFC"
+
+
+def _fixed_parameters(options: FitOptions) -> dict[str, float] | None:
+    """The parameters ``options`` fix (lambda, eta; a yes/no guess rate as gamma), None if none."""
+    pairs = [("lambda", options.fixed_lambda), ("eta", options.fixed_eta)]
+    if options.experiment == "yes/no" and options.guess is not None:
+        pairs.append(("gamma", float(options.guess)))
+    return {name: value for name, value in pairs if value is not None} or None
 
 
 def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> GridPosterior:
     """psignifit's pipeline up to the dense-grid posterior, then the refined posterior and MAP."""
     grid_spec = options.grid
-    fixed = {name: value for name, value in (("lambda", options.fixed_lambda), ("eta", options.fixed_eta))
-             if value is not None} or None
-    conf = _configuration(grid_spec, fixed, options.ci_level)
+    fixed = _fixed_parameters(options)
+    experiment = _psignifit_experiment(options)
+    conf = _configuration(grid_spec, fixed, options.ci_level, **({} if experiment == "2AFC" else
+                                                                 {"experiment": experiment}))
+    target_kw = _target_kwargs(options.target_p)
     bounds, priors = _bounds_and_priors(conf, data[:, 0], fixed)
     sparse = _parameter_grid(bounds, conf.steps_moving_bounds)
     post_sparse, _ = posterior_2afc(data, priors, sparse)
@@ -652,7 +803,7 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
     dense_grid = _parameter_grid(tight, conf.grid_steps)
     dense_lp = log_posterior_2afc(data, priors, dense_grid)
     dense_post, grid_max = posterior_2afc(data, priors, dense_grid, dense_lp)
-    dense_t75, names = _t75_grid(dense_grid), sorted(dense_grid)
+    dense_t75, names = _t75_grid(dense_grid, **target_kw), sorted(dense_grid)
 
     grid, post, n_ref, lp = dense_grid, dense_post, 0, dense_lp
     # a grid edge that cuts the mass moves out in steps of the dense grid's span (at most
@@ -670,7 +821,7 @@ def grid_posterior(data: np.ndarray, options: FitOptions = FitOptions()) -> Grid
         post, grid_max = posterior_2afc(data, priors, new_grid, lp)
         grid, n_ref, n_moves = new_grid, n_ref + 1, n_moves + bool(cut)
     cut = grid_cuts_posterior(grid, post, bounds)
-    mesh, t75, names = _t75_mesh(grid)
+    mesh, t75, names = _t75_mesh(grid, **target_kw)
     modes = _find_modes(data, priors, grid, bounds, options.map_refinements, lp) if options.map_refinements else []
     grid_max = modes[0][1] if modes else grid_max
     return GridPosterior(mesh, post, t75, grid, bounds, grid_max, names, dense_grid, dense_post, dense_t75, n_ref,
@@ -772,17 +923,18 @@ def _with_point(values: np.ndarray, x: float) -> np.ndarray:
     return np.unique(np.append(values, x))
 
 
-def _t75(params: dict[str, float]) -> float:
-    """Level where the 2AFC curve of ``params`` reaches 75 % correct (inf if it never does).
+def _t75(params: dict[str, float], target: float | None = TARGET_PC) -> float:
+    """Level where the curve of ``params`` reaches 75 % correct (``target``: another proportion; None:
+    its midpoint between guess rate and ``1 - lambda``, the yes/no threshold; inf if it never does).
 
     ``norm.ppf(q)`` for 0 < q < 1 is ``ndtri(q) * 1 + 0`` in scipy; written out. A curve with
     ``1 - lambda - gamma == 0`` (lapse 0.5 on a 2AFC grid's edge) is flat at the guess rate and never
     reaches 75 %: inf (the fit's status is then ``lapse_at_bound``), not a ZeroDivisionError.
     """
     span = 1.0 - params["lambda"] - params["gamma"]
-    if span == 0.0:
+    if span == 0.0 or target is None and not span > 0.0:
         return float("inf")
-    scaled = (TARGET_PC - params["gamma"]) / span
+    scaled = 0.5 if target is None else (target - params["gamma"]) / span
     if not 0.0 < scaled < 1.0:
         return float("inf")
     return float(params["threshold"] + (special.ndtri(scaled) + 0.0) * params["width"] / WIDTH_PER_SIGMA)
@@ -867,17 +1019,19 @@ def climbs_apart(data, priors, grid: dict[str, np.ndarray], bounds, top: np.ndar
     return bool(np.abs(end_top - end_other).max() > 1.0)
 
 
-def _distinct_thresholds(modes, ci_width_D: float, min_log_ratio: float = -1.0, min_shift: float = 0.25) -> bool:
-    """A second posterior mode, within ``min_log_ratio`` of the best, whose 75 % point differs
-    from the best one's by more than ``min_shift`` of the CI width (or is unreachable)."""
+def _distinct_thresholds(modes, ci_width_D: float, min_log_ratio: float = -1.0, min_shift: float = 0.25,
+                         target_kw: dict | None = None) -> bool:
+    """A second posterior mode, within ``min_log_ratio`` of the best, whose 75 % point (``target_kw``:
+    :func:`_target_kwargs`) differs from the best one's by more than ``min_shift`` of the CI width (or
+    is unreachable)."""
     if len(modes) < 2:
         return False
     best_lp, best = modes[0]
-    t_best = _t75(best)
+    t_best = _t75(best, **(target_kw or {}))
     for lp, other in modes[1:]:
         if lp - best_lp < min_log_ratio:
             continue
-        t_other = _t75(other)
+        t_other = _t75(other, **(target_kw or {}))
         if not (np.isfinite(t_best) and np.isfinite(t_other)):
             return True
         if abs(t_other - t_best) > min_shift * (ci_width_D if np.isfinite(ci_width_D) else 0.0):
@@ -896,13 +1050,15 @@ def _edge_mass(grid, post, bounds, names) -> bool:
 
 
 def _fit_conditions(data: np.ndarray, gp, t_map: float, lapse: float, level_range: tuple[float, float],
-                    ci: tuple[float, float]) -> tuple[list[str], bool]:
+                    ci: tuple[float, float], lapse_limit: float = LAPSE_NO_THRESHOLD,
+                    target_kw: dict | None = None) -> tuple[list[str], bool]:
     """The status conditions a fit meets (in :data:`STATUSES` terms), and whether the posterior grid
-    had separated peaks that turned out joined (the ``grid_peaks_joined`` flag)."""
+    had separated peaks that turned out joined (the ``grid_peaks_joined`` flag). ``lapse_limit``: the
+    lapse from which the MAP curve has no threshold (2AFC 0.25; module docstring, "Response kinds")."""
     lo_level, hi_level = level_range
     low, high = ci
     conditions: list[str] = []
-    if not np.isfinite(t_map) or lapse >= LAPSE_NO_THRESHOLD:
+    if not np.isfinite(t_map) or lapse >= lapse_limit:
         conditions.append("lapse_at_bound")
     elif t_map < lo_level:
         conditions.append("censored_below")
@@ -910,7 +1066,9 @@ def _fit_conditions(data: np.ndarray, gp, t_map: float, lapse: float, level_rang
         conditions.append("censored_above")
     pairs = separated_peaks(np.asarray(gp.posterior))
     apart = any(climbs_apart(data, gp.priors, gp.grid, gp.bounds, top, other) for top, other in pairs)
-    if apart or _distinct_thresholds(gp.modes, high - low):
+    distinct = _distinct_thresholds(gp.modes, high - low, target_kw=target_kw) if target_kw else \
+        _distinct_thresholds(gp.modes, high - low)
+    if apart or distinct:
         conditions.append("bimodal")
     if _edge_mass(gp.dense_grid, gp.dense_posterior, gp.bounds, gp.names) or gp.cut_axes:
         conditions.append("posterior_at_grid_edge")
@@ -936,9 +1094,21 @@ def _fit_flags(data: np.ndarray, conditions: list[str], joined: bool, level_rang
     return flags
 
 
+def _eta(data: np.ndarray, options: FitOptions, eta_map: float) -> float:
+    """The overdispersion reported: the MAP's when eta is free; with eta fixed, its posterior mean under free eta
+    (``estimate_eta``) or NaN."""
+    if options.fixed_eta is None:
+        return eta_map
+    if not options.estimate_eta:
+        return float("nan")
+    free = grid_posterior(data, replace(options, fixed_eta=None, map_refinements=0, posterior_refinements=0))
+    return float((free.mesh["eta"] * free.posterior).sum())
+
+
 def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), source: str = "psychometric data"
                      ) -> PsychometricFit:
-    """Fit a 2AFC cumulative normal to ``data`` (rows ``[level_D, n_correct, n_total]``).
+    """Fit a cumulative normal to ``data`` (rows ``[level_D, n_correct, n_total]``; yes/no: n_yes for
+    n_correct): 2AFC by default, the response kind of ``options`` otherwise (module docstring).
 
     Follows ``psignifit.psignifit`` step by step (same Configuration, bounds, priors,
     sparse grid -> tightened bounds -> dense grid), refines the posterior grid for the CI and
@@ -947,29 +1117,34 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), sourc
     data = validate_blocks(np.asarray(data, float).reshape(-1, 3) if np.size(data) else np.empty((0, 3)), source)
     data = data[data[:, 2] > 0]
     if len(np.unique(data[:, 0])) < 2:
-        return _no_fit(data, ("fewer_than_two_levels",))
+        return _no_fit(data, ("fewer_than_two_levels",), options)
     gp = grid_posterior(data, options)
+    target = options.target_p
+    target_kw = _target_kwargs(target)
     grid_max = gp.grid_max
     levels = data[:, 0]
     lo_level, hi_level = float(levels.min()), float(levels.max())
     half = (1.0 - options.ci_level) / 2.0
     low, high = weighted_quantiles(gp.t75_D, gp.posterior, (half, 1.0 - half))
-    t_map = float(_t75(grid_max))
+    t_map = float(_t75(grid_max, **target_kw))
 
     width = float(grid_max["width"])
     lapse = float(grid_max["lambda"])
     location = float(grid_max["threshold"])
-    best_pc = predicted_pc(levels, grid_max["threshold"], grid_max["width"], grid_max["lambda"])
+    guess = float(grid_max["gamma"])
+    guess_kw = {} if guess == GUESS_2AFC else {"guess": guess}
+    best_pc = predicted_pc(levels, grid_max["threshold"], grid_max["width"], grid_max["lambda"], **guess_kw)
     gof = deviance_test(data[:, 1], data[:, 2], best_pc, options.n_bootstrap, options.seed)
 
-    eta = float(grid_max["eta"])
-    if options.fixed_eta is not None:
-        eta = float("nan")
-        if options.estimate_eta:
-            free = grid_posterior(data, replace(options, fixed_eta=None, map_refinements=0, posterior_refinements=0))
-            eta = float((free.mesh["eta"] * free.posterior).sum())
+    eta = _eta(data, options, float(grid_max["eta"]))
 
-    conditions, joined = _fit_conditions(data, gp, t_map, lapse, (lo_level, hi_level), (low, high))
+    # nAFC: no threshold once 1 - lapse <= target_p; yes/no: once the curve is flat or falling (1 - lapse <= guess)
+    lapse_limit = 1.0 - (guess if target is None else target)
+    if lapse_limit == LAPSE_NO_THRESHOLD and not target_kw:  # 2AFC: the former call
+        conditions, joined = _fit_conditions(data, gp, t_map, lapse, (lo_level, hi_level), (low, high))
+    else:
+        conditions, joined = _fit_conditions(data, gp, t_map, lapse, (lo_level, hi_level), (low, high),
+                                             lapse_limit=lapse_limit, target_kw=target_kw)
     status = next((s for s in STATUSES if s in conditions), "ok")
     flags = _fit_flags(data, conditions, joined, (lo_level, hi_level), (low, high))
 
@@ -986,6 +1161,7 @@ def fit_psychometric(data: np.ndarray, options: FitOptions = FitOptions(), sourc
         threshold_bound_D=bound, width_D=width, sigma_D=float(sigma), location_D=location, lapse=lapse, eta=eta,
         deviance=gof.deviance, deviance_p=gof.p_value, n_levels=len(data), n_trials=int(data[:, 2].sum()),
         level_min_D=lo_level, level_max_D=hi_level, flags=tuple(flags),
+        guess=guess, target_p=guess + (1.0 - guess - lapse) / 2.0 if target is None else target,
     )
 
 
@@ -1009,6 +1185,8 @@ FIT_COLUMNS = [
     "sigma_D", "location_D", "lapse", "eta", "deviance", "deviance_p", "n_levels", "n_trials", "level_min_D",
     "level_max_D",
 ]
+#: Columns :func:`fit_psychometric_table` adds for options other than the default 2AFC.
+KIND_FIT_COLUMNS = ["guess", "target_p"]
 
 
 def usable_for_analysis(fits: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
@@ -1093,10 +1271,12 @@ def fit_psychometric_table(
         n_missing.append(len(group) - len(answered))
         datasets.append(aggregate_blocks(answered[level_column].to_numpy(float), answered[correct_column].to_numpy(bool)))
     fits = fit_many(datasets, options, n_jobs)
+    columns = FIT_COLUMNS if options.experiment == "nAFC" and options.guess == GUESS_2AFC else \
+        FIT_COLUMNS + KIND_FIT_COLUMNS
     rows = []
     for key, fit, miss in zip(keys, fits, n_missing):
         row = dict(zip(group_columns, key))
-        row.update({c: getattr(fit, c) for c in FIT_COLUMNS})
+        row.update({c: getattr(fit, c) for c in columns})
         row["n_missing"] = miss
         row["flags"] = ";".join(fit.flags)
         rows.append(row)
