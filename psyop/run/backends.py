@@ -205,7 +205,7 @@ def _serial_responses(arg: str, ctx: BackendContext) -> ResponseSource:
     from psyop.devices.responses.serial_box import SerialResponseBox
 
     try:
-        return SerialResponseBox(arg, ctx.plan.kind, clock=ctx.clock.now_s)
+        return SerialResponseBox(arg, ctx.plan.kind, clock=ctx.clock.now_s, buttons=ctx.plan.response.inputs.buttons)
     except (ValueError, ConnectionError) as exc:
         raise UserError(str(exc), "--responses") from exc
 
@@ -216,7 +216,7 @@ def _keyboard_responses(arg: str, ctx: BackendContext) -> ResponseSource:
 
     if not isinstance(ctx.display, GlfwWindow):
         raise UserError("--responses keyboard needs --display window", "--responses")
-    return KeyboardResponses(ctx.display, ctx.plan.kind)
+    return KeyboardResponses(ctx.display, ctx.plan.kind, keymap=ctx.plan.response.inputs.keys)
 
 
 def _openxr_tracker(arg: str, ctx: BackendContext) -> GazeSource:
@@ -234,7 +234,7 @@ def _openxr_pose(arg: str, ctx: BackendContext) -> PoseSource:
 def _openxr_responses(arg: str, ctx: BackendContext) -> ResponseSource:
     from psyop.devices.xr.tracking import OpenXRResponses
 
-    return OpenXRResponses.on_display(ctx.display, ctx.plan.kind)
+    return OpenXRResponses.on_display(ctx.display, ctx.plan.kind, ctx.plan.response.inputs.controller)
 
 
 def _headless_display(arg: str, ctx: BackendContext) -> Display:

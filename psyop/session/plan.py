@@ -31,7 +31,7 @@ from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
 from psyop.protocol.kinds import kind_of
-from psyop.protocol.kinds.base import KindResponse, ResponseKindSpec
+from psyop.protocol.kinds.base import Inputs, KindResponse, ResponseKindSpec
 from psyop.protocol.kinds.left_right_nearer import LeftRightNearerResponse
 from psyop.protocol.kinds.reach import ReachResponse
 from psyop.protocol.scene import FixationTarget
@@ -160,6 +160,8 @@ class ResponsePlan:
 
     kind: ResponseKindSpec
     question: str
+    #: the raw inputs that answer this protocol's response (the kind's maps for its section)
+    inputs: Inputs
     prompt: str | None = None
     timeout_s: float | None = None
     display_off: bool = False
@@ -341,6 +343,7 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
     display_off = bool(response_phase.display_off) if response_phase is not None else False
     response = ResponsePlan(
         kind=kind_of(r),
+        inputs=kind_of(r).inputs(r),
         question=r.question,
         prompt=response_phase.prompt if response_phase is not None else None,
         timeout_s=float(response_phase.timeout_s) if response_phase is not None and response_phase.timeout_s else None,

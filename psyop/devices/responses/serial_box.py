@@ -7,7 +7,7 @@ docs/protocols.md lists them) and scores it. Garbage bytes and unknown lines are
 from __future__ import annotations
 
 import queue
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 from psyop.session.rows import TrialRow
 from psyop.session.responses.base import Response, ResponseKindSpec, score
@@ -16,8 +16,10 @@ from psyop.devices.serial_lines import SerialLineReader
 class SerialResponseBox:
     needs_images = True
 
-    def __init__(self, url: str, kind: ResponseKindSpec, *, clock: Callable[[], float], baudrate: int = 115200) -> None:
-        if not kind.buttons:
+    def __init__(self, url: str, kind: ResponseKindSpec, *, clock: Callable[[], float], baudrate: int = 115200,
+                 buttons: Mapping[str, str] | None = None) -> None:
+        self.buttons = kind.buttons if buttons is None else buttons  # button -> the kind's answer
+        if not self.buttons:
             raise ValueError(f"a response box cannot give {kind.name} responses")
         self.kind = kind
         self._presses: queue.Queue[tuple[str, float]] = queue.Queue()
@@ -27,7 +29,7 @@ class SerialResponseBox:
 
     def _on_line(self, text: str, arrival_s: float) -> bool:
         text = text.strip()
-        if len(text) != 2 or text[0] != "B" or text[1] not in self.kind.buttons:
+        if len(text) != 2 or text[0] != "B" or text[1] not in self.buttons:
             return False
         self._presses.put((text[1], arrival_s))
         return True
@@ -44,7 +46,7 @@ class SerialResponseBox:
             if self._reader.error:
                 raise ConnectionError(self._reader.error) from None
             return None
-        r = score(self.kind, row, self.kind.buttons[button])
+        r = score(self.kind, row, self.buttons[button])
         rt = t_s - self._prompt_s
         self._prompt_s = None
         return Response(r.response, r.correct, r.reach_m, r.chosen_mode, rt)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject, TrialRow
@@ -194,7 +194,8 @@ class OpenXRResponses(KeyboardResponses):
     (docs/protocols.md lists it); a reach is confirmed by either, its distance from the right controller's grip."""
 
     @classmethod
-    def on_display(cls, built: Display | None, kind: ResponseKindSpec) -> "OpenXRResponses":
+    def on_display(cls, built: Display | None, kind: ResponseKindSpec,
+                   controller: Mapping[str, str] | None = None) -> "OpenXRResponses":
         display = _openxr_display(built, "--responses")
         display.needs_controller = True  # the first trial waits for one (OpenXRDisplay._wait_for_controller)
 
@@ -205,4 +206,8 @@ class OpenXRResponses(KeyboardResponses):
             pose = rt.locate(rt.hand_spaces["right"], rt.world, t_ns)
             return horizontal_reach_m(pose.position_m) if pose.valid else math.nan
 
-        return cls(XrButtons(display), kind, reach_m=right_hand_reach_m, keymap=kind.controller)
+        keymap = kind.controller if controller is None else controller  # hand -> the kind's answer
+        if not keymap:
+            raise UserError(f"the controllers cannot give {kind.name} responses; use --responses keyboard or serial",
+                            "--responses")
+        return cls(XrButtons(display), kind, reach_m=right_hand_reach_m, keymap=keymap)

@@ -167,6 +167,17 @@ class Scored:
 
 
 @dataclass(frozen=True)
+class Inputs:
+    """The raw inputs that answer one protocol's response, each mapped to an answer: keyboard key names (lower
+    case), response-box buttons (the character after ``B``), OpenXR controller select buttons (``left`` /
+    ``right``). An empty map: that device cannot answer it."""
+
+    keys: Mapping[str, str]
+    buttons: Mapping[str, str]
+    controller: Mapping[str, str]
+
+
+@dataclass(frozen=True)
 class AnalysisTarget:
     """One output of a study's analysis in ``make figures``: the file (relative to $(FIGDIR) or $(RESULTS)),
     the script and its extra make prerequisites and arguments."""
@@ -236,6 +247,11 @@ class ResponseKindSpec(ABC):
     def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
         """Checks of the ``observer:`` section (its kind is one of :attr:`observer_models`)."""
         return None
+
+    def inputs(self, response: KindResponse) -> Inputs:
+        """The inputs that answer ``response`` (the class maps; a kind whose answers depend on its section, e.g.
+        a scale's points, narrows them)."""
+        return Inputs(self.keys, self.buttons, self.controller)
 
     def score(self, row: TrialRow, answer: str) -> Scored:
         """``answer`` (one of the values of :attr:`keys`) scored against the trial ``row``."""
