@@ -404,7 +404,7 @@ class _Checker:
     def check_response(self) -> None:
         self.check_phase_order()
         response = self.p.response
-        needed = response.intervals_needed
+        needed = response.intervals()
         intervals = len(self.p.trial.intervals)
         if intervals != needed:
             self.add(("trial", "phases"), f"a {response.kind} response needs {needed} interval phase(s), "

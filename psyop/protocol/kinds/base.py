@@ -82,6 +82,10 @@ class KindResponse(StrictModel):
         """The design factors this response reads (a factor nothing reads is refused at validation)."""
         return set()
 
+    def intervals(self) -> int:
+        """How many interval phases a trial of this response has (the class's ``intervals_needed``)."""
+        return self.intervals_needed
+
     def level(self) -> str | None:
         """The factor whose level a psychometric function is fitted over (None: the kind has none)."""
         return None

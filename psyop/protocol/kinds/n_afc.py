@@ -1,0 +1,183 @@
+"""``n_afc``: which of n intervals held the target (n-alternative forced choice, n = 2..8). The target interval
+(column ``correct_interval``, 1..n) shows the ``target`` stimulus, every other interval the ``reference``; the
+answer is the interval's number. The analysis fits a psychometric function with guess rate 1/n per participant
+and condition (psyop.statistics.psychometric, psignifit's nAFC type); the threshold is the level where the
+proportion correct is halfway between 1/n and 1.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import ClassVar, Literal
+
+import numpy as np
+from pydantic import Field
+
+from psyop.protocol.base import Number
+from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, Inputs, IntervalSpec, KindResponse,
+                                       ModeFromFactor, ObserverBase, ResponseKindSpec, ScheduleInput, Scored,
+                                       StudyInputs, figure_target, mode_factor_of)
+from psyop.protocol.kinds.modes import mode_values
+from psyop.records import Loc, TrialRow
+
+#: the alternatives n-AFC supports (psyop.statistics.psychometric fits guess 1/n for these)
+N_CHOICES = range(2, 9)
+
+
+class NAfcResponse(KindResponse):
+    """n-alternative forced choice over ``n`` intervals: one shows ``target``, the others ``reference``."""
+
+    kind: Literal["n_afc"]
+    question: str = "Which interval showed the target?"
+    n: int = Field(ge=2, le=8, description="number of alternatives (2..8)")
+    alternatives: Literal["intervals", "locations"] = "intervals"
+    target: IntervalSpec
+    reference: IntervalSpec
+    level_factor: str | None = None
+    #: which interval holds the target: each equally often within a condition (balanced), or uniformly at random
+    order: Counterbalance = "balanced"
+
+    def intervals(self) -> int:
+        return self.n if self.alternatives == "intervals" else 1
+
+    def level(self) -> str | None:
+        return self.level_factor
+
+    def interval_specs(self) -> tuple[IntervalSpec, ...]:
+        return (self.target, self.reference)
+
+    def factors_read(self) -> set[str]:
+        used = set() if self.level_factor is None else {self.level_factor}
+        for spec in self.interval_specs():
+            used |= mode_factor_of(spec.mode) | set(spec.set)
+        return used
+
+
+def _phi(z: float) -> float:
+    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+class PsychometricNafc(ObserverBase):
+    """p(correct) = 1/n + (1 - 1/n - lapse) * Phi((x - t) / width), x the trial's level (``level_column``) and
+    t = ``threshold`` shifted per participant by N(0, ``between_subject_sd``); a wrong answer is one of the other
+    n - 1 intervals, each equally likely."""
+
+    kind: Literal["psychometric_nafc"]
+    declared: ClassVar[bool] = True
+    level_column: str
+    threshold: Number
+    width: Number = Field(gt=0)
+    lapse: Number = Field(default=0.0, ge=0, lt=0.5)
+    between_subject_sd: Number = Field(default=0.0, ge=0)
+
+    def participant_draws(self, rng: np.random.Generator) -> dict[str, float]:
+        sd = float(self.between_subject_sd)
+        return {"threshold": float(self.threshold) + (float(rng.normal(0.0, sd)) if sd > 0 else 0.0)}
+
+    def probability(self, row: TrialRow, participant: Mapping[str, float]) -> float:
+        """p(correct) in trial ``row`` (``n_alternatives`` is the trial's n)."""
+        guess = 1.0 / int(row["n_alternatives"])
+        x = float(row[self.level_column])
+        return guess + (1.0 - guess - float(self.lapse)) * _phi((x - participant["threshold"]) / float(self.width))
+
+    def answer(self, row: TrialRow, participant: Mapping[str, float], u: float) -> str:
+        p, right, n = self.probability(row, participant), int(row["correct_interval"]), int(row["n_alternatives"])
+        if u < p:
+            return str(right)
+        others = [k for k in range(1, n + 1) if k != right]
+        return str(others[min(int((u - p) / (1.0 - p) * (n - 1)), n - 2)])
+
+
+def balanced_alternatives(condition: np.ndarray, practice: np.ndarray, n: int, rng: np.random.Generator
+                          ) -> np.ndarray:
+    """1..n per trial: within each condition's main trials each alternative floor(R / n) times and the remainder
+    on distinct alternatives drawn at random, in a random order; practice trials uniformly at random."""
+    out = np.empty(condition.size, dtype=np.int64)
+    out[practice] = rng.integers(1, n + 1, size=int(practice.sum()))
+    for value in np.unique(condition[~practice]):
+        where = np.flatnonzero((condition == value) & ~practice)
+        reps = where.size
+        cells = np.concatenate([np.repeat(np.arange(1, n + 1), reps // n),
+                                rng.choice(np.arange(1, n + 1), size=reps % n, replace=False)])
+        out[where] = rng.permutation(cells)
+    return out
+
+
+class NAfc(ResponseKindSpec):
+    name = "n_afc"
+    label = "n-AFC"
+    model = NAfcResponse
+    observer_models = (PsychometricNafc,)
+    fields = {"NAfcResponse": {"kind": "plan", "question": "plan", "n": "kinds", "alternatives": "kinds",
+                               "target": "kinds", "reference": "kinds", "level_factor": "kinds", "order": "kinds"},
+              "PsychometricNafc": {k: "kinds" for k in ("kind", "level_column", "threshold", "width", "lapse",
+                                                        "between_subject_sd")}}
+
+    def inputs(self, response: KindResponse) -> Inputs:
+        """Keys 1..n (and the keypad's); box buttons 1..n; the controllers' two buttons for n = 2 only."""
+        assert isinstance(response, NAfcResponse)
+        numbers = [str(k) for k in range(1, response.n + 1)]
+        keys = {k: k for k in numbers} | {f"kp_{k}": k for k in numbers} | \
+            ({"left": "1", "right": "2"} if response.n == 2 else {})
+        return Inputs(keys, {k: k for k in numbers}, {"left": "1", "right": "2"} if response.n == 2 else {})
+
+    def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
+        """``n_alternatives``, ``correct_interval`` (1..n), each interval's mode and the factors an interval sets."""
+        assert isinstance(response, NAfcResponse)
+        n, columns, rows = response.n, schedule.columns, schedule.n
+        if response.order == "balanced":
+            right = balanced_alternatives(schedule.condition, schedule.practice.astype(bool), n, schedule.rng)
+        else:
+            right = schedule.rng.integers(1, n + 1, size=rows)
+        out: dict[str, np.ndarray] = {"n_alternatives": np.full(rows, n, dtype=np.int64), "correct_interval": right}
+        target_mode = mode_values(response.target.mode, columns, rows)
+        reference_mode = mode_values(response.reference.mode, columns, rows)
+        names = sorted(set(response.target.set) | set(response.reference.set))
+        for k in range(1, n + 1):
+            here = right == k
+            out[f"mode_interval{k}"] = np.where(here, target_mode, reference_mode)
+            for name in names:
+                value = {role: np.full(rows, spec.set[name], dtype=np.float64) if name in spec.set else
+                         np.asarray(columns[name], dtype=np.float64)
+                         for role, spec in (("target", response.target), ("reference", response.reference))}
+                out[f"{name}_interval{k}"] = np.where(here, value["target"], value["reference"])
+        return out
+
+    def check(self, response: KindResponse, checks: Checks, path: Loc) -> None:
+        """Intervals only (locations are refused: not available yet); numeric level and set factors; mode
+        factors name modes; target and reference differ."""
+        assert isinstance(response, NAfcResponse)
+        if response.alternatives == "locations":
+            checks.add(path + ("alternatives",), "alternatives: locations is not available in this version of psyop "
+                                                 "(the target's place cannot be set per trial yet); use "
+                                                 "alternatives: intervals")
+        if response.level_factor is not None:
+            checks.factor_exists(response.level_factor, path + ("level_factor",), numeric=True)
+        for role, spec in (("target", response.target), ("reference", response.reference)):
+            for key in spec.set:
+                checks.factor_exists(key, path + (role, "set", key), numeric=True)
+            if isinstance(spec.mode, ModeFromFactor):
+                checks.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
+        if response.target == response.reference:
+            checks.add(path + ("reference",), "target and reference are the same stimulus, so no interval could be "
+                                              "told apart; give the reference another mode or a set: "
+                                              "(e.g. set: {level_D: 0})")
+
+    def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
+        assert isinstance(observer, PsychometricNafc) and isinstance(response, NAfcResponse)
+        if checks.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
+                observer.level_column != response.level_factor:
+            checks.add(path + ("level_column",), f"the observer reads '{observer.level_column}' as its level, but the "
+                                                 f"response's level_factor is {response.level_factor!r}; set "
+                                                 f"response.level_factor: {observer.level_column}")
+
+    def score(self, row: TrialRow, answer: str) -> Scored:
+        return Scored(correct=answer == str(int(row["correct_interval"])))
+
+    def targets(self, study: StudyInputs) -> list[AnalysisTarget]:
+        """Fits with guess 1/n per participant and condition in results/, and their figure."""
+        return [figure_target(study, "n_afc", "analysis/n_afc.py")]
+
+
+KIND = NAfc()

@@ -1,0 +1,202 @@
+"""The ``n_afc`` kind (psyop/protocol/kinds/n_afc.py) end to end: balanced target intervals, what each interval
+shows, keys and box buttons 1..n, a window session typed under Xvfb, simulated sessions and their analysis
+(analysis/n_afc.py), recovery of the simulated observer's threshold, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from scipy import stats
+from session_helpers import wait_until
+from test_kind_yes_no import _red_near_centre
+from test_serial import PtyDevice
+
+from psyop.protocol import load_protocol
+from psyop.schedule import compile_schedule
+from psyop.session.plan import compile_plan
+from psyop.session.responses.simulated import make_observer
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLE = REPO / "protocols" / "examples" / "n_afc.yaml"
+
+
+def _variant(tmp_path: Path, *, repetitions: int | None = None, phase_s: float | None = None,
+             replace: tuple[tuple[str, str], ...] = ()) -> Path:
+    text = EXAMPLE.read_text()
+    if repetitions is not None:
+        text = re.sub(r"(?m)^(\s*repetitions:)\s*\d+", rf"\g<1> {repetitions}", text)
+    if phase_s is not None:
+        text = re.sub(r"(duration_s|expected_s):\s*[\d.]+", rf"\g<1>: {phase_s}", text)
+    for old, new in replace:
+        assert old in text, old
+        text = text.replace(old, new)
+    path = tmp_path / "n_afc.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_each_interval_holds_the_target_equally_often_per_condition() -> None:
+    schedule = compile_schedule(load_protocol(EXAMPLE), 5)
+    table = pd.crosstab(schedule["level_D"], schedule["correct_interval"])
+    assert list(table.columns) == [1, 2, 3, 4] and (table.to_numpy() == 4).all()
+    for k in range(1, 5):
+        target = schedule["correct_interval"] == k
+        assert (schedule.loc[target, f"mode_interval{k}"] == "ocular").all()
+        assert (schedule.loc[~target, f"mode_interval{k}"] == "conventional").all()
+
+
+def test_the_target_interval_shows_the_back_disc_and_the_others_hide_it(tmp_path: Path) -> None:
+    """Rendered, with the eye turned 15 deg: the target interval (ocular parallax) uncovers the red back disc,
+    every other interval of the same trial shows none."""
+    schedule = compile_schedule(load_protocol(EXAMPLE), 3)
+    row = schedule[schedule["level_D"] == schedule["level_D"].max()].iloc[0]
+    found = {}
+    for k in range(1, 5):
+        out = tmp_path / f"{k}.png"
+        subprocess.run([sys.executable, "-m", "psyop", "render", str(EXAMPLE), "--seed", "3", "--trial",
+                        str(int(row["trial"])), "--interval", str(k), "--gaze-deg", "15,0", "--out", str(out)],
+                       check=True, cwd=REPO, capture_output=True)
+        found[k] = _red_near_centre(out)
+    target = int(row["correct_interval"])
+    assert found[target] >= 10 and all(found[k] == 0 for k in found if k != target), (target, found)
+
+
+class _Keys:
+    def __init__(self, presses: list[tuple[str, float]]) -> None:
+        self.presses = presses
+
+    def poll(self) -> list[tuple[str, float]]:
+        out, self.presses = self.presses, []
+        return out
+
+
+def test_keys_and_buttons_one_to_n_answer_and_others_are_ignored() -> None:
+    from psyop.devices.responses.keyboard import KeyboardResponses
+    from psyop.devices.responses.serial_box import SerialResponseBox
+    from psyop.session.clock import RealClock
+
+    plan = compile_plan(load_protocol(EXAMPLE))
+    assert plan.response.inputs.controller == {}  # two select buttons cannot pick one of four
+    keyboard = KeyboardResponses(_Keys([]), plan.kind, keymap=plan.response.inputs.keys)
+    row = {"correct_interval": 3}
+    assert keyboard.collect(row, 1.0) is None
+    keyboard.events = _Keys([("5", 1.1), ("left", 1.15), ("kp_3", 1.2)])
+    answer = keyboard.collect(row, 1.3)
+    assert (answer.response, answer.correct) == ("3", True) and math.isclose(answer.response_time_s, 0.2)
+
+    device, clock = PtyDevice(), RealClock()
+    box = SerialResponseBox(device.path, plan.kind, clock=clock.now_s, buttons=plan.response.inputs.buttons)
+    try:
+        assert box.collect(row, clock.now_s()) is None
+        device.write(b"B5\nB4\n")
+        answer = wait_until(lambda: box.collect(row, clock.now_s()), what="the box's button 4")
+        assert (answer.response, answer.correct) == ("4", False)
+    finally:
+        box.close()
+        device.close()
+
+
+WINDOW_SCRIPT = textwrap.dedent(
+    """
+    from pathlib import Path
+    from psyop.protocol import load_protocol
+    from psyop.schedule import compile_schedule
+    from psyop.run.runner import SessionOptions, run_session
+    import psyop.devices.window as window
+
+    typed = window.GlfwWindow.poll
+    def poll(self):  # a participant who presses '3' whenever asked
+        self.inject_key("3")
+        return typed(self)
+    window.GlfwWindow.poll = poll
+    outcome = run_session(load_protocol(Path({protocol!r})), compile_schedule, SessionOptions(
+        participant="W1", data_root=Path({data!r}), clock="real", display="window", responses="keyboard",
+        tracker="sim", progress=False, render="auto", window_scale=0.08))
+    print(outcome.status)
+    """
+)
+
+
+@pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (Debian xvfb)")
+def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
+    protocol = _variant(tmp_path, repetitions=1, phase_s=0.03)
+    script = WINDOW_SCRIPT.format(protocol=str(protocol), data=str(tmp_path / "data"))
+    result = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", script], capture_output=True, text=True,
+                            timeout=180)
+    assert result.returncode == 0 and result.stdout.split()[-1] == "complete", result.stderr[-2000:]
+    trials = pd.read_parquet(tmp_path / "data" / "nafc_detection" / "sub-W1" / "ses-1" / "trials.parquet")
+    assert len(trials) == 6 and (trials["response"] == "3").all()
+    assert (trials["correct"] == (trials["correct_interval"] == 3)).all()
+
+
+def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path) -> None:
+    protocol = _variant(tmp_path, repetitions=8)
+    data, results = tmp_path / "data", tmp_path / "results"
+    subprocess.run([sys.executable, "-m", "psyop", "simulate", "--data", str(data), "--protocols", str(protocol),
+                    "--participants", "3"], check=True, cwd=REPO, capture_output=True)
+    rules = tmp_path / "studies.mk"
+    subprocess.run([sys.executable, "-m", "psyop", "studies", str(data), "--make-rules", str(rules)], check=True,
+                   cwd=REPO, capture_output=True)
+    assert "analysis/n_afc.py" in rules.read_text() and "nafc_detection_n_afc.png" in rules.read_text()
+    done = subprocess.run([sys.executable, "analysis/n_afc.py", "--study", "nafc_detection", "--data", str(data),
+                           "--results", str(results), "--out", str(tmp_path / "fig.png")], cwd=REPO,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    fits = pd.read_csv(results / "nafc_detection_n_afc_fits.csv")
+    assert len(fits) == 3 and (fits["guess"] == 0.25).all() and (fits["target_p"] == 0.625).all()
+    summary = json.loads((results / "nafc_detection.json").read_text())
+    assert summary["response_kind"] == "n_afc" and summary["n_alternatives"] == 4
+
+
+def test_the_fits_recover_each_simulated_participants_threshold(tmp_path: Path) -> None:
+    """Each simulated participant's 95 % CI covers the level where its curve reaches (1 + 1/n) / 2 correct, at a
+    rate a binomial test against 95 % accepts (p > 0.001)."""
+    from psyop.statistics.psychometric import USABLE_STATUSES, fit_psychometric_table, nafc_options
+
+    protocol = load_protocol(_variant(tmp_path, repetitions=60, replace=(("between_subject_sd: 0.05",
+                                                                          "between_subject_sd: 0.1"),)))
+    params = compile_plan(protocol).observer_params()
+    observer_model = protocol.observer
+    frames, truth = [], {}
+    g, lapse, width = 0.25, float(observer_model.lapse), float(observer_model.width)
+    # the level where p = g + (1 - g) / 2 on the observer's curve (lapse included), from its sigmoid midpoint t
+    offset = width * stats.norm.ppf(((1 - g) / 2) / (1 - g - lapse))
+    for j in range(60):
+        participant = f"S{j + 1:02d}"
+        schedule = compile_schedule(protocol, 500 + j)
+        observer = make_observer(params, seed=500 + j, participant=participant)
+        truth[participant] = observer.participant_state["threshold"] + offset
+        answers = [observer.collect(row, 0.0) for row in schedule.to_dict("records")]
+        frames.append(schedule.assign(participant=participant, correct=[a.correct for a in answers]))
+    trials = pd.concat(frames, ignore_index=True)
+    fits = fit_psychometric_table(trials, "level_D", ["participant"], "correct",
+                                  nafc_options(4, estimate_eta=False, n_bootstrap=50))
+    usable = fits[fits["status"].isin(USABLE_STATUSES)]
+    assert len(usable) >= 0.85 * len(fits), fits["status"].value_counts()
+    covered = sum(r["threshold_ci_low_D"] <= truth[r["participant"]] <= r["threshold_ci_high_D"]
+                  for r in usable.to_dict("records"))
+    print(f"threshold coverage {covered}/{len(usable)}")
+    assert stats.binom.cdf(covered, len(usable), 0.95) > 1e-3, (covered, len(usable))
+    assert trials["correct"].notna().all()
+
+
+@pytest.mark.parametrize(("old", "new", "says"), [
+    ("reference: {mode: conventional}", "reference: {mode: ocular}", "target and reference are the same stimulus"),
+    ("alternatives: intervals", "alternatives: locations", "alternatives: locations is not available"),
+    ("  n: 4", "  n: 3", "needs 3 interval phase(s)"),
+])
+def test_bad_input_is_one_line_with_its_place(tmp_path: Path, old: str, new: str, says: str) -> None:
+    protocol = _variant(tmp_path, replace=((old, new),))
+    done = subprocess.run([sys.executable, "-m", "psyop", "validate", str(protocol)], cwd=REPO, capture_output=True,
+                          text=True)
+    assert done.returncode == 2 and "Traceback" not in done.stderr and says in done.stderr, done.stderr
+    assert re.search(r"n_afc\.yaml:\d+:\d+", done.stderr), done.stderr
