@@ -1,0 +1,106 @@
+"""Controller answers of the new response kinds on a real OpenXR runtime (Monado's remote driver, as
+tests/session/xr/test_openxr_sessions.py): the right controller's select button answers "no" in a yes_no study
+and "2" in a 2-AFC n_afc study, each trial's answer scored against its schedule; an n_afc with 4 alternatives
+is refused in one line, exit 2 (two select buttons cannot pick one of four)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from monado import RemoteDriver, RemoteState, free_port, runtime_env
+
+REPO = Path(__file__).resolve().parents[3]
+
+HEAD = """
+psyop_protocol: 1
+study: {name: xr_kind, title: a red disc in front of a blue wall}
+display: {profile: vive_pro, eye_model: gullstrand_emsley_relaxed, ipd: tracker}
+eyes: stereo
+scene:
+  - {id: target, kind: disc, size_deg: 8, depth: {D: 1}, surface: {kind: solid, rgb: [1, 0, 0]}}
+  - {id: wall, kind: quad, width_deg: 60, height_deg: 60, depth: {D: 0.5}, surface: {kind: solid, rgb: [0.2, 0.2, 0.6]}}
+design:
+  factors:
+    level_D: {levels: [0, 1]}
+  repetitions: 1
+  randomisation: {kind: full}
+"""
+YES_NO = """trial:
+  phases:
+    - {kind: interval, duration_s: 0.4}
+    - {kind: response, expected_s: 0.2, timeout_s: 5}
+response:
+  kind: yes_no
+  signal: {mode: ocular}
+  noise: {mode: conventional}
+  level_factor: level_D
+"""
+TWO_AFC = """trial:
+  phases:
+    - {kind: interval, duration_s: 0.3}
+    - {kind: interval, duration_s: 0.3}
+    - {kind: response, expected_s: 0.2, timeout_s: 5}
+response:
+  kind: n_afc
+  n: 2
+  target: {mode: ocular}
+  reference: {mode: conventional}
+  level_factor: level_D
+"""
+
+
+def _run_pressing_right(tmp_path: Path, protocol: Path) -> subprocess.CompletedProcess:
+    """``psyop run`` on the remote driver, the right trigger pressed every 0.3 s until the session ends."""
+    state, port = RemoteState(), free_port()
+    cmd = [sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1", "--data",
+           str(tmp_path / "data"), "--display", "openxr", "--pose", "openxr:right", "--responses", "openxr",
+           "--clock", "real", "--no-progress"]
+    run = subprocess.Popen(cmd, env=runtime_env(tmp_path, port), cwd=REPO, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    try:
+        driver = RemoteDriver(port)
+        start = time.monotonic()
+        while run.poll() is None and time.monotonic() - start < 200:
+            state.right_trigger = int((time.monotonic() - start) / 0.15) % 2 == 1
+            try:
+                driver.send(state)
+            except OSError:
+                break
+            time.sleep(0.02)
+        out, err = run.communicate(timeout=120)
+    finally:
+        if run.poll() is None:
+            run.kill()
+    return subprocess.CompletedProcess(cmd, run.returncode, out, err)
+
+
+@pytest.mark.parametrize(("tail", "answer", "correct"), [
+    (YES_NO, "no", lambda t: ~t["signal"].astype(bool)),
+    (TWO_AFC, "2", lambda t: t["correct_interval"] == 2),
+])
+def test_the_right_controller_answers_the_kind(tmp_path: Path, tail: str, answer: str, correct) -> None:
+    protocol = tmp_path / "xr_kind.yaml"
+    protocol.write_text(HEAD + tail)
+    done = _run_pressing_right(tmp_path, protocol)
+    assert done.returncode == 0, done.stderr[-3000:]
+    trials = pd.read_parquet(tmp_path / "data" / "xr_kind" / "sub-H1" / "ses-1" / "trials.parquet")
+    assert len(trials) == 2 and (trials["response"] == answer).all(), trials[["response"]]
+    assert (trials["correct"] == correct(trials)).all() and (trials["response_time_s"] > 0).all()
+
+
+def test_four_alternatives_on_the_controllers_are_refused_in_one_line(tmp_path: Path) -> None:
+    protocol = tmp_path / "xr_kind.yaml"
+    four = TWO_AFC.replace("n: 2", "n: 4").replace("    - {kind: interval, duration_s: 0.3}\n",
+                                                   "    - {kind: interval, duration_s: 0.3}\n" * 2)
+    protocol.write_text(HEAD + four)
+    done = subprocess.run([sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1", "--data",
+                           str(tmp_path / "data"), "--display", "openxr", "--responses", "openxr", "--clock", "real",
+                           "--no-progress"], env=runtime_env(tmp_path), cwd=REPO, capture_output=True, text=True,
+                          timeout=120, stdin=subprocess.DEVNULL)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert "the controllers cannot give n_afc responses" in done.stderr
