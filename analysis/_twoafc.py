@@ -12,6 +12,8 @@ from psyop.statistics.studies import FactorFacts, StudyFacts
 
 #: Studies whose sessions carry no protocol (older logs, write_dataset without hashes): the paper's names.
 KNOWN_CONDITIONS = {"detection": "back_D", "discrimination": "offset_D"}
+#: the one condition of a study whose only factor is the level (its ``condition_cell``)
+ONE_CONDITION = "all"
 
 
 def condition_column(facts: StudyFacts, given: str | None) -> str:
@@ -22,10 +24,11 @@ def condition_column(facts: StudyFacts, given: str | None) -> str:
     candidates = facts.condition_columns()
     if not candidates and not facts.factors and facts.name in KNOWN_CONDITIONS:
         return KNOWN_CONDITIONS[facts.name]
-    if not candidates:
-        raise UserError(f"study {facts.name!r}: no condition factor besides the level factor {facts.level_factor!r} "
-                        "(its sessions record no protocol, or the design has one factor); give --condition-column",
-                        facts.name)
+    if not candidates and not facts.factors:
+        raise UserError(f"study {facts.name!r}: its sessions record no protocol, so its condition factor is unknown; "
+                        "give --condition-column", facts.name)
+    if not candidates:  # the level is the design's only factor: one threshold per participant, one condition
+        return CELL_COLUMN
     return condition_of(candidates)
 
 
@@ -33,6 +36,8 @@ def with_condition_column(trials: pd.DataFrame, facts: StudyFacts, condition: st
     """``trials`` with the crossed-cell column added when ``condition`` is it (several condition factors)."""
     if condition != CELL_COLUMN:
         return trials
+    if not facts.condition_columns():  # the level is the only factor: every trial in the one condition
+        return trials.assign(**{CELL_COLUMN: ONE_CONDITION})
     try:
         return with_condition(trials, facts.condition_columns())
     except ValueError as exc:
@@ -43,6 +48,8 @@ def condition_facts(facts: StudyFacts, condition: str) -> FactorFacts:
     """The condition's name, description and unit for labels (the crossed cells say which factors they cross)."""
     if condition == CELL_COLUMN and len(facts.condition_columns()) > 1:
         return FactorFacts(CELL_COLUMN, describe(facts.condition_columns()), None)
+    if condition == CELL_COLUMN and not facts.condition_columns():
+        return FactorFacts(CELL_COLUMN, "all trials (the level is the only factor)", None)
     return facts.factor(condition)
 
 

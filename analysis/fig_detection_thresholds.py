@@ -82,11 +82,16 @@ def main(argv: list[str] | None = None) -> int:
     }
     effect_key = ("effect of back distance on threshold (rm-ANOVA)" if cond == "back_D"
                   else f"effect of {cond_label} on threshold (rm-ANOVA)")
-    try:
-        aov = rm_anova(clean, "threshold_D", cond)
-    except ValueError as exc:  # too few complete subjects or one condition: say so instead of a number
-        payload["summary"][effect_key] = f"not computed: {exc}"
+    if fits[cond].nunique() < 2:  # the level is the only factor (or one condition was run): no effect to test
+        payload["summary"][effect_key] = f"not applicable: one condition ({fits[cond].iloc[0]!s}), no effect to test"
+        aov = None
     else:
+        try:
+            aov = rm_anova(clean, "threshold_D", cond)
+        except ValueError as exc:  # too few complete subjects: say so instead of a number
+            payload["summary"][effect_key] = f"not computed: {exc}"
+            aov = None
+    if aov is not None:
         payload[f"anova_{cond}"] = aov.table.to_dict("records")
         payload["anova_dropped"] = aov.dropped.to_dict("records")
         payload["summary"][effect_key] = format_anova(aov.table.iloc[0]) + _dropped_text(aov.dropped)
@@ -139,6 +144,9 @@ def _add_censored(payload: dict, fits, cond: str, unit: str, effect_key: str) ->
     key = f"{effect_key}, censored fits at their bounds (sensitivity)"
     if not (report["n_censored_below"] + report["n_censored_above"]):
         payload["summary"][key] = "same as above: no censored fits"
+        return
+    if fits[cond].nunique() < 2:
+        payload["summary"][key] = "not applicable: one condition"
         return
     rows, _ = censoring_of(fits)
     try:
