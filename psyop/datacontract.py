@@ -30,6 +30,10 @@ FRAMES_FILE = "frames.parquet"
 GAZE_FILE = "gaze.parquet"
 #: the gaze validations of a session whose protocol has gaze_validation: (psyop.session.log.validation_log)
 VALIDATION_FILE = "validation.parquet"
+#: the screens around the trials of a session whose protocol has session: (psyop.session.log.screens_log)
+EVENTS_FILE = "events.parquet"
+#: the questionnaire answers of such a session, one row per item answered (psyop.session.log.screens_log)
+QUESTIONNAIRES_FILE = "questionnaires.parquet"
 LOG_DIR = "log"
 #: Participant IDs are BIDS labels (psyop export --bids): letters and digits only.
 PARTICIPANT_PATTERN = re.compile(r"[A-Za-z0-9]{1,64}")  # use with fullmatch: "ab\n" is refused

@@ -25,6 +25,10 @@ if TYPE_CHECKING:
     from psyop.rendering.scene import Scene
 
 
+#: ``--phase`` values that draw a screen of the protocol's ``session:`` (psyop.session.screens)
+SCREEN_PHASES: tuple[str, ...] = ("instructions", "break", "questionnaire", "end")
+
+
 def ipd_arg_m(ipd_mm: float | None) -> float:
     """``--ipd-mm`` in metres, checked against psyop.optics.ranges.IPD_M (None: DEFAULT_IPD_M; imported
     here, not at parser build, so that ``psyop --help`` stays light)."""
@@ -46,9 +50,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("protocol", help="protocol YAML file")
     parser.add_argument("--trial", type=int, default=0, help="trial number (0-based, execution order)")
     parser.add_argument("--interval", type=int, default=1, help="interval phase of the trial (1-based)")
-    parser.add_argument("--phase", choices=("interval", "response"), default="interval",
+    parser.add_argument("--phase", choices=("interval", "response", *SCREEN_PHASES), default="interval",
                         help="interval: the stimulus of --interval; response: what the participant sees while "
-                             "answering (the prompt, else the question, on a head-fixed panel; conventional mode)")
+                             "answering (the prompt, else the question, on a head-fixed panel; conventional mode); "
+                             "instructions, break, questionnaire, end: screen --screen of the protocol's session: "
+                             "section on the same panel (a break as after its first every_trials trials)")
+    parser.add_argument("--screen", type=int, default=0, metavar="N",
+                        help="which screen of --phase instructions|break|questionnaire|end (0-based: an "
+                             "instruction page, a questionnaire item in the order the questionnaires are listed)")
     gaze = parser.add_mutually_exclusive_group()
     gaze.add_argument("--gaze-deg", default=None, metavar="AZ,EL",
                       help="gaze direction from the rendered eye's centre of rotation as Fick angles, degrees "
@@ -176,12 +185,37 @@ def _mode_and_text(args: argparse.Namespace, protocol: Protocol, row: dict) -> t
     """The rendering mode and, for ``--phase response``, the participant's response text."""
     from psyop.stimulus import interval_mode
 
+    if args.phase in SCREEN_PHASES:
+        return args.mode or "conventional", _screen_text(args, protocol)
     if args.phase == "response":
         from psyop.session.plan import compile_plan
 
         response = compile_plan(protocol, tracker_ipd_m=ipd_arg_m(args.ipd_mm)).response
         return args.mode or response.phase.mode, response.participant_text
     return args.mode or interval_mode(protocol, row, args.interval), None
+
+
+def _screen_text(args: argparse.Namespace, protocol: Protocol) -> str:
+    """The text of screen ``--screen`` of ``--phase`` (a break as after its first ``every_trials`` trials, else
+    after the first block, of the schedule of ``--seed``)."""
+    from psyop.schedule import compile_schedule
+    from psyop.session.screens import screens_of_kind
+
+    section = protocol.session
+    if section is None:
+        raise UserError(f"--phase {args.phase}: the protocol has no session: section; add one "
+                        "(docs/session_screens.md)", args.protocol)
+    schedule = compile_schedule(protocol, args.seed, participant_index=args.participant_index)
+    total = len(schedule)
+    every = section.breaks.every_trials if section.breaks is not None else None
+    done = min(every, total) if every else int((schedule["block"] == schedule["block"].iloc[0]).sum())
+    screens = screens_of_kind(section, args.phase, done=done, total=total)
+    if not screens:
+        raise UserError(f"--phase {args.phase}: the protocol's session: section has no such screen; add one "
+                        "(docs/session_screens.md)", args.protocol)
+    if not 0 <= args.screen < len(screens):
+        raise UserError(f"--screen must be in 0..{len(screens) - 1} for --phase {args.phase}, got {args.screen}")
+    return screens[args.screen].text
 
 
 @dataclass(frozen=True)
@@ -229,14 +263,15 @@ def _scene(args: argparse.Namespace, protocol: Protocol, protocol_path: Path, ro
     from psyop.stimulus import build_scene
     from psyop.stimulus.meshes import SessionMeshes
 
-    if args.phase == "response":
+    if args.phase == "response" or args.phase in SCREEN_PHASES:
         from psyop.rendering.text import em_px_for_display, text_image
         from psyop.stimulus import blank_scene, scene_origin_m, text_scene
         from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
 
         em_px = em_px_for_display(view.display, TEXT_LETTER_HEIGHT_DEG)
-        return (blank_scene() if response_text is None
-                else text_scene(text_image(response_text, em_px), scene_origin_m(protocol, view.centre_m)))
+        image = None if response_text is None else text_image(response_text, em_px,
+                                                               keep_lines=args.phase in SCREEN_PHASES)
+        return blank_scene() if image is None else text_scene(image, scene_origin_m(protocol, view.centre_m))
     return build_scene(protocol, row, args.time_s, view.centre_m, interval=args.interval, base_dir=protocol_path.parent,
                        meshes=SessionMeshes(protocol_path.parent, mesh_files))
 
@@ -250,6 +285,7 @@ def _sidecar(args: argparse.Namespace, protocol: Protocol, protocol_path: Path, 
     return {
         "protocol": str(protocol_path), "protocol_sha256": protocol.source_sha256, "seed": args.seed,
         "trial": args.trial, "phase": args.phase, "interval": args.interval, "time_s": args.time_s,
+        "screen": args.screen if args.phase in SCREEN_PHASES else None,
         "adaptive_level": level,
         "response_text": response_text,
         "eye": view.eye, "mode": view.mode, "gaze_deg": [az, el], "fixation_m": view.fixation_m.tolist(),

@@ -15,6 +15,8 @@ Every field of every protocol model is listed here with the part of psyop that r
 - ``quality``: the exclusion rules at analysis time (psyop.quality.rules);
 - ``timing``: the session loop's dropped-frame rule (psyop.session.loop, psyop.protocol.timing);
 - ``gaze_validation``: the session's gaze validations (psyop.session.validation);
+- ``screens``: the session's screens around the trials (psyop.session.screens: instructions, breaks,
+  questionnaires, end screen);
 - ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``);
 - ``kinds``: a response kind's own module (psyop.protocol.kinds): each kind lists the users of its models'
   fields in its ``fields`` (merged here).
@@ -45,6 +47,7 @@ USERS: dict[str, tuple[str, ...]] = {
     "quality": ("psyop/quality/rules.py", "psyop/protocol/quality.py"),
     "timing": ("psyop/session/loop.py", "psyop/protocol/timing.py"),
     "gaze_validation": ("psyop/session/validation.py",),
+    "screens": ("psyop/session/screens.py",),
     # the response kinds' own modules (columns, checks, scoring): psyop.protocol.kinds
     "kinds": tuple(f"psyop/protocol/kinds/{p.name}" for p in sorted(Path(__file__).with_name("kinds").glob("*.py"))),
 }
@@ -59,7 +62,18 @@ def _scene(**fields: str) -> dict[str, str]:
 FIELD_USERS: dict[str, dict[str, str]] = {
     "Protocol": {"psyop_protocol": "validation", "study": "plan", "display": "plan", "eyes": "plan", "scene": "stimulus",
                  "trial": "plan", "design": "schedule", "response": "plan", "observer": "plan",
-                 "quality": "quality", "timing": "timing", "gaze_validation": "gaze_validation"},
+                 "quality": "quality", "timing": "timing", "gaze_validation": "gaze_validation",
+                 "session": "screens"},
+    "SessionScreens": {k: "screens" for k in ("instructions", "breaks", "questionnaires", "end_screen",
+                                              "simulated_answers")},
+    # image: refused at validation (psyop.protocol.session_screens: only text is drawn in the headset)
+    "InstructionPage": {"text": "screens", "image": "refused", "expected_s": "screens"},
+    "Instructions": {"pages": "screens", "at_blocks": "screens"},
+    "Breaks": {k: "screens" for k in ("every_trials", "between_blocks", "text", "expected_s")},
+    "Questionnaire": {k: "screens" for k in ("name", "when", "items", "scale", "title", "item_expected_s")},
+    "Scale": {"points": "screens", "labels": "screens"},
+    "EndScreen": {"text": "screens", "expected_s": "screens"},
+    "SimulatedAnswers": {k: "screens" for k in ("severity_mean", "severity_sd", "item_sd")},
     "GazeValidation": {k: "gaze_validation" for k in ("when", "points_deg", "distance_m", "target_size_deg", "settle_s",
                                                       "dwell_s", "require")},
     "ValidationRequirement": {k: "gaze_validation" for k in ("max_mean_error_deg", "max_point_error_deg",

@@ -13,6 +13,7 @@ from psyop.protocol.observer import Observer
 from psyop.protocol.quality import QualitySection
 from psyop.protocol.response import Response
 from psyop.protocol.scene import Primitive
+from psyop.protocol.session_screens import SessionScreens
 from psyop.protocol.timing import TimingSection
 from psyop.protocol.trial import TrialSpec
 from psyop.protocol.validation import GazeValidation
@@ -45,6 +46,8 @@ class Protocol(StrictModel):
     quality: QualitySection | None = None  # gaze-based exclusions at analysis time (psyop.protocol.quality)
     timing: TimingSection | None = None  # dropped-frame rule of a trial's intervals (psyop.protocol.timing)
     gaze_validation: GazeValidation | None = None  # multi-point gaze checks in the headset (psyop.protocol.validation)
+    #: instructions, breaks, questionnaires, end screen around the trials (psyop.protocol.session_screens)
+    session: SessionScreens | None = None
 
     _source_text: str = PrivateAttr(default="")
     _source_name: str = PrivateAttr(default="")

@@ -534,6 +534,20 @@ class _Checker:
         for index, message in points_off_display(validation, display, eyes, ipd_m):
             self.add(("gaze_validation", "points_deg", index), message)
 
+    def check_session_blocks(self, conditions: list[JsonObject]) -> None:
+        """``session: instructions: at_blocks:`` names blocks the design has (run order from 0: one block per
+        combination of a blocked design's ``by`` factors, else the one block 0)."""
+        screens = self.p.session
+        if screens is None or screens.instructions is None or not screens.instructions.at_blocks:
+            return
+        by = self.p.design.randomisation.by
+        n_blocks = len({tuple(str(c.get(f)) for f in by) for c in conditions}) if by else 1
+        for index, block in enumerate(screens.instructions.at_blocks):
+            if block >= n_blocks:
+                self.add(("session", "instructions", "at_blocks", index),
+                         f"block {block} does not exist: the design has {n_blocks} block(s), numbered 0 to "
+                         f"{n_blocks - 1} in run order; list only those")
+
     def check_observer(self) -> None:
         observer = self.p.observer
         if observer is None:
@@ -596,4 +610,5 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
     checker.check_unused_factors()
     checker.check_observer()
     checker.check_validation()
+    checker.check_session_blocks(conditions)
     return checker.issues

@@ -58,13 +58,31 @@ def em_px_for_display(display: DisplayProfile, letter_height_deg: float) -> int:
     return max(MIN_EM_PX, int(round(px_per_tan * 2.0 * math.tan(math.radians(letter_height_deg) / 2.0))))
 
 
-def ink_coverage(text: str, em_px: int = EM_PX) -> np.ndarray:
-    """(H, W) ink coverage in [0, 1] of ``text`` wrapped at :data:`WRAP_CHARS`, centred, with a
+def wrapped_lines(text: str, keep_lines: bool = False) -> list[str]:
+    r"""The lines ``text`` is drawn in: wrapped at :data:`WRAP_CHARS` on spaces; ``keep_lines``: each of its own
+    lines wrapped separately (an empty line kept), as a session screen's page is written (psyop.session.screens),
+    else its line breaks are spaces (the response prompt).
+
+    Examples
+    --------
+    >>> wrapped_lines("a\n\nb", keep_lines=True), wrapped_lines("a\n\nb")
+    (['a', '', 'b'], ['a  b'])
+    """
+    if not keep_lines:
+        return textwrap.wrap(text, WRAP_CHARS) or [text]
+    lines: list[str] = []
+    for line in text.strip("\n").split("\n"):
+        lines += textwrap.wrap(line, WRAP_CHARS) or [""]
+    return lines
+
+
+def ink_coverage(text: str, em_px: int = EM_PX, keep_lines: bool = False) -> np.ndarray:
+    """(H, W) ink coverage in [0, 1] of ``text`` in its :func:`wrapped_lines`, centred, with a
     :data:`PADDING_EM` margin."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    lines = textwrap.wrap(text, WRAP_CHARS) or [text]
+    lines = wrapped_lines(text, keep_lines)
     dpi = 72.0  # 1 point = 1 pixel: fontsize in points is the em in pixels
     fig = Figure(figsize=(1.0, 1.0), dpi=dpi)
     canvas = FigureCanvasAgg(fig)
@@ -81,13 +99,16 @@ def ink_coverage(text: str, em_px: int = EM_PX) -> np.ndarray:
     return rgba[:, :, 3] / 255.0
 
 
-def text_image(text: str, em_px: int = EM_PX, ink_rgb: Colour = INK_RGB, panel_rgb: Colour = PANEL_RGB) -> TextImage:
-    """``text`` as ink over a panel, ``em_px`` texels per em (one rasterisation; :class:`TextImages` caches)."""
+def text_image(text: str, em_px: int = EM_PX, ink_rgb: Colour = INK_RGB, panel_rgb: Colour = PANEL_RGB,
+               keep_lines: bool = False) -> TextImage:
+    """``text`` as ink over a panel, ``em_px`` texels per em (one rasterisation; :class:`TextImages` caches);
+    ``keep_lines``: its line breaks kept (:func:`wrapped_lines`)."""
     if not text.strip():
         raise ValueError("text to draw must not be empty")
-    alpha = ink_coverage(text, em_px)[:, :, None]
+    alpha = ink_coverage(text, em_px, keep_lines)[:, :, None]
     pixels = np.asarray(panel_rgb, dtype=np.float64) * (1.0 - alpha) + np.asarray(ink_rgb, dtype=np.float64) * alpha
-    digest = hashlib.sha256(f"{text}|{em_px}|{ink_rgb}|{panel_rgb}".encode()).hexdigest()[:16]
+    lines_key = "|lines" if keep_lines else ""  # the prompt's key (and texture) as before
+    digest = hashlib.sha256(f"{text}|{em_px}|{ink_rgb}|{panel_rgb}{lines_key}".encode()).hexdigest()[:16]
     return TextImage(text, ImageTexture(pixels, key=f"text:{digest}"), float((alpha > 0).mean()), int(em_px))
 
 
@@ -97,12 +118,12 @@ class TextImages:
 
     def __init__(self, em_px: int = EM_PX) -> None:
         self.em_px = int(em_px)
-        self._images: dict[str, TextImage] = {}
+        self._images: dict[tuple[str, bool], TextImage] = {}
         self.rasterisations = 0
 
-    def image(self, text: str) -> TextImage:
-        cached = self._images.get(text)
+    def image(self, text: str, keep_lines: bool = False) -> TextImage:
+        cached = self._images.get((text, keep_lines))
         if cached is None:
-            cached = self._images[text] = text_image(text, self.em_px)
+            cached = self._images[(text, keep_lines)] = text_image(text, self.em_px, keep_lines=keep_lines)
             self.rasterisations += 1
         return cached

@@ -34,6 +34,8 @@ from psyop.session.log.schema import trial_schema
 from psyop.adaptive.session import AdaptiveLevels, add_log_columns
 from psyop.session.log.store import SessionLog, SessionStore, recover_tables
 from psyop.session.validation import gaze_validator
+from psyop.session.screens import Pacing, ScreenRunner, session_screens
+from psyop.session.rows import TrialRow
 from psyop.session.loop import LoopConfig, LoopFacts, LoopOptions, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
@@ -338,13 +340,38 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
         renderer=renderer, display=bundle.display, store=store, config=config, pose=bundle.pose,
         response=plan.response, announce=announce, adaptive=adaptive, events=bundle.events,
         validator=gaze_validator(plan.protocol.gaze_validation, store), notice=_notice,
+        screens=_screens(plan, opened, bundle, options, fresh=not completed),
     )
     loop.timing_reruns = list(opened.earlier_reruns)
     if loop.validator is not None:
         bundle.stack.callback(loop.validator.close)
+    if loop.screens is not None:
+        bundle.stack.callback(loop.screens.close)
     bundle.after_tracker_closed = lambda: store.append_gaze(
         raw_gaze_table(gaze.drain_raw(), run=store.run_index, trial=loop.current_trial), key=loop.current_trial)
     return loop.run(opened.schedule, completed), loop
+
+
+def _screens(plan: SessionPlan, opened: _Opened, bundle: Backends, options: SessionOptions, *,
+             fresh: bool) -> ScreenRunner | None:
+    """The protocol's ``session:`` screens for this run (None: it has none): the simulated participant paces and
+    answers them with ``--responses sim``, nobody with ``none``, else the live participant's answer inputs end
+    them (psyop.session.screens)."""
+    section = plan.protocol.session
+    if section is None:
+        return None
+    store = opened.store
+    recorder = store.screen_recorder() if isinstance(store, SessionStore) else None  # power's log keeps none
+    name = options.responses.partition(":")[0]
+    pacing: Pacing = "simulated" if name == "sim" else "nobody" if name == "none" else "live"
+    responses = bundle.responses
+
+    def live_input(row: TrialRow, now_s: float) -> str | None:
+        answer = responses.collect(row, now_s)
+        return None if answer is None else answer.response
+
+    return session_screens(section, pacing=pacing, seed=int(opened.seed), recorder=recorder, fresh=fresh,
+                           live_input=live_input if pacing == "live" else None)
 
 
 def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: SessionOutcome,

@@ -51,6 +51,7 @@ from psyop.datacontract import typed_response
 from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, FixationPoint, ResponsePlan, SessionPlan
 from psyop.session.progress import Progress, session_progress
 from psyop.session.responses.base import Response, ResponseSource
+from psyop.session.screens import ScreenRunner
 
 
 class TimingStopped(Exception):
@@ -164,6 +165,7 @@ class TrialLoop:
         events: tuple[EventSink, ...] = (),
         validator: GazeValidator | None = None,
         notice: Callable[[str], None] | None = None,
+        screens: ScreenRunner | None = None,
     ) -> None:
         self.identity = dict(identity)  # study, participant, session
         self.phases = phases
@@ -174,6 +176,7 @@ class TrialLoop:
         self.events = events  # outside recorders told of trial starts, phases, responses, ends (events.py)
         self.validator = validator  # the protocol's gaze validations (psyop.session.validation); None: none
         self.notice = notice  # one console line per timing rerun (the experimenter's console); None: silent
+        self.screens = screens  # the protocol's session: screens (psyop.session.screens); None: none
         self._last_block: int | None = None  # the block of the last trial this run ran (None: none yet)
         self.clock, self.gaze, self.responses = clock, gaze, responses
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
@@ -213,6 +216,8 @@ class TrialLoop:
         try:
             self._run_queue(queue, schedule, recorded, bar)
             self._validate("end", -1)
+            if self.screens is not None and len(schedule):  # the end questionnaires, the end screen
+                self.screens.at_end(self, len(recorded), n_total, frame_records(schedule.tail(1))[0])
             if len(recorded) < n_total:
                 message = (f"{len(recorded)} of {n_total} trials recorded; the other {n_total - len(recorded)} were "
                            "not run: their conditions met the adaptive stop rule (session.json adaptive_stop)")
@@ -231,6 +236,7 @@ class TrialLoop:
 
     def _run_queue(self, queue: list[TrialRecord], schedule: pd.DataFrame, recorded: set[int], bar: Progress) -> None:
         """Run the queued trials into the log, each recorded one added to ``recorded``."""
+        n_total = len(schedule)
         n_stopped = self._record_stops(schedule, recorded, -1)
         while queue:
             planned = row = queue.pop(0)
@@ -239,6 +245,8 @@ class TrialLoop:
                 bar.update(1)
                 continue
             row = self.adaptive.fill(row) if self.adaptive is not None else row
+            if self.screens is not None:  # instructions, breaks, questionnaires due before this trial
+                self.screens.before_trial(self, row, len(recorded), n_total)
             self._validate_before(row)
             self.current_trial = int(row["trial"])
             record, frames = self._run_trial_on_display(row)

@@ -21,7 +21,8 @@ class PhaseSpec:
     """One timed phase.
 
     ``show``: 'cross' (drift recalibration target) | 'stimulus' (an interval) | 'blank' | 'off'
-    (display off) | 'target' (a gaze validation target: psyop.session.validation.TargetPhase). ``gaze``: 'cross', 'pursuit', 'fixate' (a static fixation target), 'free' or 'none' (what the observer looks at;
+    (display off) | 'target' (a gaze validation target: psyop.session.validation.TargetPhase) | 'text' (a
+    session screen's head-fixed text panel: psyop.session.screens.ScreenPhase). ``gaze``: 'cross', 'pursuit', 'fixate' (a static fixation target), 'free' or 'none' (what the observer looks at;
     drives simulated gaze). The rendering mode is the trial row's ``mode_column`` when given
     (intervals: ``mode_interval<k>``), else the fixed ``mode``. ``primitives``: the scene ids
     drawn (None: all of them). ``interval``: which interval's factor values the scene uses
@@ -39,8 +40,9 @@ class PhaseSpec:
     target_size_deg: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.show not in ("cross", "stimulus", "blank", "off", "target"):
-            raise ValueError(f"phase {self.name!r}: show must be cross, stimulus, blank, off or target, got {self.show!r}")
+        if self.show not in ("cross", "stimulus", "blank", "off", "target", "text"):
+            raise ValueError(f"phase {self.name!r}: show must be cross, stimulus, blank, off, target or text, "
+                             f"got {self.show!r}")
         if self.mode not in RENDERING_MODES:
             raise ValueError(f"phase {self.name!r}: unknown rendering mode {self.mode!r}")
         if self.mode_column is not None:
@@ -52,7 +54,7 @@ class PhaseSpec:
 
     @property
     def renders(self) -> bool:
-        return self.show in ("cross", "stimulus", "blank", "target")
+        return self.show in ("cross", "stimulus", "blank", "target", "text")
 
     @property
     def shows_scene(self) -> bool:

@@ -52,7 +52,9 @@ class SceneRenderer:
     (``max_images`` None), the recalibration phase shows the central cross (its
     ``target_size_deg``), the response phase its text (the prompt, else the question: a head-fixed
     panel, psyop.stimulus.text_scene) and a blank phase its ``show:`` primitives (or the background);
-    headless sampled checks (``max_images`` set) render interval frames only. Other phases
+    headless sampled checks (``max_images`` set) render interval frames only. A session screen
+    (psyop.session.screens.ScreenPhase: instructions, a break, a questionnaire item, the end) is its text on
+    the same head-fixed panel, its line breaks kept. Other phases
     compute cameras only. Cameras and eye centres come from the plan's eye rig.
 
     Per frame only what changes is built: eyes that share a scene origin (both eyes of a stereo
@@ -126,6 +128,12 @@ class SceneRenderer:
             from psyop.session.validation import TargetPhase, validation_target_scene
 
             return validation_target_scene(phase) if watched and isinstance(phase, TargetPhase) else None
+        if phase.show == "text":  # a session screen (psyop.session.screens): its text, head-fixed, lines kept
+            from psyop.session.screens import ScreenPhase
+
+            if not (watched and isinstance(phase, ScreenPhase) and phase.text.strip()):
+                return None
+            return text_scene(self._texts.image(phase.text, keep_lines=True), scene_origin_m(self.protocol, centre))
         text = self.plan.response.participant_text
         if phase == self.plan.response.phase and text is not None:  # head-fixed, like the cross
             return text_scene(self._texts.image(text), scene_origin_m(self.protocol, centre)) if watched else None
@@ -162,7 +170,7 @@ class SceneRenderer:
         """Whether :meth:`_scene` draws this phase head-fixed (the cross, the response text, an empty blank),
         not as the world-fixed stimulus a tracked head moves through."""
         text = phase == self.plan.response.phase and self.plan.response.participant_text is not None
-        return phase.show in ("cross", "target") or text or (phase.show == "blank" and not phase.primitives)
+        return phase.show in ("cross", "target", "text") or text or (phase.show == "blank" and not phase.primitives)
 
     def _world_scene(self, row: TrialRow, phase: PhaseSpec, t_in_phase_s: float, eye: str) -> Scene | None:
         """:meth:`_scene` without a head pose, from the trial's cached time-independent parts."""

@@ -19,7 +19,7 @@ _STUDY_PATTERN = dc.STUDY_PATTERN
 MAX_SESSION = 9999
 #: new segments are checksummed record logs; ``.arrows`` ones are legacy Arrow IPC streams
 SEGMENT_SUFFIX = ".psylog"
-_SEGMENT_NAME = re.compile(r"(trials|frames|gaze|validation)-([0-9]{3})\.(psylog|arrows)")
+_SEGMENT_NAME = re.compile(r"(trials|frames|gaze|validation|events|questionnaires)-([0-9]{3})\.(psylog|arrows)")
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,8 @@ class SessionPaths:
         return self.log_dir / f"gaze-{index:03d}{SEGMENT_SUFFIX}"
 
     def segments(self, kind: str) -> list[Path]:
-        """Existing stream segments of ``kind`` ('trials', 'frames', 'gaze' or 'validation'), in write order."""
+        """Existing stream segments of ``kind`` ('trials', 'frames', 'gaze', 'validation', 'events' or
+        'questionnaires'), in write order."""
         if not self.log_dir.is_dir():
             return []
         found = []

@@ -14,7 +14,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from psyop.session.rows import JsonMapping, JsonObject, TrialRecord, TrialRow
-from psyop.datacontract import MIN_VALID_GAZE_SHARE, VALIDATION_FILE, low_gaze_mask
+from psyop.datacontract import (EVENTS_FILE, MIN_VALID_GAZE_SHARE, QUESTIONNAIRES_FILE, VALIDATION_FILE,
+                                low_gaze_mask)
 from psyop.errors import UserError
 from psyop.finalised import record_finalised
 from psyop.session.lock import SessionLock
@@ -24,6 +25,7 @@ from psyop.session.log.record import MAX_METADATA_BYTES as MAX_METADATA_BYTES, r
 from psyop.session.log.schema import FRAME_SCHEMA, GAZE_SCHEMA
 from psyop.session.signals import interrupts_deferred
 from psyop.session.log.validation_log import ValidationLog, ValidationRecorder, recorded_validations
+from psyop.session.log.screens_log import ScreenLog, recorded_screen_table
 from psyop.session.log.stream import DurableStreamWriter, is_legacy_ipc, read_segment, read_stream_tolerant
 
 #: session.json keys that must match when a session is resumed (also written into the log).
@@ -68,6 +70,11 @@ class SessionStore:
     def validation_recorder(self) -> ValidationLog:
         """This run's gaze validation attempts, durable in the session folder (log/validation-NNN.psylog)."""
         return ValidationLog(self.paths, self.run_index)
+
+    def screen_recorder(self) -> ScreenLog:
+        """This run's screens and questionnaire answers, durable in the session folder (log/events-NNN.psylog,
+        log/questionnaires-NNN.psylog; psyop.session.screens)."""
+        return ScreenLog(self.paths, self.run_index, fsync=self._fsync)
 
     def __init__(self, paths: SessionPaths, trial_schema: pa.Schema, *, fsync: bool = True) -> None:
         self.paths = paths
@@ -435,6 +442,11 @@ def _finalise_locked(
         if validations is not None:
             _write_parquet_atomic(validations, paths.directory / VALIDATION_FILE)
             written.append(paths.directory / VALIDATION_FILE)
+        for kind, name in (("events", EVENTS_FILE), ("questionnaires", QUESTIONNAIRES_FILE)):
+            table = recorded_screen_table(paths, kind)  # None: the protocol has no session: screens (no file)
+            if table is not None:
+                _write_table_atomic(table, paths.directory / name)
+                written.append(paths.directory / name)
         _write_parquet_atomic(trials, paths.trials_parquet, {"simulated": meta.get("simulated")})
         record_finalised(meta, paths.directory, written)
         meta["status"] = status
@@ -474,6 +486,11 @@ def find_sessions(root: Path) -> Sequence[SessionPaths]:
         check_inside_root(paths)  # `psyop recover DATA/s/sub-L1/ses-1` with sub-L1 -> /elsewhere wrote there
         found[ses_dir] = paths
     return list(found.values())
+
+
+def _write_table_atomic(table: pa.Table, path: Path) -> None:
+    """``table`` as parquet at ``path`` (psyop.atomic.write_atomic), its Arrow types kept (a null answer stays null)."""
+    write_atomic(path, lambda handle: pq.write_table(table, handle))
 
 
 def _write_parquet_atomic(frame: pd.DataFrame, path: Path, identity: JsonMapping | None = None) -> None:
