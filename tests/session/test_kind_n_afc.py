@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 from session_helpers import wait_until
-from test_kind_yes_no import _red_near_centre
+from test_kind_yes_no import _red_near_centre, render_frames, run_analysis
 from test_serial import PtyDevice
 
 from psyop.protocol import load_protocol
@@ -59,13 +59,8 @@ def test_the_target_interval_shows_the_back_disc_and_the_others_hide_it(tmp_path
     every other interval of the same trial shows none."""
     schedule = compile_schedule(load_protocol(EXAMPLE), 3)
     row = schedule[schedule["level_D"] == schedule["level_D"].max()].iloc[0]
-    found = {}
-    for k in range(1, 5):
-        out = tmp_path / f"{k}.png"
-        subprocess.run([sys.executable, "-m", "psyop", "render", str(EXAMPLE), "--seed", "3", "--trial",
-                        str(int(row["trial"])), "--interval", str(k), "--gaze-deg", "15,0", "--out", str(out)],
-                       check=True, cwd=REPO, capture_output=True)
-        found[k] = _red_near_centre(out)
+    render_frames(tmp_path, EXAMPLE, 3, [(f"{k}.png", int(row["trial"]), k) for k in range(1, 5)])
+    found = {k: _red_near_centre(tmp_path / f"{k}.png") for k in range(1, 5)}
     target = int(row["correct_interval"])
     assert found[target] >= 10 and all(found[k] == 0 for k in found if k != target), (target, found)
 
@@ -138,19 +133,18 @@ def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
     assert (trials["correct"] == (trials["correct_interval"] == 3)).all()
 
 
-def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path) -> None:
+def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                                                ) -> None:
+    from psyop.cli import main as psyop_main
+
     protocol = _variant(tmp_path, repetitions=8)
     data, results = tmp_path / "data", tmp_path / "results"
-    subprocess.run([sys.executable, "-m", "psyop", "simulate", "--data", str(data), "--protocols", str(protocol),
-                    "--participants", "3"], check=True, cwd=REPO, capture_output=True)
+    assert psyop_main(["simulate", "--data", str(data), "--protocols", str(protocol), "--participants", "3"]) == 0
     rules = tmp_path / "studies.mk"
-    subprocess.run([sys.executable, "-m", "psyop", "studies", str(data), "--make-rules", str(rules)], check=True,
-                   cwd=REPO, capture_output=True)
+    assert psyop_main(["studies", str(data), "--make-rules", str(rules)]) == 0
     assert "analysis/n_afc.py" in rules.read_text() and "nafc_detection_n_afc.png" in rules.read_text()
-    done = subprocess.run([sys.executable, "analysis/n_afc.py", "--study", "nafc_detection", "--data", str(data),
-                           "--results", str(results), "--out", str(tmp_path / "fig.png")], cwd=REPO,
-                          capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-2000:]
+    assert run_analysis(monkeypatch, "n_afc", ["--study", "nafc_detection", "--data", str(data), "--results",
+                                               str(results), "--out", str(tmp_path / "fig.png")]) == 0
     fits = pd.read_csv(results / "nafc_detection_n_afc_fits.csv")
     assert len(fits) == 3 and (fits["guess"] == 0.25).all() and (fits["target_p"] == 0.625).all()
     summary = json.loads((results / "nafc_detection.json").read_text())

@@ -55,6 +55,18 @@ def test_signal_is_balanced_within_each_condition_and_picks_the_interval_mode() 
     assert (schedule.loc[~schedule["signal"], "mode_interval1"] == "conventional").all()
 
 
+def render_frames(folder: Path, protocol: Path, seed: int, frames: list[tuple[str, int, int]]) -> None:
+    """``psyop render`` of each (file name, trial, interval) with the eye turned 15 deg, in one child process (the
+    EGL context lives in it)."""
+    script = textwrap.dedent(f"""
+        from psyop.cli import main
+        for name, trial, interval in {frames!r}:
+            assert main(["render", {str(protocol)!r}, "--seed", "{seed}", "--trial", str(trial), "--interval",
+                         str(interval), "--gaze-deg", "15,0", "--out", {str(folder)!r} + "/" + name]) == 0
+        """)
+    subprocess.run([sys.executable, "-c", script], check=True, cwd=REPO, capture_output=True, timeout=180)
+
+
 def _red_near_centre(png: Path, radius_px: int = 20) -> int:
     """Red pixels within ``radius_px`` of the image centre (where the discs straight ahead of the eye are drawn)."""
     image = np.asarray(Image.open(png).convert("RGB")).astype(int)
@@ -71,14 +83,9 @@ def test_a_signal_trial_shows_the_back_disc_and_a_noise_trial_hides_it(tmp_path:
     none, at the same level."""
     schedule = compile_schedule(load_protocol(EXAMPLE), 3)
     top = schedule[schedule["level_D"] == schedule["level_D"].max()]
-    found = {}
-    for signal in (True, False):
-        trial = int(top.loc[top["signal"] == signal, "trial"].iloc[0])
-        out = tmp_path / f"{signal}.png"
-        subprocess.run([sys.executable, "-m", "psyop", "render", str(EXAMPLE), "--seed", "3", "--trial", str(trial),
-                        "--interval", "1", "--gaze-deg", "15,0", "--out", str(out)], check=True, cwd=REPO,
-                       capture_output=True)
-        found[signal] = _red_near_centre(out)
+    trials = {signal: int(top.loc[top["signal"] == signal, "trial"].iloc[0]) for signal in (True, False)}
+    render_frames(tmp_path, EXAMPLE, 3, [(f"{signal}.png", trial, 1) for signal, trial in trials.items()])
+    found = {signal: _red_near_centre(tmp_path / f"{signal}.png") for signal in trials}
     assert found[True] >= 10 and found[False] == 0, found
 
 
@@ -154,21 +161,31 @@ def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
     assert (trials["correct"] == trials["signal"]).all() and (trials["response_time_s"] >= 0).all()
 
 
-def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path) -> None:
+def run_analysis(monkeypatch: pytest.MonkeyPatch, script: str, argv: list[str]) -> int:
+    """analysis/<script>.py's main, in this process (as make runs it, without the interpreter's start)."""
+    import importlib
+
+    monkeypatch.syspath_prepend(str(REPO / "analysis"))
+    try:
+        return importlib.import_module(script).main(argv)
+    finally:
+        sys.modules.pop(script, None)
+
+
+def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                                                ) -> None:
+    from psyop.cli import main as psyop_main
+
     protocol = _variant(tmp_path, repetitions=10)
     data, results = tmp_path / "data", tmp_path / "results"
-    subprocess.run([sys.executable, "-m", "psyop", "simulate", "--data", str(data), "--protocols", str(protocol),
-                    "--participants", "3"], check=True, cwd=REPO, capture_output=True)
+    assert psyop_main(["simulate", "--data", str(data), "--protocols", str(protocol), "--participants", "3"]) == 0
     meta = json.loads(next((data / "yes_no_detection").glob("sub-*/ses-1/session.json")).read_text())
     assert meta["response_kind"] == "yes_no" and meta["response"]["level_factor"] == "level_D"
     rules = tmp_path / "studies.mk"
-    subprocess.run([sys.executable, "-m", "psyop", "studies", str(data), "--make-rules", str(rules)], check=True,
-                   cwd=REPO, capture_output=True)
+    assert psyop_main(["studies", str(data), "--make-rules", str(rules)]) == 0
     assert "analysis/yes_no.py" in rules.read_text() and "yes_no_detection_yes_no.png" in rules.read_text()
-    done = subprocess.run([sys.executable, "analysis/yes_no.py", "--study", "yes_no_detection", "--data", str(data),
-                           "--results", str(results), "--out", str(tmp_path / "fig.png")], cwd=REPO,
-                          capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-2000:]
+    assert run_analysis(monkeypatch, "yes_no", ["--study", "yes_no_detection", "--data", str(data), "--results",
+                                                str(results), "--out", str(tmp_path / "fig.png")]) == 0
     table = pd.read_csv(results / "yes_no_detection_yes_no.csv")
     assert len(table) == 3 * 5 and table["d_prime"].notna().all()
     fits = pd.read_csv(results / "yes_no_detection_yes_no_fits.csv")
