@@ -10,6 +10,7 @@ remembered with its LSL timestamp, so a test can compare what psyop logged with 
 from __future__ import annotations
 
 import math
+import random
 import threading
 import time
 import uuid
@@ -29,6 +30,7 @@ PUPIL_RELAY_CHANNELS: tuple[tuple[str, str, str, str], ...] = (
 
 
 def pupil_relay_info(name: str = "pupil_capture", rate_hz: float = 200.0) -> pylsl.StreamInfo:
+    """The relay's stream declaration (``rate_hz`` 0: an irregular-rate stream)."""
     info = pylsl.StreamInfo(name, "Gaze", len(PUPIL_RELAY_CHANNELS), rate_hz, pylsl.cf_double64, str(uuid.uuid4()))
     info.desc().append_child_value("pupil_lsl_relay_version", "2.1.0")
     channels = info.desc().append_child("channels")
@@ -58,11 +60,25 @@ def known_path(k: int) -> list[float]:
 
 class PupilRelayOutlet:
     """Pushes :func:`known_path` at ``rate_hz`` from its own thread, each sample stamped with
-    ``pylsl.local_clock()`` when pushed (as the relay stamps Pupil time synchronised to LSL)."""
+    ``pylsl.local_clock()`` when pushed (as the relay stamps Pupil time synchronised to LSL).
 
-    def __init__(self, name: str = "pupil_capture", rate_hz: float = 200.0) -> None:
+    Faults on demand, each from the next sample the thread pushes: :meth:`step` shifts every
+    later stamp (a clock that jumps; ``step_at`` is then the first shifted stamp), :meth:`gap`
+    drops samples (missing from stamps and arrivals alike), :meth:`hold` withholds samples and
+    then pushes them at once with their own stamps (a sender's backlog); ``jitter_s`` adds
+    uniform noise of up to that much to each stamp."""
+
+    def __init__(self, name: str = "pupil_capture", rate_hz: float = 200.0, jitter_s: float = 0.0,
+                 irregular: bool = False) -> None:
         self.rate_hz = rate_hz
-        self.info = pupil_relay_info(name, rate_hz)
+        self.jitter_s = jitter_s
+        self.step_at: float | None = None
+        self._random = random.Random(7)
+        self._shift_s = 0.0
+        self._pending_shift_s = 0.0
+        self._to_skip = 0
+        self._to_hold = 0
+        self.info = pupil_relay_info(name, 0.0 if irregular else rate_hz)  # irregular: declared so, pushed at rate_hz
         self.outlet: pylsl.StreamOutlet | None = pylsl.StreamOutlet(self.info)
         self.pushed: list[tuple[int, float]] = []  # (k, timestamp)
         self._lock = threading.Lock()
@@ -74,16 +90,53 @@ class PupilRelayOutlet:
     def _push(self) -> None:
         period = 1.0 / self.rate_hz
         k, next_t = 0, time.monotonic()
+        held: list[tuple[int, float]] = []
         while not self._stop.is_set():
             next_t += period
             self._stop.wait(max(0.0, next_t - time.monotonic()))
             if self._paused.is_set() or self.outlet is None:
                 continue
-            stamp = pylsl.local_clock()
-            self.outlet.push_sample(known_path(k), stamp)
             with self._lock:
-                self.pushed.append((k, stamp))
+                stepped = self._pending_shift_s != 0.0
+                self._shift_s += self._pending_shift_s
+                self._pending_shift_s = 0.0
+                stamp = pylsl.local_clock() + self._shift_s + self._random.uniform(-self.jitter_s, self.jitter_s)
+                if stepped:
+                    self.step_at = stamp
+                skip = self._to_skip > 0
+                self._to_skip -= skip
+                hold = not skip and self._to_hold > 0
+                self._to_hold -= hold
+            if not skip:
+                held.append((k, stamp))
             k += 1
+            if hold or not held:
+                continue
+            for k_held, stamp_held in held:
+                self.outlet.push_sample(known_path(k_held), stamp_held)
+            with self._lock:
+                self.pushed.extend(held)
+            held = []
+
+    def step(self, by_s: float) -> None:
+        """Shift every stamp from the next sample on by ``by_s`` (negative: back)."""
+        with self._lock:
+            self._pending_shift_s += by_s
+
+    def gap(self, n: int) -> None:
+        """Drop the next ``n`` samples (never sent)."""
+        with self._lock:
+            self._to_skip += n
+
+    def hold(self, n: int) -> None:
+        """Withhold the next ``n`` samples, then push them at once with the one after them."""
+        with self._lock:
+            self._to_hold += n
+
+    def faults_done(self) -> bool:
+        """Every requested step, gap and hold has been pushed through."""
+        with self._lock:
+            return self._to_skip == 0 and self._to_hold == 0 and self._pending_shift_s == 0.0
 
     def sent(self) -> list[tuple[int, float]]:
         with self._lock:

@@ -19,8 +19,25 @@ Honesty, as for the Pupil backend:
 - a gap in the timestamps of more than 1.5 nominal sample periods is counted (``gaps``) with
   the total time missing (``gap_s``); an irregular-rate stream has no nominal period, so its
   gaps are not counted (stats say so);
+- a stream whose timestamps step (some amplifiers; hyperscanning, where the sending host's
+  clock moves) is detected, logged and re-anchored, never held stale: with ``d`` the
+  sample-to-sample timestamp difference, ``a`` the local arrival interval (0 within a chunk),
+  ``P`` the nominal period and ``T`` = ``clock_step_s`` (:data:`CLOCK_STEP_S`, 0.5 s), a regular
+  stream has stepped when ``|d - P| > T`` and ``|d - a| > T`` (a real gap shows in the arrivals
+  too, a backlog burst keeps ``d`` near ``P``); the step is ``d - P`` (``d - a`` when the arrivals
+  had a gap as well). An irregular-rate stream has stepped when ``d < -T`` (stamps went back) or
+  ``d - a > T`` (they advanced further than the time that passed); the step is ``d - a``. Each
+  step moves the clock mapping by its size (:meth:`ClockSync.stepped`), so the sample that
+  shows it and every later one map onto the session clock as before; it is counted
+  (``clock_steps``), logged in ``events`` (``size_s``, ``direction`` back/forward) and the total
+  in force is ``clock_step_offset_s``. A step of ``time_correction()`` itself by more than ``T``
+  (the sender's clock moved: its stamps move with it) is absorbed into the same offset, so the
+  mapping stays continuous whichever of the two is seen first (``correction_steps``, logged);
+  slow drift is followed by the regular re-measurement as before. Steps under ``T`` are not
+  detected (a backward one shows as older gaze, a forward one as younger);
 - a sample with a non-finite or implausible fixation, a confidence below the threshold or a
-  timestamp more than ``clock_jump_s`` from now is invalid (counted by reason);
+  timestamp more than ``clock_jump_s`` from now (after any re-anchoring) is invalid (counted by
+  reason);
 - ``latest`` raises :class:`~psyop.session.gaze.sample.TrackerLost` after ``lost_after_s``
   without a sample: the session stops, every recorded trial and raw sample stays, and the
   session can be resumed.
@@ -44,6 +61,9 @@ from psyop.session.gaze.sample import EyeSample, GazeSample, RawBuffer, RawGazeS
 from psyop.session.gaze.sync import ClockSync
 
 _NAN3 = (math.nan, math.nan, math.nan)
+
+#: a timestamp step larger than this (s) is a clock step (module docstring), smaller ones are jitter
+CLOCK_STEP_S = 0.5
 
 
 def parse_spec(arg: str) -> tuple[str, str | None]:
@@ -79,7 +99,8 @@ class LslGazeSource:
 
     def __init__(self, name: str, *, clock: Callable[[], float], channel_map: str | None = None,
                  confidence_threshold: float = 0.6, lost_after_s: float = 1.0, resolve_timeout_s: float = 5.0,
-                 resync_every_s: float = 1.0, clock_jump_s: float = 1.0) -> None:
+                 resync_every_s: float = 1.0, clock_jump_s: float = 1.0,
+                 clock_step_s: float = CLOCK_STEP_S) -> None:
         self.name = name
         self._clock = clock
         self._map_spec = channel_map
@@ -88,6 +109,7 @@ class LslGazeSource:
         self.resolve_timeout_s = resolve_timeout_s
         self.resync_every_s = resync_every_s
         self.clock_jump_s = clock_jump_s
+        self.clock_step_s = clock_step_s
         self.map: ChannelMap | None = None
         self._index: dict[str, int] = {}
         self._inlet: Any = None  # Any: a pylsl.StreamInlet (untyped)
@@ -103,8 +125,10 @@ class LslGazeSource:
         self._sync: ClockSync | None = None
         self._corrections: list[float] = []
         self._lsl_minus_session_s = math.nan
+        self._step_offset_s = 0.0  # the clock steps the mapping has absorbed so far (module docstring)
         self._counts = {"samples_received": 0, "gaps": 0, "reconnects": 0, "invalid_fixation": 0,
-                        "invalid_low_confidence": 0, "invalid_time": 0, "sync_timeouts": 0, "lost": 0}
+                        "invalid_low_confidence": 0, "invalid_time": 0, "sync_timeouts": 0, "lost": 0,
+                        "clock_steps": 0, "correction_steps": 0}
         self._gap_s = 0.0
         self._events: list[dict[str, float | str]] = []
         self._error: str | None = None
@@ -177,12 +201,21 @@ class LslGazeSource:
                                 f"{self.resolve_timeout_s:g} s", "--tracker", exit_code=3) from None
             return
         offset = self._local_offset()
-        self._corrections.append(correction)
-        del self._corrections[:-60]
-        sd = float(np.std(self._corrections)) if len(self._corrections) > 1 else 0.0
-        # tracker (sender LSL) time = session time + (lsl_local - session) - correction
-        sync = ClockSync(offset - correction, 0.0, sd, math.nan, len(self._corrections), "lsl-time-correction")
         with self._lock:
+            if self._corrections and abs(correction - self._corrections[-1]) > self.clock_step_s:
+                # the sender's clock stepped against ours; its stamps step with it (seen as a timestamp
+                # step before or after this): absorbed, so the mapping moves once, by the stamps' step
+                step = correction - self._corrections[-1]
+                self._step_offset_s += step
+                self._counts["correction_steps"] += 1
+                self._log_event("LSL time_correction stepped; absorbed into the clock mapping", size_s=step)
+                self._corrections.clear()  # the spread of the estimates since the step, not across it
+            self._corrections.append(correction)
+            del self._corrections[:-60]
+            sd = float(np.std(self._corrections)) if len(self._corrections) > 1 else 0.0
+            # tracker (sender LSL) time = session time + (lsl_local - session) - correction (+ clock steps)
+            sync = ClockSync(offset - correction + self._step_offset_s, 0.0, sd, math.nan, len(self._corrections),
+                             "lsl-time-correction")
             self._sync = sync
             self._lsl_minus_session_s = offset
 
@@ -269,6 +302,18 @@ class LslGazeSource:
                  self._value(sample, "gaze_point_z"))
         return world_mm_to_head_m(point) if m.fixation == "pupil_world_mm" else point
 
+    def _step(self, ts: float, now: float) -> float | None:
+        """The size of the clock step this timestamp shows (module docstring), or None."""
+        d, a, limit = ts - self._last_ts, now - self._last_arrival_s, self.clock_step_s
+        if not (math.isfinite(d) and math.isfinite(a)):
+            return None
+        period = self._period_s
+        if math.isfinite(period):
+            if abs(d - period) > limit and abs(d - a) > limit:
+                return d - period if abs(a - period) <= limit else d - a
+            return None
+        return d - a if d < -limit or d - a > limit else None
+
     def _handle(self, samples: list[list[float]], stamps: list[float]) -> None:
         now = self._clock()
         with self._lock:
@@ -276,6 +321,15 @@ class LslGazeSource:
         assert sync is not None
         for sample, ts in zip(samples, stamps, strict=True):
             ts = float(ts)
+            step = self._step(ts, now)
+            if step is not None:  # re-anchor: this sample and every later one map as if the clock had not moved
+                with self._lock:
+                    assert self._sync is not None
+                    self._step_offset_s += step
+                    self._sync = sync = self._sync.stepped(step)
+                    self._counts["clock_steps"] += 1
+                    self._log_event("LSL timestamps stepped; clock mapping re-anchored", size_s=step,
+                                    direction="back" if step < 0 else "forward", tracker_t_s=ts)
             t_s = sync.to_local(ts)
             fixation = self._fixation(sample)
             confidence = self._value(sample, "confidence") if "confidence" in self._index else \
@@ -299,7 +353,8 @@ class LslGazeSource:
                     c["invalid_fixation"] += 1  # non-finite, behind the eyes or beyond 100 km
                 elif not valid:
                     c["invalid_low_confidence"] += 1
-                if math.isfinite(self._last_ts) and math.isfinite(self._period_s) and ts - self._last_ts > 1.5 * self._period_s:
+                if step is None and math.isfinite(self._last_ts) and math.isfinite(self._period_s) and \
+                        ts - self._last_ts > 1.5 * self._period_s:
                     c["gaps"] += 1
                     self._gap_s += ts - self._last_ts - self._period_s
                 self._last_ts = ts
@@ -345,6 +400,7 @@ class LslGazeSource:
                     "channel_map_note": self.map.note if self.map else None,
                     "raw_samples_dropped": self._raw.dropped,
                     "clock_sync_end": sync.as_dict() if sync is not None else None,
+                    "clock_step_s": self.clock_step_s, "clock_step_offset_s": self._step_offset_s,
                     "events": list(self._events)}
 
     def close(self) -> None:

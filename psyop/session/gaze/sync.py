@@ -10,7 +10,7 @@ samples on the session clock itself, so there is nothing to synchronise).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -43,6 +43,19 @@ class ClockSync:
     def to_tracker(self, local_t_s: float) -> float:
         """The tracker timestamp of a session-clock time (the inverse of :meth:`to_local`)."""
         return self.offset_s + (1.0 + self.drift) * local_t_s
+
+    def stepped(self, step_s: float) -> ClockSync:
+        """This fit after the tracker's timestamps stepped by ``step_s`` (a clock jump: negative
+        back, positive forward): the same drift and quality, the offset moved by the step, so a
+        stamp from after the step maps to the session time it would have had without it.
+
+        Examples
+        --------
+        >>> sync = ClockSync(offset_s=100.0, drift=0.0, residual_sd_s=0.0, round_trip_median_s=1e-4, n=3)
+        >>> sync.stepped(-5.0).to_local(96.5)  # stamps now run 5 s behind: 96.5 is what 101.5 was
+        1.5
+        """
+        return replace(self, offset_s=self.offset_s + step_s)
 
     def as_dict(self) -> dict[str, float | int | str | None]:
         """What session.json records (``runs[].clock_sync``); a value the method does not measure
