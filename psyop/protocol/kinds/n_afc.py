@@ -16,9 +16,8 @@ from pydantic import Field
 
 from psyop.protocol.base import Number
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, Inputs, IntervalSpec, KindResponse,
-                                       ModeFromFactor, ObserverBase, ResponseKindSpec, ScheduleInput, Scored,
-                                       StudyInputs, figure_target, mode_factor_of)
-from psyop.protocol.kinds.modes import mode_values
+                                       ObserverBase, ResponseKindSpec, ScheduleInput, Scored, StudyInputs, figure_target)
+from psyop.protocol.kinds.modes import check_specs, interval_spec_columns, specs_factors
 from psyop.records import Loc, TrialRow
 
 #: the alternatives n-AFC supports (psyop.statistics.psychometric fits guess 1/n for these)
@@ -48,10 +47,7 @@ class NAfcResponse(KindResponse):
         return (self.target, self.reference)
 
     def factors_read(self) -> set[str]:
-        used = set() if self.level_factor is None else {self.level_factor}
-        for spec in self.interval_specs():
-            used |= mode_factor_of(spec.mode) | set(spec.set)
-        return used
+        return specs_factors(self.interval_specs(), self.level_factor)
 
 
 def _phi(z: float) -> float:
@@ -131,17 +127,8 @@ class NAfc(ResponseKindSpec):
         else:
             right = schedule.rng.integers(1, n + 1, size=rows)
         out: dict[str, np.ndarray] = {"n_alternatives": np.full(rows, n, dtype=np.int64), "correct_interval": right}
-        target_mode = mode_values(response.target.mode, columns, rows)
-        reference_mode = mode_values(response.reference.mode, columns, rows)
-        names = sorted(set(response.target.set) | set(response.reference.set))
         for k in range(1, n + 1):
-            here = right == k
-            out[f"mode_interval{k}"] = np.where(here, target_mode, reference_mode)
-            for name in names:
-                value = {role: np.full(rows, spec.set[name], dtype=np.float64) if name in spec.set else
-                         np.asarray(columns[name], dtype=np.float64)
-                         for role, spec in (("target", response.target), ("reference", response.reference))}
-                out[f"{name}_interval{k}"] = np.where(here, value["target"], value["reference"])
+            out.update(interval_spec_columns(k, response.target, response.reference, right == k, columns))
         return out
 
     def check(self, response: KindResponse, checks: Checks, path: Loc) -> None:
@@ -152,13 +139,7 @@ class NAfc(ResponseKindSpec):
             checks.add(path + ("alternatives",), "alternatives: locations is not available in this version of psyop "
                                                  "(the target's place cannot be set per trial yet); use "
                                                  "alternatives: intervals")
-        if response.level_factor is not None:
-            checks.factor_exists(response.level_factor, path + ("level_factor",), numeric=True)
-        for role, spec in (("target", response.target), ("reference", response.reference)):
-            for key in spec.set:
-                checks.factor_exists(key, path + (role, "set", key), numeric=True)
-            if isinstance(spec.mode, ModeFromFactor):
-                checks.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
+        check_specs(checks, path, {"target": response.target, "reference": response.reference}, response.level_factor)
         if response.target == response.reference:
             checks.add(path + ("reference",), "target and reference are the same stimulus, so no interval could be "
                                               "told apart; give the reference another mode or a set: "

@@ -16,10 +16,9 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from psyop.protocol.base import Integer, Number, StrictModel, format_level
-from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Inputs, IntervalSpec, KindResponse, ModeFromFactor,
-                                       ObserverBase, ResponseKindSpec, ScheduleInput, Scored, StudyInputs,
-                                       figure_target, mode_factor_of)
-from psyop.protocol.kinds.modes import mode_values
+from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Inputs, IntervalSpec, KindResponse, ObserverBase,
+                                       ResponseKindSpec, ScheduleInput, Scored, StudyInputs, figure_target)
+from psyop.protocol.kinds.modes import check_specs, interval_spec_columns, specs_factors
 from psyop.records import Loc, TrialRow
 
 #: the fewest and most points a scale may have (its keys are the digits 1..k)
@@ -48,7 +47,7 @@ class RatingResponse(KindResponse):
         return (self.stimulus,)
 
     def factors_read(self) -> set[str]:
-        return mode_factor_of(self.stimulus.mode) | set(self.stimulus.set)
+        return specs_factors((self.stimulus,))
 
 
 def _level_key(value: object) -> str:
@@ -128,11 +127,9 @@ class Rating(ResponseKindSpec):
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         """The interval's mode, the factors the stimulus sets, and the scale's points."""
         assert isinstance(response, RatingResponse)
-        columns, n = schedule.columns, schedule.n
-        out: dict[str, np.ndarray] = {"mode_interval1": mode_values(response.stimulus.mode, columns, n)}
-        for name in sorted(response.stimulus.set):
-            out[f"{name}_interval1"] = np.full(n, response.stimulus.set[name], dtype=np.float64)
-        out[POINTS_COLUMN] = np.full(n, int(response.scale.points), dtype=np.int64)
+        every = np.ones(schedule.n, dtype=bool)
+        out = interval_spec_columns(1, response.stimulus, response.stimulus, every, schedule.columns)
+        out[POINTS_COLUMN] = np.full(schedule.n, int(response.scale.points), dtype=np.int64)
         return out
 
     def check(self, response: KindResponse, checks: Checks, path: Loc) -> None:
@@ -146,10 +143,7 @@ class Rating(ResponseKindSpec):
         elif scale.labels is not None and len(scale.labels) != points:
             checks.add(path + ("scale", "labels"), f"{len(scale.labels)} label(s) for a {points}-point scale: give one "
                                                    f"label per point, lowest first, or leave labels out")
-        for key in response.stimulus.set:
-            checks.factor_exists(key, path + ("stimulus", "set", key), numeric=True)
-        if isinstance(response.stimulus.mode, ModeFromFactor):
-            checks.mode_factor(response.stimulus.mode.factor, path + ("stimulus", "mode", "factor"))
+        check_specs(checks, path, {"stimulus": response.stimulus})
 
     def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
         """``means`` is one number without a factor, else one mean per level of ``factor`` (none missing, none

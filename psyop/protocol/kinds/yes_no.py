@@ -14,10 +14,9 @@ import numpy as np
 from pydantic import Field
 
 from psyop.protocol.base import Number
-from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, IntervalSpec, KindResponse,
-                                       ModeFromFactor, ObserverBase, ResponseKindSpec, ScheduleInput, Scored,
-                                       StudyInputs, mode_factor_of)
-from psyop.protocol.kinds.modes import mode_values
+from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, IntervalSpec, KindResponse, ObserverBase,
+                                       ResponseKindSpec, ScheduleInput, Scored, StudyInputs)
+from psyop.protocol.kinds.modes import check_specs, interval_spec_columns, specs_factors
 from psyop.records import Loc, TrialRow
 
 
@@ -45,10 +44,7 @@ class YesNoResponse(KindResponse):
         return (self.signal, self.noise)
 
     def factors_read(self) -> set[str]:
-        used = set() if self.level_factor is None else {self.level_factor}
-        for spec in self.interval_specs():
-            used |= mode_factor_of(spec.mode) | set(spec.set)
-        return used
+        return specs_factors(self.interval_specs(), self.level_factor)
 
 
 def _phi(z: float) -> float:
@@ -101,28 +97,14 @@ class YesNo(ResponseKindSpec):
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         """``signal`` (the counterbalanced choice), the interval's mode and the factors signal or noise set."""
         assert isinstance(response, YesNoResponse)
-        signal, columns, n = schedule.binary.astype(bool), schedule.columns, schedule.n
-        out: dict[str, np.ndarray] = {"signal": signal}
-        out["mode_interval1"] = np.where(signal, mode_values(response.signal.mode, columns, n),
-                                         mode_values(response.noise.mode, columns, n))
-        for name in sorted(set(response.signal.set) | set(response.noise.set)):
-            value = {role: np.full(n, spec.set[name], dtype=np.float64) if name in spec.set else
-                     np.asarray(columns[name], dtype=np.float64)
-                     for role, spec in (("signal", response.signal), ("noise", response.noise))}
-            out[f"{name}_interval1"] = np.where(signal, value["signal"], value["noise"])
-        return out
+        signal = schedule.binary.astype(bool)
+        return {"signal": signal, **interval_spec_columns(1, response.signal, response.noise, signal, schedule.columns)}
 
     def check(self, response: KindResponse, checks: Checks, path: Loc) -> None:
         """The level factor and every factor signal or noise sets are numeric; a mode factor names modes; signal
         and noise differ (else every trial looks the same)."""
         assert isinstance(response, YesNoResponse)
-        if response.level_factor is not None:
-            checks.factor_exists(response.level_factor, path + ("level_factor",), numeric=True)
-        for role, spec in (("signal", response.signal), ("noise", response.noise)):
-            for key in spec.set:
-                checks.factor_exists(key, path + (role, "set", key), numeric=True)
-            if isinstance(spec.mode, ModeFromFactor):
-                checks.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
+        check_specs(checks, path, {"signal": response.signal, "noise": response.noise}, response.level_factor)
         if response.signal == response.noise:
             checks.add(path + ("noise",), "signal and noise are the same stimulus, so no trial could be told apart; "
                                           "give noise another mode or a set: (e.g. set: {level_D: 0})")
