@@ -10,14 +10,14 @@ import re
 import shutil
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import pandas as pd
 import pytest
 from scipy import stats
+from kind_helpers import (ScriptedKeys, red_near_centre, render_frames, run_analysis, variant,
+                          window_session)
 from session_helpers import wait_until
-from test_kind_yes_no import _red_near_centre, render_frames, run_analysis
 from test_serial import PtyDevice
 
 from psyop.protocol import load_protocol
@@ -27,21 +27,6 @@ from psyop.session.responses.simulated import make_observer
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "protocols" / "examples" / "n_afc.yaml"
-
-
-def _variant(tmp_path: Path, *, repetitions: int | None = None, phase_s: float | None = None,
-             replace: tuple[tuple[str, str], ...] = ()) -> Path:
-    text = EXAMPLE.read_text()
-    if repetitions is not None:
-        text = re.sub(r"(?m)^(\s*repetitions:)\s*\d+", rf"\g<1> {repetitions}", text)
-    if phase_s is not None:
-        text = re.sub(r"(duration_s|expected_s):\s*[\d.]+", rf"\g<1>: {phase_s}", text)
-    for old, new in replace:
-        assert old in text, old
-        text = text.replace(old, new)
-    path = tmp_path / "n_afc.yaml"
-    path.write_text(text)
-    return path
 
 
 def test_each_interval_holds_the_target_equally_often_per_condition() -> None:
@@ -60,18 +45,9 @@ def test_the_target_interval_shows_the_back_disc_and_the_others_hide_it(tmp_path
     schedule = compile_schedule(load_protocol(EXAMPLE), 3)
     row = schedule[schedule["level_D"] == schedule["level_D"].max()].iloc[0]
     render_frames(tmp_path, EXAMPLE, 3, [(f"{k}.png", int(row["trial"]), k) for k in range(1, 5)])
-    found = {k: _red_near_centre(tmp_path / f"{k}.png") for k in range(1, 5)}
+    found = {k: red_near_centre(tmp_path / f"{k}.png") for k in range(1, 5)}
     target = int(row["correct_interval"])
     assert found[target] >= 10 and all(found[k] == 0 for k in found if k != target), (target, found)
-
-
-class _Keys:
-    def __init__(self, presses: list[tuple[str, float]]) -> None:
-        self.presses = presses
-
-    def poll(self) -> list[tuple[str, float]]:
-        out, self.presses = self.presses, []
-        return out
 
 
 def test_keys_and_buttons_one_to_n_answer_and_others_are_ignored() -> None:
@@ -81,10 +57,10 @@ def test_keys_and_buttons_one_to_n_answer_and_others_are_ignored() -> None:
 
     plan = compile_plan(load_protocol(EXAMPLE))
     assert plan.response.inputs.controller == {}  # two select buttons cannot pick one of four
-    keyboard = KeyboardResponses(_Keys([]), plan.kind, keymap=plan.response.inputs.keys)
+    keyboard = KeyboardResponses(ScriptedKeys([]), plan.kind, keymap=plan.response.inputs.keys)
     row = {"correct_interval": 3}
     assert keyboard.collect(row, 1.0) is None
-    keyboard.events = _Keys([("5", 1.1), ("left", 1.15), ("kp_3", 1.2)])
+    keyboard.events = ScriptedKeys([("5", 1.1), ("left", 1.15), ("kp_3", 1.2)])
     answer = keyboard.collect(row, 1.3)
     assert (answer.response, answer.correct) == ("3", True) and math.isclose(answer.response_time_s, 0.2)
 
@@ -100,34 +76,10 @@ def test_keys_and_buttons_one_to_n_answer_and_others_are_ignored() -> None:
         device.close()
 
 
-WINDOW_SCRIPT = textwrap.dedent(
-    """
-    from pathlib import Path
-    from psyop.protocol import load_protocol
-    from psyop.schedule import compile_schedule
-    from psyop.run.runner import SessionOptions, run_session
-    import psyop.devices.window as window
-
-    typed = window.GlfwWindow.poll
-    def poll(self):  # a participant who presses '3' whenever asked
-        self.inject_key("3")
-        return typed(self)
-    window.GlfwWindow.poll = poll
-    outcome = run_session(load_protocol(Path({protocol!r})), compile_schedule, SessionOptions(
-        participant="W1", data_root=Path({data!r}), clock="real", display="window", responses="keyboard",
-        tracker="sim", progress=False, render="auto", window_scale=0.08))
-    print(outcome.status)
-    """
-)
-
-
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (Debian xvfb)")
 def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
-    protocol = _variant(tmp_path, repetitions=1, phase_s=0.03)
-    script = WINDOW_SCRIPT.format(protocol=str(protocol), data=str(tmp_path / "data"))
-    result = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", script], capture_output=True, text=True,
-                            timeout=180)
-    assert result.returncode == 0 and result.stdout.split()[-1] == "complete", result.stderr[-2000:]
+    protocol = variant(EXAMPLE, tmp_path, repetitions=1, phase_s=0.03)
+    assert window_session(protocol, tmp_path / "data", ["3"]) == "complete"
     trials = pd.read_parquet(tmp_path / "data" / "nafc_detection" / "sub-W1" / "ses-1" / "trials.parquet")
     assert len(trials) == 6 and (trials["response"] == "3").all()
     assert (trials["correct"] == (trials["correct_interval"] == 3)).all()
@@ -137,7 +89,7 @@ def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path, m
                                                                 ) -> None:
     from psyop.cli import main as psyop_main
 
-    protocol = _variant(tmp_path, repetitions=8)
+    protocol = variant(EXAMPLE, tmp_path, repetitions=8)
     data, results = tmp_path / "data", tmp_path / "results"
     assert psyop_main(["simulate", "--data", str(data), "--protocols", str(protocol), "--participants", "3"]) == 0
     rules = tmp_path / "studies.mk"
@@ -156,7 +108,7 @@ def test_the_fits_recover_each_simulated_participants_threshold(tmp_path: Path) 
     rate a binomial test against 95 % accepts (p > 0.001)."""
     from psyop.statistics.psychometric import USABLE_STATUSES, fit_psychometric_table, nafc_options
 
-    protocol = load_protocol(_variant(tmp_path, repetitions=60, replace=(("between_subject_sd: 0.05",
+    protocol = load_protocol(variant(EXAMPLE, tmp_path, repetitions=60, replace=(("between_subject_sd: 0.05",
                                                                           "between_subject_sd: 0.1"),)))
     params = compile_plan(protocol).observer_params()
     observer_model = protocol.observer
@@ -189,7 +141,7 @@ def test_the_fits_recover_each_simulated_participants_threshold(tmp_path: Path) 
     ("  n: 4", "  n: 3", "needs 3 interval phase(s)"),
 ])
 def test_bad_input_is_one_line_with_its_place(tmp_path: Path, old: str, new: str, says: str) -> None:
-    protocol = _variant(tmp_path, replace=((old, new),))
+    protocol = variant(EXAMPLE, tmp_path, replace=((old, new),))
     done = subprocess.run([sys.executable, "-m", "psyop", "validate", str(protocol)], cwd=REPO, capture_output=True,
                           text=True)
     assert done.returncode == 2 and "Traceback" not in done.stderr and says in done.stderr, done.stderr

@@ -4,10 +4,8 @@ sessions and their analysis (analysis/rating.py), recovery of the simulated obse
 
 from __future__ import annotations
 
-import importlib
 import json
 import math
-import re
 import shutil
 import subprocess
 import sys
@@ -20,6 +18,7 @@ import pandas as pd
 import pytest
 from PIL import Image
 from scipy import stats
+from kind_helpers import ScriptedKeys, run_analysis, variant, window_session
 from session_helpers import wait_until
 from test_serial import PtyDevice
 
@@ -35,22 +34,6 @@ from psyop.session.responses.simulated import make_observer
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "protocols" / "examples" / "rating.yaml"
 STUDY = "rating_realism"
-
-
-def _variant(tmp_path: Path, *, repetitions: int | None = None, phase_s: float | None = None,
-             replace: tuple[tuple[str, str], ...] = (), name: str = "rating.yaml") -> Path:
-    """A copy of the example with fewer repetitions, shorter phases or a few lines replaced."""
-    text = EXAMPLE.read_text()
-    if repetitions is not None:
-        text = re.sub(r"(?m)^(\s*repetitions:)\s*\d+", rf"\g<1> {repetitions}", text)
-    if phase_s is not None:
-        text = re.sub(r"(?m)^(\s*(?:-\s*)?(?:duration_s|expected_s):)\s*[\d.]+", rf"\g<1> {phase_s}", text)
-    for old, new in replace:
-        assert old in text, old
-        text = text.replace(old, new)
-    path = tmp_path / name
-    path.write_text(text)
-    return path
 
 
 def test_the_schedule_balances_the_modes_and_the_interval_shows_the_trials_mode() -> None:
@@ -82,15 +65,6 @@ def test_an_ocular_trial_is_rendered_with_ocular_parallax(tmp_path: Path) -> Non
     assert changed > 1000, changed
 
 
-class _Keys:
-    def __init__(self, presses: list[tuple[str, float]]) -> None:
-        self.presses = presses
-
-    def poll(self) -> list[tuple[str, float]]:
-        out, self.presses = self.presses, []
-        return out
-
-
 def _response(points: int) -> RatingResponse:
     return RatingResponse.model_validate({"kind": "rating", "stimulus": {"mode": "ocular"},
                                           "scale": {"points": points}})
@@ -103,14 +77,14 @@ def test_keys_1_to_k_answer_keys_above_k_are_ignored_and_nothing_is_correct() ->
     inputs = kind.inputs(load_protocol(EXAMPLE).response)
     assert set(inputs.keys) == {str(j) for j in range(1, 8)} | {f"kp_{j}" for j in range(1, 8)}
     assert inputs.buttons == {str(j): str(j) for j in range(1, 8)}
-    keyboard = KeyboardResponses(_Keys([]), kind, keymap=inputs.keys)
+    keyboard = KeyboardResponses(ScriptedKeys([]), kind, keymap=inputs.keys)
     assert keyboard.collect({}, 1.0) is None
-    keyboard.events = _Keys([("8", 1.1), ("9", 1.15), ("q", 1.2), ("5", 1.4)])
+    keyboard.events = ScriptedKeys([("8", 1.1), ("9", 1.15), ("q", 1.2), ("5", 1.4)])
     answer = keyboard.collect({}, 1.5)
     assert (answer.response, answer.correct) == ("5", None) and math.isclose(answer.response_time_s, 0.4)
     assert typed_response(answer.response)["response_value"] == 5.0
     assert keyboard.collect({}, 2.0) is None
-    keyboard.events = _Keys([("KP_7", 2.2)])
+    keyboard.events = ScriptedKeys([("KP_7", 2.2)])
     assert keyboard.collect({}, 2.3).response == "7"
     three = kind.inputs(_response(3))
     assert set(three.keys) == {"1", "2", "3", "kp_1", "kp_2", "kp_3"} and set(three.buttons) == {"1", "2", "3"}
@@ -142,35 +116,10 @@ def test_a_response_box_answers_with_its_digit_buttons_and_the_controllers_canno
         tracking.OpenXRResponses.on_display(None, kind, inputs.controller)
 
 
-WINDOW_SCRIPT = textwrap.dedent(
-    """
-    from pathlib import Path
-    from psyop.protocol import load_protocol
-    from psyop.schedule import compile_schedule
-    from psyop.run.runner import SessionOptions, run_session
-    import psyop.devices.window as window
-
-    typed = window.GlfwWindow.poll
-    def poll(self):  # a participant who presses '9' (not on the scale), then '5', whenever asked
-        self.inject_key("9")
-        self.inject_key("5")
-        return typed(self)
-    window.GlfwWindow.poll = poll
-    outcome = run_session(load_protocol(Path({protocol!r})), compile_schedule, SessionOptions(
-        participant="W1", data_root=Path({data!r}), clock="real", display="window", responses="keyboard",
-        tracker="sim", progress=False, render="auto", window_scale=0.08))
-    print(outcome.status)
-    """
-)
-
-
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (Debian xvfb)")
 def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
-    protocol = _variant(tmp_path, repetitions=2, phase_s=0.03)
-    script = WINDOW_SCRIPT.format(protocol=str(protocol), data=str(tmp_path / "data"))
-    result = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", script], capture_output=True, text=True,
-                            timeout=180)
-    assert result.returncode == 0 and result.stdout.split()[-1] == "complete", result.stderr[-2000:]
+    protocol = variant(EXAMPLE, tmp_path, repetitions=2, phase_s=0.03)
+    assert window_session(protocol, tmp_path / "data", ["9", "5"]) == "complete"  # 9 is not on the scale
     trials = pd.read_parquet(tmp_path / "data" / STUDY / "sub-W1" / "ses-1" / "trials.parquet")
     assert len(trials) == 4 and (trials["response"] == "5").all() and (trials["response_value"] == 5.0).all()
     assert trials["correct"].isna().all() and (trials["response_time_s"] >= 0).all()
@@ -179,7 +128,7 @@ def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
 def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path, monkeypatch) -> None:
     from psyop.cli import main as psyop_main
 
-    protocol = _variant(tmp_path, repetitions=6, phase_s=0.2)
+    protocol = variant(EXAMPLE, tmp_path, repetitions=6, phase_s=0.2)
     data, results = tmp_path / "data", tmp_path / "results"
     assert psyop_main(["simulate", "--data", str(data), "--protocols", str(protocol), "--participants", "3"]) == 0
     meta = json.loads(next((data / STUDY).glob("sub-*/ses-1/session.json")).read_text())
@@ -187,13 +136,8 @@ def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path, m
     rules = tmp_path / "studies.mk"
     assert psyop_main(["studies", str(data), "--make-rules", str(rules)]) == 0
     assert "analysis/rating.py" in rules.read_text() and f"{STUDY}_rating.png" in rules.read_text()
-    monkeypatch.syspath_prepend(str(REPO / "analysis"))
-    script = importlib.import_module("rating")
-    try:
-        assert script.main(["--study", STUDY, "--data", str(data), "--results", str(results),
-                            "--out", str(tmp_path / "fig.png")]) == 0
-    finally:
-        sys.modules.pop("rating", None)
+    assert run_analysis(monkeypatch, "rating", ["--study", STUDY, "--data", str(data), "--results", str(results),
+                                                "--out", str(tmp_path / "fig.png")]) == 0
     trials = pd.read_parquet(next((data / STUDY).glob("sub-*/ses-1/trials.parquet")))
     assert trials["response_value"].between(1, 7).all() and (trials["response_value"] % 1 == 0).all()
     means = pd.read_csv(results / f"{STUDY}_rating.csv")
@@ -221,7 +165,7 @@ def test_the_analysis_recovers_the_simulated_raters_means_and_mode_effect(tmp_pa
     covers the true latent difference (latent sd 1), at rates a binomial test against 95 % accepts (p > 0.001)."""
     from psyop.statistics.ratings import condition_means, ordinal_model
 
-    protocol_path = _variant(tmp_path, repetitions=20, replace=(("  sd: 1.2 ", "  sd: 1.0 "),))
+    protocol_path = variant(EXAMPLE, tmp_path, repetitions=20, replace=(("  sd: 1.2 ", "  sd: 1.0 "),))
     protocol = load_protocol(protocol_path)
     observer = protocol.observer
     assert (observer.sd, observer.between_subject_sd, observer.means) == (1.0, 0.6, {"conventional": 3.6,
@@ -263,11 +207,11 @@ def test_the_analysis_recovers_the_simulated_raters_means_and_mode_effect(tmp_pa
 
 def test_a_scale_whose_labels_or_points_are_wrong_is_refused_with_its_line(tmp_path: Path) -> None:
     bad = {
-        "labels": (_variant(tmp_path, name="labels.yaml", replace=(("points: 7 ", "points: 6 "),)),
+        "labels": (variant(EXAMPLE, tmp_path, name="labels.yaml", replace=(("points: 7 ", "points: 6 "),)),
                    "    labels:", "7 label(s) for a 6-point scale"),
-        "points": (_variant(tmp_path, name="points.yaml", replace=(("points: 7 ", "points: 1 "),)),
+        "points": (variant(EXAMPLE, tmp_path, name="points.yaml", replace=(("points: 7 ", "points: 1 "),)),
                    "    points:", "a rating scale has 2 to 9 points"),
-        "means": (_variant(tmp_path, name="means.yaml", replace=(("    ocular: 4.4", ""),)),
+        "means": (variant(EXAMPLE, tmp_path, name="means.yaml", replace=(("    ocular: 4.4", ""),)),
                   "  means:", "no mean for mode level 'ocular'"),
     }
     done = subprocess.run([sys.executable, "-m", "psyop", "validate", *(str(p) for p, _, _ in bad.values())],

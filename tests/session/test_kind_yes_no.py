@@ -6,18 +6,17 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import shutil
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-from PIL import Image
 from scipy import stats
+from kind_helpers import (ScriptedKeys, red_near_centre, render_frames, run_analysis, variant,
+                          window_session)
 from session_helpers import wait_until
 from test_serial import PtyDevice
 
@@ -31,50 +30,12 @@ REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "protocols" / "examples" / "yes_no.yaml"
 
 
-def _variant(tmp_path: Path, *, repetitions: int | None = None, phase_s: float | None = None,
-             replace: tuple[tuple[str, str], ...] = ()) -> Path:
-    """A copy of the example with fewer repetitions, shorter phases or a few lines replaced."""
-    text = EXAMPLE.read_text()
-    if repetitions is not None:
-        text = re.sub(r"(?m)^(\s*repetitions:)\s*\d+", rf"\g<1> {repetitions}", text)
-    if phase_s is not None:
-        text = re.sub(r"(?m)^(\s*(?:-\s*)?(?:duration_s|expected_s):)\s*[\d.]+", rf"\g<1> {phase_s}", text)
-    for old, new in replace:
-        assert old in text, old
-        text = text.replace(old, new)
-    path = tmp_path / "yes_no.yaml"
-    path.write_text(text)
-    return path
-
-
 def test_signal_is_balanced_within_each_condition_and_picks_the_interval_mode() -> None:
     schedule = compile_schedule(load_protocol(EXAMPLE), 11)
     counts = schedule.groupby("level_D")["signal"].agg(["sum", "count"])
     assert (counts["sum"] * 2 == counts["count"]).all()
     assert (schedule.loc[schedule["signal"], "mode_interval1"] == "ocular").all()
     assert (schedule.loc[~schedule["signal"], "mode_interval1"] == "conventional").all()
-
-
-def render_frames(folder: Path, protocol: Path, seed: int, frames: list[tuple[str, int, int]]) -> None:
-    """``psyop render`` of each (file name, trial, interval) with the eye turned 15 deg, in one child process (the
-    EGL context lives in it)."""
-    script = textwrap.dedent(f"""
-        from psyop.cli import main
-        for name, trial, interval in {frames!r}:
-            assert main(["render", {str(protocol)!r}, "--seed", "{seed}", "--trial", str(trial), "--interval",
-                         str(interval), "--gaze-deg", "15,0", "--out", {str(folder)!r} + "/" + name]) == 0
-        """)
-    subprocess.run([sys.executable, "-c", script], check=True, cwd=REPO, capture_output=True, timeout=180)
-
-
-def _red_near_centre(png: Path, radius_px: int = 20) -> int:
-    """Red pixels within ``radius_px`` of the image centre (where the discs straight ahead of the eye are drawn)."""
-    image = np.asarray(Image.open(png).convert("RGB")).astype(int)
-    h, w = image.shape[:2]
-    yy, xx = np.mgrid[:h, :w]
-    near = (yy - h / 2) ** 2 + (xx - w / 2) ** 2 <= radius_px ** 2
-    red = (image[..., 0] > 150) & (image[..., 1] < 80) & (image[..., 2] < 80)
-    return int((red & near).sum())
 
 
 def test_a_signal_trial_shows_the_back_disc_and_a_noise_trial_hides_it(tmp_path: Path) -> None:
@@ -85,17 +46,8 @@ def test_a_signal_trial_shows_the_back_disc_and_a_noise_trial_hides_it(tmp_path:
     top = schedule[schedule["level_D"] == schedule["level_D"].max()]
     trials = {signal: int(top.loc[top["signal"] == signal, "trial"].iloc[0]) for signal in (True, False)}
     render_frames(tmp_path, EXAMPLE, 3, [(f"{signal}.png", trial, 1) for signal, trial in trials.items()])
-    found = {signal: _red_near_centre(tmp_path / f"{signal}.png") for signal in trials}
+    found = {signal: red_near_centre(tmp_path / f"{signal}.png") for signal in trials}
     assert found[True] >= 10 and found[False] == 0, found
-
-
-class _Keys:
-    def __init__(self, presses: list[tuple[str, float]]) -> None:
-        self.presses = presses
-
-    def poll(self) -> list[tuple[str, float]]:
-        out, self.presses = self.presses, []
-        return out
 
 
 def test_keys_buttons_and_controller_answer_yes_or_no_and_are_scored_against_the_signal() -> None:
@@ -104,13 +56,13 @@ def test_keys_buttons_and_controller_answer_yes_or_no_and_are_scored_against_the
     from psyop.session.clock import RealClock
 
     kind = kind_named("yes_no")
-    keyboard = KeyboardResponses(_Keys([]), kind)
+    keyboard = KeyboardResponses(ScriptedKeys([]), kind)
     assert keyboard.collect({"signal": True}, 1.0) is None
-    keyboard.events = _Keys([("q", 1.1), ("Y", 1.2)])
+    keyboard.events = ScriptedKeys([("q", 1.1), ("Y", 1.2)])
     answer = keyboard.collect({"signal": True}, 1.3)
     assert (answer.response, answer.correct) == ("yes", True) and math.isclose(answer.response_time_s, 0.2)
     assert keyboard.collect({"signal": True}, 2.0) is None  # the next trial's prompt
-    keyboard.events = _Keys([("n", 2.5)])
+    keyboard.events = ScriptedKeys([("n", 2.5)])
     answer = keyboard.collect({"signal": True}, 2.6)
     assert (answer.response, answer.correct) == ("no", False)
     assert kind.controller == {"left": "yes", "right": "no"}
@@ -128,55 +80,20 @@ def test_keys_buttons_and_controller_answer_yes_or_no_and_are_scored_against_the
         device.close()
 
 
-WINDOW_SCRIPT = textwrap.dedent(
-    """
-    from pathlib import Path
-    from psyop.protocol import load_protocol
-    from psyop.schedule import compile_schedule
-    from psyop.run.runner import SessionOptions, run_session
-    import psyop.devices.window as window
-
-    typed = window.GlfwWindow.poll
-    def poll(self):  # a participant who presses 'y' whenever asked
-        self.inject_key("y")
-        return typed(self)
-    window.GlfwWindow.poll = poll
-    outcome = run_session(load_protocol(Path({protocol!r})), compile_schedule, SessionOptions(
-        participant="W1", data_root=Path({data!r}), clock="real", display="window", responses="keyboard",
-        tracker="sim", progress=False, render="auto", window_scale=0.08))
-    print(outcome.status)
-    """
-)
-
-
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (Debian xvfb)")
 def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
-    protocol = _variant(tmp_path, repetitions=2, phase_s=0.03)
-    script = WINDOW_SCRIPT.format(protocol=str(protocol), data=str(tmp_path / "data"))
-    result = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", script], capture_output=True, text=True,
-                            timeout=180)
-    assert result.returncode == 0 and result.stdout.split()[-1] == "complete", result.stderr[-2000:]
+    protocol = variant(EXAMPLE, tmp_path, repetitions=2, phase_s=0.03)
+    assert window_session(protocol, tmp_path / "data", ["y"]) == "complete"
     trials = pd.read_parquet(tmp_path / "data" / "yes_no_detection" / "sub-W1" / "ses-1" / "trials.parquet")
     assert len(trials) == 10 and (trials["response"] == "yes").all()
     assert (trials["correct"] == trials["signal"]).all() and (trials["response_time_s"] >= 0).all()
-
-
-def run_analysis(monkeypatch: pytest.MonkeyPatch, script: str, argv: list[str]) -> int:
-    """analysis/<script>.py's main, in this process (as make runs it, without the interpreter's start)."""
-    import importlib
-
-    monkeypatch.syspath_prepend(str(REPO / "analysis"))
-    try:
-        return importlib.import_module(script).main(argv)
-    finally:
-        sys.modules.pop(script, None)
 
 
 def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
                                                                 ) -> None:
     from psyop.cli import main as psyop_main
 
-    protocol = _variant(tmp_path, repetitions=10)
+    protocol = variant(EXAMPLE, tmp_path, repetitions=10)
     data, results = tmp_path / "data", tmp_path / "results"
     assert psyop_main(["simulate", "--data", str(data), "--protocols", str(protocol), "--participants", "3"]) == 0
     meta = json.loads(next((data / "yes_no_detection").glob("sub-*/ses-1/session.json")).read_text())
@@ -218,7 +135,7 @@ def test_the_analysis_recovers_the_simulated_observers_threshold_and_d_prime(tmp
     from psyop.statistics.psychometric import fit_psychometric_table, yes_no_options
     from psyop.statistics.signal_detection import rates, summary
 
-    protocol = _variant(tmp_path, repetitions=80, replace=(("between_subject_sd: 0.05", "between_subject_sd: 0.1"),))
+    protocol = variant(EXAMPLE, tmp_path, repetitions=80, replace=(("between_subject_sd: 0.05", "between_subject_sd: 0.1"),))
     trials, truth = _observed(protocol, 60, 100)
     fits = fit_psychometric_table(trials[trials["signal"]], "level_D", ["participant"], "answer_yes",
                                   yes_no_options(None, estimate_eta=False, n_bootstrap=50))
@@ -248,7 +165,7 @@ def test_the_analysis_recovers_the_simulated_observers_threshold_and_d_prime(tmp
 
 
 def test_signal_equal_to_noise_is_refused_with_its_line(tmp_path: Path) -> None:
-    protocol = _variant(tmp_path, replace=(("noise: {mode: conventional}", "noise: {mode: ocular}"),))
+    protocol = variant(EXAMPLE, tmp_path, replace=(("noise: {mode: conventional}", "noise: {mode: ocular}"),))
     done = subprocess.run([sys.executable, "-m", "psyop", "validate", str(protocol)], cwd=REPO, capture_output=True,
                           text=True)
     line = next(i for i, text in enumerate(protocol.read_text().splitlines(), 1) if text.startswith("  noise:"))
