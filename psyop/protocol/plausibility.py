@@ -1,4 +1,5 @@
-"""Values that validate but that no eye or display can show: located warnings, not errors.
+"""Values that validate but that no eye or display can show, or that were likely meant in another unit: located
+warnings, not errors.
 
 ``depth: {D: 50}`` (2 cm from the eyes) is a valid depth (psyop.optics.ranges.DEPTH_D) that only
 ``psyop audit`` noticed; ``psyop validate`` now says so at the value, with the plausible range,
@@ -21,6 +22,12 @@ from psyop.records import JsonObject, Loc
 NEAREST_SEEN_D = 10.0
 #: the scene-item fields that hold a depth
 DEPTH_FIELDS = ("depth", "near", "far", "near_depth", "far_depth")
+#: The longest trial phase studies use: an interval, a blank or a participant-paced phase of more than 30 s is far
+#: beyond the seconds a psychophysical trial shows (the paper's are 0.5-2 s); a value like 200 was likely meant in
+#: milliseconds. (A response's ``timeout_s`` is not checked: waiting long for an answer is a choice.)
+LONGEST_PHASE_S = 30.0
+#: the trial-phase fields that hold a duration
+PHASE_DURATION_FIELDS = ("duration_s", "min_duration_s", "expected_s")
 
 
 def _nearest_D(depth: Depth, conditions: list[JsonObject]) -> float:
@@ -37,7 +44,8 @@ def _nearest_D(depth: Depth, conditions: list[JsonObject]) -> float:
 
 def plausibility_warnings(protocol: Protocol) -> list[tuple[Loc, str]]:
     """(key path, message) for every depth nearer than :data:`NEAREST_SEEN_D` in some condition (and
-    a grid's nearest plane nearer than 1 / :data:`NEAREST_SEEN_D` m).
+    a grid's nearest plane nearer than 1 / :data:`NEAREST_SEEN_D` m), and every trial phase longer than
+    :data:`LONGEST_PHASE_S`.
 
     Examples
     --------
@@ -60,6 +68,20 @@ def plausibility_warnings(protocol: Protocol) -> list[tuple[Loc, str]]:
             found.append((("scene", index, "near_m"),
                           f"the nearest plane at {near_m:g} m ({1.0 / near_m:g} D) is nearer than an eye can focus or "
                           f"a headset shows; plausible distances are {1.0 / NEAREST_SEEN_D:g} m and farther"))
+    return found + _long_phases(protocol)
+
+
+def _long_phases(protocol: Protocol) -> list[tuple[Loc, str]]:
+    """(key path, message) for every trial-phase duration over :data:`LONGEST_PHASE_S`, with the milliseconds reading."""
+    found: list[tuple[Loc, str]] = []
+    for index, phase in enumerate(protocol.trial.phases):
+        for name in PHASE_DURATION_FIELDS:
+            value = getattr(phase, name, None)
+            if isinstance(value, (int, float)) and value > LONGEST_PHASE_S:
+                found.append((("trial", "phases", index, name),
+                              f"{name}: {value:g} is {value:g} s ({value / 60:.1f} min) for one {phase.kind} phase, "
+                              f"far beyond the seconds a trial shows; if you meant milliseconds, write "
+                              f"{name}: {value / 1000:g}"))
     return found
 
 

@@ -88,3 +88,31 @@ def test_a_grid_nearer_than_an_eye_focuses_is_a_located_warning(tmp_path: Path,
     assert main(["validate", str(path)]) == 0
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{path}:{line}:" in err and "0.02 m (50 D)" in err and "0.1 m" in err, err
+
+
+def test_a_phase_of_minutes_is_warned_as_likely_milliseconds(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                                             ) -> None:
+    """``duration_s: 200`` meant as milliseconds validated silently (807 minutes in `psyop show`, issue 41)."""
+    text = (ROOT / "protocols" / "detection.yaml").read_text()
+    old = "      duration_s: 2                     # Sec. 5.1: 2-second intervals"
+    assert old in text
+    path = tmp_path / "ms.yaml"
+    path.write_text(text.replace(old, "      duration_s: 200", 1))
+    line = next(i for i, t in enumerate(path.read_text().splitlines(), 1) if t == "      duration_s: 200")
+    assert main(["validate", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{path}:{line}:" in err and "warning" in err
+    assert "if you meant milliseconds, write duration_s: 0.2" in err
+
+
+def test_a_left_right_study_whose_scene_ignores_the_near_side_is_refused(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """The schedule drew near_side per trial while nothing in the scene read it: the right surface was always the
+    nearer, and validation, simulation and the audit passed (issue 41)."""
+    text = (ROOT / "protocols" / "ordinal.yaml").read_text()
+    line = next(t for t in text.splitlines() if t.strip().startswith("near_side: schedule"))
+    path = tmp_path / "fixed_side.yaml"
+    path.write_text(text.replace(line, line.replace("near_side: schedule", "near_side: right"), 1))
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "no scene item reads it" in err and "near_side: schedule" in err and err.count("\n") == 1

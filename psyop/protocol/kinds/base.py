@@ -22,7 +22,7 @@ the checker is the structural :class:`Checks`, the analysis targets are data (:c
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Literal, Protocol
 
@@ -32,7 +32,7 @@ from pydantic import Field
 from psyop.protocol.base import Number, StrictModel
 from psyop.protocol.design import Design, Factor
 from psyop.protocol.display import DisplaySpec
-from psyop.protocol.scene import RenderingMode
+from psyop.protocol.scene import Primitive, RenderingMode
 from psyop.protocol.simulated_eye import SimulatedEye
 from psyop.records import Loc, TrialRow
 
@@ -125,6 +125,9 @@ class ProtocolParts(Protocol):
 
     @property
     def design(self) -> Design: ...
+
+    @property
+    def scene(self) -> Sequence[Primitive]: ...
 
 
 class Checks(Protocol):

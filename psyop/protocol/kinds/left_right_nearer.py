@@ -13,7 +13,7 @@ from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, K
                                        ObserverBase, ResponseKindSpec, ScheduleInput, Scored, StudyInputs,
                                        figure_target, mode_factor_of)
 from psyop.protocol.kinds.modes import mode_values
-from psyop.protocol.scene import RENDERING_MODES, RenderingMode
+from psyop.protocol.scene import RENDERING_MODES, RenderingMode, SinusoidalBorder
 from psyop.records import Loc, TrialRow
 
 Probability = Annotated[Number, Field(ge=0, le=1)]
@@ -82,6 +82,10 @@ class LeftRightNearer(ResponseKindSpec):
         if isinstance(response.mode, ModeFromFactor):
             checks.mode_factor(response.mode.factor, path + ("mode", "factor"))
         checks.factor_exists(response.separation_factor, path + ("separation_factor",), numeric=True)
+        if not any(isinstance(item, SinusoidalBorder) and item.near_side == "schedule" for item in checks.p.scene):
+            checks.add(path + ("near_side",), "the schedule draws each trial's near side, but no scene item reads it, so "
+                                              "the same side would be nearer in every trial whatever the answer key "
+                                              "says; add a sinusoidal_border with near_side: schedule (its default)")
 
     def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
         """p_correct must give a probability for every (mode, separation) a trial can have."""
