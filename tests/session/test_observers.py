@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
 
 from psyop.errors import UserError
 from psyop.session.responses.simulated import make_observer
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _rows(n: int, **columns: object) -> list[dict]:
@@ -72,3 +76,31 @@ def test_ordinal_preference_and_reach() -> None:
 def test_unknown_observer_kind_is_a_user_error() -> None:
     with pytest.raises(UserError, match="unknown kind"):
         make_observer({"kind": "telepathy"}, seed=1, participant="S01")
+
+
+def test_a_two_interval_observer_takes_a_threshold_offset_per_level_of_a_word_factor(tmp_path: Path) -> None:
+    """A mode effect (issue 41 item 2): ``threshold_offset_column: mode`` with ``threshold_offset_D: {ocular: 0,
+    reversed: 0.3}``; before, an observer could read only a factor of numbers ("must have numbers as levels here")."""
+    from psyop.cli import main
+    from psyop.protocol import load_protocol
+    from psyop.schedule import compile_schedule
+    from psyop.session.plan import compile_plan
+    from psyop.session.responses.simulated import make_observer
+
+    text = (REPO / "protocols" / "detection.yaml").read_text()
+    for old, new in (("    back_D:\n      levels: [1, 2, 3]                 # Sec. 5.1 Conditions: 1, 2 or 3 D",
+                      "    back_D:\n      levels: [1]\n    mode:\n      levels: [ocular, reversed]"),
+                     ("  test: {mode: ocular}", "  test: {mode: {factor: mode}}"),
+                     ("  threshold_D: 0.36", "  threshold_offset_column: mode\n"
+                                             "  threshold_offset_D: {ocular: 0.0, reversed: 0.3}\n  threshold_D: 0.36")):
+        assert old in text, old
+        text = text.replace(old, new)
+    path = tmp_path / "mode_effect.yaml"
+    path.write_text(text)
+    protocol = load_protocol(path)
+    observer = make_observer(compile_plan(protocol).observer_params(), seed=1, participant="S01")
+    schedule = compile_schedule(protocol, 1)
+    thresholds = {row["mode"]: observer.threshold_for(row) for row in schedule.to_dict("records")}
+    assert thresholds["reversed"] - thresholds["ocular"] == pytest.approx(0.3, abs=1e-12)
+    path.write_text(text.replace("{ocular: 0.0, reversed: 0.3}", "{ocular: 0.0}"))
+    assert main(["validate", str(path)]) == 2  # a level without its offset is refused at its line

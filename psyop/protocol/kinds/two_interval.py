@@ -9,7 +9,7 @@ from typing import ClassVar, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from psyop.protocol.base import Number
+from psyop.protocol.base import Number, format_level
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, IntervalSpec, KindResponse,
                                        ModeFromFactor, ObserverBase, ResponseKindSpec, ScheduleInput, Scored,
                                        StudyInputs, mode_factor_of)
@@ -49,9 +49,10 @@ class TwoIntervalResponse(KindResponse):
 
 
 class Psychometric2afc(ObserverBase):
-    """p(correct) = 0.5 + (0.5 - lapse) * Phi((level - t) / width_D + z75), where t =
-    threshold_D + threshold_slope * row[threshold_offset_column] is the 75 % point (without lapse);
-    each simulated participant's threshold is shifted by N(0, between_subject_sd_D)."""
+    """p(correct) = 0.5 + (0.5 - lapse) * Phi((level - t) / width_D + z75), where t, the 75 % point (without lapse),
+    is threshold_D + threshold_slope * row[threshold_offset_column] (a factor of numbers) or threshold_D +
+    threshold_offset_D[the row's level of threshold_offset_column] (any factor: a mode effect,
+    ``{ocular: 0, reversed: 0.3}``); each simulated participant's threshold is shifted by N(0, between_subject_sd_D)."""
 
     kind: Literal["psychometric_2afc"]
     level_column: str = "level_D"
@@ -60,12 +61,18 @@ class Psychometric2afc(ObserverBase):
     lapse: Number = Field(default=0.0, ge=0, lt=0.5)
     threshold_slope: Number = 0.0
     threshold_offset_column: str | None = None
+    threshold_offset_D: dict[str, Number] | None = Field(default=None, min_length=1)
     between_subject_sd_D: Number = Field(default=0.0, ge=0)
 
     @model_validator(mode="after")
     def _offset(self) -> "Psychometric2afc":
         if self.threshold_slope != 0.0 and self.threshold_offset_column is None:
             raise ValueError("threshold_slope needs threshold_offset_column (the column it multiplies)")
+        if self.threshold_offset_D is not None and self.threshold_offset_column is None:
+            raise ValueError("threshold_offset_D needs threshold_offset_column (the factor whose levels it keys)")
+        if self.threshold_offset_D is not None and self.threshold_slope != 0.0:
+            raise ValueError("give threshold_slope (a factor of numbers) or threshold_offset_D (an offset per level), "
+                             "not both")
         return self
 
 
@@ -100,7 +107,7 @@ class TwoInterval(ResponseKindSpec):
                                       "level_factor": "plan", "order": "kinds"},
               "Psychometric2afc": {k: "observer" for k in ("kind", "level_column", "threshold_D", "width_D", "lapse",
                                                            "threshold_slope", "threshold_offset_column",
-                                                           "between_subject_sd_D")}}
+                                                           "threshold_offset_D", "between_subject_sd_D")}}
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         assert isinstance(response, TwoIntervalResponse)
@@ -141,8 +148,17 @@ class TwoInterval(ResponseKindSpec):
             checks.add(path + ("level_column",), f"the observer reads '{observer.level_column}' as its level, but "
                                                  f"the response's level factor is '{level_factor}'; set level_column: "
                                                  f"{level_factor}")
-        if observer.threshold_offset_column is not None:
-            checks.factor_exists(observer.threshold_offset_column, path + ("threshold_offset_column",), numeric=True)
+        column = observer.threshold_offset_column
+        if column is None:
+            return
+        if observer.threshold_offset_D is None:  # threshold_slope x the column's value: numbers
+            checks.factor_exists(column, path + ("threshold_offset_column",), numeric=True)
+        elif checks.factor_exists(column, path + ("threshold_offset_column",)):
+            given = set(observer.threshold_offset_D)
+            for level in checks.factors[column].all_levels():
+                if format_level(level) not in given:
+                    checks.add(path + ("threshold_offset_D",), f"no offset for {column} = {format_level(level)}; add "
+                                                               f"'{format_level(level)}: 0' under threshold_offset_D")
 
     def score(self, row: TrialRow, answer: str) -> Scored:
         return Scored(correct=answer == str(int(row["correct_interval"])))

@@ -21,6 +21,7 @@ from psyop.session.gaze.keyed import KeyedGenerator, keyed_rng, keyed_uniform
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.reach import HAND_HEIGHT_M
 from psyop.protocol.kinds import KINDS, kind_named
+from psyop.protocol.base import format_level
 from psyop.protocol.kinds.base import ObserverBase, ResponseKindSpec, observer_kind_name
 from psyop.session.responses.base import Response, score
 
@@ -87,8 +88,9 @@ class Psychometric2AFC(SimulatedObserver):
     as psyop.statistics.simulate uses).
 
     At x = threshold this is 0.75 without lapse: ``threshold_D`` is the 75 % point. The
-    threshold may depend on a row column (``threshold_slope`` x ``threshold_offset_column``)
-    and varies between participants with sd ``between_subject_sd_D``.
+    threshold may depend on a row column: ``threshold_slope`` x its value (a factor of numbers), or
+    ``threshold_offset_D[level]`` (any factor, e.g. a mode effect), and varies between participants with sd
+    ``between_subject_sd_D``.
     """
 
     kind = kind_named("two_interval")
@@ -102,12 +104,21 @@ class Psychometric2AFC(SimulatedObserver):
         self.slope = float(_get(params, "threshold_slope", 0.0))
         self.offset_column = _get(params, "threshold_offset_column")
         sd = float(_get(params, "between_subject_sd_D", 0.0))
+        #: the threshold's offset per level of the offset column (None: ``threshold_slope`` x its value)
+        self.offsets_D = None if _get(params, "threshold_offset_D") is None else \
+            {str(k): float(v) for k, v in dict(_get(params, "threshold_offset_D")).items()}
         self.participant_shift_D = float(self._participant_rng.normal(0.0, sd)) if sd > 0 else 0.0
         if self.width_D <= 0 or not 0 <= self.lapse < 0.5:
             raise UserError("observer: width_D must be > 0 and lapse in [0, 0.5)", "protocol observer")
 
     def threshold_for(self, row: TrialRow) -> float:
         offset = float(row[self.offset_column]) if self.offset_column else 0.0
+        if self.offset_column and self.offsets_D is not None:
+            level = format_level(row[self.offset_column])
+            if level not in self.offsets_D:
+                raise UserError(f"observer: threshold_offset_D has no offset for {self.offset_column} = {level}",
+                                "protocol observer")
+            return self.threshold_D + self.participant_shift_D + self.offsets_D[level]
         return self.threshold_D + self.participant_shift_D + self.slope * offset
 
     def p_correct(self, row: TrialRow) -> float:
