@@ -334,3 +334,40 @@ def test_audit_and_render_level_errors_are_one_line(tmp_path, capsys):
     assert "outside level_D's adaptive range [0, 1.5]" in capsys.readouterr().err
     assert main(["render", str(PROTOCOLS / "detection.yaml"), "--level", "0.5", "--out", str(tmp_path / "x.png")]) == 2
     assert "this protocol has none" in capsys.readouterr().err
+
+
+def _control(tmp_path: Path, declared: str | None) -> Path:
+    """detection.yaml with a control: the test interval's mode is a factor (ocular, conventional), the reference
+    conventional at level 0, so in the conventional condition both intervals render the same by design."""
+    text = (PROTOCOLS / "detection.yaml").read_text()
+    for old, new in (("    back_D:\n      levels: [1, 2, 3]                 # Sec. 5.1 Conditions: 1, 2 or 3 D",
+                      "    back_D:\n      levels: [1]\n    mode:\n      levels: [ocular, conventional]"),
+                     ("  test: {mode: ocular}", "  test: {mode: {factor: mode}}"),
+                     ("  reference: {mode: conventional}", "  reference: {mode: conventional, set: {level_D: 0}}")):
+        assert old in text, old
+        text = text.replace(old, new)
+    if declared is not None:
+        text = text.replace("  level_factor: level_D\n", f"  level_factor: level_D\n  identical_intervals: {declared}\n")
+    path = tmp_path / "control.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_a_declared_control_passes_and_an_undeclared_or_wrong_one_fails(ctx, tmp_path):
+    """Identical intervals in a control condition always failed the audit, with no way to declare them intended
+    (issue 41 item 4): declared in response.identical_intervals they are a note; undeclared they fail with the
+    hint; a declaration whose intervals differ on screen fails."""
+    undeclared = run_audit(load_protocol(_control(tmp_path, None)), FAST, ctx=ctx)
+    assert undeclared.failures and all("mode=conventional" in f and "declare it in response.identical_intervals" in f
+                                       for f in undeclared.failures)
+    declared = run_audit(load_protocol(_control(tmp_path, "[{mode: conventional}]")), FAST, ctx=ctx)
+    assert not declared.failures, declared.failures
+    assert any("as response.identical_intervals declares (a control)" in n for n in declared.notes)
+    wrong = run_audit(load_protocol(_control(tmp_path, "[{mode: ocular}]")), FAST, ctx=ctx)
+    assert any("mode=ocular" in f and "differ on screen although response.identical_intervals declares" in f
+               for f in wrong.failures)
+
+
+def test_a_declared_control_naming_no_level_is_refused_at_its_line(tmp_path, capsys):
+    assert main(["validate", str(_control(tmp_path, "[{mode: sideways}]"))]) == 2
+    assert "'sideways' is not a level of mode" in capsys.readouterr().err

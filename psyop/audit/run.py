@@ -31,6 +31,7 @@ from psyop.audit.meshes import MeshCheck
 from psyop.audit.occlusion import hidden_by
 from psyop.errors import UserError
 from psyop.optics.ranges import DEFAULT_IPD_M, IPD_M
+from psyop.records import TrialRow
 
 if TYPE_CHECKING:
     import moderngl
@@ -214,7 +215,7 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
         if owns_ctx:
             ctx.release()
     min_visible = MIN_VISIBLE_SAMPLES / settings.samples_per_axis**2 / px_scale
-    failures, notes = _check(records, item_ids, min_visible)
+    failures, notes = _check(records, item_ids, min_visible, protocol.response.identical_conditions())
     return AuditReport(str(protocol.study.name), settings, tuple(records), tuple(failures), tuple(notes))
 
 
@@ -245,7 +246,8 @@ def mesh_findings(records: list[FrameRecord]) -> tuple[list[str], list[str]]:
     return failures, notes
 
 
-def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float) -> tuple[list[str], list[str]]:
+def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float,
+           declared: list[dict[str, str | float]] | None = None) -> tuple[list[str], list[str]]:
     failures: list[str] = []
     notes: list[str] = []
     best: dict[str, float] = {}
@@ -270,7 +272,7 @@ def _check(records: list[FrameRecord], item_ids: list[str], min_visible: float) 
     for item in item_ids:
         if item not in shown:
             notes.append(f"note: item {item} has no primitive in any audited frame (an aperture, or in no show:)")
-    identical, same_centre = _identical_intervals(records)
+    identical, same_centre = _identical_intervals(records, declared or [])
     mesh_failures, mesh_notes = mesh_findings(records)
     return failures + mesh_failures + identical, notes + mesh_notes + same_centre
 
@@ -295,11 +297,22 @@ def _px_per_m_shift(scene: Scene, camera: EyeCamera, display: DisplayProfile) ->
 UNRESOLVED_SHIFT_PX = 0.5
 
 
-def _identical_intervals(records: list[FrameRecord]) -> tuple[list[str], list[str]]:
+def _declares(declared: list[dict[str, str | float]], row: TrialRow) -> bool:
+    """Whether the protocol declares the trial ``row``'s condition a control whose intervals are meant to render
+    identically (``response.identical_intervals``: every factor named has the row's level)."""
+    from psyop.protocol.base import format_level
+
+    return any(all(k in row and format_level(row[k]) == format_level(v) for k, v in d.items()) for d in declared)
+
+
+def _identical_intervals(records: list[FrameRecord], declared: list[dict[str, str | float]]
+                         ) -> tuple[list[str], list[str]]:
     """Failures: intervals whose factor values or modes differ but render identically at every
-    audited gaze. Notes: intervals that differ only in mode but whose modes put the centre of
-    projection at the same point at every audited gaze (e.g. ocular and reversed at a gaze straight
-    ahead, where N has no x, y part): identical frames are then the exact answer, not a bug."""
+    audited gaze, unless the protocol declares their condition a control (``response: identical_intervals``:
+    a note then), and intervals of a declared control that do not render identically. Notes: intervals that
+    differ only in mode but whose modes put the centre of projection at the same point at every audited gaze
+    (e.g. ocular and reversed at a gaze straight ahead, where N has no x, y part): identical frames are then the
+    exact answer, not a bug."""
     from psyop.schedule import interval_values
 
     by_key: dict[tuple[str, str], dict[int, dict[int, FrameRecord]]] = {}
@@ -318,10 +331,20 @@ def _identical_intervals(records: list[FrameRecord]) -> tuple[list[str], list[st
             vi, vj = interval_values(row, i), interval_values(row, j)
             mi, mj = next(iter(first.values())).frame.mode, next(iter(second.values())).frame.mode
             differ = [k for k in vi if k in vj and str(vi[k]) != str(vj[k])] + (["mode"] if mi != mj else [])
+            gazes = sorted(set(first) & set(second))
+            same = bool(gazes) and all(np.array_equal(first[g].image, second[g].image) for g in gazes)
+            if _declares(declared, row):
+                if same:
+                    notes.append(f"note: condition {condition}, {eye} eye: intervals {i} and {j} render identically, "
+                                 "as response.identical_intervals declares (a control)")
+                else:
+                    failures.append(f"FAIL condition {condition}, {eye} eye: intervals {i} and {j} differ on screen "
+                                    "although response.identical_intervals declares them identical (a control); "
+                                    "fix the stimulus or the declaration")
+                continue
             if not differ:
                 continue
-            gazes = sorted(set(first) & set(second))
-            if gazes and all(np.array_equal(first[g].image, second[g].image) for g in gazes):
+            if same:
                 what = ", ".join(f"{k} {vi.get(k, mi)} vs {vj.get(k, mj)}" for k in dict.fromkeys(differ))
                 shift_px = max(float(np.linalg.norm(np.subtract(first[g].centre_of_projection_m,
                                                                 second[g].centre_of_projection_m)))
@@ -333,5 +356,6 @@ def _identical_intervals(records: list[FrameRecord]) -> tuple[list[str], list[st
                                  f"this audit resolves; use a larger --scale or more --gazes to tell them apart")
                     continue
                 failures.append(f"FAIL condition {condition}, {eye} eye: intervals {i} and {j} render identically "
-                                f"at all {len(gazes)} audited gazes although they differ ({what})")
+                                f"at all {len(gazes)} audited gazes although they differ ({what}); if this "
+                                "condition is a control, declare it in response.identical_intervals")
     return failures, notes

@@ -90,6 +90,11 @@ class KindResponse(StrictModel):
         """The factor whose level a psychometric function is fitted over (None: the kind has none)."""
         return None
 
+    def identical_conditions(self) -> list[dict[str, str | float]]:
+        """The conditions whose intervals are meant to render identically (a control; ``psyop audit`` reports them
+        as intended), each as factor -> level (none for a kind without the declaration)."""
+        return []
+
 
 class ObserverBase(StrictModel):
     """What every simulated observer has: ``eye``, the simulated eye and tracker (psyop.protocol.simulated_eye).

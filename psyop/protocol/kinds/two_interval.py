@@ -27,11 +27,16 @@ class TwoIntervalResponse(KindResponse):
     reference: IntervalSpec
     level_factor: str = "level_D"
     order: Counterbalance = "balanced"
+    #: conditions whose two intervals are meant to render identically (a control): each factor -> level
+    identical_intervals: list[dict[str, Number | str]] = Field(default_factory=list)
 
     @property
     def counterbalance(self) -> Counterbalance:
         """How the interval order (test first or second) is assigned."""
         return self.order
+
+    def identical_conditions(self) -> list[dict[str, str | float]]:
+        return [{k: (v if isinstance(v, str) else float(v)) for k, v in d.items()} for d in self.identical_intervals]
 
     def level(self) -> str | None:
         return self.level_factor
@@ -104,7 +109,7 @@ class TwoInterval(ResponseKindSpec):
     buttons = {"1": "1", "2": "2", "L": "1", "R": "2"}
     controller = {"left": "1", "right": "2"}
     fields = {"TwoIntervalResponse": {"kind": "plan", "question": "plan", "test": "kinds", "reference": "kinds",
-                                      "level_factor": "plan", "order": "kinds"},
+                                      "level_factor": "plan", "order": "kinds", "identical_intervals": "kinds"},
               "Psychometric2afc": {k: "observer" for k in ("kind", "level_column", "threshold_D", "width_D", "lapse",
                                                            "threshold_slope", "threshold_offset_column",
                                                            "threshold_offset_D", "between_subject_sd_D")}}
@@ -123,6 +128,16 @@ class TwoInterval(ResponseKindSpec):
                 checks.factor_exists(key, path + (role, "set", key), numeric=True)
             if isinstance(spec.mode, ModeFromFactor):
                 checks.mode_factor(spec.mode.factor, path + (role, "mode", "factor"))
+        self.check_identical(response, checks, path)
+
+    def check_identical(self, response: TwoIntervalResponse, checks: Checks, path: Loc) -> None:
+        """Each declared control names design factors and levels they have."""
+        for index, declared in enumerate(response.identical_intervals):
+            for name, level in declared.items():
+                where = path + ("identical_intervals", index, name)
+                if checks.factor_exists(name, where) and not any(
+                        format_level(level) == format_level(have) for have in checks.factors[name].all_levels()):
+                    checks.add(where, f"'{format_level(level)}' is not a level of {name}")
 
     def check_design(self, response: KindResponse, checks: Checks) -> None:
         """A threshold needs its level to vary: a fixed level factor needs at least two levels in every level
