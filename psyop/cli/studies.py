@@ -27,9 +27,10 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from psyop.protocol.kinds.base import AnalysisTarget, ResponseKindSpec, StudyInputs
 
 if TYPE_CHECKING:
+    from psyop.protocol.kinds.base import AnalysisTarget as Target
+    from psyop.protocol.kinds.base import ResponseKindSpec
     from psyop.statistics.studies import StudyFacts
 
 #: Sessions of this shipped protocol (by hash) get the linear-fit thresholds figure.
@@ -37,10 +38,6 @@ LINEAR_FIT_PROTOCOLS = ("discrimination.yaml",)
 def kind_name(kind: ResponseKindSpec) -> str:
     """How ``psyop studies`` and make's progress lines name a response kind (its label)."""
     return kind.label
-
-
-#: one output of a study's analysis (psyop.protocol.kinds.base.AnalysisTarget)
-Target = AnalysisTarget
 
 
 def make_escaped(path: Path) -> str:
@@ -69,6 +66,8 @@ def targets_for(study: str, kind: ResponseKindSpec, linear_fit: bool, trials: st
     >>> [t.output for t in targets_for("mine", kind_named("left_right_nearer"), False)]
     ['mine_depth.png']
     """
+    from psyop.protocol.kinds.base import StudyInputs
+
     return kind.targets(StudyInputs(study, trials, linear_fit, adaptive))
 
 
@@ -100,6 +99,8 @@ def analysis_units(data: Path, pool_protocols: bool) -> list[tuple[StudyFacts, l
 
 def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tuple[str, list[str]]:
     """(the make fragment, one line per study, or per protocol version of one, saying what it builds)."""
+    from psyop.protocol.kinds.base import AnalysisTarget
+
     linear = set()
     for name in LINEAR_FIT_PROTOCOLS:
         path = protocols / name
@@ -111,7 +112,7 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
         uses_linear = bool(facts.protocol_sha256) and set(facts.protocol_sha256) <= linear
         prerequisites = " ".join(make_escaped(p) for p in sessions)
         adaptive = _adaptive(sessions)
-        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive) + [Target(  # issue 27
+        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive) + [AnalysisTarget(  # issue 27
             f"{facts.name}_gaze_quality.png", "analysis/gaze_quality.py", f"{prerequisites} $(QUALITY_SRC)",
             f'--study {facts.name} --data "$(DATA)" --results "$(RESULTS)"')]
         figures = [t for t in targets if t.kind == "figure"]
