@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
 
 #: ``--phase`` values that draw a screen of the protocol's ``session:`` (psyop.session.screens)
-SCREEN_PHASES: tuple[str, ...] = ("instructions", "break", "questionnaire", "end")
+SCREEN_PHASES: tuple[str, ...] = ("instructions", "break", "questionnaire", "end", "feedback")
 
 
 def ipd_arg_m(ipd_mm: float | None) -> float:
@@ -269,8 +269,10 @@ def _scene(args: argparse.Namespace, protocol: Protocol, protocol_path: Path, ro
         from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
 
         em_px = em_px_for_display(view.display, TEXT_LETTER_HEIGHT_DEG)
-        image = None if response_text is None else text_image(response_text, em_px,
-                                                               keep_lines=args.phase in SCREEN_PHASES)
+        from psyop.protocol.kinds import kind_of
+
+        keep = args.phase in SCREEN_PHASES or kind_of(protocol.response).response_text(protocol.response) is not None
+        image = None if response_text is None else text_image(response_text, em_px, keep_lines=keep)
         return blank_scene() if image is None else text_scene(image, scene_origin_m(protocol, view.centre_m))
     return build_scene(protocol, row, args.time_s, view.centre_m, interval=args.interval, base_dir=protocol_path.parent,
                        meshes=SessionMeshes(protocol_path.parent, mesh_files))

@@ -91,7 +91,8 @@ class GlfwWindow:
         if name is None:
             name = {self._glfw.KEY_LEFT: "left", self._glfw.KEY_RIGHT: "right", self._glfw.KEY_SPACE: "space",
                     self._glfw.KEY_ENTER: "enter", self._glfw.KEY_KP_1: "kp_1", self._glfw.KEY_KP_2: "kp_2",
-                    self._glfw.KEY_ESCAPE: "escape"}.get(key, "")
+                    self._glfw.KEY_ESCAPE: "escape", self._glfw.KEY_UP: "up", self._glfw.KEY_DOWN: "down",
+                    self._glfw.KEY_KP_ENTER: "kp_enter"}.get(key, "")
         if name == "escape":  # noted only: an exception raised here would be lost in ctypes (module docstring)
             self.escape_pressed = True
             return

@@ -65,7 +65,9 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                  "quality": "quality", "timing": "timing", "gaze_validation": "gaze_validation",
                  "session": "screens"},
     "SessionScreens": {k: "screens" for k in ("instructions", "breaks", "questionnaires", "end_screen",
-                                              "simulated_answers")},
+                                              "feedback", "simulated_answers")},
+    "Feedback": {k: "screens" for k in ("practice", "main", "text", "duration_s")},
+    "FeedbackText": {k: "screens" for k in ("correct", "incorrect", "answer", "timeout")},
     # image: refused at validation (psyop.protocol.session_screens: only text is drawn in the headset)
     "InstructionPage": {"text": "screens", "image": "refused", "expected_s": "screens"},
     "Instructions": {"pages": "screens", "at_blocks": "screens"},

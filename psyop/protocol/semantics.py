@@ -10,7 +10,7 @@ import difflib
 import math
 from dataclasses import dataclass
 from pathlib import Path as FsPath
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from typing import TYPE_CHECKING
 
 from pydantic import BaseModel
@@ -72,6 +72,8 @@ class _Checker:
         self.meshes = meshes  # the models read by check_mesh (a fresh MeshFiles when None)
         self.issues: list[Issue] = []
         self.factors = protocol.design.factors
+        # per-trial variables the scene may read though no factor (an adjustment's): name -> its range
+        self.variables = protocol.response.scene_variables()
         # mesh item id -> triangles of each (file, node) it can show (read by check_mesh)
         self.mesh_triangles: dict[str, dict[tuple[str, str | None], int]] = {}
 
@@ -80,6 +82,10 @@ class _Checker:
 
     # -- factors ------------------------------------------------------------------------------
     def factor_exists(self, name: str, path: Loc, *, numeric: bool | None = None) -> bool:
+        if name in self.variables and name not in self.factors:  # a number the response sets per trial
+            if numeric is False:
+                self.add(path, f"'{name}' is the response's adjusted variable, a number; words are needed here")
+            return numeric is not False
         if name not in self.factors:
             self.add(path, f"'{name}' is not a factor of design.factors.{_suggest(name, list(self.factors))} "
                            f"Factors: {', '.join(self.factors)}")
@@ -563,6 +569,14 @@ class _Checker:
         kind.check_observer(observer, response, self, path)
 
 
+def with_variables(conditions: list[JsonObject], variables: Mapping[str, tuple[float, float]]) -> list[JsonObject]:
+    """Each condition with every scene variable (an adjustment's) at each end of its range: the values the scene
+    is checked with (none: the conditions themselves)."""
+    for name, ends in variables.items():
+        conditions = [{**condition, name: float(end)} for condition in conditions for end in ends]
+    return conditions
+
+
 def _in_order(sub: Loc, loc: Loc) -> bool:
     """``sub``'s keys appear in ``loc`` in order (pydantic's loc adds union tags such as 'white_noise')."""
     it = iter(loc)
@@ -601,7 +615,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
     if len(conditions) * protocol.design.repetitions > 10_000_000:
         checker.add(("design", "repetitions"), f"{len(conditions)} conditions x {protocol.design.repetitions} "
                                                "repetitions is over 10 million trials; reduce them")
-    checker.check_scene(conditions)
+    checker.check_scene(with_variables(conditions, checker.variables))
     checker.check_primitive_limit()
     checker.check_mesh_budget(conditions)
     checker.check_response()

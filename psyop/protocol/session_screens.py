@@ -210,6 +210,52 @@ class EndScreen(StrictModel):
         return _fits(value)
 
 
+#: the placeholder an answer's feedback text may hold (the answer given, as trials.parquet's ``response``)
+FEEDBACK_FIELDS: tuple[str, ...] = ("answer",)
+
+
+class FeedbackText(StrictModel):
+    """What the feedback screen says: ``correct`` / ``incorrect`` after a trial the response kind scores,
+    ``answer`` (may say ``{answer}``) after one whose kind has no correct answer (e.g. a rating), ``timeout``
+    after a trial nobody answered in time."""
+
+    correct: str = Field(default="Correct", max_length=200)
+    incorrect: str = Field(default="Incorrect", max_length=200)
+    answer: str = Field(default="Your answer: {answer}", max_length=200)
+    timeout: str = Field(default="No answer in time", max_length=200)
+
+    @field_validator("correct", "incorrect", "timeout")
+    @classmethod
+    def _plain(cls, value: str) -> str:
+        return _fits(value)
+
+    @field_validator("answer")
+    @classmethod
+    def _answer(cls, value: str) -> str:
+        try:
+            names = {f for _, f, _, _ in string.Formatter().parse(value) if f is not None}
+            unknown = sorted(names - set(FEEDBACK_FIELDS))
+            sample = "" if unknown else value.format(answer="0.000000")
+        except (IndexError, KeyError, ValueError) as error:
+            raise ValueError(f"the text is not a valid template ({error}); write the placeholder as {{answer}} and "
+                             "a literal brace as {{ or }}") from None
+        if unknown:
+            raise ValueError(f"unknown placeholder(s) {unknown}; use {{answer}}")
+        _fits(sample)
+        return value
+
+
+class Feedback(StrictModel):
+    """``feedback:``: a short head-fixed screen after each recorded trial of the kinds chosen (``practice``
+    trials, ``main`` trials), shown for ``duration_s`` (not ended by the participant), saying whether the
+    answer was correct (or, for a kind with no correct answer, what it was)."""
+
+    practice: bool = Field(default=True, description="after each practice trial")
+    main: bool = Field(default=False, description="after each main (analysed) trial")
+    text: FeedbackText = Field(default_factory=FeedbackText)
+    duration_s: Number = Field(default=1.0, gt=0, le=60, description="how long the feedback shows, s")
+
+
 class SimulatedAnswers(StrictModel):
     """How a simulated participant answers questionnaires: a severity in [0, 1] drawn once per participant
     (normal, ``severity_mean``, ``severity_sd``, clipped), each answer the severity's point on the scale plus
@@ -221,12 +267,14 @@ class SimulatedAnswers(StrictModel):
 
 
 class SessionScreens(StrictModel):
-    """``session:``: instructions, breaks, questionnaires and the end screen (all optional)."""
+    """``session:``: instructions, breaks, questionnaires, feedback after trials and the end screen (all
+    optional)."""
 
     instructions: Instructions | None = None
     breaks: Breaks | None = None
     questionnaires: list[Questionnaire] = Field(default_factory=list, max_length=20)
     end_screen: EndScreen | None = None
+    feedback: Feedback | None = None
     simulated_answers: SimulatedAnswers = Field(default_factory=SimulatedAnswers)
 
     @field_validator("questionnaires")

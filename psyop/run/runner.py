@@ -356,7 +356,8 @@ def _screens(plan: SessionPlan, opened: _Opened, bundle: Backends, options: Sess
              fresh: bool) -> ScreenRunner | None:
     """The protocol's ``session:`` screens for this run (None: it has none): the simulated participant paces and
     answers them with ``--responses sim``, nobody with ``none``, else the live participant's answer inputs end
-    them (psyop.session.screens)."""
+    them, and a source's raw input (``poll_raw``: keyboard, response box) answers questionnaire items
+    (psyop.session.screens)."""
     section = plan.protocol.session
     if section is None:
         return None
@@ -370,8 +371,9 @@ def _screens(plan: SessionPlan, opened: _Opened, bundle: Backends, options: Sess
         answer = responses.collect(row, now_s)
         return None if answer is None else answer.response
 
+    raw = getattr(responses, "poll_raw", None) if pacing == "live" else None
     return session_screens(section, pacing=pacing, seed=int(opened.seed), recorder=recorder, fresh=fresh,
-                           live_input=live_input if pacing == "live" else None)
+                           live_input=live_input if pacing == "live" else None, raw_input=raw)
 
 
 def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: SessionOutcome,

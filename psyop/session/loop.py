@@ -50,7 +50,8 @@ from psyop.schedule.rows import interval_values
 from psyop.datacontract import typed_response
 from psyop.session.plan import TIMEOUT_RESPONSE, FixationPath, FixationPoint, ResponsePlan, SessionPlan
 from psyop.session.progress import Progress, session_progress
-from psyop.session.responses.base import Response, ResponseSource
+from psyop.session.responses.base import RawInputSource, Response, ResponseSource, score
+from psyop.protocol.kinds.adjustment import AdjustmentSpec, path_column
 from psyop.session.screens import ScreenRunner
 
 
@@ -261,6 +262,8 @@ class TrialLoop:
                 recorded.add(int(record["trial"]))  # counted before a held Ctrl-C is raised
             n_stopped = self._recorded(record, schedule, recorded, n_stopped)
             bar.update(1)
+            if self.screens is not None:  # feedback on the trial just recorded (session: feedback)
+                self.screens.after_trial(self, record, len(recorded), n_total)
 
     def _stopped(self, exc: BaseException, recorded: set[int], n_total: int) -> tuple[str, str]:
         """The outcome's status and message when ``exc`` stopped the session."""
@@ -444,18 +447,49 @@ class TrialLoop:
             if self.config.phase_delay_s > 0:
                 time.sleep(self.config.phase_delay_s)
             end_s = phase_start + phase.duration_s
+            paced = phase.ends_after_s is not None and isinstance(self.responses, RawInputSource)
+            if paced:  # a live participant ends it: the minimum first (psyop.session.phases.PhaseSpec.ends_after_s)
+                end_s = phase_start + float(phase.ends_after_s or 0.0)
             if self.config.every_frame:
                 v, n = self._frames_until(end_s, row, phase, frames)
             else:
                 v, n = self._sampled_frame(phase_start + 0.5 * phase.duration_s, row, phase, frames) if sampled and phase.renders else (0, 0)
                 self.clock.sleep_until(end_s)
             valid, total = valid + v, total + n
+            if paced:
+                v, n, end_s = self._until_participant_ends(end_s, row, phase, frames)
+                valid, total = valid + v, total + n
             if self.state is TrialState.RECALIBRATE:
                 sample = self._fresh(self.gaze.latest(self.clock.now_s()))
                 drift_deg = self.conditioner.recalibrate(sample, np.array([0.0, 0.0, -1.0]))
             phase_start = end_s
         self._phase_index = -1  # the response phase
         return valid, total, drift_deg
+
+    def _until_participant_ends(self, min_end_s: float, row: TrialRow, phase: PhaseSpec,
+                                frames: FrameRecorder) -> tuple[int, int, float]:
+        """A participant-paced interval after its minimum (``min_end_s``): frames on until the live source reports
+        an input its kind maps (an answer key or button) made at or after the minimum, which ends the interval
+        (the response phase follows); (frames with valid gaze, frames, the interval's end)."""
+        source = self.responses
+        assert isinstance(source, RawInputSource)
+        valid = total = 0
+        t = min_end_s
+        while True:
+            now_s = self.clock.now_s()
+            if source.raw_inputs(min_end_s - 1e-9, now_s):  # inputs before the minimum are dropped
+                return valid, total, max(now_s, min_end_s)
+            if self.config.every_frame:  # the display paces the frames (a frame begun during the minimum first)
+                if self._pending is not None:
+                    request, self._pending = self._pending, None
+                else:
+                    request = self.display.begin_frame(t)
+                v, n = self._frame(row, phase, frames, request)
+                valid, total = valid + v, total + n
+                t = max(t + self.frame_period_s, request.display_time_s + request.period_s)
+            else:
+                t = now_s + 0.01
+                self.clock.sleep_until(t)
 
     def _track_reach(self, row: TrialRow, response: Response, end_s: float) -> tuple[Response, TrialRecord]:
         """A reach: take the pose source's last N hand samples (hold last valid), recompute
@@ -464,7 +498,7 @@ class TrialLoop:
         if response.reach_m is None or self.pose is None:
             return response, {}
         extras = dict(response.extras)
-        endpoint = tuple(extras[k] for k in ("hand_x_m", "hand_y_m", "hand_z_m")) if "hand_x_m" in extras else None
+        endpoint = tuple(float(extras[k]) for k in ("hand_x_m", "hand_y_m", "hand_z_m")) if "hand_x_m" in extras else None
         samples = self.pose.hand(row, end_s, self.config.hand_last_n, endpoint)
         if not samples:
             return response, {}
@@ -575,6 +609,9 @@ class TrialLoop:
             request, self._pending = self._pending, None
             self._frame(row, prompt, frames, request)
             slot_s = request.display_time_s + request.period_s
+        adjustment = plan.adjustment if plan is not None else None
+        if adjustment is not None and isinstance(self.responses, RawInputSource):  # a person adjusts, frame by frame
+            return self._await_adjustment(row, frames, prompt, adjustment, start_s, slot_s, timeout_s)
         while True:
             response = self.responses.collect(row, self.clock.now_s())
             if response is not None:
@@ -593,6 +630,41 @@ class TrialLoop:
                     continue
             else:
                 wake_s = self.clock.now_s() + 0.01
+            self.clock.sleep_until(wake_s if timeout_s is None else min(wake_s, start_s + timeout_s))
+
+    def _await_adjustment(self, row: TrialRow, frames: FrameRecorder, prompt: PhaseSpec, adjustment: AdjustmentSpec,
+                          start_s: float, slot_s: float, timeout_s: float | None) -> Response:
+        """An adjustment's response phase (psyop.protocol.kinds.adjustment): each frame, the source's raw inputs
+        since the phase began move the value (:class:`AdjustmentState`), and the stimulus is drawn with the value
+        it has at the frame's display time, written into the row, until the participant confirms (or the phase
+        times out). The answer is the final value; its path goes to ``<variable>_path``."""
+        source = self.responses
+        assert isinstance(source, RawInputSource)
+        state = adjustment.state(float(row[adjustment.variable]), start_s)
+        column = path_column(adjustment.variable)
+        while True:
+            now_s = self.clock.now_s()
+            for event in source.raw_inputs(start_s, now_s):
+                state.apply(event.name, event.t_s, event.amount)
+            if state.confirmed_s is not None:
+                assert self.response_plan is not None  # an adjustment is the plan's response
+                scored = score(self.response_plan.kind, row, state.answer())
+                return dataclasses.replace(scored, response_time_s=state.confirmed_s - start_s,
+                                           extras=((column, state.path_json()),))
+            if timeout_s is not None and now_s - start_s >= timeout_s - 1e-9:
+                self.responses.timed_out()
+                return Response(TIMEOUT_RESPONSE, correct=None, response_time_s=math.nan,
+                                extras=((column, state.path_json()),))
+            if self.config.every_frame:  # the display's pacing, as in _await_response
+                request = self.display.begin_frame(now_s if self.clock.virtual else slot_s)
+                self._frame({**row, adjustment.variable: state.value_at(request.display_time_s)}, prompt, frames,
+                            request)
+                slot_s = request.display_time_s + request.period_s
+                wake_s = self.clock.now_s() + self.frame_period_s if self.clock.virtual else slot_s
+                if self.display.paced:
+                    continue
+            else:
+                wake_s = now_s + 0.01
             self.clock.sleep_until(wake_s if timeout_s is None else min(wake_s, start_s + timeout_s))
 
 

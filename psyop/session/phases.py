@@ -26,7 +26,10 @@ class PhaseSpec:
     drives simulated gaze). The rendering mode is the trial row's ``mode_column`` when given
     (intervals: ``mode_interval<k>``), else the fixed ``mode``. ``primitives``: the scene ids
     drawn (None: all of them). ``interval``: which interval's factor values the scene uses
-    (1-based; 0: none). ``target_size_deg``: the recalibration cross's size.
+    (1-based; 0: none). ``target_size_deg``: the recalibration cross's size. ``ends_after_s``: an
+    interval with ``min_duration_s``: a live participant ends it with an answer input from this time into the
+    phase on (its ``min_duration_s``), while ``duration_s`` is when a simulated participant ends it; None: the
+    phase lasts ``duration_s`` for everyone.
     """
 
     name: str
@@ -38,6 +41,7 @@ class PhaseSpec:
     primitives: tuple[str, ...] | None = None
     interval: int = 0
     target_size_deg: float = 1.0
+    ends_after_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.show not in ("cross", "stimulus", "blank", "off", "target", "text"):

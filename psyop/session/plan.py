@@ -31,6 +31,7 @@ from psyop.protocol.factor_fields import factor_fields, resolve_factor_fields
 from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
 from psyop.protocol.kinds import kind_of
+from psyop.protocol.kinds.adjustment import AdjustmentResponse, AdjustmentSpec
 from psyop.protocol.kinds.base import Inputs, KindResponse, ResponseKindSpec
 from psyop.protocol.kinds.left_right_nearer import LeftRightNearerResponse
 from psyop.protocol.kinds.reach import ReachResponse
@@ -156,7 +157,8 @@ class ResponsePlan:
     experimenter's console at each response phase of a live session). The participant reads the
     prompt, else the question, in the headset during the response phase (:attr:`participant_text`).
     Both are recorded in session.json. ``phase``: what the display shows while
-    waiting (blank, or off for blind reaching)."""
+    waiting (blank, off for blind reaching, or interval 1's stimulus for an adjustment, whose
+    ``adjustment`` says what is adjusted: psyop.protocol.kinds.adjustment)."""
 
     kind: ResponseKindSpec
     question: str
@@ -168,22 +170,34 @@ class ResponsePlan:
     average_last_samples: int = 10
     level_factor: str | None = None  # the factor a psychometric function is fitted over (two_interval, yes_no)
     phase: PhaseSpec = field(default_factory=lambda: PhaseSpec("response", 0.0, "blank", "none"))
+    adjustment: AdjustmentSpec | None = None
+    #: the kind's lines under the prompt (ResponseKindSpec.response_text: a rating's scale); None: the prompt alone
+    response_text: str | None = None
+
+    @property
+    def keeps_lines(self) -> bool:
+        """Whether :attr:`participant_text` is drawn with its line breaks kept (each line wrapped on its own):
+        when the kind adds lines; a prompt alone is wrapped as one paragraph, as ever."""
+        return self.response_text is not None
 
     @property
     def participant_text(self) -> str | None:
         """What the participant reads in the headset during the response phase: the ``prompt``, else the
-        ``question``; None when the display is off (docs/protocols.md, "Trial phases")."""
-        if self.display_off or self.phase.show == "off":
+        ``question``, then the kind's :attr:`response_text` after an empty line; None when the display is off
+        (docs/protocols.md, "Trial phases")."""
+        if self.display_off or self.phase.show in ("off", "stimulus"):  # an adjustment shows what it adjusts
             return None
         for text in (self.prompt, self.question):
             if text is not None and text.strip():
-                return text.strip()
-        return None
+                return text.strip() if self.response_text is None else f"{text.strip()}\n\n{self.response_text}"
+        return self.response_text
 
     def as_dict(self) -> dict[str, Any]:  # Any: session.json values
         return {"kind": self.kind.name, "question": self.question,
                 "prompt": self.prompt, "timeout_s": self.timeout_s, "display_off": self.display_off,
-                "average_last_samples": self.average_last_samples, "level_factor": self.level_factor}
+                "average_last_samples": self.average_last_samples, "level_factor": self.level_factor} | \
+            ({} if self.adjustment is None else {"adjustment": self.adjustment.as_dict()}) | \
+            ({} if self.response_text is None else {"response_text": self.response_text})
 
 
 @dataclass(frozen=True)
@@ -233,7 +247,9 @@ class SessionPlan:
         return {
             "response_kind": self.kind.name,
             "response": self.response.as_dict(),
-            "phases": [dict(p.__dict__, primitives=None if p.primitives is None else list(p.primitives))
+            # ends_after_s is the protocol's min_duration_s (in protocol_text): left out, session.json as before
+            "phases": [{k: v for k, v in dict(p.__dict__, primitives=None if p.primitives is None else
+                                              list(p.primitives)).items() if k != "ends_after_s"}
                        for p in self.phases],
             "eye_model": {"name": self.rig.eye_model.name, "nc_m": self.rig.nc_m},
             "ipd_m": self.rig.ipd_m,
@@ -249,7 +265,8 @@ class SessionPlan:
 
 def _duration_s(phase: Interval | Blank | DriftRecalibration) -> float:
     """A fixed phase's duration; a participant-paced one runs for its minimum, else expected, time
-    (a simulated participant ends it then; a live one by the clock, see docs/protocols.md)."""
+    (a simulated participant ends it then; a live one with an answer input after its minimum: PhaseSpec.ends_after_s,
+    psyop.session.loop)."""
     if isinstance(phase, DriftRecalibration):
         return float(phase.expected_s)
     if phase.duration_s is not None:
@@ -307,7 +324,8 @@ def compile_phases(protocol: Protocol, gaze: str) -> tuple[tuple[PhaseSpec, ...]
             n_interval += 1
             primitives = None if phase.show == "all" else tuple(phase.show)
             out.append(PhaseSpec(f"interval{n_interval}", _duration_s(phase), "stimulus", gaze,
-                                 mode_column=mode_column(n_interval), primitives=primitives, interval=n_interval))
+                                 mode_column=mode_column(n_interval), primitives=primitives, interval=n_interval,
+                                 ends_after_s=None if phase.min_duration_s is None else float(phase.min_duration_s)))
         elif isinstance(phase, Blank):
             if phase.display_off:
                 out.append(PhaseSpec("display_off", _duration_s(phase), "off", "none", mode=phase.mode))
@@ -317,6 +335,16 @@ def compile_phases(protocol: Protocol, gaze: str) -> tuple[tuple[PhaseSpec, ...]
         elif isinstance(phase, ResponsePhase):
             return tuple(out), phase
     return tuple(out), None
+
+
+def _response_phase(protocol: Protocol, display_off: bool) -> PhaseSpec:
+    """What the response phase shows: nothing (display off), a blank with the prompt, or, for an adjustment,
+    interval 1's stimulus (its mode and ``show:``), which the session draws with the adjusted value."""
+    if isinstance(protocol.response, AdjustmentResponse) and not display_off:
+        show = protocol.trial.intervals[0].show if protocol.trial.intervals else "all"
+        return PhaseSpec("response", 0.0, "stimulus", "none", mode_column=mode_column(1),
+                         primitives=None if show == "all" else tuple(show), interval=1)
+    return PhaseSpec("response", 0.0, "off" if display_off else "blank", "none")
 
 
 def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> SessionPlan:
@@ -350,7 +378,9 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
         display_off=display_off,
         average_last_samples=int(r.average_last_samples) if isinstance(r, ReachResponse) else 10,
         level_factor=r.level(),
-        phase=PhaseSpec("response", 0.0, "off" if display_off else "blank", "none"),
+        response_text=kind_of(r).response_text(r),
+        phase=_response_phase(protocol, display_off),
+        adjustment=AdjustmentSpec.of(r) if isinstance(r, AdjustmentResponse) else None,
     )
     return SessionPlan(study=protocol.study.name, protocol=protocol, phases=phases, response=response,
                        observer=protocol.observer, display=resolve_display_profile(spec), rig=rig, fixation=path, fixation_point=point,

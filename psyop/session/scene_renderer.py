@@ -136,7 +136,8 @@ class SceneRenderer:
             return text_scene(self._texts.image(phase.text, keep_lines=True), scene_origin_m(self.protocol, centre))
         text = self.plan.response.participant_text
         if phase == self.plan.response.phase and text is not None:  # head-fixed, like the cross
-            return text_scene(self._texts.image(text), scene_origin_m(self.protocol, centre)) if watched else None
+            image = self._texts.image(text, keep_lines=self.plan.response.keeps_lines) if watched else None
+            return None if image is None else text_scene(image, scene_origin_m(self.protocol, centre))
         if phase.show == "blank" and not phase.primitives:
             return blank_scene() if watched else None
         if phase.show == "blank" and not watched:

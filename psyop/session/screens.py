@@ -22,11 +22,14 @@ Each screen is participant-paced:
   noise; every draw keyed by the questionnaire, its time and the item, so a resumed session draws the same);
 - nobody (``--responses none``) lets it pass after the same time, answering nothing;
 - a live participant ends it with the next input the session's response source accepts as an answer (the
-  response kind's keys on the keyboard, its buttons on a response box or a headset controller). Not supported:
-  any other key (a source reports only its kind's inputs, so "any key" means any answer key), and rating a
-  questionnaire item in the headset: a live answer is recorded only when the input is itself a scale point
-  (the text of a number 0 .. points - 1), which no shipped response source delivers; otherwise ``answer`` is
-  null and ``answered_by`` holds the input that ended the item (give the questionnaire outside the headset).
+  response kind's keys on the keyboard, its buttons on a response box or a headset controller; "any key" means
+  any answer key). A questionnaire item is answered with a scale point: the digit keys 0 .. points - 1 (top row
+  or keypad) or the response box's digit buttons, read raw from a source that offers them (``poll_raw``: the
+  keyboard, the response box) and interpreted here; any other input leaves the item showing. A source without
+  raw input (the headset's controllers: two buttons cannot pick one of several points) ends an item with an
+  answer input as before, the item's ``answer`` null and ``answered_by`` naming that input.
+- feedback after a trial (``feedback``) is timed, not participant-paced: it shows for its ``duration_s``
+  whoever answers (``ended_by`` ``timed``).
 
 Every screen shown is one record in the run's events log and every item answered one record in its
 questionnaire log (psyop.session.log.screens_log), durable when it ends; finalisation writes events.parquet
@@ -46,7 +49,8 @@ from typing import TYPE_CHECKING, Literal, Protocol
 import numpy as np
 
 from psyop.protocol import ssq
-from psyop.protocol.session_screens import Questionnaire, SessionScreens as ScreensSection
+from psyop.datacontract import TIMEOUT_RESPONSE
+from psyop.protocol.session_screens import Feedback, Questionnaire, SessionScreens as ScreensSection
 from psyop.session.events import SessionEvent
 from psyop.session.gaze.plan import FixationPlan
 from psyop.session.log.raw_gaze import raw_gaze_table
@@ -65,6 +69,8 @@ if TYPE_CHECKING:
 Pacing = Literal["simulated", "nobody", "live"]
 #: a live participant's input: (the row the response source scores against, now) -> the answer given, or None
 ScreenInput = Callable[[TrialRow, float], "str | None"]
+#: a live source's raw input since the last poll: (input name, time on the session clock, the kind's answer or None)
+RawInput = Callable[[], "list[tuple[str, float, str | None]]"]
 #: the row a screen's frames are drawn and logged with (no trial)
 SCREEN_ROW: JsonObject = {"trial": -1, "condition": "session_screen"}
 
@@ -89,6 +95,8 @@ class Screen:
     text: str
     expected_s: float
     questionnaire: Questionnaire | None = None
+    #: shown for ``expected_s`` whoever participates, never ended by an input (feedback)
+    timed: bool = False
 
     def phase(self) -> ScreenPhase:
         return ScreenPhase(f"{self.screen}_{self.page}", self.expected_s, "text", "cross", text=self.text)
@@ -104,6 +112,7 @@ class Moment:
     block: int
     done: int
     total: int
+    after_trial: int = -1  # the trial a feedback screen follows (-1: every other screen)
 
     @property
     def left(self) -> int:
@@ -149,13 +158,29 @@ def break_screen(section: ScreensSection, moment: Moment) -> Screen:
     return Screen("break", "break", 0, 1, text, float(breaks.expected_s))
 
 
+def feedback_text(feedback: Feedback, record: TrialRow) -> str:
+    """What the feedback after trial ``record`` says: correct / incorrect when its kind scored the answer, the
+    timeout text when nobody answered in time, else the answer given (a kind with no correct answer)."""
+    correct, response = record.get("correct"), str(record.get("response"))
+    if correct is not None and not (isinstance(correct, float) and math.isnan(correct)):
+        return feedback.text.correct if bool(correct) else feedback.text.incorrect
+    if response == TIMEOUT_RESPONSE:
+        return feedback.text.timeout
+    return feedback.text.answer.format(answer=response)
+
+
+def feedback_screen(feedback: Feedback, record: TrialRow) -> Screen:
+    return Screen("feedback", "feedback", 0, 1, feedback_text(feedback, record), float(feedback.duration_s),
+                  timed=True)
+
+
 def end_screens(section: ScreensSection) -> list[Screen]:
     end = section.end_screen
     return [] if end is None else [Screen("end", "end", 0, 1, end.text, float(end.expected_s))]
 
 
 def screens_of_kind(section: ScreensSection, kind: str, *, done: int = 0, total: int = 0) -> list[Screen]:
-    """Every screen of ``kind`` (instructions | break | questionnaire | end) in session order (a break as after
+    """Every screen of ``kind`` (instructions | break | questionnaire | end | feedback) in session order (a break as after
     ``done`` of ``total`` trials): what ``psyop render --phase KIND --screen N`` draws."""
     if kind == "instructions":
         return instruction_screens(section)
@@ -165,6 +190,9 @@ def screens_of_kind(section: ScreensSection, kind: str, *, done: int = 0, total:
         return [s for q in section.questionnaires for s in questionnaire_screens(q)]
     if kind == "end":
         return end_screens(section)
+    if kind == "feedback":  # after a correct answer, then after an incorrect one
+        return [] if section.feedback is None else [feedback_screen(section.feedback, {"correct": c})
+                                                    for c in (True, False)]
     raise ValueError(f"unknown screen kind {kind!r}")
 
 
@@ -237,6 +265,7 @@ class ScreenRunner:
     recorder: ScreenRecorder | None = None
     fresh: bool = True
     live_input: ScreenInput | None = None
+    raw_input: RawInput | None = None  # a live source's raw input: questionnaire items answered with digits
     _block: int | None = None
     _break_mark: int = 0
     _administrations: int = 0
@@ -277,6 +306,17 @@ class ScreenRunner:
             if instructions is not None and block in instructions.at_blocks:
                 self._show_all(loop, instruction_screens(self.section), Moment("at_block", trial, block, done, total),
                                row)
+
+    def after_trial(self, loop: ScreenHost, record: TrialRow, done: int, total: int) -> None:
+        """The feedback after trial ``record`` (just recorded; ``done`` of ``total`` trials recorded), when the
+        protocol's ``feedback`` is on for its kind of trial (``practice`` or ``main``)."""
+        feedback = self.section.feedback
+        practice = bool(record.get("practice", False))
+        if feedback is None or not (feedback.practice if practice else feedback.main):
+            return
+        moment = Moment("practice" if practice else "main", -1, int(record.get("block", 0)), done, total,
+                        after_trial=int(record["trial"]))
+        self._show(loop, feedback_screen(feedback, record), moment, record)
 
     def at_end(self, loop: ScreenHost, done: int, total: int, row: TrialRow) -> None:
         """After the run's last trial: the end questionnaires, then the end screen (``row``: the last trial's,
@@ -319,6 +359,18 @@ class ScreenRunner:
             return None, ended_by
         return None, ended_by
 
+    def _given(self, screen: Screen, row: TrialRow, start: float, now_s: float) -> str | None:
+        """A live participant's input that ends ``screen`` (shown since ``start``), or None: on a questionnaire
+        item a scale point read raw (when the source offers raw input), else the next answer input."""
+        if screen.questionnaire is not None and self.raw_input is not None:
+            points = len(scale_labels(screen.questionnaire))
+            for name, t_s, _ in self.raw_input():
+                point = scale_point(name, points)
+                if point is not None and t_s >= start:  # a key held over from the item before is not this answer
+                    return str(point)
+            return None
+        return self.live_input(row, now_s) if self.live_input is not None else None
+
     def _show_all(self, loop: ScreenHost, screens: list[Screen], moment: Moment, row: TrialRow) -> None:
         for screen in screens:
             self._show(loop, screen, moment, row)
@@ -353,17 +405,18 @@ class ScreenRunner:
         loop.gaze.set_plan(FixationPlan("cross", start, 1.0))
         for sink in loop.events:  # outside recorders (LSL markers) see each screen's onset
             sink.emit(SessionEvent("phase", -1, "session_screen", start, phase.name))
-        paced_end = None if self.pacing == "live" else start + screen.expected_s
+        paced_end = None if self.pacing == "live" and not screen.timed else start + screen.expected_s
+        by = "timed" if screen.timed else self.pacing
         if paced_end is not None and not loop.config.every_frame:
             clock.sleep_until(paced_end)
-            return start, clock.now_s(), self.pacing
+            return start, clock.now_s(), by
         t = start
         while True:
             if paced_end is not None and t >= paced_end - 1e-9:
                 clock.sleep_until(paced_end)
-                return start, clock.now_s(), self.pacing
+                return start, clock.now_s(), by
             if paced_end is None:
-                given = self.live_input(row, clock.now_s()) if self.live_input is not None else None
+                given = self._given(screen, row, start, clock.now_s())
                 if given is not None:
                     return start, clock.now_s(), f"input:{given}"
             if not loop.config.every_frame:
@@ -371,6 +424,12 @@ class ScreenRunner:
                 clock.sleep_until(t)
                 continue
             t = _screen_frame(loop, phase, start, t)
+
+
+def scale_point(name: str, points: int) -> int | None:
+    """The scale point a raw input names: a digit key (``3``, keypad ``kp_3``) or box button 0 .. points - 1."""
+    digit = name.removeprefix("kp_")
+    return int(digit) if len(digit) == 1 and digit.isdigit() and int(digit) < points else None
 
 
 def _screen_frame(loop: ScreenHost, phase: ScreenPhase, start: float, t: float) -> float:
@@ -391,14 +450,15 @@ def event_row(run: int, screen: Screen, moment: Moment, start: float, end: float
     """The events log's row of one screen (psyop.session.log.screens_log.EVENTS_SCHEMA)."""
     return {"run": run, "screen": screen.screen, "name": screen.name, "page": screen.page,
             "n_pages": screen.n_pages, "when": moment.when, "before_trial": moment.before_trial,
-            "block": moment.block, "trials_done": moment.done, "trials_left": moment.left, "start_s": start,
+            "block": moment.block, "after_trial": moment.after_trial, "trials_done": moment.done, "trials_left": moment.left, "start_s": start,
             "end_s": end, "duration_s": end - start if math.isfinite(end - start) else None,
             "ended_by": ended_by, "text": screen.text}
 
 
 def session_screens(section: ScreensSection | None, *, pacing: Pacing, seed: int, recorder: ScreenRecorder | None,
-                    fresh: bool, live_input: ScreenInput | None = None) -> ScreenRunner | None:
+                    fresh: bool, live_input: ScreenInput | None = None,
+                    raw_input: RawInput | None = None) -> ScreenRunner | None:
     """The screens of a run (None: the protocol has no ``session:``, and the loop runs as without it)."""
     if section is None:
         return None
-    return ScreenRunner(section, pacing, int(seed), recorder, fresh, live_input)
+    return ScreenRunner(section, pacing, int(seed), recorder, fresh, live_input, raw_input)

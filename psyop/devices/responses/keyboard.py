@@ -2,7 +2,9 @@
 
 The keys are raw input; the response kind (psyop.protocol.kinds, carried by the session plan) maps each to
 an answer (its ``keys``) and scores it. A kind whose answer is a hand position (reach) has its keys confirm
-and the reach read from the hand pose. docs/protocols.md lists each kind's keys.
+and the reach read from the hand pose. docs/protocols.md lists each kind's keys. :meth:`KeyboardResponses.poll_raw`
+hands every key pressed, unmapped, to whoever interprets other input (a questionnaire item's scale points, the
+end of a participant-paced interval: psyop.session.screens, psyop.session.loop).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from collections.abc import Callable, Mapping
 from typing import Protocol
 
 from psyop.session.rows import TrialRow
-from psyop.session.responses.base import Response, ResponseKindSpec, score
+from psyop.session.responses.base import RawInput, Response, ResponseKindSpec, score
 
 class KeyEvents(Protocol):
     """Source of key presses: ``poll`` returns (key name, time on the session clock) pairs."""
@@ -54,6 +56,25 @@ class KeyboardResponses:
                 r = score(self.kind, row, answer)
             return Response(r.response, r.correct, r.reach_m, r.chosen_mode, rt)
         return None
+
+    def poll_raw(self) -> list[tuple[str, float, str | None]]:
+        """Every key pressed since the last poll: (key name in lower case, time on the session clock, the kind's
+        answer it maps to or None). What the key means is the caller's (the response phase uses :meth:`collect`)."""
+        return [(key.lower(), t_s, self.keymap.get(key.lower())) for key, t_s in self.events.poll()]
+
+    def raw_inputs(self, since_s: float, now_s: float) -> list[RawInput]:
+        """Every mapped key pressed since ``since_s`` (the response phase's start), in order; earlier ones are
+        counted in ``early_presses`` and dropped (an adjustment reads these, frame by frame)."""
+        out: list[RawInput] = []
+        for key, t_s in self.events.poll():
+            name = self.keymap.get(key.lower())
+            if name is None:
+                continue
+            if t_s < since_s:
+                self.early_presses += 1
+                continue
+            out.append(RawInput(name, t_s))
+        return out
 
     def timed_out(self) -> None:
         self._prompt_s = None

@@ -95,6 +95,11 @@ class KindResponse(StrictModel):
         as intended), each as factor -> level (none for a kind without the declaration)."""
         return []
 
+    def scene_variables(self) -> dict[str, tuple[float, float]]:
+        """Per-trial variables the scene may read as ``{factor: NAME}`` though no design factor (an adjustment's
+        adjusted value), each with the range it can take (validation checks the scene at both ends)."""
+        return {}
+
 
 class ObserverBase(StrictModel):
     """What every simulated observer has: ``eye``, the simulated eye and tracker (psyop.protocol.simulated_eye).
@@ -120,6 +125,10 @@ class ObserverBase(StrictModel):
     def probability(self, row: TrialRow, participant: Mapping[str, float]) -> float | None:
         """For a binary answer: p of the answer given when ``u < p`` (the margin tests read it); else None."""
         return None
+
+    def extras(self, row: TrialRow, participant: Mapping[str, float], u: float) -> dict[str, float | str]:
+        """Trial-log values beside the answer (an adjustment's path), from the same draws as :meth:`answer`."""
+        return {}
 
 
 class ProtocolParts(Protocol):
@@ -268,6 +277,11 @@ class ResponseKindSpec(ABC):
     def score(self, row: TrialRow, answer: str) -> Scored:
         """``answer`` (one of the values of :attr:`keys`) scored against the trial ``row``."""
         return Scored()
+
+    def response_text(self, response: KindResponse) -> str | None:
+        """Lines the participant reads under the prompt on the response panel (e.g. a rating scale's points and
+        labels), each kept on its own line; None: the prompt alone (psyop.session.plan.ResponsePlan)."""
+        return None
 
     @abstractmethod
     def targets(self, study: StudyInputs) -> list[AnalysisTarget]:

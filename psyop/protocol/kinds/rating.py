@@ -174,6 +174,14 @@ class Rating(ResponseKindSpec):
     def score(self, row: TrialRow, answer: str) -> Scored:
         return Scored(correct=None)
 
+    def response_text(self, response: KindResponse) -> str | None:
+        """The scale under the prompt: each point's key and label, lowest first; without labels the keys' range."""
+        assert isinstance(response, RatingResponse)
+        points = int(response.scale.points)
+        if response.scale.labels is None:
+            return f"1 (lowest) to {points} (highest)"
+        return "\n".join(f"{point}  {label}" for point, label in enumerate(response.scale.labels, start=1))
+
     def targets(self, study: StudyInputs) -> list[AnalysisTarget]:
         """Mean ratings, the ANOVA and the ordinal model in results/ and their figure (analysis/rating.py)."""
         return [figure_target(study, "rating", "analysis/rating.py")]

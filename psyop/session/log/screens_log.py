@@ -22,7 +22,7 @@ from psyop.session.rows import JsonMapping
 EVENTS_SCHEMA = pa.schema([
     ("run", pa.int32()), ("seq", pa.int32()), ("screen", pa.string()), ("name", pa.string()),
     ("page", pa.int32()), ("n_pages", pa.int32()), ("when", pa.string()), ("before_trial", pa.int64()),
-    ("block", pa.int64()), ("trials_done", pa.int64()), ("trials_left", pa.int64()),
+    ("block", pa.int64()), ("after_trial", pa.int64()), ("trials_done", pa.int64()), ("trials_left", pa.int64()),
     ("start_s", pa.float64()), ("end_s", pa.float64()), ("duration_s", pa.float64()),
     ("ended_by", pa.string()), ("text", pa.string()),
 ])

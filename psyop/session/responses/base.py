@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 from psyop.protocol.kinds.base import ResponseKindSpec
 from psyop.session.rows import TrialRow
 
-__all__ = ["Response", "ResponseKindSpec", "ResponseSource", "score"]
+__all__ = ["RawInput", "RawInputSource", "Response", "ResponseKindSpec", "ResponseSource", "score"]
 
 
 @dataclass(frozen=True)
@@ -22,7 +22,7 @@ class Response:
     reach_m: float | None = None
     chosen_mode: str | None = None
     response_time_s: float = math.nan
-    extras: tuple[tuple[str, float], ...] = ()  # extra trial-log values, e.g. hand position
+    extras: tuple[tuple[str, float | str], ...] = ()  # extra trial-log values, e.g. hand position, a path
 
 
 def score(kind: ResponseKindSpec, row: TrialRow, answer: str, reach_m: float | None = None) -> Response:
@@ -49,3 +49,22 @@ class ResponseSource(Protocol):
         ...
 
     def close(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class RawInput:
+    """One raw input of a device, already named by the response kind's map (an adjustment's 'up', 'down',
+    'confirm'; 'axis' for a thumbstick, whose deflection in [-1, 1] is ``amount``), at its session-clock time."""
+
+    name: str
+    t_s: float
+    amount: float = 1.0
+
+
+@runtime_checkable
+class RawInputSource(Protocol):
+    """A response source that can report every raw input, not only an answer: what a response that the loop
+    builds from many inputs (an adjustment) reads, once per frame. Inputs before ``since_s`` (the response
+    phase's start) are dropped (pressed before the prompt); each input is reported once."""
+
+    def raw_inputs(self, since_s: float, now_s: float) -> list[RawInput]: ...

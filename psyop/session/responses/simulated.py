@@ -8,6 +8,7 @@ once per participant from (seed, participant).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -20,8 +21,8 @@ from psyop.errors import UserError
 from psyop.session.gaze.keyed import KeyedGenerator, keyed_rng, keyed_uniform
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.reach import HAND_HEIGHT_M
-from psyop.protocol.kinds import KINDS, kind_named
 from psyop.protocol.base import format_level
+from psyop.protocol.kinds import KINDS, kind_named
 from psyop.protocol.kinds.base import ObserverBase, ResponseKindSpec, observer_kind_name
 from psyop.session.responses.base import Response, score
 
@@ -103,22 +104,22 @@ class Psychometric2AFC(SimulatedObserver):
         self.lapse = float(_get(params, "lapse", 0.0))
         self.slope = float(_get(params, "threshold_slope", 0.0))
         self.offset_column = _get(params, "threshold_offset_column")
-        sd = float(_get(params, "between_subject_sd_D", 0.0))
         #: the threshold's offset per level of the offset column (None: ``threshold_slope`` x its value)
         self.offsets_D = None if _get(params, "threshold_offset_D") is None else \
             {str(k): float(v) for k, v in dict(_get(params, "threshold_offset_D")).items()}
+        sd = float(_get(params, "between_subject_sd_D", 0.0))
         self.participant_shift_D = float(self._participant_rng.normal(0.0, sd)) if sd > 0 else 0.0
         if self.width_D <= 0 or not 0 <= self.lapse < 0.5:
             raise UserError("observer: width_D must be > 0 and lapse in [0, 0.5)", "protocol observer")
 
     def threshold_for(self, row: TrialRow) -> float:
-        offset = float(row[self.offset_column]) if self.offset_column else 0.0
         if self.offset_column and self.offsets_D is not None:
             level = format_level(row[self.offset_column])
             if level not in self.offsets_D:
                 raise UserError(f"observer: threshold_offset_D has no offset for {self.offset_column} = {level}",
                                 "protocol observer")
             return self.threshold_D + self.participant_shift_D + self.offsets_D[level]
+        offset = float(row[self.offset_column]) if self.offset_column else 0.0
         return self.threshold_D + self.participant_shift_D + self.slope * offset
 
     def p_correct(self, row: TrialRow) -> float:
@@ -332,7 +333,9 @@ class DeclaredObserver(SimulatedObserver):
 
     def collect(self, row: TrialRow, now_s: float) -> Response:
         u = keyed_uniform(*self.trial_keys(row))
-        return score(self.kind, row, self.model.answer(row, self.participant_state, u))
+        r = score(self.kind, row, self.model.answer(row, self.participant_state, u))
+        extras = self.model.extras(row, self.participant_state, u)
+        return r if not extras else dataclasses.replace(r, extras=tuple(extras.items()))
 
 
 def declared_observer(name: str) -> tuple[ResponseKindSpec, type[ObserverBase]]:
