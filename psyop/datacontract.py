@@ -173,6 +173,19 @@ def low_gaze_mask(trials: pd.DataFrame, legacy_threshold: float = MIN_VALID_GAZE
     return (marked.astype(bool) | legacy).rename(None)
 
 
+#: Per trial: whether the intervals' frames stayed within the protocol's ``trial.max_gaze_age_ms`` on all but
+#: ``trial.max_gaze_age_over_share`` of them (null: no bound, or no interval frame with valid gaze;
+#: psyop.session.latency).
+GAZE_AGE_OK = "gaze_age_ok"
+
+
+def late_gaze_mask(trials: pd.DataFrame) -> pd.Series:
+    """True for the trials marked late-gaze: ``gaze_age_ok`` false (a session before the column: none)."""
+    if GAZE_AGE_OK not in trials:
+        return pd.Series(False, index=trials.index)
+    return trials[GAZE_AGE_OK].map(lambda value: not pd.isna(value) and not bool(value)).astype(bool).rename(None)
+
+
 # ---- dataset_description.json -------------------------------------------------------------------------
 SIMULATED_KEY = "simulated"
 

@@ -1,5 +1,6 @@
 """The timing figure of a session (``psyop timing``): frame intervals against the refresh period,
-dropped frames per trial, measured against nominal phase durations (psyop.session.timing.TimingReport)."""
+dropped frames per trial, measured against nominal phase durations and the gaze-to-photon age of every frame
+with valid gaze by phase kind, with the protocol's bound (psyop.session.timing.TimingReport)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ def timing_figure(report: TimingReport, out_png: Path) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (hist, drops, phases) = plt.subplots(1, 3, figsize=(13, 3.8))
+    fig, (hist, drops, phases, ages) = plt.subplots(1, 4, figsize=(17, 3.8))
     period_ms = float(report.summary["refresh_period_s"]) * 1e3
     intervals_ms = np.asarray(report.intervals_s, dtype=np.float64) * 1e3
     if intervals_ms.size:
@@ -40,6 +41,24 @@ def timing_figure(report: TimingReport, out_png: Path) -> list[Path]:
     phases.set(ylabel="phase duration (ms)", title=f"measured vs nominal (+-1 period = {period_ms:.1f} ms)")
     if report.phases:
         phases.legend(frameon=False)
+    _gaze_ages(ages, report)
     fig.suptitle(f"{report.session} ({report.clock} clock{', simulated' if report.simulated else ''})", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, out_png)
+
+
+def _gaze_ages(ax, report: TimingReport) -> None:  # ax: a matplotlib Axes
+    """The gaze-to-photon age histogram, one step outline per phase kind, the bound dashed."""
+    by_kind: dict[str, list[float]] = {}
+    for kind, age in report.gaze_ages_s:
+        by_kind.setdefault(kind, []).append(age * 1e3)
+    every = np.concatenate([np.asarray(v) for v in by_kind.values()]) if by_kind else np.zeros(0)
+    bins = np.linspace(float(every.min()), float(every.max()) + 1e-6, 40) if every.size else 10
+    for kind, ages in sorted(by_kind.items()):
+        ax.hist(ages, bins=bins, histtype="step", lw=1.2, label=f"{kind} ({len(ages)})")
+    bound = report.gaze_age.get("max_gaze_age_ms")
+    if bound is not None:
+        ax.axvline(float(bound), color="tab:red", ls="--", lw=1, label="bound (intrinsic)")
+    ax.set(xlabel="gaze age at display (ms)", ylabel="frames", title="gaze-to-photon age (valid gaze)")
+    if by_kind:
+        ax.legend(frameon=False, fontsize=7)

@@ -8,8 +8,8 @@ from typing import Annotated, Any
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict
 
 #: Suffixes a numeric factor name must end with, so that every column says its unit.
-UNIT_SUFFIXES: tuple[str, ...] = ("_D", "_m", "_mm", "_deg", "_rad", "_s", "_px", "_arcmin", "_hz", "_fraction",
-                                  "_percent", "_count")
+UNIT_SUFFIXES: tuple[str, ...] = ("_D", "_m", "_mm", "_deg", "_rad", "_s", "_ms", "_px", "_arcmin", "_hz", "_fraction",
+                                  "_percent", "_count", "_cd_m2")
 
 
 class StrictModel(BaseModel):

@@ -16,6 +16,8 @@ from psyop.optics.ranges import DEFAULT_IPD_M, IPD_M, NC_M
 from psyop.protocol.base import Integer, Number, StrictModel
 from psyop.protocol.scene import FactorRef
 
+#: the most gaze latency a protocol may add (``display.added_latency_ms``), ms
+MAX_ADDED_LATENCY_MS = 1000.0
 #: Built-in display profiles (``psyop.optics.display.DISPLAY_PROFILES``).
 DISPLAY_PROFILE_NAMES: tuple[str, ...] = ("vive_pro",)
 #: Schematic eyes of the paper's Table 1 (``psyop.optics.eye_models.EYE_MODELS``).
@@ -144,6 +146,17 @@ class DisplaySpec(StrictModel):
     eye_model: str | InlineEyeModel = "gullstrand_emsley_relaxed"
     ipd: Literal["tracker"] | FixedIpd = "tracker"
     rendering_nc: RenderingNc | None = None
+    added_latency_ms: Number | FactorRef | None = Field(
+        default=None,
+        description="gaze latency added on purpose, ms (0..1000), or {factor: NAME} (NAME ending in _ms): each frame "
+                    "is rendered with the gaze sample this much older than the newest one (docs/latency.md)")
+
+    @field_validator("added_latency_ms", mode="after")
+    @classmethod
+    def _latency(cls, value: Any) -> Any:  # Any: pydantic validator input
+        if isinstance(value, float) and not 0.0 <= value <= MAX_ADDED_LATENCY_MS:
+            raise ValueError(f"added_latency_ms must be in [0, {MAX_ADDED_LATENCY_MS:g}] ms")
+        return value
 
     @field_validator("profile", mode="after")
     @classmethod

@@ -437,7 +437,29 @@ class _Checker:
         for value in (nc.mm, nc.scale) if nc is not None else ():
             if isinstance(value, FactorRef):
                 used.add(value.factor)
+        if isinstance(self.p.display.added_latency_ms, FactorRef):
+            used.add(self.p.display.added_latency_ms.factor)
         return used
+
+    def check_added_latency(self, conditions: list[JsonObject]) -> None:
+        """``display.added_latency_ms: {factor: NAME}``: a numeric factor named ``..._ms`` whose every level is a
+        latency in [0, MAX_ADDED_LATENCY_MS] ms (docs/latency.md)."""
+        from psyop.protocol.display import MAX_ADDED_LATENCY_MS
+
+        ref = self.p.display.added_latency_ms
+        if not isinstance(ref, FactorRef):
+            return
+        path = ("display", "added_latency_ms", "factor")
+        if not self.factor_exists(ref.factor, path, numeric=True):
+            return
+        if not ref.factor.endswith("_ms"):
+            self.add(path, f"added_latency_ms reads milliseconds: name the factor '{ref.factor}' with _ms "
+                           "(e.g. added_latency_ms)")
+            return
+        for level in sorted({float(c[ref.factor]) for c in conditions if ref.factor in c}):
+            if not 0.0 <= level <= MAX_ADDED_LATENCY_MS:
+                self.add(path, f"level {level:g} of '{ref.factor}' is no added latency in [0, "
+                               f"{MAX_ADDED_LATENCY_MS:g}] ms")
 
     def check_rendering_nc(self, conditions: list[JsonObject]) -> None:
         """``display.rendering_nc``: a numeric factor (``mm`` ones named ``..._mm``), not a ``set:`` override,
@@ -621,6 +643,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
     checker.check_response()
     checker.check_kind_design()
     checker.check_rendering_nc(conditions)
+    checker.check_added_latency(conditions)
     checker.check_unused_factors()
     checker.check_observer()
     checker.check_validation()

@@ -80,17 +80,30 @@ Phase = Annotated[Union[DriftRecalibration, Interval, Blank, ResponsePhase], Fie
 
 #: default of ``trial.min_valid_gaze_share``
 MIN_VALID_GAZE_SHARE = 0.5
+#: default of ``trial.max_gaze_age_over_share``
+MAX_GAZE_AGE_OVER_SHARE = 0.05
 
 
 class TrialSpec(StrictModel):
     """The phases of every trial, in order. ``min_valid_gaze_share``: a trial whose rendered
     frames had a smaller share of valid gaze is marked (trials.parquet ``gaze_ok`` false),
-    counted and warned about (docs/protocols.md, "Gaze quality")."""
+    counted and warned about (docs/protocols.md, "Gaze quality"). ``max_gaze_age_ms``: a trial whose
+    intervals had more than ``max_gaze_age_over_share`` of their frames (with valid gaze) rendered from
+    gaze older than it (the latency ``display.added_latency_ms`` adds not counted) is marked
+    (``gaze_age_ok`` false) and counted alike (docs/latency.md)."""
 
     phases: list[Phase] = Field(min_length=1)
     min_valid_gaze_share: Number = Field(
         default=MIN_VALID_GAZE_SHARE, ge=0, le=1,
         description="trials with a smaller share of frames with valid gaze are marked gaze_ok: false")
+    max_gaze_age_ms: Number | None = Field(
+        default=None, gt=0, le=1000,
+        description="bound on the gaze-to-photon age of the intervals' frames, ms (the latency the protocol adds "
+                    "not counted): trials with more than max_gaze_age_over_share of frames over it are marked "
+                    "gaze_age_ok: false")
+    max_gaze_age_over_share: Number = Field(
+        default=MAX_GAZE_AGE_OVER_SHARE, ge=0, le=1,
+        description="the share of the intervals' frames that may exceed max_gaze_age_ms")
 
     @property
     def intervals(self) -> list[Interval]:

@@ -12,6 +12,7 @@ import pandas as pd
 from psyop import datacontract as dc
 from psyop.protocol.model import Protocol
 from psyop.protocol.quality import QualitySection
+from psyop.quality.latency import latency_sentence
 from psyop.quality.validation import validation_sentence
 from psyop.quality.rules import (
     apply_rules,
@@ -71,7 +72,8 @@ def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> Stu
     sentence = methods_sentence(exclusions, n_people, len(measures)) if rules is not None else \
         "No quality: section in the protocol: no gaze-based exclusions."
     validations = validation_sentence(session_dirs, validation_bounded(session_dirs))
-    extra = " ".join(part for part in (unmeasured_sentence(measures, rules), validations) if part)
+    latency = latency_sentence(session_dirs)  # the gaze-to-photon age (psyop.quality.latency)
+    extra = " ".join(part for part in (unmeasured_sentence(measures, rules), validations, latency) if part)
     return StudyQuality(measures, events, exclusions, sentence + (" " + extra if extra else ""))
 
 

@@ -36,6 +36,7 @@ from psyop.session.log.store import SessionLog, SessionStore, recover_tables
 from psyop.session.validation import gaze_validator
 from psyop.session.screens import Pacing, ScreenRunner, session_screens
 from psyop.session.rows import TrialRow
+from psyop.session.gaze.delay import DelayedGaze
 from psyop.session.loop import LoopConfig, LoopFacts, LoopOptions, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
@@ -307,6 +308,8 @@ def _notice(text: str) -> None:
 def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[SessionOutcome, TrialLoop]:
     """Start the tracker, open the log, make the renderer (closed first by ``bundle``) and run the loop."""
     plan, clock, store, gaze = opened.plan, opened.clock, opened.store, bundle.gaze
+    if plan.latency.adds:  # display.added_latency_ms: frames take past samples from the raw stream (docs/latency.md)
+        gaze = DelayedGaze(gaze)
     announce = _announcer(plan, options.responses)
     current = [-1]  # the trial in progress when the loop stops (for the raw gaze no trial recorded)
     bundle.after_tracker_closed = lambda: store.append_gaze(
@@ -343,6 +346,7 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
         screens=_screens(plan, opened, bundle, options, fresh=not completed),
     )
     loop.timing_reruns = list(opened.earlier_reruns)
+    loop.latency = plan.latency  # the latency each trial adds and the bound it is judged by (psyop.session.latency)
     if loop.validator is not None:
         bundle.stack.callback(loop.validator.close)
     if loop.screens is not None:
@@ -389,6 +393,9 @@ def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: Sessi
     summary["display"] = display_summary
     summary["frame_timing"] = {**loop.session_timing.summary(), "clock": options.clock,
                                "scope": "the trials this run recorded (psyop timing: the whole session)"}
+    # the recorded trials' gaze-to-photon age, overall and by phase kind (psyop.session.latency)
+    summary["gaze_age"] = {**loop.session_timing.gaze.summary(loop.latency),
+                           "scope": "the trials this run recorded (psyop timing: the whole session)"}
     if loop.display_interruptions:
         summary["display_interruptions"] = loop.display_interruptions
     timing = opened.plan.protocol.timing

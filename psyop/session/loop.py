@@ -33,12 +33,14 @@ from psyop.session.clock import Clock
 from psyop.session.events import EventKind, EventSink, SessionEvent
 from psyop.session.frames import Display, DisplayInterrupted, FrameRecorder, FrameRenderer, FrameRequest, latency_summary
 from psyop.session.log.schema import VIEW_TANGENTS
+from psyop.session.gaze.delay import DelayedGaze
 from psyop.session.gaze.filter import GazeConditioner
 from psyop.session.gaze.plan import FixationPlan, circling_target
 from psyop.session.gaze.sample import GazeSample, GazeSource, TrackerLost
 from psyop.session.gaze.simulated import seed_for
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.log.store import SessionLog
+from psyop.session.latency import GazeLatency
 from psyop.session.signals import interrupts_deferred
 from psyop.session.pose import ConditionedPose, PoseConditioner, PoseSource, reach_from_positions
 from psyop.session.reach import horizontal_reach_m
@@ -146,6 +148,10 @@ class SessionOutcome:
 
 class TrialLoop:
     """Runs the remaining trials of a schedule into a :class:`SessionStore`."""
+
+    #: the protocol's gaze-latency rules (psyop.session.latency; the runner sets the plan's): the latency each
+    #: trial adds (its gaze source then a DelayedGaze) and the bound its trials are judged by
+    latency: GazeLatency = GazeLatency()
 
     def __init__(
         self,
@@ -315,6 +321,7 @@ class TrialLoop:
     def _store_trial(self, record: TrialRecord, frames: FrameRecorder) -> None:
         """Append one trial to the log: its row, frames and raw gaze (a log of rows only: the row)."""
         self.session_timing.add(self._timing, self.phases)
+        self.session_timing.gaze.add(self._timing.gaze, self.phases, int(record["trial"]), record.get("gaze_age_ok"))
         if self.store.keeps_samples:
             self.store.append_trial(record, frames.table() if len(frames) else None,
                                     self.raw_gaze(int(record["trial"])))
@@ -425,6 +432,7 @@ class TrialLoop:
         )
         # measured timing (psyop.session.timing); the sampled regime shows no phase whole
         record.update(self._timing.columns(self.phases, self.config.timing, measured=self.config.every_frame))
+        record.update(self._timing.gaze.columns(self.phases, self.latency))  # psyop.session.latency
         record.update(dict(response.extras))
         record.update(typed_response(response.response))  # response_value (a number where it is one), outcome
         record.update(hand_columns)
@@ -528,16 +536,17 @@ class TrialLoop:
         """Tell the gaze source where the observer is asked to look (a real tracker ignores it)."""
         self.gaze.set_plan(fixation_plan(self.config, phase, row, start_s))
 
-    def _fresh(self, sample: GazeSample | None) -> GazeSample | None:
-        """A sample older than ``stale_after_s`` (tracker dropout) counts as invalid."""
-        if sample is not None and self.clock.now_s() - sample.timestamp_s > self.config.stale_after_s:
+    def _fresh(self, sample: GazeSample | None, added_s: float = 0.0) -> GazeSample | None:
+        """A sample older than ``stale_after_s`` (tracker dropout) counts as invalid; a sample delayed on purpose
+        by ``added_s`` is judged by its age beyond that."""
+        if sample is not None and self.clock.now_s() - sample.timestamp_s - added_s > self.config.stale_after_s:
             return GazeSample(sample.timestamp_s, sample.fixation_m, sample.confidence, False)
         return sample
 
     def _frame(self, row: TrialRow, phase: PhaseSpec, frames: FrameRecorder, request: FrameRequest) -> tuple[int, int]:
         """The software path of one frame the display asked for: gaze in -> condition -> render
         (for the request's display time, views and targets) -> end the frame -> log."""
-        sample = self._fresh(self.gaze.latest(self.clock.now_s()))
+        sample, newest_t_s, added_s = self._gaze_for(row)
         gaze = self.conditioner.condition(sample)
         head = self.head_conditioner.condition(self.pose.head(self.clock.now_s()) if self.pose is not None else None)
         render_start = self.clock.now_s()
@@ -554,6 +563,9 @@ class TrialLoop:
             self._ages.append(age)
         else:
             self._n_held += 1
+        at_display = request.display_time_s - gaze.sample_t_s if math.isfinite(gaze.sample_t_s) else math.nan
+        intrinsic = request.display_time_s - newest_t_s if math.isfinite(newest_t_s) else math.nan
+        self._timing.gaze.add(self._phase_index, at_display, intrinsic, gaze.valid, added_s)
         fx, fy, fz = gaze.fixation_m
         frames.add(trial=int(row["trial"]), phase=phase.name, frame=len(frames), gaze_sample_t_s=gaze.sample_t_s,
                    fixation_x_m=fx, fixation_y_m=fy, fixation_z_m=fz, gaze_confidence=gaze.confidence,
@@ -562,12 +574,26 @@ class TrialLoop:
                    image_ok=check.ok if check else None, **_pose_columns("head", head),
                    display_time_s=request.display_time_s, display_period_s=request.period_s,
                    display_should_render=request.should_render, display_missed_frames=request.missed_frames,
-                   gaze_age_at_display_s=(request.display_time_s - gaze.sample_t_s
-                                          if math.isfinite(gaze.sample_t_s) else math.nan),
+                   gaze_age_at_display_s=at_display, added_latency_s=added_s, gaze_age_intrinsic_s=intrinsic,
                    **_view_columns(request))
         if check is not None and check.checked and not check.ok:
             raise RuntimeError(f"trial {row['trial']}: rendered frame failed its check (non-finite or empty)")
         return int(gaze.valid), 1
+
+    def _gaze_for(self, row: TrialRow) -> tuple[GazeSample | None, float, float]:
+        """The sample a frame of trial ``row`` is rendered with, the newest sample's time (NaN: none yet) and the
+        latency added (s): the newest sample (stale ones invalid), or with ``display.added_latency_ms`` the one
+        at or before the newest sample's time minus it, held (psyop.session.gaze.delay; docs/latency.md)."""
+        newest = self.gaze.latest(self.clock.now_s())
+        newest_t_s = newest.timestamp_s if newest is not None else math.nan
+        added_s = self.latency.added_s(row) if self.latency.adds else 0.0
+        if added_s <= 0.0:
+            return self._fresh(newest), newest_t_s, 0.0
+        if not isinstance(self.gaze, DelayedGaze):
+            raise RuntimeError("display.added_latency_ms needs the gaze source wrapped in a DelayedGaze "
+                               "(psyop.run.runner does it)")
+        delayed = self.gaze.before(newest_t_s - added_s) if newest is not None else None
+        return self._fresh(delayed, added_s), newest_t_s, added_s
 
     def _frames_until(self, end_s: float, row: TrialRow, phase: PhaseSpec, frames: FrameRecorder) -> tuple[int, int]:
         """Frames until the phase ends: the display paces them (begin_frame) and says when each is

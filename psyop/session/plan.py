@@ -35,9 +35,10 @@ from psyop.protocol.kinds.adjustment import AdjustmentResponse, AdjustmentSpec
 from psyop.protocol.kinds.base import Inputs, KindResponse, ResponseKindSpec
 from psyop.protocol.kinds.left_right_nearer import LeftRightNearerResponse
 from psyop.protocol.kinds.reach import ReachResponse
-from psyop.protocol.scene import FixationTarget
+from psyop.protocol.scene import FactorRef, FixationTarget
 from psyop.protocol.trial import Blank, DriftRecalibration, Interval, ResponsePhase
 from psyop.schedule.rows import mode_column
+from psyop.session.latency import GazeLatency
 from psyop.session.phases import PhaseSpec, mode_for
 from psyop.stimulus.placement import centre_angles_deg
 
@@ -217,6 +218,9 @@ class SessionPlan:
     fixation_point: FixationPoint | None = None
     #: protocol ``trial.min_valid_gaze_share``: a trial below it is logged with ``gaze_ok`` false
     min_valid_gaze_share: float = 0.5
+    #: protocol ``display.added_latency_ms`` and ``trial.max_gaze_age_ms`` / ``max_gaze_age_over_share``
+    #: (psyop.session.latency): the gaze latency each trial adds and the bound its frames are judged by
+    latency: GazeLatency = GazeLatency()
 
     @property
     def kind(self) -> ResponseKindSpec:
@@ -260,6 +264,7 @@ class SessionPlan:
             "adaptive": None if self.adaptive is None else {"factor": self.adaptive.factor,
                                                             "procedure": type(self.adaptive.spec).__name__},
             "min_valid_gaze_share": self.min_valid_gaze_share,
+            "gaze_latency": self.latency.as_dict(),
         } | ({} if self.fixation_point is None else {"fixation_point": self.fixation_point.as_dict()})
 
 
@@ -385,4 +390,16 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
     return SessionPlan(study=protocol.study.name, protocol=protocol, phases=phases, response=response,
                        observer=protocol.observer, display=resolve_display_profile(spec), rig=rig, fixation=path, fixation_point=point,
                        adaptive=adaptive_plan(protocol),
-                       min_valid_gaze_share=float(protocol.trial.min_valid_gaze_share))
+                       min_valid_gaze_share=float(protocol.trial.min_valid_gaze_share),
+                       latency=gaze_latency(protocol))
+
+
+def gaze_latency(protocol: Protocol) -> GazeLatency:
+    """The protocol's gaze-latency rules: ``display.added_latency_ms`` (ms, or ``{factor: NAME}``) and
+    ``trial.max_gaze_age_ms`` with ``trial.max_gaze_age_over_share`` (psyop.session.latency)."""
+    added = protocol.display.added_latency_ms
+    bound = protocol.trial.max_gaze_age_ms
+    return GazeLatency(added_ms=float(added) if isinstance(added, (int, float)) else 0.0,
+                       added_factor=added.factor if isinstance(added, FactorRef) else None,
+                       max_age_s=None if bound is None else float(bound) / 1000.0,
+                       max_over_share=float(protocol.trial.max_gaze_age_over_share))

@@ -42,6 +42,8 @@ import pandas as pd
 import pyarrow as pa
 
 from psyop.protocol.timing import TimingSection
+from psyop.session.latency import GAZE_AGE_DESCRIPTIONS, GazeAges, GazeLatency, SessionGazeAges, frame_gaze_ages, frames_gaze_age, \
+    gaze_age_lines
 from psyop.session.phases import PhaseSpec
 from psyop.session.rows import JsonObject
 
@@ -125,6 +127,8 @@ class TrialTiming:
     period_s: list[float] = field(default_factory=list)
     missed: list[int] = field(default_factory=list)
     start_s: float | None = None
+    #: the frames' gaze ages (psyop.session.latency): the trial's latency columns
+    gaze: GazeAges = field(default_factory=GazeAges)
 
     def add(self, phase_index: int, display_time_s: float, period_s: float, missed: int) -> None:
         self.phase_index.append(phase_index)
@@ -204,6 +208,8 @@ class SessionTiming:
     intervals_s: list[np.ndarray] = field(default_factory=list)
     dropped_by_kind: dict[str, int] = field(default_factory=dict)
     n_frames: int = 0
+    #: the recorded trials' gaze ages by phase kind (session.json ``summary.gaze_age``, psyop.session.latency)
+    gaze: SessionGazeAges = field(default_factory=SessionGazeAges)
 
     def add(self, trial: TrialTiming, phases: Sequence[PhaseSpec]) -> None:
         if trial.display_time_s:
@@ -296,6 +302,10 @@ class TimingReport:
     trials: tuple[int, ...]
     dropped_per_trial: tuple[int, ...]  # over every timed phase of the trial
     phases: tuple[PhaseReport, ...]
+    #: the gaze-to-photon age of every frame with valid gaze, by phase kind (psyop.session.latency.frames_gaze_age)
+    gaze_age: JsonObject = field(default_factory=dict)
+    #: each such frame's gaze age at display and phase kind (the figure's histogram)
+    gaze_ages_s: tuple[tuple[str, float], ...] = ()
 
     def lines(self) -> list[str]:
         """The summary, one line each (units in the words)."""
@@ -313,7 +323,7 @@ class TimingReport:
                         f"{got.max() * 1e3:.1f}) over {got.size} trials" if got.size else "not measured (no frames)")
             out.append(f"{p.label} ({p.kind}): nominal {p.nominal_s * 1e3:.1f} ms, {measured}; "
                        f"{p.dropped_frames} dropped frames")
-        return out
+        return out + gaze_age_lines(self.gaze_age)
 
 
 def _recorded_phase(p: Mapping[str, object]) -> PhaseSpec:
@@ -346,9 +356,11 @@ def session_report(directory: str, meta: JsonObject, trials: pd.DataFrame, frame
         dropped += counts
         measured = trials[f"{label}_duration_s"].dropna().astype(float)
         reports.append(PhaseReport(label, phase.show, phase.duration_s, tuple(measured), int(counts.sum())))
+    rule = GazeLatency.of_record(meta.get("gaze_latency"))
     return TimingReport(directory, str(meta.get("clock", "?")), bool(meta.get("simulated")), summary,
                         tuple(float(v) for v in intervals), tuple(int(t) for t in trials["trial"]),
-                        tuple(int(d) for d in dropped), tuple(reports))
+                        tuple(int(d) for d in dropped), tuple(reports), frames_gaze_age(frames, phases, rule),
+                        frame_gaze_ages(frames, phases))
 
 
 _DESCRIPTIONS = {"onset_s": ("display time of the phase's first frame (session clock)", "s"),
@@ -361,6 +373,8 @@ _DESCRIPTIONS = {"onset_s": ("display time of the phase's first frame (session c
 def timing_column_description(name: str, phase_names: Sequence[str]) -> JsonObject | None:
     """A sidecar description of a measured-timing column (BIDS events.json), None for any other column;
     ``phase_names``: session.json ``phases`` names (the column prefixes, repeats with ``_2`` ...)."""
+    if name in GAZE_AGE_DESCRIPTIONS:
+        return dict(GAZE_AGE_DESCRIPTIONS[name])
     if name == TIMING_OK:
         return {"Description": "the trial's stimulus phases dropped no more display frames than the protocol's "
                                "timing.max_dropped_frames (n/a: no timing: rule)"}

@@ -24,6 +24,12 @@ class LowGazeWarning(UserWarning):
     """The loaded trials include trials marked low-gaze (trials.parquet ``gaze_ok`` false)."""
 
 
+class LateGazeWarning(LowGazeWarning):
+    """The loaded trials include trials marked late-gaze (trials.parquet ``gaze_age_ok`` false: more of the
+    intervals' frames than the protocol allows were rendered from gaze older than ``trial.max_gaze_age_ms``).
+    A LowGazeWarning, so what silences low-gaze warnings silences these too."""
+
+
 @dataclass(frozen=True)
 class Dataset:
     """All trials of one study and whether the data came from simulated sessions."""
@@ -109,7 +115,7 @@ def load_trials(data_root: Path, study: str, include_practice: bool = False) -> 
 
 
 def load_dataset(data_root: Path, study: str, include_practice: bool = False,
-                 include_timeouts: bool = False, drop_low_gaze: bool = False) -> Dataset:
+                 include_timeouts: bool = False, drop_low_gaze: bool = False, drop_late_gaze: bool = False) -> Dataset:
     """Like :func:`load_trials` but returns a :class:`Dataset` with the simulated flag.
 
     Practice trials (a true ``practice`` column) are left out unless ``include_practice``;
@@ -122,6 +128,9 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
     :func:`psyop.datacontract.low_gaze_mask`) are kept and counted in
     ``trials.attrs["n_low_gaze"]``, with a :class:`LowGazeWarning` naming the count;
     ``drop_low_gaze`` leaves them out (``trials.attrs["n_low_gaze_dropped"]``); ``quality:`` rules too (attrs["quality"]).
+    Late-gaze trials (``gaze_age_ok`` false: gaze older than the protocol's ``trial.max_gaze_age_ms`` on more
+    of their interval frames than it allows; :func:`psyop.datacontract.late_gaze_mask`) are counted alike:
+    ``attrs["n_late_gaze"]``, a :class:`LateGazeWarning`, ``drop_late_gaze`` (``attrs["n_late_gaze_dropped"]``).
     """
     files = session_files(data_root, study)
     if not files:
@@ -148,26 +157,47 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
     if not include_timeouts:
         trials = dc.drop_timeouts(trials)
         n_timeout = trials.attrs["n_timeout_dropped"]
-    low = dc.low_gaze_mask(trials)
-    n_low = int(low.sum())
-    if n_low:
-        what = "left out (drop_low_gaze)" if drop_low_gaze else "kept in the analysis (drop_low_gaze=True leaves them out)"
-        warnings.warn(LowGazeWarning(
-            f"{study}: {n_low} of {len(trials)} trials had less valid gaze than the protocol's "
-            f"trial.min_valid_gaze_share (gaze_ok false); {what}"), stacklevel=2)
-    if drop_low_gaze:
-        trials = trials[~low].reset_index(drop=True)
+    trials, n_low, n_late = _gaze_flags(trials, study, drop_low_gaze, drop_late_gaze)
     trials = include_quality(trials, [f.parent for f in files])  # the protocol's quality: rules (issue 27)
     # simulated only when the description says so and no session's own trials.parquet says real
     # (a real session whose session.json was deleted still carries its flag in its finalised table)
     simulated = is_simulated(data_root) and False not in file_flags
     trials.attrs["n_low_gaze"] = n_low
     trials.attrs["n_low_gaze_dropped"] = n_low if drop_low_gaze else 0
+    trials.attrs["n_late_gaze"] = n_late
+    trials.attrs["n_late_gaze_dropped"] = n_late if drop_late_gaze else 0
     trials.attrs["n_timeout_dropped"] = n_timeout
     trials.attrs["n_practice_dropped"] = n_practice
     trials.attrs["simulated"] = simulated
     trials.attrs["n_sessions"] = len(files)
     return Dataset(study=study, trials=trials, simulated=simulated, n_sessions=len(files))
+
+
+def _gaze_flags(trials: pd.DataFrame, study: str, drop_low_gaze: bool, drop_late_gaze: bool
+                ) -> tuple[pd.DataFrame, int, int]:
+    """``trials`` less the low-gaze and late-gaze trials asked to be dropped, and how many of each there were (each
+    count warned about: :class:`LowGazeWarning`, :class:`LateGazeWarning`)."""
+    low = dc.low_gaze_mask(trials)
+    n_low = int(low.sum())
+    if n_low:
+        what = "left out (drop_low_gaze)" if drop_low_gaze else "kept in the analysis (drop_low_gaze=True leaves them out)"
+        warnings.warn(LowGazeWarning(
+            f"{study}: {n_low} of {len(trials)} trials had less valid gaze than the protocol's "
+            f"trial.min_valid_gaze_share (gaze_ok false); {what}"), stacklevel=3)
+    late = dc.late_gaze_mask(trials)
+    n_late = int(late.sum())
+    if n_late:
+        what = "left out (drop_late_gaze)" if drop_late_gaze else \
+            "kept in the analysis (drop_late_gaze=True leaves them out)"
+        warnings.warn(LateGazeWarning(
+            f"{study}: {n_late} of {len(trials)} trials had more frames with gaze older than the protocol's "
+            f"trial.max_gaze_age_ms than trial.max_gaze_age_over_share allows (gaze_age_ok false); {what}"),
+            stacklevel=3)
+    drop = (low if drop_low_gaze else pd.Series(False, index=trials.index)) | \
+        (late if drop_late_gaze else pd.Series(False, index=trials.index))
+    if drop.any():
+        trials = trials[~drop].reset_index(drop=True)
+    return trials, n_low, n_late
 
 
 def load_gaze(data_root: Path, study: str) -> pd.DataFrame:

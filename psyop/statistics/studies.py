@@ -25,7 +25,7 @@ from psyop.statistics.protocol_versions import session_hash, split_unit, unit_tr
 
 #: Units by factor-name suffix (docs/protocols.md: a numeric factor says its unit in its name).
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (("_deg", "deg"), ("_arcmin", "arcmin"), ("_mm", "mm"), ("_m", "m"),
-                                              ("_D", "D"), ("_s", "s"), ("_hz", "Hz"), ("_px", "px"),
+                                              ("_D", "D"), ("_ms", "ms"), ("_s", "s"), ("_hz", "Hz"), ("_px", "px"),
                                               ("_fraction", "fraction"))
 
 #: Labels of the paper's factors when a study's sessions record no protocol description.

@@ -30,6 +30,7 @@ import pyarrow.parquet as pq
 from psyop.protocol import load_protocol
 from psyop.run.simulate import plan_jobs, run_job
 from psyop.session.plan import compile_plan
+from psyop.session.latency import GAZE_AGE_COLUMNS
 from psyop.session.timing import timing_column_names
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,7 +57,19 @@ SESSION_JSON_EXCLUDED = ("finalised", "runs", "host", "python", "packages", "fin
                          "protocol_file", "protocol_text", "protocol_sha256", "protocol_file_sha256")
 #: session.json keys added since 26cd3cb, on purpose, not recorded and checked instead: issue 27's
 #: ``sim_tracker_faults`` (the analysis rebuilds a requested stream from it)
-ADDED_SESSION_KEYS = {"sim_tracker_faults": {"dropout_rate_hz": 0.0, "nan_burst_rate_hz": 0.0}}
+ADDED_SESSION_KEYS = {"sim_tracker_faults": {"dropout_rate_hz": 0.0, "nan_burst_rate_hz": 0.0},
+                      # issue 44's gaze-latency rules (none in the shipped protocols: psyop.session.latency)
+                      "gaze_latency": {"added_latency_ms": 0.0, "added_latency_factor": None,
+                                       "max_gaze_age_ms": None, "max_gaze_age_over_share": 0.05}}
+#: issue 44's gaze-to-photon latency, added after 26cd3cb on purpose (psyop.session.latency), not recorded and
+#: checked instead (tests/session/test_refactor_equality.py): the trial columns are what the frames give
+#: (``trials_gaze_age``), the frame columns say no latency was added and the intrinsic age is the gaze age of
+#: every frame with valid gaze, session.json's ``summary.gaze_age`` is what the frames give, and its
+#: ``integrity`` names no late trial and no bound
+ADDED_LATENCY_TRIAL_COLUMNS = GAZE_AGE_COLUMNS
+ADDED_LATENCY_FRAME_COLUMNS = ("added_latency_s", "gaze_age_intrinsic_s")
+LATENCY_SUMMARY = "gaze_age"
+ADDED_INTEGRITY = {"late_gaze_trials": [], "max_gaze_age_ms": None}
 
 
 def as_recorded_kind(meta: dict) -> dict:
@@ -94,7 +107,9 @@ def kept_session_json(session: Path) -> dict:
     meta = as_recorded_kind(json.loads((session / "session.json").read_text()))
     kept = {k: v for k, v in meta.items() if k not in SESSION_JSON_EXCLUDED and k not in ADDED_SESSION_KEYS}
     if isinstance(kept.get("summary"), dict):
-        kept["summary"] = {k: v for k, v in kept["summary"].items() if k != TIMING_SUMMARY}
+        kept["summary"] = {k: v for k, v in kept["summary"].items() if k not in (TIMING_SUMMARY, LATENCY_SUMMARY)}
+    if isinstance(kept.get("integrity"), dict):
+        kept["integrity"] = {k: v for k, v in kept["integrity"].items() if k not in ADDED_INTEGRITY}
     if isinstance(kept.get("meshes"), list):
         kept["meshes"] = [m for m in kept["meshes"] if (m["file"], m["node"]) not in ADDED_MODELS]
     return {"_rendering": str(meta["rendering"]), **kept}
@@ -103,9 +118,11 @@ def kept_session_json(session: Path) -> dict:
 def session_values(session: Path, study: str) -> dict[str, pa.Table | dict]:
     """The recorded parts of a session: trials (less the columns added since 26cd3cb), frames, gaze, session.json."""
     trials = pq.read_table(session / "trials.parquet")
-    left_out = set(ADDED_AFTER + measured_timing_columns(study))
+    left_out = set(ADDED_AFTER + measured_timing_columns(study) + ADDED_LATENCY_TRIAL_COLUMNS)
+    frames = pq.read_table(session / "frames.parquet")
     return {"trials": trials.select([n for n in trials.column_names if n not in left_out]),
-            "frames": pq.read_table(session / "frames.parquet"), "gaze": pq.read_table(session / "gaze.parquet"),
+            "frames": frames.select([n for n in frames.column_names if n not in ADDED_LATENCY_FRAME_COLUMNS]),
+            "gaze": pq.read_table(session / "gaze.parquet"),
             "session_json": kept_session_json(session)}
 
 

@@ -32,7 +32,11 @@ from psyop.session.log.store import SessionStore
 pytestmark = pytest.mark.timeout(120)
 
 SIZE_TOL_S = 0.05
-AGE_MAX_S = 0.1
+#: The ages asserted are correctness bounds, not latency claims (timing belongs in benchmarks): a mapping left
+#: behind by a step holds gaze seconds old (2 s and 5 s steps here), while a correct one stays within the
+#: loop's own delays, which a loaded 2-core machine stretches to a few hundred ms. The ages measured unloaded
+#: are printed (-s) and stated in docs/sessions.md.
+AGE_MAX_S = 1.0
 AGE_MIN_S = 0.01  # "younger than zero" by this much at most: the sync's own ms error on a loaded machine
 STEPPED = "LSL timestamps stepped; clock mapping re-anchored"
 

@@ -27,6 +27,9 @@ from psyop.session.timing import TIMING_OK
 
 from recorded_sessions import (
     ADDED_AFTER,
+    ADDED_INTEGRITY,
+    ADDED_LATENCY_TRIAL_COLUMNS,
+    LATENCY_SUMMARY,
     ADDED_MODELS,
     ADDED_SESSION_KEYS,
     ROOT,
@@ -72,9 +75,43 @@ def test_simulated_session_unchanged(tmp_path: Path, study: str) -> None:
         f"{study}: the virtual clock dropped a frame"
     assert all(row[TIMING_OK] is None for row in measured), f"{study}: timing_ok without a timing: rule"
     meta = json.loads((session / "session.json").read_text())
+    _check_added_latency(session, meta, trials)
     protocol = ROOT / "protocols" / f"{study}.yaml"
     assert meta["protocol_text"] == protocol.read_text()
     assert meta["protocol_file_sha256"] == hashlib.sha256(protocol.read_bytes()).hexdigest()
+
+
+def _check_added_latency(session: Path, meta: dict, trials: list[dict]) -> None:
+    """Issue 44's latency columns and blocks (recorded_sessions.ADDED_LATENCY_*): the trial columns are what the
+    frames give, no latency was added, the intrinsic age is every valid frame's gaze age, session.json's
+    summary.gaze_age is the frames' and its integrity names no late trial."""
+    import math
+
+    import numpy as np
+
+    from psyop.session.latency import GazeLatency, frames_gaze_age, trials_gaze_age
+    from psyop.session.timing import _recorded_phase
+
+    frames = pq.read_table(session / "frames.parquet").to_pandas()
+    phases = [_recorded_phase(p) for p in meta["phases"]]
+    rule = GazeLatency.of_record(meta["gaze_latency"])
+    assert (frames["added_latency_s"] == 0.0).all()
+    valid = frames["gaze_valid"].to_numpy(dtype=bool)
+    assert np.array_equal(frames["gaze_age_intrinsic_s"].to_numpy()[valid],
+                          frames["gaze_age_at_display_s"].to_numpy()[valid])
+    expected = trials_gaze_age(frames, phases, rule)
+    for row in trials:
+        want = expected.loc[row["trial"]].to_dict() if row["trial"] in expected.index \
+            else dict.fromkeys(ADDED_LATENCY_TRIAL_COLUMNS)
+        for column in ADDED_LATENCY_TRIAL_COLUMNS:
+            got, value = row[column], want[column]
+            value = None if value is None or (isinstance(value, float) and math.isnan(value)) else value
+            assert got == value, (row["trial"], column, got, value)
+        assert row["gaze_age_ok"] is None and row["gaze_age_over_share"] is None  # no bound in the shipped protocols
+    assert any(row["gaze_age_median_s"] is not None for row in trials)
+    summary = {k: v for k, v in meta["summary"][LATENCY_SUMMARY].items() if k != "scope"}
+    assert not differences(summary, frames_gaze_age(frames, phases, rule), "gaze_age")
+    assert {k: meta["integrity"][k] for k in ADDED_INTEGRITY} == ADDED_INTEGRITY
 
 
 def test_a_changed_value_is_reported() -> None:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import pandas as pd
 import pyarrow as pa
 
+from psyop.session.latency import GAZE_AGE_COLUMNS, GAZE_AGE_FIELDS
+
 #: Columns the session adds to every schedule row (architecture contract + psyop extras).
 TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
     pa.field("study", pa.string()),
@@ -26,6 +28,9 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
     pa.field("gaze_ok", pa.bool_()),
     pa.field("n_frames", pa.int64()),
     pa.field("run", pa.int64()),
+    # the intervals' gaze-to-photon age (median, p95, max), the share over trial.max_gaze_age_ms and whether it
+    # stayed within trial.max_gaze_age_over_share (psyop.session.latency)
+    *GAZE_AGE_FIELDS,
     # egocentric (reach) trials: the participant's arm reach, the target distance and the
     # mean hand position (head space) over the samples the reach was taken from
     pa.field("arm_reach_m", pa.float64()),
@@ -47,7 +52,7 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
 #: everything else in trials.parquet is a pure function of (protocol, seed, participant).
 TIMING_COLUMNS: tuple[str, ...] = (
     "trial_start_s", "trial_end_s", "response_time_s", "n_frames", "run", "gaze_valid_fraction",
-    "gaze_ok", "hand_sample_t_s",
+    "gaze_ok", "hand_sample_t_s", *GAZE_AGE_COLUMNS,
 )
 
 def pose_fields(prefix: str) -> list[pa.Field]:
@@ -99,6 +104,10 @@ FRAME_SCHEMA = pa.schema(
         pa.field("display_should_render", pa.bool_()),
         pa.field("display_missed_frames", pa.int64()),
         pa.field("gaze_age_at_display_s", pa.float64()),
+        # the latency the protocol added (display.added_latency_ms; 0 without) and the newest sample's age at the
+        # display time (the frame's gaze age without the added latency): psyop.session.latency
+        pa.field("added_latency_s", pa.float64()),
+        pa.field("gaze_age_intrinsic_s", pa.float64()),
         # each eye's view as the display reported it (headset runtimes; null when the protocol's
         # display profile and eye rig placed the cameras): centre of rotation in head space,
         # orientation (w, x, y, z) and field of view as tangents (left, right, bottom, top)

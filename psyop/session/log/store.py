@@ -22,6 +22,7 @@ from psyop.session.lock import SessionLock
 from psyop.atomic import io_error, write_atomic
 from psyop.session.log.layout import SessionPaths, check_inside_root, stale_temp_files, write_json_atomic
 from psyop.session.log.record import MAX_METADATA_BYTES as MAX_METADATA_BYTES, read_metadata, record_of
+from psyop.session.latency import GazeLatency, late_gaze_report
 from psyop.session.log.schema import FRAME_SCHEMA, GAZE_SCHEMA
 from psyop.session.signals import interrupts_deferred
 from psyop.session.log.validation_log import ValidationLog, ValidationRecorder, recorded_validations
@@ -453,7 +454,8 @@ def _finalise_locked(
         meta["n_trials_recorded"] = int(len(trials))
         meta["finalised"] = _now()
         threshold = float(meta.get("min_valid_gaze_share", MIN_VALID_GAZE_SHARE))
-        meta["integrity"] = {**found.report, **low_gaze_report(trials, threshold)}
+        meta["integrity"] = {**found.report, **low_gaze_report(trials, threshold),
+                             **late_gaze_report(trials, GazeLatency.of_record(meta.get("gaze_latency")))}
         not_run = {t for c in ((meta.get("adaptive_stop") or {}).get("conditions") or {}).values()
                    for t in c.get("trials_not_run", [])}
         if not_run:  # left out by the adaptive stop rule, not lost
