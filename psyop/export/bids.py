@@ -105,6 +105,7 @@ def export_bids(data_root: Path, out: Path) -> BidsExport:
     out.mkdir(parents=True, exist_ok=True)
     exported = [_export_session(path.parent, out) for path in trials_files]
     _write_participants(out, exported, data_root)
+    _write_phenotype(out, [path.parent for path in trials_files])
     _write_json(out / "dataset_description.json", _description(exported))
     write_atomic(out / "README.md", _readme(exported))
     return BidsExport(out, tuple(exported))
@@ -457,6 +458,53 @@ def _write_participants(out: Path, exported: Sequence[ExportedSession], data_roo
                                                                      "mixed": "both"}},
         "studies": {"Description": "psyop studies (BIDS tasks) the participant took part in"},
     })
+
+
+def _write_phenotype(out: Path, sessions: Sequence[Path]) -> None:
+    """The sessions' questionnaire answers (questionnaires.parquet, the protocol's ``session: questionnaires``) as BIDS
+    phenotype files: one measurement tool per questionnaire and administration, ``phenotype/<name>_<when>[_<k>].tsv``
+    (``k`` counts repeated administrations of one ``when`` in a session, e.g. between blocks), one row per participant,
+    session and task, one column per item (the answer, 0 .. points - 1; n/a when none), and its sidecar with the
+    items' texts and the scale's labels."""
+    frames = [pd.read_parquet(d / dc.QUESTIONNAIRES_FILE) for d in sessions if (d / dc.QUESTIONNAIRES_FILE).exists()]
+    answers = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    if answers.empty:
+        return
+    answers["occurrence"] = answers["run"].astype(int) * 1_000_000 + answers["administration"].astype(int)
+    answers["k"] = answers.groupby(["study", "participant", "session", "questionnaire", "when"])["occurrence"].rank(
+        method="dense").astype(int)
+    folder = out / "phenotype"
+    folder.mkdir(exist_ok=True)
+    for (name, when, k), table in answers.groupby(["questionnaire", "when", "k"], sort=True):
+        repeated = int(answers.loc[(answers["questionnaire"] == name) & (answers["when"] == when), "k"].max()) > 1
+        tool = f"{name}_{when}" + (f"_{k}" if repeated else "")
+        items = table.drop_duplicates("item").sort_values("item")
+        width = max(2, len(str(int(items["item"].max()) + 1)))
+        columns = {int(i): f"item{int(i) + 1:0{width}d}" for i in items["item"]}
+        wide = table.pivot_table(index=["participant", "session", "study"], columns="item", values="answer",
+                                 aggfunc="first").rename(columns=columns).reset_index()
+        rows = pd.DataFrame({"participant_id": "sub-" + wide["participant"].astype(str),
+                             "session_id": "ses-" + wide["session"].astype(int).astype(str),
+                             "task": [task_label(str(study)) for study in wide["study"]]})
+        for column in columns.values():
+            rows[column] = [("n/a" if pd.isna(v) else int(v)) for v in wide.get(column, pd.Series(dtype=float))]
+        _write_tsv(folder / f"{tool}.tsv", rows)
+        sidecar: JsonObject = {
+            "MeasurementToolMetadata": {"Description": f"psyop questionnaire '{name}' given at '{when}'"
+                                        + (f" (administration {k})" if repeated else "")
+                                        + (" (the Simulator Sickness Questionnaire, Kennedy et al. 1993)"
+                                           if name == "ssq" else "")},
+            "participant_id": {"Description": "psyop participant ID"},
+            "session_id": {"Description": "the psyop session"},
+            "task": {"Description": "the psyop study (BIDS task) whose session gave the questionnaire"}}
+        for row in items.to_dict("records"):
+            labels = table[table["item"] == row["item"]].dropna(subset=["answer"]).drop_duplicates("answer")
+            sidecar[columns[int(row["item"])]] = {
+                "Description": f"{row['item_text']} (answer 0 .. {int(row['scale_points']) - 1}; the levels "
+                               "listed are those given)",
+                "Levels": {str(int(a)): str(label) for a, label in
+                           sorted(zip(labels["answer"], labels["answer_label"]))}}
+        _write_json(folder / f"{tool}.json", sidecar)
 
 
 def _description(exported: Sequence[ExportedSession]) -> JsonObject:
