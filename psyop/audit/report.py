@@ -18,6 +18,7 @@ import numpy as np
 
 from psyop.audit.meshes import (EDGE_PIXEL_TOLERANCE, EXACT_SAMPLES_PER_AXIS, MESH_AREA_FLOOR_WINDOW_PX, MESH_AREA_RELATIVE_TOLERANCE,
                                 MSAA_SAMPLES)
+from psyop.audit.luminance import luminance_table
 from psyop.audit.run import AuditReport, FrameRecord
 
 MODES = ("conventional", "ocular", "reversed")
@@ -49,6 +50,7 @@ def format_table(report: AuditReport) -> str:
             cells.append(f"  {f'{min(values):9.2f} ..{max(values):9.2f} ({hidden[(name, m)]}/{len(values)})':>40}")
         lines.append(f"{name:<{width}}  {item:<{item_width}}" + "".join(cells))
     lines += mesh_table(report, modes)
+    lines += luminance_table([(rec.frame.label, check) for rec in report.records for check in rec.luminance])
     lines += list(report.notes)
     lines += list(report.failures) if report.failures else ["PASS: every primitive is seen, none shows where it is "
                                                              "covered, differing intervals render differently"

@@ -27,6 +27,7 @@ import numpy as np
 
 from psyop.audit.frames import AuditFrame, fixation_point, representative_rows
 from psyop.audit.masks import FrameMeasurer
+from psyop.audit.luminance import LuminanceCheck, luminance_checks
 from psyop.audit.meshes import MeshCheck
 from psyop.audit.occlusion import hidden_by
 from psyop.errors import UserError
@@ -95,6 +96,9 @@ class FrameRecord:
     px_per_m_shift: float = 0.0
     #: each mesh item's rendered silhouette against exact ray-triangle intersection, display pixels
     meshes: tuple[MeshCheck, ...] = ()
+    #: on a calibrated display: each luminance primitive's intended and achieved luminance and contrast
+    #: (psyop.audit.luminance)
+    luminance: tuple[LuminanceCheck, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -170,6 +174,7 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
     from psyop.rendering.renderer import create_headless_context
     from psyop.session.plan import compile_plan
     from psyop.stimulus import build_scene, scene_origin_m
+    from psyop.stimulus.build import output_for
     from psyop.stimulus.meshes import SessionMeshes
 
     plan = compile_plan(protocol, tracker_ipd_m=settings.ipd_m)
@@ -192,22 +197,18 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
             origin = scene_origin_m(protocol, centre)
             fixation = fixation_point(scene, fixation_prefix, origin, frame.gaze_index, settings.gazes)
             camera = plan.rig.camera(display, frame.eye, fixation, frame.mode, row=frame.row)
-            try:
-                image = measurer.colour(scene, camera)
-                areas = measurer.visible_areas_px(scene, camera) / px_scale
-                mesh_checks = (tuple(_in_display_px(c, px_scale) for c in measurer.mesh_checks(scene, camera))
-                               if settings.mesh_check else
-                               tuple(MeshCheck(m.name, 0.0, 0.0, 0.0, skipped="the audit ran with mesh_check off")
-                                     for m in scene.meshes))
-            except ValueError as error:  # e.g. more primitives than the renderer takes
-                raise UserError(f"{protocol.source_name or protocol.study.name}: cannot render {frame.label}: "
-                                f"{error}") from None
+            image, areas, mesh_checks = _measure(measurer, scene, camera, px_scale, settings,
+                                                 f"{protocol.source_name or protocol.study.name}: cannot render "
+                                                 f"{frame.label}")
+            transfer = output_for(protocol, base_dir).transfer
+            lum = (luminance_checks(ctx, scene, camera, transfer, measurer.settings)
+                   if transfer is not None and scene.output is not None else ())
             names = tuple(p.name for p in scene.primitives)
             records.append(FrameRecord(frame, names, tuple(item_of(n, item_ids) for n in names),
                                        tuple(float(a) for a in areas),
                                        hidden_by(scene.primitives, camera.centre_of_projection_m), image,
                                        _point3(camera.centre_of_projection_m),
-                                       _px_per_m_shift(scene, camera, display), mesh_checks))
+                                       _px_per_m_shift(scene, camera, display), mesh_checks, lum))
             if progress is not None:
                 progress(done, len(frames))
     finally:
@@ -217,6 +218,22 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
     min_visible = MIN_VISIBLE_SAMPLES / settings.samples_per_axis**2 / px_scale
     failures, notes = _check(records, item_ids, min_visible, protocol.response.identical_conditions())
     return AuditReport(str(protocol.study.name), settings, tuple(records), tuple(failures), tuple(notes))
+
+
+def _measure(measurer: FrameMeasurer, scene: Scene, camera: EyeCamera, px_scale: float, settings: AuditSettings,
+             where: str) -> tuple[np.ndarray, np.ndarray, tuple[MeshCheck, ...]]:
+    """One frame's image, visible areas (display px^2) and mesh checks; a scene the renderer refuses (e.g. more
+    primitives than it takes) is a UserError beginning with ``where``."""
+    try:
+        image = measurer.colour(scene, camera)
+        areas = measurer.visible_areas_px(scene, camera) / px_scale
+        mesh_checks = (tuple(_in_display_px(c, px_scale) for c in measurer.mesh_checks(scene, camera))
+                       if settings.mesh_check else
+                       tuple(MeshCheck(m.name, 0.0, 0.0, 0.0, skipped="the audit ran with mesh_check off")
+                             for m in scene.meshes))
+    except ValueError as error:
+        raise UserError(f"{where}: {error}") from None
+    return image, areas, mesh_checks
 
 
 def _in_display_px(check: MeshCheck, px_scale: float) -> MeshCheck:

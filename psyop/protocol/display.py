@@ -146,6 +146,11 @@ class DisplaySpec(StrictModel):
     eye_model: str | InlineEyeModel = "gullstrand_emsley_relaxed"
     ipd: Literal["tracker"] | FixedIpd = "tracker"
     rendering_nc: RenderingNc | None = None
+    calibration: str | None = Field(
+        default=None, min_length=1,
+        description="the display's calibration file (psyop calibrate --out FILE), relative to the protocol: surfaces "
+                    "may then state luminance: {cd_m2: ...} and the renderer linearises its output "
+                    "(docs/gratings_and_luminance.md; read and checked by psyop.protocol.luminance)")
     added_latency_ms: Number | FactorRef | None = Field(
         default=None,
         description="gaze latency added on purpose, ms (0..1000), or {factor: NAME} (NAME ending in _ms): each frame "

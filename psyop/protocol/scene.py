@@ -132,11 +132,38 @@ class FactorRef(StrictModel):
 Factorable = Union[Number, FactorRef]
 
 
+#: a pattern's mean pixel value when neither ``mean`` nor ``luminance`` is given
+PATTERN_MEAN = 0.5
+
+
+def _mean_or_luminance(surface: StrictModel) -> None:
+    """A pattern's mean is a pixel value (``mean``) or a luminance (``luminance``), not both."""
+    if getattr(surface, "mean", None) is not None and getattr(surface, "luminance", None) is not None:
+        raise ValueError("give the mean as mean (a pixel value) or as luminance: {cd_m2: ...}, not both")
+
+
+class Luminance(StrictModel):
+    """A luminance in cd/m² (``{cd_m2: 40}``, or ``{cd_m2: {factor: NAME}}``, NAME ending in ``_cd_m2``): only on a
+    display with a calibration (``display: calibration: FILE``); validation refuses it elsewhere, and any value
+    outside the calibrated range (docs/gratings_and_luminance.md)."""
+
+    cd_m2: Annotated[Number, Field(gt=0, le=1e5)] | FactorRef
+
+
 class SolidSurface(StrictModel):
-    """A uniform colour, linear RGB in [0, 1]."""
+    """A uniform colour: ``rgb``, pixel values in [0, 1] (written to the display as they are), or
+    ``luminance: {cd_m2: 40}`` (a grey of that luminance, on a calibrated display). Give one."""
 
     kind: Literal["solid"]
-    rgb: Rgb
+    rgb: Rgb | None = None
+    luminance: Luminance | None = None
+
+    @model_validator(mode="after")
+    def _one_colour(self) -> "SolidSurface":
+        if (self.rgb is None) == (self.luminance is None):
+            raise ValueError("give the colour as rgb: [r, g, b] (pixel values) or luminance: {cd_m2: ...} "
+                             "(a calibrated display), one of them")
+        return self
 
 
 class WhiteNoiseSurface(StrictModel):
@@ -144,10 +171,18 @@ class WhiteNoiseSurface(StrictModel):
 
     kind: Literal["white_noise"]
     grain_deg: Number = Field(default=0.05, gt=0, le=10)
-    mean: Annotated[Number, Field(ge=0, le=1)] | FactorRef = 0.5
+    mean: Annotated[Number, Field(ge=0, le=1)] | FactorRef | None = Field(
+        default=None, description="grey level (pixel value); default 0.5 (PATTERN_MEAN) unless luminance is given")
+    luminance: Luminance | None = Field(
+        default=None, description="the mean as a luminance (calibrated display), instead of mean")
     contrast: Annotated[Number, Field(ge=0, le=1)] | FactorRef = Field(
         default=1.0, description="RMS-free peak contrast around the mean; a number or {factor: NAME}")
     seed: Integer = Field(default=0, ge=0, description="added to the trial seed, so two surfaces differ")
+
+    @model_validator(mode="after")
+    def _one_mean(self) -> "WhiteNoiseSurface":
+        _mean_or_luminance(self)
+        return self
 
 
 class PinkNoiseSurface(StrictModel):
@@ -155,10 +190,18 @@ class PinkNoiseSurface(StrictModel):
 
     kind: Literal["one_over_f"]
     exponent: Number = Field(default=1.0, ge=0, le=4)
-    mean: Annotated[Number, Field(ge=0, le=1)] | FactorRef = 0.5
+    mean: Annotated[Number, Field(ge=0, le=1)] | FactorRef | None = Field(
+        default=None, description="grey level (pixel value); default 0.5 (PATTERN_MEAN) unless luminance is given")
+    luminance: Luminance | None = Field(
+        default=None, description="the mean as a luminance (calibrated display), instead of mean")
     contrast: Annotated[Number, Field(ge=0, le=1)] | FactorRef = Field(
         default=1.0, description="peak contrast around the mean; a number or {factor: NAME}")
     seed: Integer = Field(default=0, ge=0)
+
+    @model_validator(mode="after")
+    def _one_mean(self) -> "PinkNoiseSurface":
+        _mean_or_luminance(self)
+        return self
 
 
 class ImageSurface(StrictModel):
@@ -169,7 +212,83 @@ class ImageSurface(StrictModel):
     tile_deg: Number | None = Field(default=None, gt=0, description="repeat every tile_deg; default: stretch")
 
 
-Surface = Annotated[Union[SolidSurface, WhiteNoiseSurface, PinkNoiseSurface, ImageSurface],
+UnitFraction = Annotated[Number, Field(ge=0, le=1)]
+
+
+class GaussianWindow(StrictModel):
+    """A Gabor's envelope: ``exp(-r² / (2 sigma_deg²))``, r the surface-degree distance from the surface's centre."""
+
+    kind: Literal["gaussian"]
+    sigma_deg: Annotated[Number, Field(gt=0, lt=90)] | FactorRef
+
+
+class RaisedCosineWindow(StrictModel):
+    """A flat top of radius ``plateau_radius_deg`` (surface degrees from the centre), then a half cosine falling from 1
+    to 0 over ``ramp_deg``: ``0.5 (1 + cos(pi (r - plateau) / ramp))``; 0 beyond ``plateau + ramp``."""
+
+    kind: Literal["raised_cosine"]
+    plateau_radius_deg: Annotated[Number, Field(ge=0, lt=90)] | FactorRef = 0.0
+    ramp_deg: Annotated[Number, Field(gt=0, lt=90)] | FactorRef
+
+
+Window = Annotated[Union[GaussianWindow, RaisedCosineWindow], Field(discriminator="kind")]
+
+
+class Contrast(StrictModel):
+    """A contrast named by its definition: ``{michelson: 0.01}`` ((Lmax - Lmin) / (Lmax + Lmin)) or ``{weber: 0.01}``
+    ((Lmax - Lmean) / Lmean, the peak increment over the mean). For a grating (sine or square, symmetric about its
+    mean) the two are the same number; each may be ``{factor: NAME}``. Give one."""
+
+    michelson: UnitFraction | FactorRef | None = None
+    weber: UnitFraction | FactorRef | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> "Contrast":
+        if (self.michelson is None) == (self.weber is None):
+            raise ValueError("give one of michelson or weber")
+        return self
+
+
+class GratingSurface(StrictModel):
+    """A grating drawn procedurally (docs/gratings_and_luminance.md): ``L = mean (1 + contrast * window * s(2 pi
+    cycles_per_deg x + phase))``, s = sin (``waveform: sine``) or its sign (``square``, box-filtered over each pixel),
+    x the surface-degree coordinate along the modulation direction (``orientation_deg`` 0: vertical bars, modulation
+    along the surface's right axis; positive angles turn the bars counter-clockwise). Surface degrees: metres on the
+    surface along its own axes times 180 / (pi R), R the distance of its centre from the scene origin.
+    ``drift_deg_s``: the bars move at that many surface degrees per second towards +x (the phase falls by
+    360 cycles_per_deg drift_deg_s degrees per second). ``mean`` is a pixel value (0..1) or ``luminance: {cd_m2}``
+    (a calibrated display); ``contrast`` Michelson (a number, ``{factor: NAME}``, ``{michelson: ...}`` or
+    ``{weber: ...}``)."""
+
+    kind: Literal["grating"]
+    waveform: Literal["sine", "square"] = "sine"
+    cycles_per_deg: Annotated[Number, Field(gt=0, le=60)] | FactorRef
+    orientation_deg: Annotated[Number, Field(ge=-360, le=360)] | FactorRef = 0.0
+    phase_deg: Annotated[Number, Field(ge=-360, le=360)] | FactorRef = 0.0
+    drift_deg_s: Annotated[Number, Field(ge=-1000, le=1000)] | FactorRef | None = None
+    mean: UnitFraction | FactorRef | None = Field(
+        default=None, description="mean pixel value; default 0.5 (PATTERN_MEAN) unless luminance is given")
+    luminance: Luminance | None = Field(default=None, description="the mean as a luminance (calibrated display)")
+    contrast: UnitFraction | FactorRef | Contrast = Field(default=1.0, description="Michelson contrast")
+    window: Window | None = None
+
+    @model_validator(mode="after")
+    def _one_mean(self) -> "GratingSurface":
+        _mean_or_luminance(self)
+        return self
+
+    @property
+    def michelson(self) -> float | FactorRef:
+        """The Michelson contrast (Weber, as defined on :class:`Contrast`, is the same for these waveforms)."""
+        c = self.contrast
+        if isinstance(c, Contrast):
+            value = c.michelson if c.michelson is not None else c.weber
+            assert value is not None
+            return value
+        return c
+
+
+Surface = Annotated[Union[SolidSurface, WhiteNoiseSurface, PinkNoiseSurface, ImageSurface, GratingSurface],
                     Field(discriminator="kind")]
 
 

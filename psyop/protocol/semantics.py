@@ -383,6 +383,15 @@ class _Checker:
                                         f"(they would cover {coverage:.0%} of it; random placement becomes slow above 40 % and jams near 55 %). "
                                         f"Use at most {fit} targets, smaller targets or a wider field.")
 
+    def check_luminance(self, conditions: list[JsonObject]) -> None:
+        """The display's calibration file, every luminance against its range, gratings against the display's
+        Nyquist frequency (psyop.protocol.luminance)."""
+        from psyop.protocol.luminance import grating_issues, luminance_issues
+
+        value_sets = list(self._value_sets(conditions))
+        for path, message in luminance_issues(self.p, self.base_dir, value_sets) + grating_issues(self.p, value_sets):
+            self.add(path, message)
+
     def check_image(self, surface: ImageSurface, path: Loc) -> None:
         base = self.base_dir or FsPath.cwd()
         target = (base / surface.path)
@@ -644,6 +653,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
     checker.check_kind_design()
     checker.check_rendering_nc(conditions)
     checker.check_added_latency(conditions)
+    checker.check_luminance(conditions)
     checker.check_unused_factors()
     checker.check_observer()
     checker.check_validation()

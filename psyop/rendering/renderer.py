@@ -21,9 +21,22 @@ import numpy as np
 
 from psyop.rendering.camera_math import camera_is_usable, near_far_m, pixel_rays
 from psyop.rendering.reuse import ReuseDecision, decide_reuse
-from psyop.rendering.scene import GridMaterial, ImageTexture, NoiseTexture, Scene, Shape, Solid
+from psyop.rendering.scene import (
+    Grating,
+    GridMaterial,
+    ImageTexture,
+    OUTPUT_TABLE_ROW,
+    NoiseTexture,
+    OutputTransfer,
+    Scene,
+    Shape,
+    Solid,
+    Waveform,
+    WindowKind,
+)
 from psyop.rendering.shaders import (
     MAX_PRIMITIVES,
+    OUTPUT_FRAGMENT_SHADER,
     TEXELS_PER_PRIMITIVE,
     VERTEX_SHADER,
     AntiAliasing,
@@ -101,6 +114,10 @@ class _EyeState:
     depth_range_m: tuple[float, float] | None = (0.0, math.inf)  # None: not computed yet (see depth_centre_m)
     depth_centre_m: np.ndarray | None = None  # the centre of projection of the last image, for depth_range_m
     rendered_scene: Scene | None = None  # the scene of this eye's last image (reuse needs the same)
+    # a calibrated display's ray-cast target (normalised luminance; the final pass maps it into ``fbo``)
+    linear: moderngl.Texture | None = None
+    linear_fbo: moderngl.Framebuffer | None = None
+    frames_output: int = 0  # final passes drawn for this eye (the dither's frame index)
     released: list[Any] = field(default_factory=list)  # Any: moderngl objects of any kind, released together
 
 
@@ -181,6 +198,11 @@ class Renderer:
             False: (self._prog, self._edge_prog, self._vao, self._edge_vao)}
         self._with_meshes = False
         self._mesh_pass: MeshPass | None = None
+        # the final pass of a calibrated display (psyop.rendering.scene.OutputTransfer), built on first use
+        self._output: OutputTransfer | None = None
+        self._output_prog: moderngl.Program | None = None
+        self._output_vao: moderngl.VertexArray | None = None
+        self._table_tex: moderngl.Texture | None = None
         self._set_constant_uniforms()  # uniforms no frame changes: written once
         self.set_scene(scene)
 
@@ -213,6 +235,8 @@ class Renderer:
             raise ValueError(f"at most {MAX_PRIMITIVES} primitives, got {len(scene.primitives)}")
         layer_of = self._upload_textures(scene)
         self._upload_primitives(scene, layer_of)
+        if scene.output != self._output:
+            self._set_output(scene.output)
         aperture_changed = self._scene is None or scene.aperture != self._scene.aperture
         self._scene = scene
         for state in self._eyes.values():
@@ -229,6 +253,56 @@ class Renderer:
         self._set_if_present("u_aperture_colour", ap_colour)
         self._set_if_present("u_samples", int(self.settings.samples_per_axis))
         self._set_if_present("u_edge_margin_px", float(self.settings.edge_margin_px))
+
+    def _set_output(self, output: OutputTransfer | None) -> None:
+        """Switch the final pass on (a calibrated display: upload its table) or off (values written as they are)."""
+        self._output = output
+        if self._table_tex is not None:
+            self._table_tex.release()
+            self._table_tex = None
+        for state in self._eyes.values():
+            self._release_linear(state)
+        if output is None:
+            return
+        if self._output_prog is None:
+            self._output_prog = self.ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=OUTPUT_FRAGMENT_SHADER)
+            self._output_vao = self.ctx.vertex_array(self._output_prog, [])
+            _uniform(self._output_prog, "u_linear").value = 5
+            _uniform(self._output_prog, "u_table").value = 6
+        n = output.table.shape[0]
+        rows = -(-n // OUTPUT_TABLE_ROW)
+        table = np.zeros((rows * OUTPUT_TABLE_ROW, 4), dtype=np.float32)
+        table[:n, :3] = output.table
+        self._table_tex = self.ctx.texture((OUTPUT_TABLE_ROW, rows), 4, table.tobytes(), dtype="f4")
+        self._table_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        _uniform(self._output_prog, "u_table_size").value = int(output.table.shape[0])
+        _uniform(self._output_prog, "u_dither").value = 1 if output.dither else 0
+
+    def _release_linear(self, state: _EyeState) -> None:
+        for obj in (state.linear_fbo, state.linear):
+            if obj is not None:
+                obj.release()
+        state.linear = state.linear_fbo = None
+
+    def _linear_target(self, state: _EyeState) -> moderngl.Framebuffer:
+        """The eye's ray-cast target on a calibrated display (float, with the two-pass depth), made on first use."""
+        if state.linear_fbo is None:
+            state.linear = self.ctx.texture((state.width_px, state.height_px), 4, dtype="f4")
+            state.linear.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            state.linear_fbo = self.ctx.framebuffer(color_attachments=[state.linear], depth_attachment=state.depth)
+        return state.linear_fbo
+
+    def _final_pass(self, state: _EyeState) -> None:
+        """Normalised luminance -> codes (the calibration's inverse and the dither), into the eye's image."""
+        assert self._output_vao is not None and self._output_prog is not None and self._table_tex is not None
+        assert state.linear is not None
+        state.fbo.use()
+        self.ctx.viewport = (0, 0, state.width_px, state.height_px)
+        state.linear.use(5)
+        self._table_tex.use(6)
+        _uniform(self._output_prog, "u_offset").value = float((state.frames_output * 0.6180339887498949) % 1.0)
+        state.frames_output += 1
+        self._output_vao.render(moderngl.TRIANGLES, vertices=3)
 
     def _upload_textures(self, scene: Scene) -> dict[NoiseTexture | tuple[str, str], int]:
         """The texture layer of each texture material of ``scene``; the layers are re-synthesised and
@@ -333,6 +407,11 @@ class Renderer:
             row += [0.0, *m.colour, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
         elif isinstance(m, GridMaterial):
             row += [2.0, *m.background, 0.0, *m.line_colour, m.lines_per_side, 0.0, 0.0, 0.0, m.line_width_fraction]
+        elif isinstance(m, Grating):
+            window = {WindowKind.NONE: 0.0, WindowKind.GAUSSIAN: 1.0, WindowKind.RAISED_COSINE: 2.0}[m.window]
+            phase = m.phase_cycles - math.floor(m.phase_cycles)  # float64 here: float32 keeps it exact to 6e-8 cycles
+            row += [3.0, m.mean, m.amplitude, phase, 0.0 if m.waveform is Waveform.SINE else 1.0,
+                    m.cycles_u, m.cycles_v, m.deg_per_unit_u, m.deg_per_unit_v, window, m.window_1, m.window_2, 0.0]
         else:
             assert layer is not None
             row += [1.0, 0.0, 0.0, 0.0, layer, 0.0, 0.0, 0.0, 0.0, sizes[layer][0], sizes[layer][1], m.repeats, 0.0]
@@ -390,6 +469,7 @@ class Renderer:
 
     def _release_eye(self, state: _EyeState) -> None:
         self._release_eye_aperture(state)
+        self._release_linear(state)
         if state.mesh_target is not None:
             state.mesh_target.release()
         for obj in (state.fbo, state.colour, state.msaa_fbo, state.depth):
@@ -468,7 +548,8 @@ class Renderer:
             state.aperture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         if camera is not None and self.scene.meshes:
             self._draw_meshes(state, camera)
-        target = state.msaa_fbo if state.msaa_fbo is not None else state.fbo
+        resolved = state.fbo if self._output is None else self._linear_target(state)
+        target = state.msaa_fbo if state.msaa_fbo is not None else resolved
         target.use()
         self.ctx.viewport = (0, 0, state.width_px, state.height_px)
         if camera is None:
@@ -505,7 +586,9 @@ class Renderer:
             state.rendered_scene = self._scene
             self._keep_depth_centre(state, cop)
         if state.msaa_fbo is not None:
-            self.ctx.copy_framebuffer(state.fbo, state.msaa_fbo)
+            self.ctx.copy_framebuffer(resolved, state.msaa_fbo)
+        if self._output is not None:
+            self._final_pass(state)
 
     def _keep_depth_centre(self, state: _EyeState, cop: np.ndarray) -> None:
         """After a draw: the reuse bounds wait until a frame may reuse this image (:meth:`_depth_range_m`)."""
@@ -587,6 +670,16 @@ class Renderer:
         blocks = padded.reshape(padded.shape[0] // block_px, block_px, padded.shape[1] // block_px, block_px)
         return int(np.count_nonzero(blocks.any(axis=(1, 3))))
 
+    def linear_image(self, eye: str = "right") -> np.ndarray:
+        """(H, W, 3) float32, top row first: the eye's last ray-cast values before the final pass (normalised
+        luminance on a calibrated display; the same as :meth:`image` without one)."""
+        state = self._eyes[eye]
+        if state.linear_fbo is None:
+            return self.image(eye)
+        raw = state.linear_fbo.read(components=4, dtype="f4")
+        img = np.frombuffer(raw, dtype=np.float32).reshape(state.height_px, state.width_px, 4)
+        return np.ascontiguousarray(img[::-1, :, :3])
+
     def image_uint8(self, eye: str = "right") -> np.ndarray:
         """(H, W, 3) uint8 image (rounded) of the eye's last frame."""
         return np.round(np.clip(self.image(eye), 0.0, 1.0) * 255.0).astype(np.uint8)
@@ -597,7 +690,8 @@ class Renderer:
         for state in self._eyes.values():
             self._release_eye(state)
         self._eyes.clear()
-        for obj in (self._prims_tex, self._layers_tex, self._centres, self._bounds,
+        for obj in (self._prims_tex, self._layers_tex, self._centres, self._bounds, self._table_tex,
+                    self._output_vao, self._output_prog,
                     *(o for variant in self._variants.values() for o in variant)):
             if obj is not None:
                 obj.release()

@@ -129,7 +129,92 @@ class GridMaterial:
         object.__setattr__(self, "line_colour", _colour(self.line_colour, "line_colour"))
 
 
-Material = Solid | NoiseTexture | ImageTexture | GridMaterial
+class Waveform(str, Enum):
+    SINE = "sine"
+    SQUARE = "square"
+
+
+class WindowKind(str, Enum):
+    NONE = "none"
+    GAUSSIAN = "gaussian"
+    RAISED_COSINE = "raised_cosine"
+
+
+@dataclass(frozen=True)
+class Grating:
+    """A grey grating computed per ray sample in the fragment shader (never a texture), so its phase is exact
+    below the pixel and its outline is the primitive's ray-cast edge.
+
+    In the primitive's local coordinates ``(a, b)`` (-1..1 along ``half_u``/``half_v``) the surface coordinates
+    are ``x = a * deg_per_unit_u``, ``y = b * deg_per_unit_v`` (surface degrees, psyop.stimulus.build), and the
+    value is ``mean + amplitude * w(x, y) * s(cycles)``, ``cycles = x * cycles_u + y * cycles_v + phase_cycles``:
+    ``s = sin(2 pi cycles)`` (``SINE``, point-sampled at each ray) or its sign (``SQUARE``, box-filtered along the
+    modulation direction over the pixel's footprint, exact within 32x32 grids at edges). ``w``: 1, a Gaussian
+    ``exp(-r^2 / (2 window_1^2))`` or a raised cosine (flat to ``window_1``, falling to 0 over ``window_2``),
+    r = |(x, y)|. Values are what the renderer writes (pixel values, or normalised luminance with an
+    :class:`OutputTransfer`); the mean plus or minus the amplitude must lie in [0, 1].
+    """
+
+    mean: float
+    amplitude: float
+    cycles_u: float
+    cycles_v: float
+    deg_per_unit_u: float
+    deg_per_unit_v: float
+    phase_cycles: float = 0.0
+    waveform: Waveform = Waveform.SINE
+    window: WindowKind = WindowKind.NONE
+    window_1: float = 0.0
+    window_2: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "waveform", Waveform(self.waveform))
+        object.__setattr__(self, "window", WindowKind(self.window))
+        numbers = (self.mean, self.amplitude, self.cycles_u, self.cycles_v, self.deg_per_unit_u, self.deg_per_unit_v,
+                   self.phase_cycles, self.window_1, self.window_2)
+        if not all(math.isfinite(float(x)) for x in numbers):
+            raise ValueError(f"grating numbers must be finite, got {numbers}")
+        if not (self.amplitude >= 0.0 and self.mean - self.amplitude >= -1e-12 and self.mean + self.amplitude <= 1 + 1e-12):
+            raise ValueError(f"grating mean {self.mean} +- amplitude {self.amplitude} must lie in [0, 1]")
+        if not (self.deg_per_unit_u > 0 and self.deg_per_unit_v > 0):
+            raise ValueError("grating deg_per_unit_u and deg_per_unit_v must be positive")
+        if self.window is WindowKind.GAUSSIAN and not self.window_1 > 0:
+            raise ValueError("a Gaussian window needs sigma (window_1) > 0")
+        if self.window is WindowKind.RAISED_COSINE and not (self.window_1 >= 0 and self.window_2 > 0):
+            raise ValueError("a raised-cosine window needs plateau (window_1) >= 0 and ramp (window_2) > 0")
+
+    def value(self, x_deg: np.ndarray, y_deg: np.ndarray, footprint_cycles: float = 0.0) -> np.ndarray:
+        """The analytic value at surface degrees (x, y), float64 (the shader's formula; tests compare with it).
+        ``footprint_cycles``: a square wave's box-filter half-width in cycles (0: point-sampled)."""
+        x, y = np.asarray(x_deg, dtype=np.float64), np.asarray(y_deg, dtype=np.float64)
+        cycles = x * self.cycles_u + y * self.cycles_v + self.phase_cycles
+        if self.waveform is Waveform.SINE:
+            s = np.sin(2.0 * np.pi * cycles)
+        elif footprint_cycles > 1e-6:
+            h = footprint_cycles
+            s = (_triangle(cycles + h) - _triangle(cycles - h)) / (2.0 * h)
+        else:
+            s = np.sign(np.sin(2.0 * np.pi * cycles))
+        return np.asarray(self.mean + self.amplitude * self.envelope(x, y) * s)
+
+    def envelope(self, x_deg: np.ndarray, y_deg: np.ndarray) -> np.ndarray:
+        """The window w(x, y) (1 without a window)."""
+        r2 = np.asarray(x_deg, dtype=np.float64) ** 2 + np.asarray(y_deg, dtype=np.float64) ** 2
+        if self.window is WindowKind.GAUSSIAN:
+            return np.exp(-0.5 * r2 / self.window_1**2)
+        if self.window is WindowKind.RAISED_COSINE:
+            t = np.clip((np.sqrt(r2) - self.window_1) / self.window_2, 0.0, 1.0)
+            return 0.5 + 0.5 * np.cos(np.pi * t)
+        return np.ones_like(r2)
+
+
+def _triangle(cycles: np.ndarray) -> np.ndarray:
+    """The antiderivative of the unit square wave sign(sin(2 pi c)), in cycles: f for f = frac(c) < 0.5, else 1 - f."""
+    f = np.mod(cycles, 1.0)
+    return np.where(f < 0.5, f, 1.0 - f)
+
+
+Material = Solid | NoiseTexture | ImageTexture | GridMaterial | Grating
 
 
 @dataclass(frozen=True)
@@ -264,15 +349,60 @@ class Aperture:
             raise ValueError(f"aperture radius_deg must be in (0, 180), got {self.radius_deg}")
 
 
+#: the final pass's table width: ``OutputTransfer.table`` rows are laid out in rows of this many texels
+OUTPUT_TABLE_ROW = 128
+
+
+@dataclass(frozen=True)
+class OutputTransfer:
+    """The renderer's final pass on a calibrated display (docs/gratings_and_luminance.md): the ray-cast's values are
+    normalised luminance ``l``; ``table`` (n, 3) holds per output channel the display's normalised luminance at the
+    codes ``255 k / (n - 1)``, non-decreasing (the calibration's forward model, finely sampled). The final pass
+    inverts it per pixel: a binary search for the bracketing entries, then linear interpolation between them, gives
+    the fractional code (exact at every entry: a luminance of a whole code gives that code); values below the first
+    entry give code 0, above the last 255. The code is then made an integer by ordered dithering (``dither``: an
+    8 x 8 Bayer threshold, offset per frame by the golden ratio, so each aligned 8 x 8 block's mean code is within
+    1/64 of the fractional one and each pixel's mean over frames tends to it), or rounded; a code within 0.001 of an
+    integer is that integer (steady backgrounds). Equal transfers compare by ``key`` (the calibration's path), so a
+    scene built each frame keeps the uploaded table."""
+
+    table: np.ndarray = field(compare=False)
+    key: str = "transfer"
+    dither: bool = True
+
+    def __post_init__(self) -> None:
+        table = np.asarray(self.table, dtype=np.float32)
+        if table.ndim == 1:
+            table = np.repeat(table[:, None], 3, axis=1)
+        if table.ndim != 2 or table.shape[1] != 3 or not 2 <= table.shape[0] <= OUTPUT_TABLE_ROW**2 \
+                or not np.all(np.isfinite(table)):
+            raise ValueError(f"OutputTransfer.table must be a finite (n, 3) array, 2 <= n <= {OUTPUT_TABLE_ROW**2}")
+        if np.any(np.diff(table, axis=0) < 0) or np.any(table[-1] <= table[0]):
+            raise ValueError("OutputTransfer.table must rise with the code (non-decreasing in float32: near a black "
+                             "level the finest steps may round equal)")
+        table = np.ascontiguousarray(table)
+        table.setflags(write=False)
+        object.__setattr__(self, "table", table)
+
+    def codes(self, values: np.ndarray) -> np.ndarray:
+        """The fractional codes of normalised luminances (the final pass's inversion, float64), per channel."""
+        v = np.asarray(values, dtype=np.float64)
+        grid = np.linspace(0.0, 255.0, self.table.shape[0])
+        return np.stack([np.interp(v[..., c], self.table[:, c].astype(np.float64), grid) for c in range(3)], axis=-1)
+
+
 @dataclass(frozen=True)
 class Scene:
     """What to draw: primitives (nearest hit wins), a background, an optional aperture, and mesh items
-    (psyop.rendering.mesh_scene; rasterised first, sharing the primitives' depth: docs/rendering.md)."""
+    (psyop.rendering.mesh_scene; rasterised first, sharing the primitives' depth: docs/rendering.md).
+    ``output``: None (values are pixel values, written as they are) or the calibrated display's
+    :class:`OutputTransfer` (values are normalised luminance, mapped to codes by the final pass)."""
 
     primitives: tuple[Primitive, ...]
     background: Colour = (0.5, 0.5, 0.5)
     aperture: Aperture | None = None
     meshes: tuple[MeshInstance, ...] = ()
+    output: OutputTransfer | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "primitives", tuple(self.primitives))

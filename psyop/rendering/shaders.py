@@ -34,7 +34,7 @@ from __future__ import annotations
 from enum import Enum
 
 from psyop.limits import MAX_PRIMITIVES  # shared with protocol validation
-from psyop.rendering.scene import COPLANAR_RELATIVE_DEPTH
+from psyop.rendering.scene import COPLANAR_RELATIVE_DEPTH, OUTPUT_TABLE_ROW
 
 TEXELS_PER_PRIMITIVE = 7
 
@@ -141,10 +141,38 @@ Hit intersect(int i, vec3 d) {
     return h;
 }
 
+// A grating (psyop.rendering.scene.Grating): p2 = (mean, amplitude, phase in cycles, square?), p3 = (cycles per
+// surface degree along a and b, surface degrees per local unit along a and b), p4 = (window kind, its two numbers).
+// The cycle count is reduced with fract() before sin(), so the phase keeps float32's relative precision.
+float square_triangle(float c) { float f = fract(c); return f < 0.5 ? f : 1.0 - f; }
+
+vec3 shade_grating(int i, vec4 p2, float a, float b, float footprint) {
+    vec4 p3 = P(i, 3); vec4 p4 = P(i, 4);
+    vec2 xy = vec2(a * p3.z, b * p3.w);
+    float cyc = xy.x * p3.x + xy.y * p3.y;
+    float c = fract(cyc) + p2.z;
+    float s;
+    if (p2.w < 0.5) {
+        s = sin(TWO_PI * c);
+    } else {
+        // box filter along the modulation over the pixel footprint (local units per pixel): half-width in cycles
+        float h = 0.5 * footprint * (abs(p3.x * p3.z) + abs(p3.y * p3.w));
+        s = h > 1e-6 ? (square_triangle(c + h) - square_triangle(c - h)) / (2.0 * h) : (fract(c) < 0.5 ? 1.0 : -1.0);
+    }
+    float w = 1.0;
+    if (p4.x > 1.5) {
+        w = 0.5 + 0.5 * cos(3.14159265358979 * clamp((length(xy) - p4.y) / p4.z, 0.0, 1.0));
+    } else if (p4.x > 0.5) {
+        w = exp(-0.5 * dot(xy, xy) / (p4.y * p4.y));
+    }
+    return vec3(p2.x + p2.y * w * s);
+}
+
 vec3 shade(int i, float a, float b, float footprint) {
     vec4 p1 = P(i, 1); vec4 p2 = P(i, 2);
     int kind = int(p1.w + 0.5);
     if (kind == 0) return p2.rgb;
+    if (kind == 3) return shade_grating(i, p2, a, b, footprint);
     vec4 p4 = P(i, 4);
     if (kind == 1) {
         vec2 st = fract(vec2(a * 0.5 + 0.5, 0.5 - b * 0.5) * p4.z);
@@ -361,3 +389,52 @@ def edge_pass_shader(meshes: bool = False) -> str:
     define = "AA_EDGE_PASS" + ("\n#define MESH_LAYER" if meshes else "")
     return FRAGMENT_TEMPLATE % {"max_prims": MAX_PRIMITIVES, "aa_define": define,
                                 "coplanar": COPLANAR_RELATIVE_DEPTH}
+
+
+#: The 8 x 8 Bayer matrix (recursive ordered-dither indices 0..63), row by row.
+BAYER_8X8: tuple[int, ...] = (
+    0, 32, 8, 40, 2, 34, 10, 42, 48, 16, 56, 24, 50, 18, 58, 26,
+    12, 44, 4, 36, 14, 46, 6, 38, 60, 28, 52, 20, 62, 30, 54, 22,
+    3, 35, 11, 43, 1, 33, 9, 41, 51, 19, 59, 27, 49, 17, 57, 25,
+    15, 47, 7, 39, 13, 45, 5, 37, 63, 31, 55, 23, 61, 29, 53, 21,
+)
+
+#: The final pass on a calibrated display (psyop.rendering.scene.OutputTransfer): normalised luminance -> the
+#: fractional code (binary search in the forward table, linear between its entries) -> an integer code (ordered
+#: dither or rounding), written as code / 255 so any 8-bit conversion of the float image gives that code exactly.
+OUTPUT_FRAGMENT_SHADER = """
+#version 410 core
+#define ROW %(row)d
+uniform sampler2D u_linear;   // the ray-cast's image, normalised luminance
+uniform sampler2D u_table;    // the forward table, row-major in rows of ROW texels: l at code 255 k / (n - 1)
+uniform int u_table_size;     // n
+uniform int u_dither;         // 1: ordered dither, 0: round
+uniform float u_offset;       // this frame's threshold offset: frac(frame * golden ratio)
+const int BAYER[64] = int[64](%(bayer)s);
+out vec4 frag_colour;
+
+float entry(int k, int channel) { return texelFetch(u_table, ivec2(k %% ROW, k / ROW), 0)[channel]; }
+
+float code_of(float l, int channel) {
+    if (!(l > entry(0, channel))) return 0.0;
+    if (l >= entry(u_table_size - 1, channel)) return 255.0;
+    int lo = 0; int hi = u_table_size - 1;  // entry(lo) < l <= entry(hi)
+    while (hi - lo > 1) {
+        int mid = (lo + hi) / 2;
+        if (entry(mid, channel) < l) lo = mid; else hi = mid;
+    }
+    float a = entry(lo, channel); float b = entry(hi, channel);
+    return (float(lo) + (l - a) / (b - a)) * 255.0 / float(u_table_size - 1);
+}
+
+void main() {
+    ivec2 fc = ivec2(gl_FragCoord.xy);
+    vec4 lin = texelFetch(u_linear, fc, 0);
+    vec3 code = vec3(code_of(lin.r, 0), code_of(lin.g, 1), code_of(lin.b, 2));
+    float t = fract((float(BAYER[(fc.y & 7) * 8 + (fc.x & 7)]) + 0.5) / 64.0 + u_offset);
+    vec3 q = (u_dither == 1) ? floor(code + t) : floor(code + 0.5);
+    vec3 nearest = floor(code + 0.5);
+    q = mix(q, nearest, vec3(lessThan(abs(code - nearest), vec3(1e-3))));
+    frag_colour = vec4(clamp(q, 0.0, 255.0) / 255.0, lin.a);
+}
+""" % {"bayer": ", ".join(str(b) for b in BAYER_8X8), "row": OUTPUT_TABLE_ROW}

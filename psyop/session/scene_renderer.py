@@ -190,6 +190,8 @@ class SceneRenderer:
         prims: list[Primitive] = []
         meshes: list[MeshInstance] = []
         aperture = None
+        output = None  # a calibrated display's final pass (psyop.rendering.scene.OutputTransfer), the same in every part
+        background = Scene(()).background
         for item_id, part in parts:
             if part is None:  # a moving item: built for this frame's time
                 part = build_scene(self.protocol, row, t_in_phase_s, centre, interval=max(1, phase.interval),
@@ -197,7 +199,8 @@ class SceneRenderer:
             prims += part.primitives
             meshes += part.meshes
             aperture = part.aperture if part.aperture is not None else aperture
-        return Scene(tuple(prims), aperture=aperture, meshes=tuple(meshes))
+            output, background = part.output, part.background
+        return Scene(tuple(prims), background=background, aperture=aperture, meshes=tuple(meshes), output=output)
 
     def _static_parts(self, row: TrialRow, phase: PhaseSpec, eye: str) -> StaticParts:
         """What of this phase's scene does not depend on time: ``(scene,)`` when nothing in it moves (the

@@ -36,6 +36,7 @@ from psyop.rendering.text import TextImage
 from psyop.rendering.textures import ImageFiles
 from psyop.rendering.scene import (
     Aperture,
+    Grating,
     GridMaterial,
     Material,
     NoiseKind,
@@ -45,7 +46,10 @@ from psyop.rendering.scene import (
     Shape,
     SineBorder,
     Solid,
+    Waveform,
+    WindowKind,
 )
+from psyop.stimulus.output import PIXEL_OUTPUT, Output
 from psyop.protocol.factor_fields import resolve_factor_fields
 from psyop.protocol.trial import Interval
 from psyop.schedule import interval_values
@@ -86,19 +90,72 @@ def _trial_seed(values: TrialRow) -> int:
     return int(values.get("trial_seed", 0)) % (2**31)
 
 
+def surface_deg_per_unit(extent_deg: float) -> float:
+    """Surface degrees per local unit (a primitive's half-extent) of a primitive ``extent_deg`` across
+    (:func:`psyop.rendering.builders.placed_primitive`: half-extent ``R tan(extent / 2)`` metres): the half-extent
+    in surface degrees, ``degrees(tan(extent / 2))``, whatever its distance R (a surface degree is ``R pi / 180``
+    metres along the surface; docs/gratings_and_luminance.md).
+
+    Examples
+    --------
+    >>> round(surface_deg_per_unit(2.0), 6)
+    1.000102
+    """
+    return math.degrees(math.tan(math.radians(extent_deg) / 2.0))
+
+
+def _pattern_mean(surface: ps.WhiteNoiseSurface | ps.PinkNoiseSurface | ps.GratingSurface, output: Output) -> float:
+    """A pattern's mean as the renderer's value: its pixel value, or its luminance through the display's calibration."""
+    if surface.luminance is not None:
+        return output.luminance_value(_number(surface.luminance.cd_m2))
+    return output.pixel_value(ps.PATTERN_MEAN if surface.mean is None else _number(surface.mean))
+
+
+def _grating(surface: ps.GratingSurface, width_deg: float, height_deg: float, time_s: float,
+             output: Output) -> Grating:
+    """A grating material: surface-degree frequencies along the primitive's axes, phase (drifted to ``time_s``)
+    in cycles, window in surface degrees (:class:`psyop.rendering.scene.Grating`)."""
+    cpd = _number(surface.cycles_per_deg)
+    theta = math.radians(_number(surface.orientation_deg))
+    drift = 0.0 if surface.drift_deg_s is None else _number(surface.drift_deg_s)
+    phase_cycles = _number(surface.phase_deg) / 360.0 - cpd * drift * float(time_s)
+    mean = _pattern_mean(surface, output)
+    window, w1, w2 = WindowKind.NONE, 0.0, 0.0
+    if isinstance(surface.window, ps.GaussianWindow):
+        window, w1 = WindowKind.GAUSSIAN, _number(surface.window.sigma_deg)
+    elif isinstance(surface.window, ps.RaisedCosineWindow):
+        window = WindowKind.RAISED_COSINE
+        w1, w2 = _number(surface.window.plateau_radius_deg), _number(surface.window.ramp_deg)
+    return Grating(mean=mean, amplitude=output.amplitude(mean, _number(surface.michelson)),
+                   cycles_u=cpd * math.cos(theta), cycles_v=cpd * math.sin(theta),
+                   deg_per_unit_u=surface_deg_per_unit(width_deg), deg_per_unit_v=surface_deg_per_unit(height_deg),
+                   phase_cycles=phase_cycles, waveform=Waveform(surface.waveform), window=window,
+                   window_1=w1, window_2=w2)
+
+
 def _material(surface: ps.Surface, values: TrialRow, size_deg: float, base_dir: Path | None,
-              images: ImageFiles | None = None) -> Material:
-    """A rendering material for a protocol surface (noise seeded from the trial seed)."""
+              images: ImageFiles | None = None, *, height_deg: float | None = None, time_s: float = 0.0,
+              output: Output | None = None) -> Material:
+    """A rendering material for a protocol surface (noise seeded from the trial seed). ``size_deg``: the
+    primitive's extent (its width when ``height_deg`` is given); ``output``: how values become the renderer's
+    (pixel values as they are, or normalised luminance on a calibrated display)."""
+    output = output if output is not None else PIXEL_OUTPUT
     if isinstance(surface, ps.SolidSurface):
-        return Solid(_rgb(tuple(float(c) for c in surface.rgb)))
+        if surface.luminance is not None:
+            grey = output.luminance_value(_number(surface.luminance.cd_m2))
+            return Solid((grey, grey, grey))
+        assert surface.rgb is not None  # SolidSurface._one_colour
+        return Solid(output.pixel_rgb(_rgb(tuple(float(c) for c in surface.rgb))))
+    if isinstance(surface, ps.GratingSurface):
+        return _grating(surface, size_deg, size_deg if height_deg is None else height_deg, time_s, output)
     seed = _trial_seed(values) + int(getattr(surface, "seed", 0))
     if isinstance(surface, ps.WhiteNoiseSurface):
         size = int(min(1024, max(4, round(size_deg / float(surface.grain_deg)))))
         # peak contrast c around the mean: grey = mean * (1 + c z), z ~ N(0, 1) clipped; RMS c/2
-        return NoiseTexture(NoiseKind.WHITE, seed=seed, size_px=size, mean=_number(surface.mean),
+        return NoiseTexture(NoiseKind.WHITE, seed=seed, size_px=size, mean=_pattern_mean(surface, output),
                             contrast=_number(surface.contrast) / 2.0)
     if isinstance(surface, ps.PinkNoiseSurface):
-        return NoiseTexture(NoiseKind.PINK, seed=seed, size_px=256, mean=_number(surface.mean),
+        return NoiseTexture(NoiseKind.PINK, seed=seed, size_px=256, mean=_pattern_mean(surface, output),
                             contrast=_number(surface.contrast) / 2.0)
     if isinstance(surface, ps.ImageSurface):
         repeats = size_deg / float(surface.tile_deg) if surface.tile_deg else 1.0
@@ -116,7 +173,8 @@ def _rotate_axes(prim: Primitive, angle_deg: float) -> Primitive:
 
 
 def _sinusoidal_border(item: ps.SinusoidalBorder, values: TrialRow, origin: np.ndarray,
-                       base_dir: Path | None, images: ImageFiles | None = None) -> list[Primitive]:
+                       base_dir: Path | None, images: ImageFiles | None = None, time_s: float = 0.0,
+                       output: Output = PIXEL_OUTPUT) -> list[Primitive]:
     near_side = item.near_side if item.near_side != "schedule" else str(values.get("near_side", "left"))
     if near_side not in ("left", "right"):
         raise UserError(f"near_side must be left or right, got {near_side!r}")
@@ -130,9 +188,11 @@ def _sinusoidal_border(item: ps.SinusoidalBorder, values: TrialRow, origin: np.n
     border = SineBorder(amplitude=math.tan(math.radians(float(item.amplitude_deg))) / half_tan,
                         cycles=size / float(item.period_deg), phase_rad=math.radians(phase_deg), offset=0.0,
                         side=-1 if near_side == "left" else 1)
-    far = builders.frontoparallel_rect(far_m, size, size, _material(far_surface, values, size, base_dir, images),
+    far = builders.frontoparallel_rect(far_m, size, size, _material(far_surface, values, size, base_dir, images,
+                                                                    time_s=time_s, output=output),
                                        origin_m=origin, name=f"{item.id}_far")
-    near = builders.frontoparallel_rect(near_m, size, size, _material(near_surface, values, size, base_dir, images),
+    near = builders.frontoparallel_rect(near_m, size, size, _material(near_surface, values, size, base_dir, images,
+                                                                      time_s=time_s, output=output),
                                         origin_m=origin, border=border, name=f"{item.id}_near")
     return [_rotate_axes(far, float(item.orientation_deg)), _rotate_axes(near, float(item.orientation_deg))]
 
@@ -178,8 +238,9 @@ def _fixation(item: ps.FixationTarget, values: TrialRow, time_s: float, origin: 
 
 
 def depends_on_time(item: ps.Primitive) -> bool:
-    """Whether a scene item's primitives change with the time into the interval: only a fixation target
-    on a path moves (:func:`_fixation` is the one use of ``time_s`` in :func:`build_scene`). A session
+    """Whether a scene item's primitives change with the time into the interval: a fixation target
+    on a path moves (:func:`_fixation`) and a drifting grating's phase moves (``drift_deg_s``, :func:`_grating`);
+    these are the uses of ``time_s`` in :func:`build_scene`. A session
     builds every other item once per trial and phase (``psyop.session.scene_renderer``); an item kind
     that starts to use the time must be named here.
 
@@ -189,7 +250,11 @@ def depends_on_time(item: ps.Primitive) -> bool:
     >>> depends_on_time(ps.Aperture(id="window", kind="aperture", diameter_deg=30))
     False
     """
-    return isinstance(item, ps.FixationTarget) and item.path is not None
+    if isinstance(item, ps.FixationTarget):
+        return item.path is not None
+    return any(isinstance(surface, ps.GratingSurface) and surface.drift_deg_s is not None
+               and (isinstance(surface.drift_deg_s, ps.FactorRef) or surface.drift_deg_s != 0.0)
+               for surface in (getattr(item, name, None) for name in ("surface", "left", "right")))
 
 
 def _room(item: ps.Room) -> list[Primitive]:
@@ -263,10 +328,12 @@ class _ItemContext:
     arm_reach_m: float
     images: ImageFiles | None
     meshes: SessionMeshes
+    output: Output = PIXEL_OUTPUT
 
 
 def _disc(item: ps.Disc, ctx: _ItemContext) -> list[Primitive]:
-    mat = _material(item.surface, ctx.values, _number(item.size_deg), ctx.base_dir, ctx.images)
+    mat = _material(item.surface, ctx.values, _number(item.size_deg), ctx.base_dir, ctx.images, time_s=ctx.time_s,
+                    output=ctx.output)
     az, el = centre_angles_deg(item.centre_deg)
     return [builders.placed_primitive(Shape.DISC, _distance_m(item.depth, ctx.values), _number(item.size_deg),
                                       _number(item.size_deg), mat, az, el, ctx.origin_m, str(item.facing),
@@ -276,9 +343,14 @@ def _disc(item: ps.Disc, ctx: _ItemContext) -> list[Primitive]:
 def _quad(item: ps.Quad, ctx: _ItemContext) -> list[Primitive]:
     size = max(_number(item.width_deg), _number(item.height_deg))
     az, el = centre_angles_deg(item.centre_deg)
+    if isinstance(item.surface, ps.GratingSurface):  # a grating needs each axis's extent (surface degrees per unit)
+        mat = _material(item.surface, ctx.values, _number(item.width_deg), ctx.base_dir, ctx.images,
+                        height_deg=_number(item.height_deg), time_s=ctx.time_s, output=ctx.output)
+    else:
+        mat = _material(item.surface, ctx.values, size, ctx.base_dir, ctx.images, output=ctx.output)
     return [builders.placed_primitive(Shape.RECT, _distance_m(item.depth, ctx.values), _number(item.width_deg),
                                       _number(item.height_deg),
-                                      _material(item.surface, ctx.values, size, ctx.base_dir, ctx.images),
+                                      mat,
                                       az, el, ctx.origin_m, str(item.facing), name=item.id)]
 
 
@@ -286,7 +358,8 @@ def _target_field(item: ps.TargetField, ctx: _ItemContext) -> list[Primitive]:
     values = ctx.values
     near_D = item.near.resolve_D(values)
     far_D = item.far.resolve_D(values)
-    mat = _material(item.surface, values, _number(item.size_deg), ctx.base_dir, ctx.images)
+    mat = _material(item.surface, values, _number(item.size_deg), ctx.base_dir, ctx.images, time_s=ctx.time_s,
+                    output=ctx.output)
     field = builders.target_field(_trial_seed(values), int(item.count), near_D, far_D, _number(item.size_deg),
                                   float(item.field_deg), ctx.origin_m, material=mat,
                                   min_gap_deg=float(item.min_gap_deg))
@@ -301,25 +374,27 @@ def _build_item(item: ps.Primitive, ctx: _ItemContext) -> list[Primitive] | Aper
     """
     from psyop.stimulus.meshes import mesh_instance
 
+    out = ctx.output  # the builders' own colours are pixel values: out.primitives turns them into the output's values
     match item:
         case ps.Disc():
             return _disc(item, ctx)
         case ps.Quad():
             return _quad(item, ctx)
         case ps.SinusoidalBorder():
-            return _sinusoidal_border(item, ctx.values, ctx.origin_m, ctx.base_dir, ctx.images)
+            return _sinusoidal_border(item, ctx.values, ctx.origin_m, ctx.base_dir, ctx.images, ctx.time_s, ctx.output)
         case ps.Aperture():
-            return Aperture(radius_deg=_number(item.diameter_deg) / 2.0, colour=_rgb(item.surround_rgb))
+            return out.aperture(Aperture(radius_deg=_number(item.diameter_deg) / 2.0, colour=_rgb(item.surround_rgb)))
         case ps.GridPlanes():
-            return _grid_planes(item)
+            return out.primitives(_grid_planes(item))
         case ps.TargetField():
             return _target_field(item, ctx)
         case ps.FixationTarget():
-            return _fixation(item, ctx.values, ctx.time_s, ctx.origin_m)
+            return out.primitives(_fixation(item, ctx.values, ctx.time_s, ctx.origin_m))
         case ps.Room():
-            return _room(item)
+            return out.primitives(_room(item))
         case ps.ReachTarget():
-            return _reach_target(item, ctx.values, ctx.arm_reach_m, ctx.meshes)
+            part = _reach_target(item, ctx.values, ctx.arm_reach_m, ctx.meshes)
+            return part if isinstance(part, MeshInstance) else out.primitives(part)
         case ps.Mesh():
             return mesh_instance(item, ctx.values, ctx.origin_m, ctx.meshes)
         case _:
@@ -348,6 +423,9 @@ def build_scene(
     ``show:``, with interval ``interval``'s factor values). Every primitive's name is its scene
     item's ``id`` or starts with ``<id>_`` (``psyop audit`` maps primitives back to items by it).
 
+    On a calibrated display (``display: calibration``) the scene's values are normalised luminance and it carries
+    the renderer's final pass (``Scene.output``); ``background`` (a pixel value) becomes its code's luminance.
+
     ``images``: the session's decoded image files (decoded once, reused every frame); without
     it image surfaces are decoded from ``base_dir`` on every call. ``meshes``: the session's
     :class:`psyop.stimulus.meshes.SessionMeshes` (each model loaded once); without it models are read from
@@ -357,9 +435,10 @@ def build_scene(
 
     values = interval_values(row, interval)
     values = {**values, "trial_seed": row.get("trial_seed", 0)}
+    output = output_for(protocol, base_dir)
     ctx = _ItemContext(values=values, time_s=time_s, origin_m=scene_origin_m(protocol, eye_centre_m),
                        base_dir=base_dir, arm_reach_m=arm_reach_m, images=images,
-                       meshes=meshes if meshes is not None else SessionMeshes(base_dir))
+                       meshes=meshes if meshes is not None else SessionMeshes(base_dir), output=output)
     phases = interval_phases(protocol)
     if show is None:
         show = phases[interval - 1].show if 0 < interval <= len(phases) else "all"
@@ -380,7 +459,18 @@ def build_scene(
             instances.append(part)
         else:
             prims += part
-    return Scene(tuple(prims), background=background, aperture=aperture, meshes=tuple(instances))
+    return Scene(tuple(prims), background=output.pixel_rgb(background), aperture=aperture, meshes=tuple(instances),
+                 output=output.scene_output())
+
+
+def output_for(protocol: Protocol, base_dir: Path | None) -> Output:
+    """How the protocol's values reach the display: pixel values as they are, or normalised luminance through
+    ``display: calibration`` (read once and cached, psyop.protocol.luminance; docs/gratings_and_luminance.md)."""
+    if getattr(protocol.display, "calibration", None) is None:
+        return PIXEL_OUTPUT
+    from psyop.protocol.luminance import protocol_transfer
+
+    return Output(protocol_transfer(protocol, base_dir))
 
 
 def recalibration_cross_scene(
