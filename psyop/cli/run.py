@@ -7,7 +7,7 @@ import signal
 from pathlib import Path
 
 from psyop.errors import UserError
-from psyop.run.backends import help_text
+from psyop.run.backends import EXPERIMENTER_WINDOW_HELP, help_text
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -40,6 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--window-scale", type=float, default=0.25, metavar="S",
                         help="--display window: render and show each eye at S x the display's resolution "
                              "(1 = full resolution; both eyes side by side for stereo; default 0.25)")
+    parser.add_argument("--experimenter-window", action="store_true", help=EXPERIMENTER_WINDOW_HELP)
     parser.add_argument("--data", type=Path, default=Path("data"), help="data root (default data/)")
     parser.add_argument("--render", default="auto", choices=["auto", "images", "cameras"],
                         help="images: ray-cast the stimulus; cameras: eye cameras only; auto: images if OpenGL works")
@@ -75,6 +76,7 @@ def main(args: argparse.Namespace) -> int:
         window_scale=args.window_scale, lsl_markers=args.lsl_markers, lsl_wait_s=args.lsl_wait_s,
         progress=not args.no_progress, allow_protocol_change=args.allow_protocol_change, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
         xr_request_exit_at_frame=args.xr_request_exit_at_frame, mesh_files=mesh_files,
+        experimenter_window=args.experimenter_window,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),
     )

@@ -25,6 +25,7 @@ Ctrl-C would have arrived. Events are pumped at every frame, so Escape works in 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject
@@ -40,6 +41,18 @@ if TYPE_CHECKING:
 
 class EscapePressed(KeyboardInterrupt):
     """Escape was pressed in the session window: the session ends as on Ctrl-C (psyop.session.loop)."""
+
+
+def key_name(glfw: ModuleType, key: int, scancode: int) -> str:
+    """The name a key press is queued under: the layout's printable name (``2``, ``a``), else one of the named
+    keys (``left``, ``space``, ``enter``, ``escape``, ...), else empty."""
+    name = glfw.get_key_name(key, scancode)
+    if name is None:
+        name = {glfw.KEY_LEFT: "left", glfw.KEY_RIGHT: "right", glfw.KEY_SPACE: "space",
+                glfw.KEY_ENTER: "enter", glfw.KEY_KP_1: "kp_1", glfw.KEY_KP_2: "kp_2",
+                glfw.KEY_ESCAPE: "escape", glfw.KEY_UP: "up", glfw.KEY_DOWN: "down",
+                glfw.KEY_KP_ENTER: "kp_enter"}.get(key, "")
+    return str(name)
 
 
 class GlfwWindow:
@@ -87,12 +100,7 @@ class GlfwWindow:
     def _on_key(self, window: object, key: int, scancode: int, action: int, mods: int) -> None:
         if action != self._glfw.PRESS:
             return
-        name = self._glfw.get_key_name(key, scancode)
-        if name is None:
-            name = {self._glfw.KEY_LEFT: "left", self._glfw.KEY_RIGHT: "right", self._glfw.KEY_SPACE: "space",
-                    self._glfw.KEY_ENTER: "enter", self._glfw.KEY_KP_1: "kp_1", self._glfw.KEY_KP_2: "kp_2",
-                    self._glfw.KEY_ESCAPE: "escape", self._glfw.KEY_UP: "up", self._glfw.KEY_DOWN: "down",
-                    self._glfw.KEY_KP_ENTER: "kp_enter"}.get(key, "")
+        name = key_name(self._glfw, key, scancode)
         if name == "escape":  # noted only: an exception raised here would be lost in ctypes (module docstring)
             self.escape_pressed = True
             return

@@ -10,7 +10,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, cast
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, cast
 
 import moderngl
 import numpy as np
@@ -55,18 +56,44 @@ void main() {
 """
 
 
+class _GlfwLoader:
+    """moderngl's GL function loader for a context glfw made current (glcontext cannot detect an EGL one)."""
+
+    def __init__(self, glfw_module: ModuleType) -> None:
+        self._glfw = glfw_module
+
+    def load_opengl_function(self, name: str) -> int:
+        return int(self._glfw.get_proc_address(name) or 0)
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def release(self) -> None:
+        return None
+
+
 class Window:
     """A glfw window with an OpenGL 4.1 core context wrapped by moderngl."""
 
     _window: glfw._GLFWwindowPointerT | None  # None once released
     _blit: tuple[moderngl.Program, moderngl.VertexArray] | None  # set by the first present_side_by_side
 
-    def __init__(self, width_px: int, height_px: int, title: str = "psyop", swap_interval: int = 1):
+    def __init__(self, width_px: int, height_px: int, title: str = "psyop", swap_interval: int = 1, *,
+                 egl: bool = False):
+        """``egl``: the window's context is made through EGL (on X11 too) rather than the platform's own API
+        (GLX), so that it can take turns on one thread with other EGL contexts (an OpenXR session's); its GL
+        functions are then loaded through glfw."""
         import glfw  # imported here: headless use never needs it
 
         self._glfw = glfw
         if not glfw.init():
             raise WindowUnavailable("glfw.init() failed (no X display? run under xvfb-run)")
+        glfw.default_window_hints()
+        if egl:
+            glfw.window_hint(glfw.CONTEXT_CREATION_API, glfw.EGL_CONTEXT_API)
         glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 4)
         glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 1)
         glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
@@ -78,8 +105,18 @@ class Window:
             raise WindowUnavailable("glfw.create_window failed")
         glfw.make_context_current(self._window)
         glfw.swap_interval(swap_interval)
-        self.ctx = moderngl.create_context()
+        try:
+            loader = cast(Any, _GlfwLoader(glfw))  # Any: moderngl's stub says dict; it takes any loader object
+            self.ctx = moderngl.create_context(context=loader) if egl else moderngl.create_context()
+        except Exception as exc:  # re-raised as WindowUnavailable: no usable OpenGL 4.1 context here
+            glfw.destroy_window(self._window)
+            glfw.terminate()
+            raise WindowUnavailable(f"no OpenGL context for the window: {exc}") from exc
         self.width_px, self.height_px = width_px, height_px
+
+    def make_current(self) -> None:
+        """Make the window's context current on this thread (after another context was)."""
+        self._glfw.make_context_current(self.handle)
 
     @property
     def handle(self) -> glfw._GLFWwindowPointerT:

@@ -21,6 +21,7 @@ from psyop.session.rows import JsonObject
 from psyop.optics.display import DisplayProfile
 from psyop.errors import UserError
 from psyop.run.backends import BackendContext, build
+from psyop.run.backends import experimenter_window as make_experimenter_window
 from psyop.session.clock import Clock
 from psyop.session.events import EventSink
 from psyop.session.frames import Display
@@ -51,6 +52,14 @@ class Backends:
     after_tracker_closed: Callable[[], None] = lambda: None
     #: a window display's framebuffer as the window system made it (read while the window is open)
     framebuffer_px: tuple[int, int] | None = None
+    #: ``--experimenter-window``: the display with the window's mirror (what the loop drives); None without it
+    mirrored: Display | None = None
+
+    @property
+    def shown(self) -> Display:
+        """The display the loop and the renderer drive: the mirrored one with an experimenter window, else
+        ``display`` (which ``display_used`` and the tracking backends always see as it is)."""
+        return self.mirrored if self.mirrored is not None else self.display
 
     def __enter__(self) -> Backends:
         return self
@@ -75,17 +84,26 @@ def open_markers(metadata: JsonObject, clock: Clock, wait_s: float) -> EventSink
     return markers
 
 
-def assemble(specs: dict[str, str], context: BackendContext, markers: EventSink | None = None) -> Backends:
-    """Build the backends ``specs`` names (``{"display": ..., "tracker": ..., "pose": ..., "responses": ...}``).
+def assemble(specs: dict[str, str], context: BackendContext, markers: EventSink | None = None, *,
+             experimenter_window: bool = False) -> Backends:
+    """Build the backends ``specs`` names (``{"display": ..., "tracker": ..., "pose": ..., "responses": ...}``),
+    and with ``experimenter_window`` the experimenter's window right after the display
+    (:func:`psyop.run.backends.experimenter_window`): it mirrors the display (``Backends.shown``), hears the
+    trial events, counts the valid gaze samples and gives keyboard responses its keys.
 
     The closing order is the teardown the runner had by hand: responses, tracker, (raw gaze flush), pose,
-    event sinks in the order they were added, display."""
+    event sinks in the order they were added, the experimenter window, display."""
+    window = None
     with contextlib.ExitStack() as built:  # a backend that cannot be built closes those built before it
         if markers is not None:
             built.callback(markers.close)
         display = build("display", specs["display"], context)
         built.callback(display.close)
         context = dataclasses.replace(context, display=display)
+        if experimenter_window:
+            window = make_experimenter_window(context)
+            built.callback(window.close)
+            context = dataclasses.replace(context, experimenter_window=window)
         gaze = build("tracker", specs["tracker"], context)
         built.callback(gaze.close)
         pose = build("pose", specs["pose"], context)
@@ -93,9 +111,18 @@ def assemble(specs: dict[str, str], context: BackendContext, markers: EventSink 
         responses = build("responses", specs["responses"], context)
         built.pop_all()
     events = ((markers,) if markers is not None else ()) + tuple(context.event_sinks)
-    bundle = Backends(display, gaze, pose, responses, events, framebuffer_px=_framebuffer_px(display))
+    bundle = Backends(display, gaze, pose, responses, events + ((window,) if window is not None else ()),
+                      framebuffer_px=_framebuffer_px(display))
     stack = bundle.stack
     stack.callback(display.close)
+    if window is not None:
+        from psyop.devices.experimenter import MirroredDisplay, WatchedGaze
+
+        mirrored = MirroredDisplay(display, window)
+        bundle.mirrored = mirrored
+        bundle.gaze = WatchedGaze(gaze, window)
+        stack.callback(window.close)
+        stack.callback(mirrored.close)
     for sink in reversed(events):
         if sink is not gaze:  # a tracker that takes events is closed as the tracker
             stack.callback(sink.close)

@@ -32,6 +32,8 @@ from psyop.errors import UserError
 if TYPE_CHECKING:
     import pandas as pd
 
+    from psyop.devices.experimenter import ExperimenterWindow
+    from psyop.devices.responses.keyboard import KeyEvents
     from psyop.session.clock import Clock
     from psyop.session.events import EventSink
     from psyop.session.frames import Display
@@ -70,6 +72,9 @@ class BackendContext:
     session: int = 1
     event_sinks: list[EventSink] = field(default_factory=list)
     xr_request_exit_at_frame: int | None = None  # testing aid: the OpenXR runtime is asked to stop at frame N
+    #: the experimenter window (``--experimenter-window``; None without it): keyboard responses read its keys
+    #: when the display is no window of its own
+    experimenter_window: KeyEvents | None = None
 
 
 @dataclass(frozen=True)
@@ -214,9 +219,14 @@ def _keyboard_responses(arg: str, ctx: BackendContext) -> ResponseSource:
     from psyop.devices.responses.keyboard import KeyboardResponses
     from psyop.devices.window import GlfwWindow
 
-    if not isinstance(ctx.display, GlfwWindow):
-        raise UserError("--responses keyboard needs --display window", "--responses")
-    return KeyboardResponses(ctx.display, ctx.plan.kind, keymap=ctx.plan.response.inputs.keys)
+    keys: KeyEvents | None = ctx.display if isinstance(ctx.display, GlfwWindow) else ctx.experimenter_window
+    if keys is None:
+        raise UserError(KEYBOARD_NEEDS_A_WINDOW, "--responses")
+    return KeyboardResponses(keys, ctx.plan.kind, keymap=ctx.plan.response.inputs.keys)
+
+
+KEYBOARD_NEEDS_A_WINDOW = ("--responses keyboard reads the keys of a window: the session window (--display window) "
+                           "or the experimenter window (--experimenter-window, with --display openxr or headless)")
 
 
 def _openxr_tracker(arg: str, ctx: BackendContext) -> GazeSource:
@@ -264,6 +274,38 @@ def _window_display(arg: str, ctx: BackendContext) -> Display:
     return GlfwWindow(ctx.plan.display, ctx.clock, scale=ctx.window_scale, n_eyes=len(ctx.plan.rig.eyes))
 
 
+#: what ``--experimenter-window`` does (its ``--help``)
+EXPERIMENTER_WINDOW_HELP = (
+    "open a small window on the experimenter's screen: a mirror of the first eye's image (downscaled, about "
+    "15 updates a second) and a status line (trial k of N, condition, phase, last answer, dropped frames, gaze valid "
+    "share); --responses keyboard then reads its keys. With --display openxr or headless (pip install "
+    "'psyop[window]')")
+
+
+def experimenter_window(ctx: BackendContext) -> ExperimenterWindow:
+    """The experimenter window of ``--experimenter-window`` for the display ``ctx.display`` (built first): its
+    context made through the display's API (GLX for ``openxr:xlib``, else EGL), its mirror the shape of the
+    display's eye image (the runtime's swapchain, else the protocol's display profile)."""
+    from psyop.devices.window import GlfwWindow
+
+    if ctx.display is None or isinstance(ctx.display, GlfwWindow):
+        raise UserError("--experimenter-window is for a display the experimenter cannot see (--display openxr or "
+                        "headless); the session window already shows the session", "--experimenter-window")
+    lookup("display", "window")[0].check_installed()  # glfw, as the window display needs it
+    from psyop.devices.experimenter import MIRROR_WIDTH_PX, ExperimenterWindow
+
+    width_px, height_px = ctx.plan.display.width_px, ctx.plan.display.height_px
+    egl = True
+    if ctx.display.name == "openxr":
+        from psyop.devices.xr.display import OpenXRDisplay
+
+        if isinstance(ctx.display, OpenXRDisplay):
+            width_px, height_px = ctx.display.runtime.facts.recommended_sizes_px[0]
+            egl = ctx.display.runtime.facts.graphics != "xlib"
+    mirror_px = (MIRROR_WIDTH_PX, max(16, round(MIRROR_WIDTH_PX * height_px / width_px)))
+    return ExperimenterWindow(ctx.clock, len(ctx.schedule), mirror_px, egl=egl, restore=ctx.display.gl_context)
+
+
 #: Every backend, in the order ``--help`` lists them.
 BACKENDS: tuple[AnyBackend, ...] = (
     Backend("tracker", "sim", "sim", "simulated binocular tracker (120 Hz, blinks, drift; from the seed)",
@@ -290,7 +332,8 @@ BACKENDS: tuple[AnyBackend, ...] = (
             "adds the hand: left or right (grip pose), left:aim or right:aim (pointing pose), or vive_tracker:ROLE",
             True, _openxr_pose, takes_arg=None),
     Backend("responses", "sim", "sim", "the protocol's simulated observer", False, _sim_responses),
-    Backend("responses", "keyboard", "keyboard", "keys of the session window (needs --display window)", True,
+    Backend("responses", "keyboard", "keyboard", "keys of the session window (--display window) or of the "
+            "experimenter window (--experimenter-window)", True,
             _keyboard_responses),
     Backend("responses", "serial", "serial:DEVICE", "a response box sending 'B<button>' lines", True,
             _serial_responses, takes_arg=True),

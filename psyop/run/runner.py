@@ -79,6 +79,7 @@ class SessionOptions:
     lsl_wait_s: float = 10.0  # --lsl-markers: wait this long for a recorder to connect before the first trial
     participant_index: int | None = None  # keys block_order: latin_square (None: the number the ID ends in)
     mesh_files: MeshFiles | None = None  # the models validation read (psyop.mesh.MeshFiles), reused (None: read anew)
+    experimenter_window: bool = False  # a mirror and status window for the experimenter (psyop.devices.experimenter)
 
     @property
     def simulated_sources(self) -> tuple[str, ...]:
@@ -208,7 +209,7 @@ def run_session(
                              session=options.session, xr_request_exit_at_frame=options.xr_request_exit_at_frame)
     specs = {"display": options.display, "tracker": options.tracker, "pose": options.pose,
              "responses": options.responses}
-    with assemble(specs, context, markers) as bundle:
+    with assemble(specs, context, markers, experimenter_window=options.experimenter_window) as bundle:
         outcome, loop = _run(opened, bundle, options)
     _finalise(opened, bundle, loop, outcome, options)
     return outcome
@@ -329,7 +330,7 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
     adaptive = AdaptiveLevels.from_log(plan.adaptive, logged) if plan.adaptive is not None else None
     every_frame = (not (clock.virtual and not bundle.responses.needs_images)) if options.every_frame is None \
         else options.every_frame
-    renderer, rendering = _make_renderer(options.render, plan, bundle.display, options.window_scale,
+    renderer, rendering = _make_renderer(options.render, plan, bundle.shown, options.window_scale,
                                          1.0 if every_frame else options.check_scale,
                                          None if every_frame else options.check_images, opened.mesh_files)
     bundle.stack.callback(renderer.close)
@@ -340,7 +341,7 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
     loop = TrialLoop(
         identity={"study": plan.study, "participant": options.participant, "session": options.session},
         phases=plan.phases, clock=clock, gaze=gaze, responses=bundle.responses,
-        renderer=renderer, display=bundle.display, store=store, config=config, pose=bundle.pose,
+        renderer=renderer, display=bundle.shown, store=store, config=config, pose=bundle.pose,
         response=plan.response, announce=announce, adaptive=adaptive, events=bundle.events,
         validator=gaze_validator(plan.protocol.gaze_validation, store), notice=_notice,
         screens=_screens(plan, opened, bundle, options, fresh=not completed),
@@ -387,7 +388,7 @@ def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: Sessi
         "outcome": outcome.status, "message": outcome.message, "latency": outcome.latency,
         "tracker": bundle.gaze.stats(), "pose": {"source": options.pose, "hand_samples_held": loop.n_hand_held,
                                                  "hand_trials_reused": bundle.pose.n_reused_hand_trials}}
-    display_summary = bundle.display.summary()
+    display_summary = bundle.shown.summary()
     if "display_flip_period_s" in display_summary:  # from the flip timestamps (least squares)
         summary["display_flip_period_s"] = display_summary["display_flip_period_s"]
     summary["display"] = display_summary

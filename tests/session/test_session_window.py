@@ -120,3 +120,16 @@ def test_window_scale_is_a_run_option(tmp_path: Path, capsys: pytest.CaptureFixt
     assert main(["run", str(protocol), "--participant", "X", "--data", str(tmp_path), "--display", "window",
                  "--window-scale", "1.5", "--no-progress"]) == 2
     assert "window scale must be in (0, 1]" in capsys.readouterr().err
+
+
+def test_keyboard_responses_without_a_window_are_refused_naming_both_windows(tmp_path: Path,
+                                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 45: keyboard answers come from a window's keys: the session window or the experimenter window."""
+    from psyop.cli import main
+
+    protocol = Path(__file__).resolve().parents[2] / "protocols" / "detection.yaml"
+    assert main(["run", str(protocol), "--participant", "X", "--data", str(tmp_path), "--display", "headless",
+                 "--clock", "real", "--responses", "keyboard", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "--responses keyboard reads the keys of a window" in err
+    assert "--display window" in err and "--experimenter-window" in err and "Traceback" not in err

@@ -196,7 +196,8 @@ class OpenXRDisplay:
                 raise DisplayInterrupted(  # ends the session before its first trial, finalised and resumable: exit 3
                     f"{self.runtime.facts.runtime}: no controller became active within {timeout_s:g} s, and "
                     "--responses openxr answers with the controllers' buttons; switch a controller on (or pair it) "
-                    "and run again, or answer with --responses keyboard or serial:DEVICE", rerun=False)
+                    "and run again, or answer with --responses keyboard --experimenter-window (keys typed in the "
+                    "experimenter's window) or --responses serial:DEVICE", rerun=False)
             if not said:
                 print(f"psyop run: waiting up to {timeout_s:g} s for a controller to become active "
                       "(--responses openxr)", file=sys.stderr, flush=True)

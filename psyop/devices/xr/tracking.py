@@ -208,6 +208,6 @@ class OpenXRResponses(KeyboardResponses):
 
         keymap = kind.controller if controller is None else controller  # hand -> the kind's answer
         if not keymap:
-            raise UserError(f"the controllers cannot give {kind.name} responses; use --responses keyboard or serial",
-                            "--responses")
+            raise UserError(f"the controllers cannot give {kind.name} responses; use --responses keyboard with "
+                            "--experimenter-window (its keys), or --responses serial:DEVICE", "--responses")
         return cls(XrButtons(display), kind, reach_m=right_hand_reach_m, keymap=keymap)
