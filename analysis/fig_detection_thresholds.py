@@ -16,6 +16,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from _common import out_path, parser, provenance, read_fits, require_columns, results_file, run, write_json
 import fit_psychometric
 from _twoafc import check_two_interval, condition_column, condition_facts, level_column
@@ -80,6 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         "fit_intervals": interval_report(fits),
         "fits": fit_fates(fits, cond),
     }
+    _add_reported(payload, clean, facts.reported, unit)
     effect_key = ("effect of back distance on threshold (rm-ANOVA)" if cond == "back_D"
                   else f"effect of {cond_label} on threshold (rm-ANOVA)")
     if fits[cond].nunique() < 2:  # the level is the only factor (or one condition was run): no effect to test
@@ -156,6 +159,36 @@ def _add_censored(payload: dict, fits, cond: str, unit: str, effect_key: str) ->
     else:
         payload["anova_censored_at_bounds"] = aov.table.to_dict("records")
         payload["summary"][key] = format_anova(aov.table.iloc[0])
+
+
+def _add_reported(payload: dict, clean, reported, unit: str) -> None:
+    """Each threshold the protocol's ``study.reported`` gives (a condition: factor -> level, its threshold, its source),
+    beside the mean threshold measured there over participants with its 95 % t interval, and whether the reported
+    value lies inside it."""
+    from psyop.protocol.base import format_level
+
+    rows = []
+    for entry in reported:
+        condition = {str(k): v for k, v in dict(entry["condition"]).items()}
+        mask = np.ones(len(clean), dtype=bool)
+        for name, level in condition.items():
+            mask &= clean[name].map(format_level).to_numpy() == format_level(level) if name in clean else False
+        values = clean.loc[mask].groupby("participant")["threshold_D"].mean()
+        n = len(values)
+        mean = float(values.mean()) if n else float("nan")
+        half = float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / n ** 0.5) if n > 1 else float("nan")
+        threshold = float(entry["threshold"])
+        inside = bool(mean - half <= threshold <= mean + half) if n > 1 else None
+        where = ", ".join(f"{k} = {format_level(v)}" for k, v in condition.items())
+        source = f" ({entry['source']})" if entry.get("source") else ""
+        rows.append({"condition": condition, "threshold": threshold, "source": entry.get("source"), "n": n,
+                     "measured_mean": mean, "measured_ci": [mean - half, mean + half], "inside_ci": inside})
+        payload["summary"][f"reported threshold at {where}{source}"] = (
+            f"{threshold:g} {unit}; measured {mean:.2f} {unit} [95 % CI {mean - half:.2f}, {mean + half:.2f}; "
+            f"{n} participants]: " + ("inside the interval" if inside else "outside the interval" if inside is False
+                                      else "no interval (fewer than 2 participants)"))
+    if rows:
+        payload["reported"] = rows
 
 
 if __name__ == "__main__":

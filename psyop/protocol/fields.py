@@ -18,6 +18,8 @@ Every field of every protocol model is listed here with the part of psyop that r
 - ``screens``: the session's screens around the trials (psyop.session.screens: instructions, breaks,
   questionnaires, end screen);
 - ``tracker``: the simulated tracker (psyop.session.gaze.simulated.tracker_config reads ``observer: eye:``);
+- ``analysis``: the two-interval thresholds analysis (analysis/fig_detection_thresholds.py, reading
+  ``study.reported`` through psyop.statistics.studies);
 - ``kinds``: a response kind's own module (psyop.protocol.kinds): each kind lists the users of its models'
   fields in its ``fields`` (merged here).
 
@@ -48,6 +50,8 @@ USERS: dict[str, tuple[str, ...]] = {
     "timing": ("psyop/session/loop.py", "psyop/protocol/timing.py"),
     "gaze_validation": ("psyop/session/validation.py",),
     "screens": ("psyop/session/screens.py",),
+    # the two-interval thresholds analysis (study.reported, beside the measured thresholds)
+    "analysis": ("analysis/fig_detection_thresholds.py", "psyop/statistics/studies.py"),
     # the response kinds' own modules (columns, checks, scoring): psyop.protocol.kinds
     "kinds": tuple(f"psyop/protocol/kinds/{p.name}" for p in sorted(Path(__file__).with_name("kinds").glob("*.py"))),
 }
@@ -80,7 +84,9 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                                                       "dwell_s", "require")},
     "ValidationRequirement": {k: "gaze_validation" for k in ("max_mean_error_deg", "max_point_error_deg",
                                                              "max_attempts")},
-    "StudyInfo": {"name": "plan", "title": "summary", "citation": "summary", "description": "summary"},
+    "StudyInfo": {"name": "plan", "title": "summary", "citation": "summary", "description": "summary",
+                  "reported": "analysis"},
+    "ReportedThreshold": {"condition": "analysis", "threshold": "analysis", "source": "analysis"},
     "DisplaySpec": {"profile": "display", "eye_model": "display", "ipd": "plan", "rendering_nc": "display",
                     "added_latency_ms": "plan", "calibration": "display"},
     "RenderingNc": {"mm": "display", "scale": "display", "signed": "display"},

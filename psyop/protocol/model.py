@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, PrivateAttr
 
-from psyop.protocol.base import StrictModel
+from psyop.protocol.base import Number, StrictModel
 from psyop.protocol.design import Design
 from psyop.protocol.display import DisplaySpec
 from psyop.protocol.observer import Observer
@@ -19,6 +19,16 @@ from psyop.protocol.trial import TrialSpec
 from psyop.protocol.validation import GazeValidation
 
 
+class ReportedThreshold(StrictModel):
+    """A threshold the literature reports for one condition of this design (``study: reported:``): the two-interval
+    analysis states it beside the threshold it measures there (``condition``: factor -> level; ``threshold`` in the
+    level factor's unit)."""
+
+    condition: dict[str, Number | str] = Field(min_length=1)
+    threshold: Number
+    source: str | None = None
+
+
 class StudyInfo(StrictModel):
     """Who and what: ``name`` is the study's folder under data/."""
 
@@ -28,6 +38,7 @@ class StudyInfo(StrictModel):
     title: str = Field(min_length=1)
     citation: str | None = None
     description: str | None = None
+    reported: list[ReportedThreshold] = Field(default_factory=list)
 
 
 class Protocol(StrictModel):

@@ -571,6 +571,25 @@ class _Checker:
         for index, message in points_off_display(validation, display, eyes, ipd_m):
             self.add(("gaze_validation", "points_deg", index), message)
 
+    def check_reported(self) -> None:
+        """``study.reported``: a two-interval response's thresholds, each at a condition named by design factors and
+        levels they have (the level factor is what the threshold is on, so it names no condition)."""
+        response = self.p.response
+        for index, reported in enumerate(self.p.study.reported):
+            path: Loc = ("study", "reported", index)
+            if response.kind != "two_interval":
+                self.add(path, f"reported thresholds are compared by the two-interval analysis; this study's response "
+                               f"is {response.kind}: remove study.reported")
+                return
+            for name, level in reported.condition.items():
+                where = path + ("condition", name)
+                if name == response.level():
+                    self.add(where, f"'{name}' is the level factor the threshold is measured on; name the other "
+                                    "factors' levels")
+                elif self.factor_exists(name, where) and not any(
+                        _same(level, have) for have in self.factors[name].all_levels()):
+                    self.add(where, f"'{level}' is not a level of {name}")
+
     def check_session_blocks(self, conditions: list[JsonObject]) -> None:
         """``session: instructions: at_blocks:`` names blocks the design has (run order from 0: one block per
         combination of a blocked design's ``by`` factors, else the one block 0)."""
@@ -658,4 +677,5 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
     checker.check_observer()
     checker.check_validation()
     checker.check_session_blocks(conditions)
+    checker.check_reported()
     return checker.issues

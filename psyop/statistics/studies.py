@@ -76,6 +76,8 @@ class StudyFacts:
     factors: dict[str, FactorFacts] = field(default_factory=dict)
     level_factor: str | None = None
     response_fields: dict[str, str] = field(default_factory=dict)
+    #: the protocol's ``study.reported``: thresholds the literature reports, each {condition, threshold, source}
+    reported: tuple[dict[str, object], ...] = ()
     #: the protocol hashes of every session in the study's folder (more than ``protocol_sha256`` when
     #: this is one version of it, ``study@<hash12>``: psyop.statistics.protocol_versions)
     folder_protocol_sha256: tuple[str, ...] = ()
@@ -173,6 +175,18 @@ def _protocol_factors(text: str) -> tuple[dict[str, FactorFacts], str | None, di
     return factors, level, fields
 
 
+def _reported(text: str | None) -> tuple[dict[str, object], ...]:
+    """The protocol text's ``study.reported`` entries (validated when the session ran), as plain mappings."""
+    try:
+        document = yaml.safe_load(text or "") or {}
+    except (yaml.YAMLError, ValueError, TypeError, AttributeError, KeyError):
+        return ()
+    study = document.get("study") if isinstance(document, dict) else None
+    entries = study.get("reported") if isinstance(study, dict) else None
+    return tuple(dict(e) for e in entries if isinstance(e, dict) and isinstance(e.get("condition"), dict)) \
+        if isinstance(entries, list) else ()
+
+
 def study_facts(data_root: Path, study: str) -> StudyFacts:
     """The :class:`StudyFacts` of ``data_root/<study>``; a UserError naming the folder when it has no sessions.
 
@@ -218,7 +232,7 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
     folder = split_unit(study)[0]
     everything = tuple(sorted(hashes)) if folder == study else \
         tuple(sorted({h for f in dc.trials_files(data_root, folder) if (h := session_hash(f))}))
-    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields, everything)
+    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields, _reported(text), everything)
 
 
 def studies_in(data_root: Path) -> list[StudyFacts]:

@@ -64,3 +64,38 @@ def test_the_fits_recover_the_papers_latency_thresholds() -> None:
     means = usable.groupby("separation_D")["threshold_D"].mean()
     for separation, paper in PAPER_MS.items():  # the study's mean over 24 simulated participants
         assert math.isclose(means[separation], paper, abs_tol=4.0), (separation, means[separation])
+
+
+def test_the_analysis_states_the_reported_thresholds_beside_the_measured_ones(tmp_path: Path, monkeypatch) -> None:
+    """``study.reported`` (the paper's 43.7 and 21.5 ms) appears in the thresholds summary beside the mean measured at
+    each separation, with its 95 % interval and whether the reported value lies inside it."""
+    import json
+
+    from kind_helpers import run_analysis
+
+    from psyop.cli import main
+
+    protocol = variant(EXAMPLE, tmp_path, repetitions=4)
+    data, results = tmp_path / "data", tmp_path / "results"
+    assert main(["simulate", "--data", str(data), "--protocols", str(protocol), "--participants", "3"]) == 0
+    common = ["--study", "latency_2024", "--data", str(data), "--results", str(results)]
+    fits = str(results / "latency_2024_fits.csv")
+    assert run_analysis(monkeypatch, "fit_psychometric", [*common, "--out", fits]) == 0
+    assert run_analysis(monkeypatch, "fig_detection_thresholds", [*common, "--fits", fits,
+                                                                  "--out", str(tmp_path / "t.png")]) == 0
+    payload = json.loads((results / "latency_2024_thresholds.json").read_text())
+    assert [r["threshold"] for r in payload["reported"]] == [43.7, 21.5]
+    lines = [v for k, v in payload["summary"].items() if k.startswith("reported threshold at separation_D")]
+    assert len(lines) == 2 and all("measured" in line and "95 % CI" in line for line in lines)
+
+
+def test_a_reported_threshold_must_name_a_condition_of_the_design(tmp_path: Path, capsys) -> None:
+    from psyop.cli import main
+
+    for old, new, says in (("{separation_D: 2.0}, threshold: 21.5", "{separation_D: 3.0}, threshold: 21.5",
+                            "'3.0' is not a level of separation_D"),
+                           ("{separation_D: 2.0}, threshold: 21.5", "{added_latency_ms: 20}, threshold: 21.5",
+                            "is the level factor the threshold is measured on")):
+        assert main(["validate", str(variant(EXAMPLE, tmp_path, replace=((old, new),)))]) == 2
+        err = capsys.readouterr().err
+        assert says in err and "latency_2024.yaml:" in err, err
