@@ -75,7 +75,7 @@ CROSS_CPU_RUN = @echo "[psyop] not x86-64: the cross_cpu tests ran once, with th
 endif
 
 test: lint $(STAMP) $(SYSDEPS_STAMP)
-	"$(PY)" -m pytest -n $(JOBS) -q
+	"$(PY)" -m pytest -n $(JOBS) -q -m "not bench"
 	$(CROSS_CPU_RUN)
 
 # only the cross_cpu tests, both ways (the machine's widest kernels, then narrowed to AVX2)
@@ -85,6 +85,7 @@ test-cross-cpu: $(STAMP) $(SYSDEPS_STAMP)
 
 bench: $(STAMP) $(SYSDEPS_STAMP)
 	@mkdir -p bench
+	"$(PY)" -m pytest -n $(JOBS) -q -m bench
 	"$(PY)" -m benchmarks --out bench
 
 # Power curves of the five shipped studies (psyop power: whole simulated studies through compile ->

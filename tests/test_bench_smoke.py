@@ -70,6 +70,7 @@ def test_bench_nc_calibration_quick_writes_its_coverage_table(tmp_path: Path) ->
     assert "| 3 | " in report and "Quick run" in report and (tmp_path / "nc_calibration.md").is_file()
 
 
+@pytest.mark.bench  # 80 s of make figures-build before and after: make bench runs it (and the benchmark in full)
 def test_bench_figures_power_speed_quick_compares_before_and_after(tmp_path: Path) -> None:
     """Before (the commit before issue 21's figure and power work) and after, side by side; the run
     fails when any output differs byte for byte."""
