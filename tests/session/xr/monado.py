@@ -15,7 +15,9 @@ import math
 import os
 import socket
 import struct
+import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -131,3 +133,28 @@ class RemoteDriver:
 
     def close(self) -> None:
         self.sock.close()
+
+
+def run_driven(cmd: list[str], tmp_path: Path, state: RemoteState, update: Callable[[RemoteState, float], None],
+               *, timeout_s: float = 200.0) -> subprocess.CompletedProcess:
+    """Run ``cmd`` (a psyop child process) on the remote driver's runtime while sending it ``state``, changed by
+    ``update(state, elapsed_s)`` before each packet, until the child ends; the child's completed process (stdout and
+    stderr as text)."""
+    port = free_port()
+    run = subprocess.Popen(cmd, env=runtime_env(tmp_path, port), cwd=REPO, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    try:
+        driver = RemoteDriver(port)
+        start = time.monotonic()
+        while run.poll() is None and time.monotonic() - start < timeout_s:
+            update(state, time.monotonic() - start)
+            try:
+                driver.send(state)
+            except OSError:
+                break
+            time.sleep(0.005)
+        out, err = run.communicate(timeout=120)
+    finally:
+        if run.poll() is None:
+            run.kill()
+    return subprocess.CompletedProcess(cmd, run.returncode, out, err)

@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
-from monado import RemoteDriver, RemoteState, free_port, runtime_env
+from monado import RemoteState, run_driven, runtime_env
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -56,27 +55,14 @@ response:
 
 def _run_pressing_right(tmp_path: Path, protocol: Path) -> subprocess.CompletedProcess:
     """``psyop run`` on the remote driver, the right trigger pressed every 0.3 s until the session ends."""
-    state, port = RemoteState(), free_port()
     cmd = [sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1", "--data",
            str(tmp_path / "data"), "--display", "openxr", "--pose", "openxr:right", "--responses", "openxr",
            "--clock", "real", "--no-progress"]
-    run = subprocess.Popen(cmd, env=runtime_env(tmp_path, port), cwd=REPO, stdout=subprocess.PIPE,
-                           stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
-    try:
-        driver = RemoteDriver(port)
-        start = time.monotonic()
-        while run.poll() is None and time.monotonic() - start < 200:
-            state.right_trigger = int((time.monotonic() - start) / 0.15) % 2 == 1
-            try:
-                driver.send(state)
-            except OSError:
-                break
-            time.sleep(0.02)
-        out, err = run.communicate(timeout=120)
-    finally:
-        if run.poll() is None:
-            run.kill()
-    return subprocess.CompletedProcess(cmd, run.returncode, out, err)
+
+    def press(state: RemoteState, elapsed_s: float) -> None:
+        state.right_trigger = int(elapsed_s / 0.15) % 2 == 1
+
+    return run_driven(cmd, tmp_path, RemoteState(), press)
 
 
 @pytest.mark.parametrize(("tail", "answer", "correct"), [

@@ -7,14 +7,12 @@ record the added and the intrinsic latency."""
 from __future__ import annotations
 
 import math
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from monado import RemoteDriver, RemoteState, free_port, runtime_env
+from monado import RemoteState, run_driven
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -48,27 +46,15 @@ response:
 def test_headset_frames_use_the_gaze_of_50_ms_earlier(tmp_path: Path) -> None:
     protocol = tmp_path / "xr_latency.yaml"
     protocol.write_text(PROTOCOL)
-    state, port = RemoteState(), free_port()
     cmd = [sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1", "--data", str(tmp_path / "data"),
            "--display", "openxr", "--pose", "openxr", "--tracker", "openxr", "--responses", "none", "--clock", "real",
            "--no-progress"]
-    run = subprocess.Popen(cmd, env=runtime_env(tmp_path, port), cwd=REPO, stdout=subprocess.PIPE,
-                           stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
-    try:
-        driver = RemoteDriver(port)
-        start = time.monotonic()
-        while run.poll() is None and time.monotonic() - start < 200:
-            state.gaze_pitch_deg = 15.0 * math.sin(2.0 * math.pi * 0.5 * (time.monotonic() - start))  # moving gaze
-            try:
-                driver.send(state)
-            except OSError:
-                break
-            time.sleep(0.005)
-        out, err = run.communicate(timeout=120)
-    finally:
-        if run.poll() is None:
-            run.kill()
-    assert run.returncode == 0, err[-3000:]
+
+    def look(state: RemoteState, elapsed_s: float) -> None:  # a gaze that keeps moving
+        state.gaze_pitch_deg = 15.0 * math.sin(2.0 * math.pi * 0.5 * elapsed_s)
+
+    done = run_driven(cmd, tmp_path, RemoteState(), look)
+    assert done.returncode == 0, done.stderr[-3000:]
     session = tmp_path / "data" / "xr_latency" / "sub-H1" / "ses-1"
     frames = pd.read_parquet(session / "frames.parquet")
     gaze = pd.read_parquet(session / "gaze.parquet").sort_values("gaze_sample_t_s").drop_duplicates("gaze_sample_t_s")
