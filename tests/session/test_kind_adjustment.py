@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import shutil
 import subprocess
 import sys
@@ -18,6 +17,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy import stats
+from kind_helpers import ScriptedKeys, variant
 from session_helpers import wait_until
 from test_serial import PtyDevice
 
@@ -31,22 +31,6 @@ from psyop.session.responses.simulated import make_observer
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "protocols" / "examples" / "adjustment.yaml"
 STUDY = "depth_adjustment"
-
-
-def _variant(tmp_path: Path, *, repetitions: int | None = None, phase_s: float | None = None,
-             replace: tuple[tuple[str, str], ...] = (), name: str = "adjustment.yaml") -> Path:
-    """A copy of the example with fewer repetitions, shorter phases or a few lines replaced."""
-    text = EXAMPLE.read_text()
-    if repetitions is not None:
-        text = re.sub(r"(?m)^(\s*repetitions:)\s*\d+", rf"\g<1> {repetitions}", text)
-    if phase_s is not None:
-        text = re.sub(r"(?m)^(\s*(?:-\s*)?(?:duration_s|expected_s):)\s*[\d.]+", rf"\g<1> {phase_s}", text)
-    for old, new in replace:
-        assert old in text, old
-        text = text.replace(old, new)
-    path = tmp_path / name
-    path.write_text(text)
-    return path
 
 
 def test_start_values_are_seeded_within_the_bounds_and_the_reference_is_the_factor() -> None:
@@ -72,7 +56,7 @@ def test_start_values_are_seeded_within_the_bounds_and_the_reference_is_the_fact
 ])
 def test_bad_input_is_refused_in_one_line_with_its_place(tmp_path: Path, old: str, new: str, key: str,
                                                           message: str) -> None:
-    protocol = _variant(tmp_path, replace=((old, new),))
+    protocol = variant(EXAMPLE, tmp_path, replace=((old, new),))
     done = subprocess.run([sys.executable, "-m", "psyop", "validate", str(protocol)], cwd=REPO, capture_output=True,
                           text=True)
     line = next(i for i, text in enumerate(protocol.read_text().splitlines(), 1) if text.startswith(key))
@@ -106,7 +90,7 @@ def test_the_response_phase_shows_the_stimulus_at_the_adjusted_value(tmp_path: P
     depth_plan = compile_plan(load_protocol(EXAMPLE), tracker_ipd_m=0.064)
     assert depth_plan.response.phase.show == "stimulus" and depth_plan.response.participant_text is None
     assert depth_plan.response.adjustment == AdjustmentSpec("match_D", 0.25, 3.0, 0.05, 0.5)
-    protocol = load_protocol(_variant(tmp_path, replace=SIZE_SCENE))
+    protocol = load_protocol(variant(EXAMPLE, tmp_path, replace=SIZE_SCENE))
     plan = compile_plan(protocol, tracker_ipd_m=0.064)
     row = compile_schedule(protocol, 1).iloc[0].to_dict()
     renderer = SceneRenderer(plan, scale=0.5)
@@ -131,15 +115,6 @@ def test_the_response_phase_shows_the_stimulus_at_the_adjusted_value(tmp_path: P
     assert len(changed) and np.linalg.norm(changed - centres[6.0], axis=1).max() < radius + 2.0
 
 
-class _Keys:
-    def __init__(self, presses: list[tuple[str, float]]) -> None:
-        self.presses = presses
-
-    def poll(self) -> list[tuple[str, float]]:
-        out, self.presses = self.presses, []
-        return out
-
-
 def test_keys_step_the_value_and_confirm_and_keys_before_the_prompt_are_ignored() -> None:
     """What the loop does each frame (psyop.session.loop.TrialLoop._await_adjustment): the keyboard's raw inputs
     since the prompt into the kind's state. Up x3, down x1, Enter: start + 2 steps, a path of 5 entries (the start
@@ -148,13 +123,13 @@ def test_keys_step_the_value_and_confirm_and_keys_before_the_prompt_are_ignored(
 
     kind = kind_named("adjustment")
     spec = AdjustmentSpec("match_D", 0.25, 3.0, 0.05, 0.5)
-    keyboard = KeyboardResponses(_Keys([("up", 9.5), ("x", 10.1), ("Up", 10.2), ("up", 10.4), ("=", 10.5),
+    keyboard = KeyboardResponses(ScriptedKeys([("up", 9.5), ("x", 10.1), ("Up", 10.2), ("up", 10.4), ("=", 10.5),
                                         ("down", 10.9)]), kind)
     state = spec.state(1.0, t0_s=10.0)
     for event in keyboard.raw_inputs(10.0, 11.0):
         state.apply(event.name, event.t_s, event.amount)
     assert keyboard.early_presses == 1 and state.confirmed_s is None
-    keyboard.events = _Keys([("return", 11.0), ("enter", 11.25), ("up", 11.3)])
+    keyboard.events = ScriptedKeys([("return", 11.0), ("enter", 11.25), ("up", 11.3)])
     for event in keyboard.raw_inputs(10.0, 11.5):
         state.apply(event.name, event.t_s, event.amount)
     assert state.confirmed_s == 11.25 and math.isclose(state.confirmed_s - 10.0, 1.25)
@@ -241,7 +216,7 @@ WINDOW_SCRIPT = textwrap.dedent(
 def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
     """The loop's response phase with a person's keys: each trial ends start + 2 steps (up x3, down, Enter), its
     path has 5 entries, its time is from the prompt, and the response phase's frames were drawn."""
-    protocol = _variant(tmp_path, repetitions=1, phase_s=0.03)
+    protocol = variant(EXAMPLE, tmp_path, repetitions=1, phase_s=0.03)
     script = WINDOW_SCRIPT.format(protocol=str(protocol), data=str(tmp_path / "data"))
     result = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", script], capture_output=True, text=True,
                             timeout=180)
@@ -263,7 +238,7 @@ def test_a_window_session_typed_under_xvfb(tmp_path: Path) -> None:
 
 
 def test_simulated_sessions_are_analysed_by_make_figures_rules(tmp_path: Path) -> None:
-    protocol = _variant(tmp_path, repetitions=4)
+    protocol = variant(EXAMPLE, tmp_path, repetitions=4)
     data, results = tmp_path / "data", tmp_path / "results"
     subprocess.run([sys.executable, "-m", "psyop", "simulate", "--data", str(data), "--protocols", str(protocol),
                     "--participants", "3"], check=True, cwd=REPO, capture_output=True)
