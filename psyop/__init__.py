@@ -1,10 +1,10 @@
 """psyop: gaze-contingent VR psychophysics.
 
-The data path runs one way (see DESIGN notes in the README):
+The data path runs one way (docs/architecture.md; the layers are checked by import-linter, .importlinter):
 
-    protocol -> schedule -> session (clock, gaze, responses, log) -> analysis
-                             rendering <- optics
-    statistics (tables in, tables out)
+    protocol -> schedule -> stimulus -> session (plan, clock, loop, log) -> run -> data/ (parquet)
+    optics -> rendering ----^            ^ seams        devices (adapters)--^
+    data/ -> quality -> statistics | audit | export -> figures | power -> cli, analysis/
 """
 
 from importlib.metadata import PackageNotFoundError, version

@@ -82,7 +82,7 @@ def _sessions(task: ReplicationTask) -> tuple[Protocol, Callable[[Path], list[Se
                                seed=session_seed(task.seed, task.participants, task.replication, j),
                                data_root=data_root, progress=False, write_description=False,
                                render="cameras", fsync=False,
-                               # power reads trials only: no 120 Hz raw gaze stream (issue 27)
+                               # power reads trials only: no 120 Hz raw gaze stream
                                tracker_faults=SimulatedTrackerConfig(raw_stream="requested"), mesh_files=meshes)
                 for j in range(task.participants)]
     return protocol, options
@@ -116,7 +116,7 @@ def replication_trials(task: ReplicationTask) -> tuple[Protocol, pd.DataFrame]:
 
 
 def replication_trials_durable(task: ReplicationTask) -> tuple[Protocol, pd.DataFrame]:
-    """The full path (before issue 30), kept for comparisons only (tests, benchmarks): every
+    """The full path through durable logs, kept for comparisons only (tests, benchmarks): every
     session into a durable log in a temporary data directory, finalised to parquet and read back
     by ``load_dataset``."""
     import warnings

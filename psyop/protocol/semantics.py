@@ -399,7 +399,7 @@ class _Checker:
             self.add(path, f"texture file '{surface.path}' not found (looked for {target}); paths are relative "
                            "to the protocol file. Fix the path or add the file.")
             return
-        try:  # decode it now: run, render and audit would otherwise fail on it mid-session (issue 26)
+        try:  # decode it now: run, render and audit would otherwise fail on it mid-session
             check_image_file(target, surface.path)
         except UserError as error:
             self.add(path, error.message)

@@ -325,7 +325,7 @@ class OpenXRDisplay:
             # GL is asynchronous: draws into a swapchain image may still be rasterising (llvmpipe's
             # threads, or a GPU) when a Ctrl-C lands mid-frame. Destroying the swapchains, session or
             # instance frees the runtime-owned memory those images live in, and the raster threads
-            # then write into freed memory (SIGSEGV, issue 16). Wait for every queued draw first.
+            # then write into freed memory (SIGSEGV). Wait for every queued draw first.
             try:
                 self._ctx.finish()
             except Exception:  # noqa: BLE001 - teardown goes on
