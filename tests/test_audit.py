@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 
 import matplotlib.image as mpimg
@@ -54,6 +55,34 @@ def test_shipped_protocols_pass_the_audit(ctx, name):
                               for r in blanks)
     else:
         assert not blanks
+
+
+def _docs_protocols(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """Every complete protocol (a ```yaml block starting ``psyop_protocol: 1``) in docs/, written to files."""
+    folder = tmp_path_factory.mktemp("docs_protocols")
+    paths = []
+    for doc in sorted((REPO / "docs").glob("*.md")):
+        for k, block in enumerate(re.findall(r"```yaml\n(psyop_protocol: 1\n.*?)```", doc.read_text(), re.S)):
+            paths.append(folder / f"{doc.stem}_{k}.yaml")
+            paths[-1].write_text(block)
+    return paths
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in (PROTOCOLS / "examples").glob("*.yaml")))
+def test_example_protocols_pass_the_audit(ctx, name):
+    # the teaser's meshes are checked in tests/test_audit_mesh.py; here what each example draws is seen
+    settings = dataclasses.replace(FAST, mesh_check=False)
+    report = run_audit(load_protocol(PROTOCOLS / "examples" / name), settings, ctx=ctx,
+                       base_dir=PROTOCOLS / "examples")
+    assert report.passed, "\n".join(report.failures)
+
+
+def test_the_docs_protocols_validate_and_pass_the_audit(ctx, tmp_path_factory):
+    paths = _docs_protocols(tmp_path_factory)
+    assert paths, "docs/ should hold at least one complete protocol"
+    for path in paths:
+        report = run_audit(load_protocol(path), FAST, ctx=ctx, base_dir=path.parent)
+        assert report.passed, f"{path.name}: " + "\n".join(report.failures)
 
 
 def test_audit_shows_the_coplanar_rule_and_the_mode_change_in_detection(ctx):

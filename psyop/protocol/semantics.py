@@ -231,6 +231,13 @@ class _Checker:
                          "make centre_deg plus eccentricity_deg less than 90")
                 return
 
+    def check_visibility(self, conditions: list[JsonObject]) -> None:
+        """A fixation target or stimulus an aperture hides in every frame that shows it (psyop.protocol.visibility)."""
+        from psyop.protocol.visibility import hidden_by_aperture
+
+        for path, message in hidden_by_aperture(self.p, conditions):
+            self.add(path, message)
+
     def _value_sets(self, conditions: list[JsonObject]) -> Iterator[JsonObject]:
         """Every set of factor values a scene is built from: each condition, each interval's ``set:``
         overrides of it, and an adaptive factor at both ends of its range."""
@@ -666,6 +673,7 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
         checker.add(("design", "repetitions"), f"{len(conditions)} conditions x {protocol.design.repetitions} "
                                                "repetitions is over 10 million trials; reduce them")
     checker.check_scene(with_variables(conditions, checker.variables))
+    checker.check_visibility(with_variables(conditions, checker.variables))
     checker.check_primitive_limit()
     checker.check_mesh_budget(conditions)
     checker.check_response()
