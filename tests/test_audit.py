@@ -156,6 +156,28 @@ def test_contact_sheet_columns_are_labelled_and_a_progress_line_counts_frames(ct
     assert f"psyop audit: frame {len(report.records)}/{len(report.records)} (100 %)" in err
 
 
+def test_the_contact_sheet_crops_the_stimulus_and_renders_it_finer(ctx):
+    """At the audit's scale the detection stimulus is a few pixels; the sheet's crop frames it (not the fixation
+    path), renders it on a grid up to the display's own pixels, and shows the same rays as the frame."""
+    settings = dataclasses.replace(FAST, sheet_crop=True)
+    report = run_audit(load_protocol(PROTOCOLS / "detection.yaml"), settings, ctx=ctx, base_dir=PROTOCOLS)
+    crop = report.sheet_crop
+    frame_h, frame_w = report.records[0].image.shape[:2]
+    assert crop is not None and crop.width_px * crop.height_px < 0.1 * frame_w * frame_h
+    assert crop.magnification == 16  # capped at the display's own pixels: 1 / 0.0625
+    m = crop.magnification
+    for rec in report.records:
+        cell = rec.sheet_image
+        assert cell is not None and cell.shape[:2] == (crop.height_px * m, crop.width_px * m)
+        background = rec.image[0, 0]
+        drawn_cell = np.any(np.abs(cell - background) > 0.02, axis=-1).mean()
+        drawn_frame = np.any(np.abs(rec.image - background) > 0.02, axis=-1).mean()
+        assert drawn_cell > 0.02 and drawn_cell > 50 * drawn_frame  # a shape in the cell, a speck in the frame
+        window = rec.image[crop.y0:crop.y0 + crop.height_px, crop.x0:crop.x0 + crop.width_px]
+        pooled = cell.reshape(crop.height_px, m, crop.width_px, m, 3).mean(axis=(1, 3))
+        assert np.abs(pooled - window).mean() < 0.03  # the same part of the same scene, finer
+
+
 IDENTICAL = (HIDDEN_DISC.replace("width_deg: 30", "width_deg: 2").replace("height_deg: 30", "height_deg: 2")
              .replace("depth: {D: 3}", "centre_deg: [6, 0]\n    depth: {D: 3}")
              .replace("reference: {mode: conventional}", "reference: {mode: ocular, set: {level_D: 0}}"))

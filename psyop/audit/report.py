@@ -110,6 +110,11 @@ def column_labels(report: AuditReport) -> list[tuple[str, int]]:
     return [(phase, gaze) for _, phase, gaze in order]
 
 
+def _cell(rec: FrameRecord) -> np.ndarray:
+    """What a sheet cell shows: the frame in the sheet's crop when the audit made one, else the whole frame."""
+    return rec.image if rec.sheet_image is None else rec.sheet_image
+
+
 def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> None:
     """A PNG of every audited frame: one row per (condition, eye), one column per (phase, gaze),
     with the row's condition and eye written at its left and each column's phase and gaze above it
@@ -124,17 +129,18 @@ def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> Non
         rows.setdefault((rec.frame.condition, rec.frame.eye), []).append(rec)
     if not rows:
         raise ValueError("no frames to put on a contact sheet")
-    h, w = report.records[0].image.shape[:2]
+    cropped = report.sheet_crop is not None
+    h, w = _cell(report.records[0]).shape[:2]
     columns = column_labels(report)
     n_cols = max(len(columns), max(len(r) for r in rows.values()))
-    label_px, header_px = 260, 36
+    label_px, header_px = 260, 52 if cropped else 36
     sheet = np.ones((header_px + len(rows) * (h + gap_px) + gap_px, label_px + n_cols * (w + gap_px) + gap_px, 3),
                     np.float32)
     for r, recs in enumerate(rows.values()):
         for rec in recs:
             c = columns.index(_column_of(rec))
             y, x = header_px + gap_px + r * (h + gap_px), label_px + gap_px + c * (w + gap_px)
-            sheet[y:y + h, x:x + w] = np.clip(rec.image, 0.0, 1.0)
+            sheet[y:y + h, x:x + w] = np.clip(_cell(rec), 0.0, 1.0)
     dpi = 100
     fig = plt.figure(figsize=(sheet.shape[1] / dpi, sheet.shape[0] / dpi), dpi=dpi)
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
@@ -143,8 +149,10 @@ def write_contact_sheet(report: AuditReport, path: Path, gap_px: int = 2) -> Non
     for r, (condition, eye) in enumerate(rows):
         ax.text(4, header_px + gap_px + r * (h + gap_px) + h / 2, f"{condition}\n{eye} eye", fontsize=7, va="center")
     for c, (phase, gaze) in enumerate(columns):
-        ax.text(label_px + gap_px + c * (w + gap_px) + w / 2, header_px / 2, f"{phase}\ngaze {gaze}", fontsize=7,
+        ax.text(label_px + gap_px + c * (w + gap_px) + w / 2, header_px - 18, f"{phase}\ngaze {gaze}", fontsize=7,
                 ha="center", va="center")
+    if report.sheet_crop is not None:
+        ax.text(4, 8, report.sheet_crop.describe(report.settings.scale), fontsize=7, va="center")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     from psyop.atomic import write_atomic

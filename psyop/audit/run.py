@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from psyop.audit.crops import SheetCrop, sheet_crop
 from psyop.audit.frames import AuditFrame, fixation_point, representative_rows
 from psyop.audit.masks import FrameMeasurer
 from psyop.audit.luminance import LuminanceCheck, luminance_checks
@@ -67,6 +68,8 @@ class AuditSettings:
     #: compare every mesh item's silhouette with exact ray-triangle intersection (numpy: ~2 s of CPU per
     #: frame for a room that fills it); off, each mesh gets a note that it was not compared
     mesh_check: bool = True
+    #: render every frame again in the contact sheet's crop (psyop.audit.crops): ``psyop audit --sheet`` turns it on
+    sheet_crop: bool = False
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale) and 0.01 <= self.scale <= 1.0):
@@ -99,6 +102,8 @@ class FrameRecord:
     #: on a calibrated display: each luminance primitive's intended and achieved luminance and contrast
     #: (psyop.audit.luminance)
     luminance: tuple[LuminanceCheck, ...] = ()
+    #: the frame in the contact sheet's crop (:attr:`AuditReport.sheet_crop`), when the audit made one
+    sheet_image: np.ndarray | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -108,6 +113,8 @@ class AuditReport:
     records: tuple[FrameRecord, ...]
     failures: tuple[str, ...]
     notes: tuple[str, ...]
+    #: the window every record's ``sheet_image`` shows (None: the sheet shows whole frames)
+    sheet_crop: SheetCrop | None = None
 
     @property
     def passed(self) -> bool:
@@ -187,6 +194,8 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
     ctx = ctx if ctx is not None else create_headless_context()
     measurer = FrameMeasurer(ctx, RenderSettings(samples_per_axis=settings.samples_per_axis, reuse_tolerance_px=None))
     records: list[FrameRecord] = []
+    drawn: list[tuple[Scene, EyeCamera]] = []  # each frame's scene and camera, kept for the sheet's crop
+    crop: SheetCrop | None = None
     meshes = SessionMeshes(base_dir, mesh_files)
     try:
         frames = list(iter_frames(plan, settings))
@@ -209,15 +218,43 @@ def run_audit(protocol: Protocol, settings: AuditSettings, ctx: moderngl.Context
                                        hidden_by(scene.primitives, camera.centre_of_projection_m), image,
                                        _point3(camera.centre_of_projection_m),
                                        _px_per_m_shift(scene, camera, display), mesh_checks, lum))
+            if settings.sheet_crop:
+                drawn.append((scene, camera))
             if progress is not None:
                 progress(done, len(frames))
+        if drawn:
+            crop, records = _in_sheet_crop(measurer, drawn, records, settings.scale, fixation_prefix)
     finally:
         measurer.release()
         if owns_ctx:
             ctx.release()
     min_visible = MIN_VISIBLE_SAMPLES / settings.samples_per_axis**2 / px_scale
     failures, notes = _check(records, item_ids, min_visible, protocol.response.identical_conditions())
-    return AuditReport(str(protocol.study.name), settings, tuple(records), tuple(failures), tuple(notes))
+    return AuditReport(str(protocol.study.name), settings, tuple(records), tuple(failures), tuple(notes), crop)
+
+
+def _in_sheet_crop(measurer: FrameMeasurer, drawn: list[tuple[Scene, EyeCamera]], records: list[FrameRecord],
+                   scale: float, fixation_prefix: str | None) -> tuple[SheetCrop | None, list[FrameRecord]]:
+    """The sheet's crop over every frame (psyop.audit.crops) and the records with their frames rendered in it. The
+    window frames the stimulus: a fixation target's primitives (its path may circle far around it) are left out of
+    it unless the scene has nothing else."""
+    from psyop.audit.masks import screen_boxes_px, zoom_camera
+
+    if any(scene.meshes for scene, _ in drawn):
+        return None, records  # a mesh has no screen box here: whole frames
+    boxes = []
+    for scene, cam in drawn:
+        frame_boxes = screen_boxes_px(scene, cam)
+        stimulus = np.array([item_of(p.name, [fixation_prefix]) != fixation_prefix if fixation_prefix else True
+                             for p in scene.primitives], dtype=bool)
+        boxes.append(frame_boxes[stimulus] if stimulus.any() else frame_boxes)
+    camera = drawn[0][1]
+    crop = sheet_crop(boxes, int(camera.width_px), int(camera.height_px), scale)
+    if crop is None:
+        return None, records
+    images = [measurer.colour(scene, zoom_camera(cam, crop.x0, crop.y0, crop.width_px, crop.height_px,
+                                                 crop.magnification)) for scene, cam in drawn]
+    return crop, [dataclasses.replace(rec, sheet_image=image) for rec, image in zip(records, images, strict=True)]
 
 
 def _measure(measurer: FrameMeasurer, scene: Scene, camera: EyeCamera, px_scale: float, settings: AuditSettings,

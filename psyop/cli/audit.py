@@ -45,7 +45,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--level", type=float, action="append", default=None, metavar="VALUE",
                         help="audit the adaptive factor at this level (repeatable; default: its range's min, "
                              "start and max)")
-    parser.add_argument("--sheet", default=None, metavar="PATH.png", help="write a contact sheet of the checked frames")
+    parser.add_argument("--sheet", default=None, metavar="PATH.png", help="write a contact sheet of the checked frames, cropped to where the "
+                             "scene's primitives are and rendered finer (docs/protocols.md, \"Auditing a protocol\")")
     parser.set_defaults(func=run)
 
 
@@ -56,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     if args.sheet is not None and not str(args.sheet).lower().endswith(".png"):
         raise UserError(f"--sheet must name a .png file, got {args.sheet!r}")
     settings = AuditSettings(scale=args.scale, gazes=args.gazes, samples_per_axis=args.samples, ipd_m=ipd_arg_m(args.ipd_mm), seed=args.seed,
-                             levels=tuple(args.level or ()))
+                             levels=tuple(args.level or ()), sheet_crop=args.sheet is not None)
     from psyop.mesh.load import MeshFiles
 
     path = Path(args.protocol)
