@@ -61,7 +61,7 @@ _WINDOW_SCRIPT = textwrap.dedent(
     window.GlfwWindow.poll = poll
     outcome = run_session(load_protocol(Path({protocol!r})), compile_schedule, SessionOptions(
         participant="W1", data_root=Path({data!r}), clock="real", display="window", responses="keyboard",
-        tracker="sim", progress=False, render="auto", window_scale=0.08))
+        tracker="sim", progress=False, render="auto", window_scale=0.2))
     print(outcome.status)
     """
 )
@@ -77,14 +77,15 @@ def window_session(protocol: Path, data: Path, keys: list[str]) -> str:
     return result.stdout.split()[-1]
 
 
-def render_frames(folder: Path, protocol: Path, seed: int, frames: list[tuple[str, int, int]]) -> None:
-    """``psyop render`` of each (file name, trial, interval) with the eye turned 15 deg, in one child process (the
-    EGL context lives in it)."""
+def render_frames(folder: Path, protocol: Path, seed: int, frames: list[tuple[str, int, int]],
+                  gaze_deg: str = "15,0") -> None:
+    """``psyop render`` of each (file name, trial, interval) with the eye turned to ``gaze_deg`` (15 deg right by
+    default), in one child process (the EGL context lives in it)."""
     script = textwrap.dedent(f"""
         from psyop.cli import main
         for name, trial, interval in {frames!r}:
             assert main(["render", {str(protocol)!r}, "--seed", "{seed}", "--trial", str(trial), "--interval",
-                         str(interval), "--gaze-deg", "15,0", "--out", {str(folder)!r} + "/" + name]) == 0
+                         str(interval), "--gaze-deg", "{gaze_deg}", "--out", {str(folder)!r} + "/" + name]) == 0
         """)
     subprocess.run([sys.executable, "-c", script], check=True, cwd=REPO, capture_output=True, timeout=180)
 

@@ -137,7 +137,7 @@ def test_the_fits_recover_each_simulated_participants_threshold(tmp_path: Path) 
 
 @pytest.mark.parametrize(("old", "new", "says"), [
     ("reference: {mode: conventional}", "reference: {mode: ocular}", "target and reference are the same stimulus"),
-    ("alternatives: intervals", "alternatives: locations", "alternatives: locations is not available"),
+    ("alternatives: intervals", "alternatives: locations", "alternatives: locations needs locations_deg with n = 4"),
     ("  n: 4", "  n: 3", "needs 3 interval phase(s)"),
 ])
 def test_bad_input_is_one_line_with_its_place(tmp_path: Path, old: str, new: str, says: str) -> None:

@@ -1,6 +1,13 @@
-"""``n_afc``: which of n intervals held the target (n-alternative forced choice, n = 2..8). The target interval
-(column ``correct_interval``, 1..n) shows the ``target`` stimulus, every other interval the ``reference``; the
-answer is the interval's number. The analysis fits a psychometric function with guess rate 1/n per participant
+"""``n_afc``: which of n intervals, or of n locations, held the target (n-alternative forced choice, n = 2..8).
+
+- ``alternatives: intervals``: the target interval (column ``correct_interval``, 1..n) shows the ``target``
+  stimulus, every other interval the ``reference``; the answer is the interval's number.
+- ``alternatives: locations``: one interval (``target`` sets its mode and factor overrides); the target location
+  (column ``correct_location``, 1..n, in the order of ``locations_deg``) is written to the schedule as the scene
+  variables ``target_azimuth_deg`` and ``target_elevation_deg``, which the target item reads as its
+  ``centre_deg: [{factor: target_azimuth_deg}, {factor: target_elevation_deg}]``; the other locations are empty.
+  The answer is the location's number.
+ The analysis fits a psychometric function with guess rate 1/n per participant
 and condition (psyop.statistics.psychometric, psignifit's nAFC type); the threshold is the level where the
 proportion correct is halfway between 1/n and 1.
 """
@@ -15,6 +22,7 @@ import numpy as np
 from pydantic import Field
 
 from psyop.protocol.base import Number
+from psyop.protocol.scene import FactorRef
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, Inputs, IntervalSpec, KindResponse,
                                        ObserverBase, ResponseKindSpec, ScheduleInput, Scored, StudyInputs, figure_target)
 from psyop.protocol.kinds.modes import check_specs, interval_spec_columns, specs_factors
@@ -22,17 +30,27 @@ from psyop.records import Loc, TrialRow
 
 #: the alternatives n-AFC supports (psyop.statistics.psychometric fits guess 1/n for these)
 N_CHOICES = range(2, 9)
+#: locations: the scene variables (and schedule columns) holding the target's centre in each trial
+LOCATION_AZIMUTH, LOCATION_ELEVATION = "target_azimuth_deg", "target_elevation_deg"
+
+
+def correct_alternative(row: TrialRow) -> int:
+    """The trial's right answer, 1..n: its target location (locations) or its target interval (intervals)."""
+    return int(row["correct_location"]) if "correct_location" in row else int(row["correct_interval"])
 
 
 class NAfcResponse(KindResponse):
-    """n-alternative forced choice over ``n`` intervals: one shows ``target``, the others ``reference``."""
+    """n-alternative forced choice over ``n`` intervals (one shows ``target``, the others ``reference``) or ``n``
+    locations (``locations_deg``, the target item placed at one per trial)."""
 
     kind: Literal["n_afc"]
     question: str = "Which interval showed the target?"
     n: int = Field(ge=2, le=8, description="number of alternatives (2..8)")
     alternatives: Literal["intervals", "locations"] = "intervals"
     target: IntervalSpec
-    reference: IntervalSpec
+    reference: IntervalSpec | None = None
+    #: locations: the n places of the target, each Fick [azimuth, elevation] in degrees (docs/optics.md, "Angles")
+    locations_deg: list[tuple[Number, Number]] | None = None
     level_factor: str | None = None
     #: which interval holds the target: each equally often within a condition (balanced), or uniformly at random
     order: Counterbalance = "balanced"
@@ -44,7 +62,14 @@ class NAfcResponse(KindResponse):
         return self.level_factor
 
     def interval_specs(self) -> tuple[IntervalSpec, ...]:
-        return (self.target, self.reference)
+        return (self.target,) if self.reference is None else (self.target, self.reference)
+
+    def scene_variables(self) -> dict[str, tuple[float, float]]:
+        """locations: the target's centre per trial, each over its range of the locations."""
+        if self.alternatives != "locations" or not self.locations_deg:
+            return {}
+        az, el = ([float(place[k]) for place in self.locations_deg] for k in (0, 1))
+        return {LOCATION_AZIMUTH: (min(az), max(az)), LOCATION_ELEVATION: (min(el), max(el))}
 
     def factors_read(self) -> set[str]:
         return specs_factors(self.interval_specs(), self.level_factor)
@@ -78,7 +103,7 @@ class PsychometricNafc(ObserverBase):
         return guess + (1.0 - guess - float(self.lapse)) * _phi((x - participant["threshold"]) / float(self.width))
 
     def answer(self, row: TrialRow, participant: Mapping[str, float], u: float) -> str:
-        p, right, n = self.probability(row, participant), int(row["correct_interval"]), int(row["n_alternatives"])
+        p, right, n = self.probability(row, participant), correct_alternative(row), int(row["n_alternatives"])
         if u < p:
             return str(right)
         others = [k for k in range(1, n + 1) if k != right]
@@ -100,13 +125,51 @@ def balanced_alternatives(condition: np.ndarray, practice: np.ndarray, n: int, r
     return out
 
 
+def _reads_location(item: object) -> bool:
+    """Whether a scene item's ``centre_deg`` reads the target's location (``{factor: target_azimuth_deg}`` or
+    ``{factor: target_elevation_deg}``)."""
+    centre = getattr(item, "centre_deg", None)
+    parts = centre if isinstance(centre, tuple) else ()
+    return any(isinstance(part, FactorRef) and part.factor in (LOCATION_AZIMUTH, LOCATION_ELEVATION) for part in parts)
+
+
+def check_locations(response: NAfcResponse, checks: Checks, path: Loc) -> None:
+    """alternatives: locations: n distinct places inside the display's field of view, a scene item that reads
+    them, and no reference (the other places are empty)."""
+    from psyop.protocol.display import resolve_display_profile
+
+    places = response.locations_deg
+    if places is None or len(places) != response.n:
+        checks.add(path + (("locations_deg",) if places is not None else ("alternatives",)),
+                   f"alternatives: locations needs locations_deg with n = {response.n} places, each [azimuth_deg, "
+                   f"elevation_deg] (got {0 if places is None else len(places)})")
+        return
+    if len({(float(a), float(e)) for a, e in places}) != len(places):
+        checks.add(path + ("locations_deg",), "two locations are the same place; give n distinct places")
+    display = resolve_display_profile(checks.p.display)
+    half_w, half_h = display.horizontal_fov_deg / 2, display.vertical_fov_deg / 2
+    for k, (az, el) in enumerate(places):
+        if abs(float(az)) >= half_w or abs(float(el)) >= half_h:
+            checks.add(path + ("locations_deg", k), f"location {k + 1} at [{float(az):g}, {float(el):g}] deg is "
+                                                    f"outside the display's field of view (+-{half_w:g} deg across, "
+                                                    f"+-{half_h:g} deg up and down); move it inside")
+    if response.reference is not None:
+        checks.add(path + ("reference",), "with alternatives: locations the other locations are empty, so a reference "
+                                          "is not shown; remove it")
+    if not any(_reads_location(item) for item in checks.p.scene):
+        checks.add(path + ("alternatives",), f"nothing in the scene is placed at the drawn location: give the target "
+                                             f"item centre_deg: [{{factor: {LOCATION_AZIMUTH}}}, "
+                                             f"{{factor: {LOCATION_ELEVATION}}}]")
+
+
 class NAfc(ResponseKindSpec):
     name = "n_afc"
     label = "n-AFC"
     model = NAfcResponse
     observer_models = (PsychometricNafc,)
     fields = {"NAfcResponse": {"kind": "plan", "question": "plan", "n": "kinds", "alternatives": "kinds",
-                               "target": "kinds", "reference": "kinds", "level_factor": "kinds", "order": "kinds"},
+                               "target": "kinds", "reference": "kinds", "locations_deg": "kinds",
+                               "level_factor": "kinds", "order": "kinds"},
               "PsychometricNafc": {k: "kinds" for k in ("kind", "level_column", "threshold", "width", "lapse",
                                                         "between_subject_sd")}}
 
@@ -119,28 +182,44 @@ class NAfc(ResponseKindSpec):
         return Inputs(keys, {k: k for k in numbers}, {"left": "1", "right": "2"} if response.n == 2 else {})
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
-        """``n_alternatives``, ``correct_interval`` (1..n), each interval's mode and the factors an interval sets."""
+        """``n_alternatives``; intervals: ``correct_interval`` (1..n), each interval's mode and the factors an
+        interval sets; locations: ``correct_location`` (1..n), the target's centre (``target_azimuth_deg``,
+        ``target_elevation_deg``) and the one interval's mode and factors."""
         assert isinstance(response, NAfcResponse)
         n, columns, rows = response.n, schedule.columns, schedule.n
         if response.order == "balanced":
             right = balanced_alternatives(schedule.condition, schedule.practice.astype(bool), n, schedule.rng)
         else:
             right = schedule.rng.integers(1, n + 1, size=rows)
-        out: dict[str, np.ndarray] = {"n_alternatives": np.full(rows, n, dtype=np.int64), "correct_interval": right}
+        out: dict[str, np.ndarray] = {"n_alternatives": np.full(rows, n, dtype=np.int64)}
+        if response.alternatives == "locations":
+            places = np.asarray(response.locations_deg, dtype=np.float64)
+            out |= {"correct_location": right, LOCATION_AZIMUTH: places[right - 1, 0],
+                    LOCATION_ELEVATION: places[right - 1, 1]}
+            out.update(interval_spec_columns(1, response.target, response.target, np.ones(rows, bool), columns))
+            return out
+        assert response.reference is not None  # check(): intervals need one
+        out["correct_interval"] = right
         for k in range(1, n + 1):
             out.update(interval_spec_columns(k, response.target, response.reference, right == k, columns))
         return out
 
     def check(self, response: KindResponse, checks: Checks, path: Loc) -> None:
-        """Intervals only (locations are refused: not available yet); numeric level and set factors; mode
-        factors name modes; target and reference differ."""
+        """Numeric level and set factors; mode factors name modes. Intervals: a reference that differs from the
+        target, no locations. Locations: n distinct places inside the display, read by a scene item, no reference."""
         assert isinstance(response, NAfcResponse)
+        specs = {"target": response.target} | ({} if response.reference is None else {"reference": response.reference})
+        check_specs(checks, path, specs, response.level_factor)
         if response.alternatives == "locations":
-            checks.add(path + ("alternatives",), "alternatives: locations is not available in this version of psyop "
-                                                 "(the target's place cannot be set per trial yet); use "
-                                                 "alternatives: intervals")
-        check_specs(checks, path, {"target": response.target, "reference": response.reference}, response.level_factor)
-        if response.target == response.reference:
+            check_locations(response, checks, path)
+            return
+        if response.locations_deg is not None:
+            checks.add(path + ("locations_deg",), "locations_deg places the target in alternatives: locations; remove "
+                                                  "it, or set alternatives: locations")
+        if response.reference is None:
+            checks.add(path, "alternatives: intervals needs a reference: the stimulus of the other n - 1 intervals "
+                             "(e.g. reference: {mode: conventional})")
+        elif response.target == response.reference:
             checks.add(path + ("reference",), "target and reference are the same stimulus, so no interval could be "
                                               "told apart; give the reference another mode or a set: "
                                               "(e.g. set: {level_D: 0})")
@@ -154,7 +233,7 @@ class NAfc(ResponseKindSpec):
                                                  f"response.level_factor: {observer.level_column}")
 
     def score(self, row: TrialRow, answer: str) -> Scored:
-        return Scored(correct=answer == str(int(row["correct_interval"])))
+        return Scored(correct=answer == str(correct_alternative(row)))
 
     def targets(self, study: StudyInputs) -> list[AnalysisTarget]:
         """Fits with guess 1/n per participant and condition in results/, and their figure."""
