@@ -141,7 +141,8 @@ def test_keys_step_the_value_and_confirm_and_keys_before_the_prompt_are_ignored(
     for t in (0.1, 0.2):
         low.apply("down", t)
     assert low.value == 0.25 and len(low.path) == 3
-    assert kind.controller == {} and kind.inputs(load_protocol(EXAMPLE).response).keys["kp_enter"] == "confirm"
+    assert kind.controller == {"thumbstick": "axis", "left": "confirm", "right": "confirm"}
+    assert kind.inputs(load_protocol(EXAMPLE).response).keys["kp_enter"] == "confirm"
 
 
 def test_response_box_buttons_adjust_over_a_real_pty() -> None:
@@ -172,7 +173,7 @@ def test_response_box_buttons_adjust_over_a_real_pty() -> None:
 
 
 def test_the_thumbstick_mapping_moves_continuously_at_rate_times_deflection() -> None:
-    """The controller's mapping logic without a runtime (the thumbstick is not read from OpenXR yet): an axis input
+    """The controller's mapping logic without a runtime (on Monado: tests/session/xr/test_openxr_thumbstick.py): an axis input
     sets the deflection from its time on; the value moves at rate_per_s x deflection, a rest inside the dead zone
     moves nothing, the bounds stop it and a frame's value is carried to its display time."""
     spec = AdjustmentSpec("match_D", 0.0, 2.0, 0.05, 0.5)

@@ -57,6 +57,13 @@ _SELECT_BINDINGS = {
     "/interaction_profiles/valve/index_controller": "trigger/click",
     "/interaction_profiles/oculus/touch_controller": "trigger/value",
 }
+#: each profile's two-axis stick (the Vive wand's trackpad; the simple controller has none), the paths of the
+#: OpenXR 1.0 specification's interaction profiles (section 6.4)
+_THUMBSTICK_BINDINGS = {
+    "/interaction_profiles/htc/vive_controller": "trackpad",
+    "/interaction_profiles/valve/index_controller": "thumbstick",
+    "/interaction_profiles/oculus/touch_controller": "thumbstick",
+}
 
 
 def xr_error(what: str, exc: BaseException | str, runtime: str = "the OpenXR runtime") -> UserError:
@@ -264,6 +271,26 @@ class XrRuntime:
     def _path(self, text: str) -> XrObject:
         return self.xr.string_to_path(self.instance, text)
 
+    def _suggest_controller_bindings(self) -> None:
+        """Each controller profile's grip and aim poses, select button and (where it has one) stick, suggested in one
+        call per profile (a runtime that rejects one path drops that profile's whole suggestion: tested on Monado's
+        Index profile, tests/session/xr/test_openxr_thumbstick.py)."""
+        xr = self.xr
+        for profile, button in _SELECT_BINDINGS.items():
+            bindings = []
+            for h in HANDS:
+                bindings.append(xr.ActionSuggestedBinding(self.grip, self._path(f"/user/hand/{h}/input/grip/pose")))
+                bindings.append(xr.ActionSuggestedBinding(self.aim, self._path(f"/user/hand/{h}/input/aim/pose")))
+                bindings.append(xr.ActionSuggestedBinding(self.select, self._path(f"/user/hand/{h}/input/{button}")))
+                if profile in _THUMBSTICK_BINDINGS:
+                    bindings.append(xr.ActionSuggestedBinding(
+                        self.stick, self._path(f"/user/hand/{h}/input/{_THUMBSTICK_BINDINGS[profile]}")))
+            try:
+                xr.suggest_interaction_profile_bindings(self.instance, xr.InteractionProfileSuggestedBinding(
+                    interaction_profile=self._path(profile), suggested_bindings=bindings))
+            except xr.exception.XrException:
+                pass  # a runtime may not know every profile; the others still bind
+
     def _create_actions(self) -> None:
         xr = self.xr
         self.action_set = xr.create_action_set(self.instance, xr.ActionSetCreateInfo(
@@ -279,17 +306,10 @@ class XrRuntime:
         self.select = xr.create_action(self.action_set, xr.ActionCreateInfo(
             action_type=xr.ActionType.BOOLEAN_INPUT, action_name="select", localized_action_name="Select",
             subaction_paths=hands))
-        for profile, button in _SELECT_BINDINGS.items():
-            bindings = []
-            for h in HANDS:
-                bindings.append(xr.ActionSuggestedBinding(self.grip, self._path(f"/user/hand/{h}/input/grip/pose")))
-                bindings.append(xr.ActionSuggestedBinding(self.aim, self._path(f"/user/hand/{h}/input/aim/pose")))
-                bindings.append(xr.ActionSuggestedBinding(self.select, self._path(f"/user/hand/{h}/input/{button}")))
-            try:
-                xr.suggest_interaction_profile_bindings(self.instance, xr.InteractionProfileSuggestedBinding(
-                    interaction_profile=self._path(profile), suggested_bindings=bindings))
-            except xr.exception.XrException:
-                pass  # a runtime may not know every profile; the others still bind
+        self.stick = xr.create_action(self.action_set, xr.ActionCreateInfo(
+            action_type=xr.ActionType.VECTOR2F_INPUT, action_name="thumbstick", localized_action_name="Thumbstick",
+            subaction_paths=hands))
+        self._suggest_controller_bindings()
         self.gaze_action = None
         if self.facts.eye_gaze_supported:
             self.gaze_action = xr.create_action(self.action_set, xr.ActionCreateInfo(
@@ -442,6 +462,19 @@ class XrRuntime:
                                                                                      subaction_path=path))
             if state.is_active and state.current_state and state.changed_since_last_sync:
                 out[hand] = int(state.last_change_time)
+        return out
+
+    @signals_held
+    def thumbsticks(self) -> dict[str, tuple[float, int]]:
+        """Per hand with an active stick: its forward deflection now (y in [-1, 1], forward positive) and the
+        runtime's time of its last change (``lastChangeTime``, XrTime ns)."""
+        xr = self.xr
+        out = {}
+        for hand, path in self.hand_paths.items():
+            state = xr.get_action_state_vector2f(self.session, xr.ActionStateGetInfo(action=self.stick,
+                                                                                      subaction_path=path))
+            if state.is_active:
+                out[hand] = (float(state.current_state.y), int(state.last_change_time))
         return out
 
     # -- teardown -------------------------------------------------------------------------------------

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject, TrialRow
@@ -22,7 +22,7 @@ from psyop.session.gaze.sample import GazeSample, RawBuffer, RawGazeSample
 from psyop.session.gaze.sync import ClockSync
 from psyop.session.pose import PoseSample
 from psyop.session.reach import horizontal_reach_m
-from psyop.session.responses.base import ResponseKindSpec
+from psyop.session.responses.base import RawInput, ResponseKindSpec
 from psyop.devices.responses.keyboard import KeyboardResponses
 from psyop.devices.xr.runtime import HANDS, XR_EXIT_CODE, rotate
 
@@ -170,6 +170,11 @@ class OpenXRPose:
         return None
 
 
+#: the raw input name of a controller's stick in a response kind's ``controller`` map (its value is the kind's
+#: name for the deflection, e.g. an adjustment's "axis"); the select buttons are "left" and "right"
+THUMBSTICK = "thumbstick"
+
+
 class XrButtons:
     """Raw events from the controllers' select buttons, once per input sync: the left hand's is 'left', the
     right hand's 'right', each at the time the runtime saw the press (the response kind gives them meaning)."""
@@ -177,6 +182,8 @@ class XrButtons:
     def __init__(self, display: OpenXRDisplay) -> None:
         self.display, self.runtime = display, display.runtime
         self._seen_sync = -1
+        #: the stick as the last :meth:`poll` saw it: (session time s of its last change, forward deflection)
+        self.stick: tuple[float, float] = (0.0, 0.0)
 
     def poll(self) -> list[tuple[str, float]]:
         rt = self.runtime
@@ -184,6 +191,12 @@ class XrButtons:
             return []
         self._seen_sync = rt.sync_count
         presses = rt.select_presses()  # the runtime's own press times: a response time is not frame-quantised
+        sticks = rt.thumbsticks()
+        if sticks:  # the stick deflected furthest, when both hands hold one
+            y, t_ns = max(sticks.values(), key=lambda state: abs(state[0]))
+            if y != self.stick[1]:  # a runtime may report no change time (0, Monado on a return to rest): this sync's
+                changed_s = self.display.to_session_s(t_ns if t_ns > 0 else self.display.frame_time_ns)  # frame time
+                self.stick = (max(changed_s, self.stick[0]), y)
         events = sorted((self.display.to_session_s(t_ns), hand)
                         for hand, t_ns in presses.items())
         return [(name, t_s) for t_s, name in events[:1]]
@@ -192,6 +205,12 @@ class XrButtons:
 class OpenXRResponses(KeyboardResponses):
     """Answers from the controllers: XrButtons' 'left' / 'right' through the response kind's ``controller`` map
     (docs/protocols.md lists it); a reach is confirmed by either, its distance from the right controller's grip."""
+
+    def __init__(self, events: XrButtons, kind: ResponseKindSpec, *, reach_m: Callable[[], float] | None = None,
+                 keymap: Mapping[str, str] | None = None) -> None:
+        super().__init__(events, kind, reach_m=reach_m, keymap=keymap)
+        self._stick_phase_s = math.nan  # the response phase whose stick deflection was last reported
+        self._stick_reported = 0.0
 
     @classmethod
     def on_display(cls, built: Display | None, kind: ResponseKindSpec,
@@ -211,3 +230,20 @@ class OpenXRResponses(KeyboardResponses):
             raise UserError(f"the controllers cannot give {kind.name} responses; use --responses keyboard with "
                             "--experimenter-window (its keys), or --responses serial:DEVICE", "--responses")
         return cls(XrButtons(display), kind, reach_m=right_hand_reach_m, keymap=keymap)
+
+    def raw_inputs(self, since_s: float, now_s: float) -> list[RawInput]:
+        """The select buttons through the kind's map (as keys), and, where the map names ``thumbstick``, the stick's
+        deflection as that input (an adjustment's axis) whenever it differs from the one last reported in this
+        phase: a stick already held when the phase begins counts from the phase's start."""
+        out = super().raw_inputs(since_s, now_s)
+        axis = self.keymap.get(THUMBSTICK)
+        if axis is None:
+            return out
+        if self._stick_phase_s != since_s:  # a new response phase: nothing reported yet (a resting stick reads 0)
+            self._stick_phase_s, self._stick_reported = since_s, 0.0
+        assert isinstance(self.events, XrButtons)
+        changed_s, deflection = self.events.stick
+        if deflection != self._stick_reported:
+            self._stick_reported = deflection
+            out.append(RawInput(axis, max(changed_s, since_s), deflection))
+        return sorted(out, key=lambda raw: raw.t_s)

@@ -317,8 +317,9 @@ class Adjustment(ResponseKindSpec):
     observer_models = (AdjustmentObserver,)
     keys = _KEYS
     buttons = _BUTTONS
-    # the select buttons alone cannot adjust; the thumbstick is not read from the runtime yet (docs/kind_adjustment.md)
-    controller: ClassVar[Mapping[str, str]] = {}
+    #: controllers: either stick adjusts continuously (its forward deflection), either select button confirms
+    #: (psyop.devices.xr.tracking: the raw names "thumbstick", "left", "right")
+    controller: ClassVar[Mapping[str, str]] = {"thumbstick": AXIS, "left": CONFIRM, "right": CONFIRM}
     fields = {"AdjustmentResponse": {"kind": "plan", "question": "plan", "variable": "kinds", "item": "kinds",
                                      "field": "kinds", "stimulus": "kinds", "start": "kinds", "bounds": "kinds",
                                      "step": "kinds", "rate_per_s": "kinds", "reference": "kinds"},

@@ -80,6 +80,7 @@ class RemoteState:
     head_position_m: tuple[float, float, float] = (0.1, 1.5, -0.2)
     gaze_pitch_deg: float = -10.0  # relative to the head
     right_trigger: bool = False
+    right_thumbstick_y: float = 0.0  # the right stick's forward deflection, in [-1, 1]
     right_controller_position_m: tuple[float, float, float] = (0.2, 1.2, -0.5)  # left: mirrored in x
     extra: dict[str, float] = field(default_factory=dict)
 
@@ -102,8 +103,11 @@ class RemoteState:
             if side == "right" and self.right_trigger:
                 buttons[8] = 1  # trigger_click
             x, y, z = self.right_controller_position_m
+            floats = [0.0] * 19  # velocities (6), hand curls (5), trigger, squeeze, squeeze force, stick x y (14, 15),
+            if side == "right":  # trackpad force, trackpad x y: Monado's r_remote_controller_data, in order
+                floats[15] = self.right_thumbstick_y
             controllers += (_pose((0.0, 0.0, 0.0, 1.0), (x if side == "right" else -x, y, z))
-                            + struct.pack("<19f", *([0.0] * 19)) + bytes(buttons))
+                            + struct.pack("<19f", *floats) + bytes(buttons))
         gaze = _pose(self.gaze_quat_xyzw(), (0.0, 0.0, 0.0)) + struct.pack("<?3x", True)
         return b"mndrmtg\0" + head + controllers + gaze
 
