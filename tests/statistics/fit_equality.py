@@ -1,6 +1,7 @@
 """Helpers of the tests that hold psyop's fast fit paths to the former code bit for bit
 (test_psychometric_fast_paths.py, test_psychometric_zoom_fast_paths.py): byte equality of arrays,
-field-by-field equality of two fits, and random 2AFC datasets on the detection levels."""
+field-by-field equality of two fits, former definitions patched into every fit module, and random 2AFC
+datasets on the detection levels."""
 
 from __future__ import annotations
 
@@ -8,10 +9,25 @@ from dataclasses import fields
 
 import numpy as np
 
+from psyop.statistics import posterior_modes, psignifit_grid, psignifit_posterior, psychometric
+from psyop.statistics import psignifit_grid as engine
 from psyop.statistics.psychometric import PsychometricFit
 from psyop.statistics.simulate import DETECTION_LEVELS_D, pc_2afc
 
 LEVELS = np.array(DETECTION_LEVELS_D)
+
+
+#: The modules of a fit: psychometric (the public API) and the posterior-grid engine it calls.
+FIT_MODULES = (psychometric, psignifit_grid, psignifit_posterior, posterior_modes)
+
+
+def patch_everywhere(monkeypatch, name: str, value) -> None:
+    """Set ``name`` to ``value`` in every fit module that holds it: each module looks its callees up in
+    its own namespace, so a former definition patched into all of them replaces every call site."""
+    held = [m for m in FIT_MODULES if hasattr(m, name)]
+    assert held, f"no fit module defines {name!r}"
+    for module in held:
+        monkeypatch.setattr(module, name, value)
 
 
 def same_bits(a, b) -> bool:
@@ -72,7 +88,5 @@ def tabulated_priors(data: np.ndarray) -> dict:
     """psignifit's tabulated 2AFC priors for the levels of ``data`` (psyop's cached tabulation)."""
     import psignifit
 
-    from psyop.statistics import psychometric as psy
-
     conf = psignifit.Configuration(experiment_type="2AFC", sigmoid="norm", verbose=False)
-    return psy._bounds_and_priors(conf, data[:, 0], None)[1]
+    return engine._bounds_and_priors(conf, data[:, 0], None)[1]

@@ -20,11 +20,17 @@ import pytest
 from scipy import ndimage, special
 from scipy.stats import norm
 
-from psignifit._parameter import parameter_grid
-
+from psyop.statistics import posterior_modes as modes
+from psyop.statistics import psignifit_grid as engine
+from psyop.statistics import psignifit_posterior as model
+from psyop.statistics import psignifit_private as private
 from psyop.statistics import psychometric as psy
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
-from fit_equality import LEVELS, fit_datasets, fit_grid, random_data, same_bits, same_fit, tabulated_priors
+from fit_equality import (
+    LEVELS, fit_datasets, fit_grid, patch_everywhere, random_data, same_bits, same_fit, tabulated_priors,
+)
+
+parameter_grid = private.private_symbol("parameter_grid")  # psignifit's own, the reference of engine._parameter_grid
 
 pytestmark = pytest.mark.cross_cpu  # fast paths against the former code beside them, bit for bit
 
@@ -66,7 +72,7 @@ def _old_log_posterior_2afc(data, priors, grid):
     k = data[:, 1].reshape(x.shape)
     n = data[:, 2].reshape(x.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
-        psi = gamma + (1.0 - gamma - lam) * special.ndtr((x - thr) * psy._NORM_SPAN / width)
+        psi = gamma + (1.0 - gamma - lam) * special.ndtr((x - thr) * model._NORM_SPAN / width)
         log_psi = np.where(k > 0, k * np.log(psi), 0.0)
         log_1m = np.where(n - k > 0, (n - k) * np.log(1.0 - psi), 0.0)
         eta_var = eta_std ** 2
@@ -92,7 +98,7 @@ def _old_posterior_2afc(data, priors, grid, log_posterior=None):
     imax = np.unravel_index(int(np.argmax(lp)), lp.shape)
     names = sorted(grid)
     grid_max = {n: float(np.atleast_1d(grid[n])[i]) for n, i in zip(names, imax)}
-    p = np.exp(lp - lp[imax]) * psy.integral_weights([np.atleast_1d(grid[n]) for n in names])
+    p = np.exp(lp - lp[imax]) * private.integral_weights([np.atleast_1d(grid[n]) for n in names])
     return p / p.sum(), grid_max
 
 
@@ -142,10 +148,10 @@ def test_t75_mesh_is_psignifits_inverse_bit_for_bit():
     for _ in range(400):
         grid = _random_grid(rng, eta_free=rng.random() < 0.2)
         old_mesh, old_t75, old_names = _old_t75_mesh(grid, SIGMOID)
-        mesh, t75, names = psy._t75_mesh(grid)
+        mesh, t75, names = model._t75_mesh(grid)
         assert names == old_names
         assert same_bits(t75, old_t75), grid
-        assert same_bits(psy._t75_grid(grid), old_t75)
+        assert same_bits(model._t75_grid(grid), old_t75)
         assert all(same_bits(mesh[n], old_mesh[n]) for n in names)
 
 
@@ -159,7 +165,7 @@ def test_t75_is_norm_ppf_bit_for_bit():
             for thr, width in ((rng.uniform(-2, 3), _widths(rng, 1)[0]), (0.0, 1e-300), (-0.0, 5e-324),
                                (1e6, 1e6), (rng.uniform(-1, 1), 0.0)):
                 p = {"gamma": gamma, "lambda": float(lapse), "threshold": float(thr), "width": float(width)}
-                new, old = psy._t75(p), _old_t75(p)
+                new, old = model._t75(p), _old_t75(p)
                 assert type(new) is type(old) and (new == old or math.isnan(new) and math.isnan(old)), p
                 assert math.copysign(1.0, new) == math.copysign(1.0, old), p
 
@@ -167,7 +173,7 @@ def test_t75_is_norm_ppf_bit_for_bit():
 def test_t75_flat_curve_is_inf():
     """Lapse 0.5 at guess 0.5: the curve is flat at 50 % and never reaches 75 % (the former code raised
     ZeroDivisionError); a fit whose MAP lapse is 0.5 reports no threshold (status lapse_at_bound)."""
-    assert psy._t75({"gamma": 0.5, "lambda": 0.5, "threshold": 0.3, "width": 0.4}) == math.inf
+    assert model._t75({"gamma": 0.5, "lambda": 0.5, "threshold": 0.3, "width": 0.4}) == math.inf
     data = np.c_[LEVELS, [8, 7, 9, 8, 7], np.full(5, 15)]
     with pytest.warns(UserWarning, match="lapse rate"), np.errstate(invalid="ignore"):
         fit = fit_psychometric(data, FitOptions(fixed_lambda=0.5, n_bootstrap=0, estimate_eta=False))
@@ -205,12 +211,12 @@ def test_log_posterior_and_posterior_bit_for_bit():
         data = random_data(rng)
         priors = tabulated_priors(data)
         grid = fit_grid(rng, eta_free=i % 5 == 0)
-        assert same_bits(psy.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid))
-        post, best = psy.posterior_2afc(data, priors, grid)
+        assert same_bits(model.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid))
+        post, best = model.posterior_2afc(data, priors, grid)
         old_post, old_best = _old_posterior_2afc(data, priors, grid)
         assert same_bits(post, old_post) and best == old_best
         lp = _old_log_posterior_2afc(data, priors, grid)
-        post, best = psy.posterior_2afc(data, priors, grid, lp)
+        post, best = model.posterior_2afc(data, priors, grid, lp)
         assert same_bits(post, _old_posterior_2afc(data, priors, grid, lp)[0]) and best == old_best
 
 
@@ -222,7 +228,7 @@ def test_refine_map_bit_for_bit():
         priors = tabulated_priors(data)
         grid = fit_grid(rng)
         best = {n: float(rng.choice(np.atleast_1d(v))) for n, v in grid.items()}
-        assert psy._refine_map(data, priors, grid, best) == _old_refine_map(data, priors, grid, best)
+        assert modes._refine_map(data, priors, grid, best) == _old_refine_map(data, priors, grid, best)
 
 
 def test_local_maxima_is_maximum_filter():
@@ -232,7 +238,7 @@ def test_local_maxima_is_maximum_filter():
         values = rng.integers(0, 4, shape).astype(float)  # many ties
         if rng.random() < 0.3:
             values[rng.random(shape) < 0.2] = -np.inf
-        assert same_bits(psy._local_maxima(values), _old_local_maxima(values)), shape
+        assert same_bits(modes._local_maxima(values), _old_local_maxima(values)), shape
 
 
 # ---- closeness checks and psignifit's parameter grid --------------------------------------------------------------
@@ -256,15 +262,15 @@ def test_isclose_and_allclose_are_numpys():
     pairs = _close_pairs(rng)
     with np.errstate(invalid="ignore"):
         for a, b in pairs:
-            assert psy._isclose(a, b) == bool(np.isclose(a, b)), (a, b)
+            assert engine._isclose(a, b) == bool(np.isclose(a, b)), (a, b)
     values = np.array([b for _, b in pairs], float)
     others = np.array([a for a, _ in pairs], float)
     for _ in range(2000):
         i = rng.integers(0, len(values), int(rng.integers(1, 6)))
         a, b = others[i], values[i]
-        assert psy._allclose(a, b) == bool(np.allclose(a, b)), (a, b)
-        assert psy._allclose(b, b) == bool(np.allclose(b, b))
-        assert psy._allclose(a[:1], b) == bool(np.allclose(a[:1], b))
+        assert engine._allclose(a, b) == bool(np.allclose(a, b)), (a, b)
+        assert engine._allclose(b, b) == bool(np.allclose(b, b))
+        assert engine._allclose(a[:1], b) == bool(np.allclose(a[:1], b))
 
 
 def test_parameter_grid_is_psignifits():
@@ -276,7 +282,7 @@ def test_parameter_grid_is_psignifits():
             hi = float(rng.choice([lo, lo + 1e-9, lo + 1e-5 * abs(lo), lo + rng.uniform(0, 2), np.nextafter(lo, 2.0)]))
             bounds[name] = (lo, hi)
         steps = {n: int(rng.integers(1, 40)) for n in bounds}
-        ours, theirs = psy._parameter_grid(bounds, steps), parameter_grid(bounds, steps)
+        ours, theirs = engine._parameter_grid(bounds, steps), parameter_grid(bounds, steps)
         assert list(ours) == list(theirs)
         assert all(same_bits(ours[n], theirs[n]) for n in bounds)
 
@@ -304,6 +310,6 @@ def test_fits_equal_the_former_functions(monkeypatch, options):
     with np.errstate(invalid="ignore"):
         new = [fit_psychometric(d, options) for d in datasets]
         for name, old in OLD_FUNCTIONS.items():
-            monkeypatch.setattr(psy, name, old)
+            patch_everywhere(monkeypatch, name, old)
         old_fits = [fit_psychometric(d, options) for d in datasets]
     assert all(same_fit(a, b) for a, b in zip(new, old_fits))

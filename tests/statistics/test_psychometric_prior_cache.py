@@ -1,4 +1,4 @@
-"""The bounds and tabulated priors a fit reuses (psychometric._bounds_and_priors) change no fit:
+"""The bounds and tabulated priors a fit reuses (engine._bounds_and_priors) change no fit:
 every field of a fit with the cache warm equals the same fit computed with the cache cleared."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from psyop.statistics import psychometric
+from psyop.statistics import psignifit_grid as engine
 from psyop.statistics.psychometric import FitOptions, fit_psychometric
 from psyop.statistics.simulate import DETECTION_LEVELS_D, pc_2afc
 
@@ -39,10 +39,10 @@ def test_fits_with_reused_priors_equal_fresh_fits():
     fresh = []
     for data in datasets:
         for o in options:
-            psychometric._PRIORS_CACHE.clear()
+            engine._PRIORS_CACHE.clear()
             fresh.append(asdict(fit_psychometric(data, o)))
-    psychometric._PRIORS_CACHE.clear()
+    engine._PRIORS_CACHE.clear()
     warm = [asdict(fit_psychometric(data, o)) for data in datasets for o in options]
-    keys = len(psychometric._PRIORS_CACHE)
+    keys = len(engine._PRIORS_CACHE)
     assert keys < len(warm)  # entries were reused (the same levels and options)
     assert all(_same(a, b) for a, b in zip(fresh, warm))

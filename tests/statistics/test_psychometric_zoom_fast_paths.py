@@ -1,6 +1,6 @@
 """The second round of psyop.statistics.psychometric fast paths, held bit for bit to what they replaced
-(kept here as ``_old_*``): the MAP zoom's ``np.linspace`` (:func:`psy._linspace`) and
-``np.unique(np.append(...))`` (:func:`psy._with_point`), the log posterior's sparse ``meshgrid`` (reshaped
+(kept here as ``_old_*``): the MAP zoom's ``np.linspace`` (:func:`modes._linspace`) and
+``np.unique(np.append(...))`` (:func:`modes._with_point`), the log posterior's sparse ``meshgrid`` (reshaped
 views), and psignifit's Configuration built once per grid / fixed parameters / CI level and never modified.
 Each must give the same bits on many random inputs with edge values, and whole fits with the former
 functions patched back in must equal today's field for field."""
@@ -14,9 +14,13 @@ import psignifit
 import pytest
 from scipy import special
 
-from psyop.statistics import psychometric as psy
+from psyop.statistics import posterior_modes as modes
+from psyop.statistics import psignifit_grid as engine
+from psyop.statistics import psignifit_posterior as model
 from psyop.statistics.psychometric import FitOptions, GridSpec, fit_psychometric
-from fit_equality import LEVELS, fit_datasets, fit_grid, random_data, same_bits, same_fit, tabulated_priors
+from fit_equality import (
+    LEVELS, fit_datasets, fit_grid, patch_everywhere, random_data, same_bits, same_fit, tabulated_priors,
+)
 
 pytestmark = pytest.mark.cross_cpu  # fast paths against the former code beside them, bit for bit
 
@@ -40,7 +44,7 @@ def _old_shrink(grid, centre, bounds, points=15):
 
 def _old_refine_map(data, priors, local, grid_max):
     local = {n: np.unique(np.append(v, grid_max[n])) if len(np.atleast_1d(v)) > 1 else v for n, v in local.items()}
-    return psy._grid_argmax(local, _old_log_posterior_2afc(data, priors, local))[1]
+    return model._grid_argmax(local, _old_log_posterior_2afc(data, priors, local))[1]
 
 
 def _old_log_posterior_2afc(data, priors, grid):
@@ -52,16 +56,16 @@ def _old_log_posterior_2afc(data, priors, grid):
     k, n = data[:, 1], data[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         z = x - thr
-        z *= psy._NORM_SPAN
+        z *= model._NORM_SPAN
         z = z / width
         special.ndtr(z, out=z)
         psi = (1.0 - gamma - lam) * z
         psi += gamma
         eta_var = eta_std ** 2
         beta = bool(np.any(eta_var > 1e-9))
-        lp = psy._binomial_log_likelihood(psi, k, n, overwrite=not beta)
+        lp = model._binomial_log_likelihood(psi, k, n, overwrite=not beta)
         if beta:
-            lp = psy._beta_binomial_log_likelihood(psi, k, n, eta_var, lp)
+            lp = model._beta_binomial_log_likelihood(psi, k, n, eta_var, lp)
         lp += np.log(priors["threshold"](thr))
         lp += np.log(priors["width"](width))
         lp += np.log(priors["lambda"](lam))
@@ -89,8 +93,8 @@ def test_linspace_is_numpys():
     pairs += [(x, x + d) for x, d in zip(rng.uniform(-2, 2, 200), 10.0 ** rng.uniform(-320, 0, 200))]
     for lo, hi in pairs:
         for num in (2, 3, 9, 15, 16):
-            assert same_bits(psy._linspace(lo, hi, num), np.linspace(lo, hi, num)), (lo, hi, num)
-            assert same_bits(psy._linspace(np.float64(lo), np.float64(hi), num), np.linspace(lo, hi, num))
+            assert same_bits(modes._linspace(lo, hi, num), np.linspace(lo, hi, num)), (lo, hi, num)
+            assert same_bits(modes._linspace(np.float64(lo), np.float64(hi), num), np.linspace(lo, hi, num))
 
 
 def test_with_point_is_unique_of_append():
@@ -106,7 +110,7 @@ def test_with_point_is_unique_of_append():
               (np.array([np.nan, 0.2]), 0.1), (np.array([0.2, 0.1]), 0.15), (np.array([5e-324, 1e-323]), 5e-324),
               (np.linspace(1.0, 1.0 + 1e-15, 15), 1.0 + 5e-16), (np.array([0.1, 0.2]), np.float64(0.2))]
     for values, point in cases:
-        ours, numpys = psy._with_point(values, point), np.unique(np.append(values, point))
+        ours, numpys = modes._with_point(values, point), np.unique(np.append(values, point))
         assert same_bits(ours, numpys), (values, point)
         assert ours is not values
 
@@ -125,7 +129,7 @@ def test_log_posterior_views_are_the_meshgrid():
         grid = fit_grid(rng, eta_free=i % 5 == 0)
         if i % 7 == 0:
             grid = {k: (float(v[0]) if i % 2 else list(v)) for k, v in grid.items()}  # scalars and lists
-        new, old = psy.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid)
+        new, old = model.log_posterior_2afc(data, priors, grid), _old_log_posterior_2afc(data, priors, grid)
         assert same_bits(new, old) and new.strides == old.strides
 
 
@@ -139,24 +143,24 @@ def test_shrink_and_refine_map_bit_for_bit():
         best = {n: float(rng.choice(np.atleast_1d(v))) for n, v in grid.items()}
         bounds = {"eta": (0.0, 0.0), "gamma": (0.5, 0.5), "lambda": (0.0, 0.5), "threshold": (-0.5, 1.5),
                   "width": (0.01, 5.0)}
-        new_box, old_box = psy._shrink(grid, best, bounds), _old_shrink(grid, best, bounds)
+        new_box, old_box = modes._shrink(grid, best, bounds), _old_shrink(grid, best, bounds)
         assert list(new_box) == list(old_box) and all(same_bits(new_box[n], old_box[n]) for n in grid)
-        assert psy._refine_map(data, priors, old_box, best) == _old_refine_map(data, priors, old_box, best)
+        assert modes._refine_map(data, priors, old_box, best) == _old_refine_map(data, priors, old_box, best)
 
 
 def test_configuration_is_cached_and_never_modified():
     options = FitOptions(n_bootstrap=0, estimate_eta=False)
     data = np.c_[LEVELS, [3, 5, 9, 14, 15], np.full(5, 15)]
     fit_psychometric(data, options)
-    conf = psy._configuration(options.grid, {"eta": 0.0}, options.ci_level)
+    conf = engine._configuration(options.grid, {"eta": 0.0}, options.ci_level)
     before = copy.deepcopy(vars(conf))
     fit_psychometric(data, options)
     fit_psychometric(np.c_[LEVELS, [8, 8, 9, 10, 15], np.full(5, 15)], options)
-    assert psy._configuration(options.grid, {"eta": 0.0}, options.ci_level) is conf
+    assert engine._configuration(options.grid, {"eta": 0.0}, options.ci_level) is conf
     assert repr(vars(conf)) == repr(before)
     fresh = _old_configuration(options.grid, {"eta": 0.0}, options.ci_level)
     assert repr(vars(fresh)) == repr(vars(conf))
-    assert psy._configuration(GridSpec().scaled(0.5), {"eta": 0.0}, 0.95) is not conf
+    assert engine._configuration(GridSpec().scaled(0.5), {"eta": 0.0}, 0.95) is not conf
 
 
 OLD_FUNCTIONS = {"_shrink": _old_shrink, "_refine_map": _old_refine_map, "log_posterior_2afc": _old_log_posterior_2afc,
@@ -177,6 +181,6 @@ def test_fits_equal_the_former_functions(monkeypatch, options):
     with np.errstate(invalid="ignore"):
         new = [fit_psychometric(d, options) for d in datasets]
         for name, old in OLD_FUNCTIONS.items():
-            monkeypatch.setattr(psy, name, old)
+            patch_everywhere(monkeypatch, name, old)
         old_fits = [fit_psychometric(d, options) for d in datasets]
     assert all(same_fit(a, b) for a, b in zip(new, old_fits))

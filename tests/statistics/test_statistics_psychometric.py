@@ -194,15 +194,15 @@ def test_fit_table_names_trials_with_a_missing_level():
 
 
 def test_log_posterior_matches_psignifit():
-    from psignifit._parameter import parameter_bounds, parameter_grid
-    from psignifit._posterior import log_posterior
-    from psignifit._priors import setup_priors
+    from psyop.statistics.psignifit_private import parameter_bounds, private_symbol, setup_priors
+
+    parameter_grid, log_posterior = private_symbol("parameter_grid"), private_symbol("log_posterior")
 
     data = np.c_[LEVELS, [8, 0, 12, 15, 14], np.full(5, 15)].astype(float)
     conf = psignifit.Configuration(experiment_type="2AFC", sigmoid="norm", verbose=False)
     bounds = parameter_bounds(min_width=0.25, experiment_type=conf.experiment_type, stimulus_range=(0, 1),
                               alpha=conf.width_alpha, nafc_choices=conf.experiment_choices)
-    priors = setup_priors(custom_priors=None, bounds=bounds, stimulus_range=(0, 1), width_min=0.25,
+    priors = setup_priors(bounds=bounds, stimulus_range=(0, 1), width_min=0.25,
                           width_alpha=conf.width_alpha, beta_prior=conf.beta_prior, threshold_prop_correct=conf.thresh_PC)
     for eta in (None, 0.0):
         b = dict(bounds, **({"eta": (0.0, 0.0)} if eta is not None else {}))
