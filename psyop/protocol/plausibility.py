@@ -12,7 +12,7 @@ import math
 
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
-from psyop.protocol.scene import Depth, GridPlanes
+from psyop.protocol.scene import Aperture, Depth, FactorRef, GridPlanes
 from psyop.protocol.source import read_yaml
 from psyop.records import JsonObject, Loc
 
@@ -28,6 +28,8 @@ DEPTH_FIELDS = ("depth", "near", "far", "near_depth", "far_depth")
 LONGEST_PHASE_S = 30.0
 #: the trial-phase fields that hold a duration
 PHASE_DURATION_FIELDS = ("duration_s", "min_duration_s", "expected_s")
+#: the scene-item fields that hold an angular size
+SIZE_FIELDS = ("size_deg", "width_deg", "height_deg")
 
 
 def _nearest_D(depth: Depth, conditions: list[JsonObject]) -> float:
@@ -68,7 +70,7 @@ def plausibility_warnings(protocol: Protocol) -> list[tuple[Loc, str]]:
             found.append((("scene", index, "near_m"),
                           f"the nearest plane at {near_m:g} m ({1.0 / near_m:g} D) is nearer than an eye can focus or "
                           f"a headset shows; plausible distances are {1.0 / NEAREST_SEEN_D:g} m and farther"))
-    return found + _long_phases(protocol)
+    return found + _long_phases(protocol) + _oversized(protocol, conditions)
 
 
 def _long_phases(protocol: Protocol) -> list[tuple[Loc, str]]:
@@ -82,6 +84,38 @@ def _long_phases(protocol: Protocol) -> list[tuple[Loc, str]]:
                               f"{name}: {value:g} is {value:g} s ({value / 60:.1f} min) for one {phase.kind} phase, "
                               f"far beyond the seconds a trial shows; if you meant milliseconds, write "
                               f"{name}: {value / 1000:g}"))
+    return found
+
+
+def _largest(value: object, conditions: list[JsonObject]) -> float | None:
+    """A size field's largest value: the number, or its factor's largest level over the conditions."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(value, FactorRef):
+        levels = [float(c[value.factor]) for c in conditions if isinstance(c.get(value.factor), (int, float))]
+        return max((v for v in levels if math.isfinite(v)), default=None)
+    return None
+
+
+def _oversized(protocol: Protocol, conditions: list[JsonObject]) -> list[tuple[Loc, str]]:
+    """(key path, message) for every item size larger than the display's whole field of view (its diagonal): a
+    value likely meant in arcmin or in pixels. An aperture is left out (an opening wider than the view is a choice
+    that hides nothing)."""
+    from psyop.protocol.display import resolve_display_profile
+
+    display = resolve_display_profile(protocol.display)
+    field_deg = math.hypot(display.horizontal_fov_deg, display.vertical_fov_deg)
+    found: list[tuple[Loc, str]] = []
+    for index, item in enumerate(protocol.scene):
+        if isinstance(item, Aperture):
+            continue
+        for name in SIZE_FIELDS:
+            largest = _largest(getattr(item, name, None), conditions)
+            if largest is not None and largest > field_deg:
+                found.append((("scene", index, name),
+                              f"{name}: {largest:g} deg is wider than the display's whole field of view ({field_deg:.0f} "
+                              f"deg across its diagonal); if you meant arcmin, write {name}: {largest / 60:g}; if "
+                              f"pixels, about {largest * display.arcmin_per_px / 60:.2g} deg"))
     return found
 
 

@@ -116,3 +116,18 @@ def test_a_left_right_study_whose_scene_ignores_the_near_side_is_refused(tmp_pat
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err
     assert "no scene item reads it" in err and "near_side: schedule" in err and err.count("\n") == 1
+
+
+def test_a_size_wider_than_the_whole_view_is_warned_as_arcmin_or_pixels(tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    text = (ROOT / "protocols" / "detection.yaml").read_text()
+    old = next(line for line in text.splitlines() if line.strip().startswith("size_deg: 2"))
+    path = tmp_path / "huge.yaml"
+    path.write_text(text.replace(old, old.replace("size_deg: 2", "size_deg: 170"), 1))
+    assert main(["validate", str(path)]) == 0  # a warning: the value is valid
+    err = capsys.readouterr().err
+    line = next(i for i, t in enumerate(path.read_text().splitlines(), 1) if "size_deg: 170" in t)
+    assert f"{path}:{line}:" in err and "warning: size_deg: 170 deg is wider than the display's whole field" in err
+    assert "if you meant arcmin, write size_deg: 2.83333" in err and "if pixels, about 13 deg" in err
+    assert main(["validate", str(ROOT / "protocols" / "detection.yaml")]) == 0
+    assert "warning" not in capsys.readouterr().err  # the shipped sizes are not warned
