@@ -76,6 +76,30 @@ TIMEOUT_RESPONSE = "timeout"
 RESPONSE_VALUE = "response_value"
 OUTCOME = "outcome"
 OUTCOMES: tuple[str, ...] = ("answered", TIMEOUT_RESPONSE)
+#: When a trial ran, on the session clock (s).
+TRIAL_START_S = "trial_start_s"
+TRIAL_END_S = "trial_end_s"
+
+# ---- gaze columns (the frame log's gaze and the raw stream, psyop.session.log.schema) -------------------
+#: the time of the gaze sample (the raw stream's own sample; the frame log's: the sample a frame was rendered with)
+GAZE_SAMPLE_T_S = "gaze_sample_t_s"
+#: whether the sample holds a gaze direction
+GAZE_VALID = "gaze_valid"
+#: the tracker's confidence in the sample (null: it reports none)
+GAZE_CONFIDENCE = "gaze_confidence"
+#: the fixation point in head space (m): x right, y up, -z forward
+FIXATION_X_M = "fixation_x_m"
+FIXATION_Y_M = "fixation_y_m"
+FIXATION_Z_M = "fixation_z_m"
+FIXATION_COLUMNS: tuple[str, str, str] = (FIXATION_X_M, FIXATION_Y_M, FIXATION_Z_M)
+
+# ---- frame-log timing columns (psyop.session.timing measures them) ---------------------------------------
+#: when the frame's rendering began, on the session clock (s)
+RENDER_START_S = "render_start_s"
+#: when the frame was shown (a headset's predicted photon time, a window's flip), on the session clock (s)
+DISPLAY_TIME_S = "display_time_s"
+#: the display periods that passed without a new frame before this one
+DISPLAY_MISSED_FRAMES = "display_missed_frames"
 
 
 @dataclass(frozen=True)

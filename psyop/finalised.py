@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
-import json
 import os
 import stat
 from collections.abc import Iterable, Mapping
@@ -28,6 +27,7 @@ from pathlib import Path
 
 from psyop.errors import UserError
 from psyop.records import JsonMapping, JsonObject
+from psyop.session_json import read_session_json
 
 #: session.json key: ``{file name: {"sha256": hex, "size_bytes": int}}`` of every finalised file.
 FINALISED_KEY = "finalised_files"
@@ -70,7 +70,7 @@ def record_finalised(meta: JsonObject, directory: Path, files: Iterable[Path]) -
 
     Examples
     --------
-    >>> import tempfile
+    >>> import json, tempfile
     >>> d = Path(tempfile.mkdtemp())
     >>> _ = (d / "trials.parquet").write_bytes(b"PAR1")
     >>> meta = {}
@@ -185,23 +185,9 @@ def unfinished_finalisation(meta: JsonMapping) -> bool:
 
 
 def read_session_meta(directory: Path) -> JsonObject | None:
-    """A session directory's session.json as a dict (None when absent); unreadable: UserError."""
-    path = Path(directory) / SESSION_METADATA_FILE
-    try:
-        info = os.stat(path)
-    except FileNotFoundError:
-        return None
-    except OSError as exc:
-        raise UserError(f"cannot read session.json: {exc.strerror or exc}", str(path)) from exc
-    if not stat.S_ISREG(info.st_mode):
-        raise UserError("session.json is not a regular file", str(path))
-    try:
-        meta = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise UserError(f"session.json is unreadable ({exc}); run `psyop recover` on this session", str(path)) from exc
-    if not isinstance(meta, dict):
-        raise UserError("session.json is not a JSON object", str(path))
-    return meta
+    """A session directory's session.json as a dict (None when absent); unreadable: a UserError naming it
+    (:func:`psyop.session_json.read_session_json`, the one parser of session.json)."""
+    return read_session_json(Path(directory) / SESSION_METADATA_FILE)
 
 
 def verify_session(directory: Path) -> None:
@@ -212,7 +198,7 @@ def verify_session(directory: Path) -> None:
 
     Examples
     --------
-    >>> import tempfile
+    >>> import json, tempfile
     >>> d = Path(tempfile.mkdtemp())
     >>> _ = (d / "trials.parquet").write_bytes(b"PAR1")
     >>> meta = {}
@@ -257,7 +243,7 @@ def reseal(meta: JsonObject, directory: Path, reason: str) -> JsonObject:
 
     Examples
     --------
-    >>> import tempfile
+    >>> import json, tempfile
     >>> d = Path(tempfile.mkdtemp())
     >>> _ = (d / "trials.parquet").write_bytes(b"PAR1")
     >>> meta = {}

@@ -77,8 +77,6 @@ class InputFile:
 
 #: the largest logged table a replay reads: an hour at 90 Hz is ~330k frame rows, tens of MB
 MAX_LOG_TABLE_BYTES = 512 << 20
-#: the largest session.json a replay reads (real ones are a few tens of kB)
-MAX_SESSION_JSON_BYTES = 16 << 20
 
 
 def read_logged_table(path: Path, context: str) -> pd.DataFrame:  # pandas imported lazily inside
@@ -98,20 +96,3 @@ def read_logged_table(path: Path, context: str) -> pd.DataFrame:  # pandas impor
     except Exception as exc:  # noqa: BLE001 - any unreadable file is the user's input
         raise UserError(f"{context}: not a parquet table ({type(exc).__name__}: {exc}); give a session's "
                         f"{path.name} (run `psyop recover` on a crashed session first)", str(path)) from None
-
-
-def read_session_json(path: Path, context: str) -> dict:  # type: ignore[type-arg]
-    """A replayed session's ``session.json`` (a regular file within :data:`MAX_SESSION_JSON_BYTES`)."""
-    import json
-
-    meta_file = InputFile(what=f"{context}: session.json", give=f"{context} needs a session's session.json",
-                          max_bytes=MAX_SESSION_JSON_BYTES, typical="a session.json is a few tens of kB",
-                          not_found=f"{context}: no file {{path}}")
-    raw = meta_file.read_bytes(path)
-    try:
-        meta = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise UserError(f"{context}: session.json is not valid JSON ({exc})", str(path)) from None
-    if not isinstance(meta, dict):
-        raise UserError(f"{context}: session.json is not a JSON object", str(path))
-    return meta

@@ -34,7 +34,7 @@ def main(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from psyop import datacontract as dc
-    from psyop.finalised import read_session_meta
+    from psyop.session.log.record import read_record_file
     from psyop.figures.timing_figures import timing_figure
     from psyop.session.timing import session_report
 
@@ -42,24 +42,24 @@ def main(args: argparse.Namespace) -> int:
     sessions = session_dirs(path)
     drawn = 0
     for session in sessions:
-        meta = read_session_meta(session)
-        if meta is None:
+        record = read_record_file(session / dc.SESSION_METADATA_FILE)
+        if record is None:
             raise UserError("no session.json beside trials.parquet: run `psyop recover` on this session", str(session))
-        if args.skip_simulated and meta.get("simulated", True):
+        if args.skip_simulated and record.simulated is not False:  # not recorded: not known to be real
             continue
         frames_file = session / "frames.parquet"
         if not frames_file.is_file():
             raise UserError("no frames.parquet: the session is not finalised; run `psyop recover` on it", str(session))
         frames = pd.read_parquet(frames_file)
-        missing = sorted({"trial", "frame", "phase", "display_time_s", "display_missed_frames"} - set(frames.columns))
+        missing = sorted({"trial", "frame", "phase", dc.DISPLAY_TIME_S, dc.DISPLAY_MISSED_FRAMES} - set(frames.columns))
         if missing:
             raise UserError(f"frames.parquet has no {', '.join(missing)}: recorded by a psyop that did not log display "
                             "times, so its timing cannot be measured", str(frames_file))
-        report = session_report(str(session), meta, pd.read_parquet(session / dc.TRIALS_FILE), frames)
+        report = session_report(str(session), dict(record.raw), pd.read_parquet(session / dc.TRIALS_FILE), frames)
         print(f"{session}:")
         for line in report.lines():
             print(f"  {line}")
-        name = f"timing_{meta.get('study', session.parent.parent.name)}_{session.parent.name}_{session.name}.png"
+        name = f"timing_{record.study or session.parent.parent.name}_{session.parent.name}_{session.name}.png"
         for written in timing_figure(report, args.out / name)[:1]:
             print(f"  figure: {written}")
         drawn += 1

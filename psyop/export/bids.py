@@ -36,11 +36,12 @@ from psyop.atomic import write_atomic
 from psyop.errors import UserError
 from psyop.export.gaze import (FRAME_LOG, RunDisplay, display_from_metadata, gaze_on_image_px, image_geometry,
                                run_display, session_gaze)
-from psyop.finalised import FINALISED_KEY, read_session_meta, verify_session
+from psyop.finalised import verify_session
 from psyop.optics.angles import fick_direction
 from psyop.optics.display import DisplayProfile
 from psyop.quality.validation import final_attempts, read_validations
 from psyop.records import JsonMapping, JsonObject
+from psyop.session.log.record import SessionRecord, read_record_file
 from psyop.session.timing import timing_column_description
 
 #: The BIDS version the export follows (the schema bundled with bids-validator-deno 3.0.2).
@@ -48,7 +49,7 @@ BIDS_VERSION = "1.11.1"
 #: Trial-table columns written as events columns besides onset/duration/trial_type (when present).
 EVENT_COLUMNS: tuple[str, ...] = ("trial", "block", "response", "correct", "response_time", "practice")
 #: Per-trial columns that are bookkeeping, not events columns (the full table is in sourcedata/).
-_NOT_EVENT_COLUMNS = {"study", "participant", "session", "trial_start_s", "trial_end_s", "condition",
+_NOT_EVENT_COLUMNS = {"study", "participant", "session", dc.TRIAL_START_S, dc.TRIAL_END_S, "condition",
                       "response_time_s", "run", "trial_seed", "n_frames", "drift_correction_deg"}
 _NOT_EVENT_PREFIXES = ("hand_sample_",)
 
@@ -122,41 +123,40 @@ def _check_task_labels(studies: Sequence[str], data_root: Path) -> None:
 
 
 def _export_session(directory: Path, out: Path) -> ExportedSession:
-    meta = read_session_meta(directory) or {}
+    record = read_record_file(directory / dc.SESSION_METADATA_FILE) or SessionRecord()
     study = directory.parents[1].name
     participant = directory.parent.name.removeprefix("sub-")
     session = int(directory.name.removeprefix("ses-"))
     trials = pd.read_parquet(directory / dc.TRIALS_FILE)
     where = str(directory / dc.SESSION_METADATA_FILE)
-    display = display_from_metadata(meta, where)
-    rig = meta.get("rig")
-    if not isinstance(rig, Mapping) or not rig.get("eyes") or not isinstance(rig.get("ipd_m"), (int, float)):
+    display = display_from_metadata(record.raw, where)
+    if record.rig is None:
         raise UserError("session.json records no eye rig (\"rig\": eyes and ipd_m): cannot place gaze on each "
                         "eye's image", where)
-    eyes = tuple(e for e in ("left", "right") if e in rig["eyes"])
-    ipd_m = float(rig["ipd_m"])
+    eyes = tuple(e for e in ("left", "right") if e in record.rig.eyes)
+    ipd_m = record.rig.ipd_m
     gaze = session_gaze(directory)
     measures = _session_measures(directory)
     validations = read_validations(directory)  # the protocol's gaze validations (None: it has none)
     beh = out / f"sub-{participant}" / f"ses-{session}" / "beh"
     beh.mkdir(parents=True, exist_ok=True)
     runs = sorted(int(r) for r in trials["run"].dropna().unique()) if "run" in trials else [0]
-    phases = [p for p in (meta.get("phases") or []) if isinstance(p, Mapping)]
+    phases = record.phases
     for run in runs:
         run_trials = trials[trials["run"] == run] if "run" in trials else trials
-        run_trials = run_trials.sort_values("trial_start_s", kind="stable")
+        run_trials = run_trials.sort_values(dc.TRIAL_START_S, kind="stable")
         stem = f"sub-{participant}_ses-{session}_task-{task_label(study)}_run-{run + 1}"
-        used = run_display(meta, run, display, where)  # the display this run really used, where it measured it
-        _write_events(beh / f"{stem}_events", run_trials, used, eyes, meta, study)
+        used = run_display(record.raw, run, display, where)  # the display this run really used, where it measured it
+        _write_events(beh / f"{stem}_events", run_trials, used, eyes, record, study)
         samples = _run_samples(gaze.samples, run_trials, gaze.source)
         for index, eye in enumerate(eyes):
             recording = f"{stem}_recording-eye{index + 1}"
             calibration = validation_fields(validations, run, used.eyes[eye], eye, ipd_m) if validations is not None \
                 else calibration_fields(measures, run_trials, phases)
-            _write_physio(beh / f"{recording}_physio", samples, used, eye, ipd_m, gaze.source, gaze.file, meta,
+            _write_physio(beh / f"{recording}_physio", samples, used, eye, ipd_m, gaze.source, gaze.file, record,
                           calibration)
             _write_physioevents(beh / f"{recording}_physioevents", run_trials, phases, study)
-    _copy_sourcedata(directory, out / "sourcedata" / study / f"sub-{participant}" / f"ses-{session}", meta)
+    _copy_sourcedata(directory, out / "sourcedata" / study / f"sub-{participant}" / f"ses-{session}", record)
     return ExportedSession(study, participant, session, len(runs), gaze.source, eyes, len(gaze.samples))
 
 
@@ -166,8 +166,8 @@ def _run_samples(samples: pd.DataFrame, run_trials: pd.DataFrame, source: str) -
         return samples[samples["trial"].isin(run_trials["trial"])].reset_index(drop=True)
     if "run" in samples and "run" in run_trials:  # a real clock restarts with each run: times alone overlap
         return samples[samples["run"].isin(run_trials["run"].unique())].reset_index(drop=True)
-    start, end = float(run_trials["trial_start_s"].min()), float(run_trials["trial_end_s"].max())
-    t = samples["gaze_sample_t_s"]
+    start, end = float(run_trials[dc.TRIAL_START_S].min()), float(run_trials[dc.TRIAL_END_S].max())
+    t = samples[dc.GAZE_SAMPLE_T_S]
     return samples[(t >= start) & (t <= end)].reset_index(drop=True)
 
 
@@ -194,11 +194,11 @@ def _screen_note(display: DisplayProfile) -> str:
             "that subtends the same angles (the same visual angle for every pixel), not a physical screen.")
 
 
-def _write_events(stem: Path, trials: pd.DataFrame, used: RunDisplay, eyes: Sequence[str], meta: JsonMapping,
+def _write_events(stem: Path, trials: pd.DataFrame, used: RunDisplay, eyes: Sequence[str], record: SessionRecord,
                   study: str) -> None:
     events = pd.DataFrame({
-        "onset": trials["trial_start_s"].astype(float).to_numpy(),
-        "duration": (trials["trial_end_s"].astype(float) - trials["trial_start_s"].astype(float)).to_numpy(),
+        "onset": trials[dc.TRIAL_START_S].astype(float).to_numpy(),
+        "duration": (trials[dc.TRIAL_END_S].astype(float) - trials[dc.TRIAL_START_S].astype(float)).to_numpy(),
         "trial_type": trials["condition"].astype(str).to_numpy() if "condition" in trials else "trial",
     })
     if "trial" in trials:
@@ -228,18 +228,18 @@ def _write_events(stem: Path, trials: pd.DataFrame, used: RunDisplay, eyes: Sequ
         "response_time": {"Description": "response time from the start of the response phase", "Units": "s"},
         dc.RESPONSE_VALUE: {"Description": "the response as a number where it is one (the interval chosen, 1 or 2; a "
                                            "reach in metres); n/a otherwise (left/right, a mode name, a timeout)",
-                            **({"Units": "m"} if meta.get("response_kind") == "reach" else {})},
+                            **({"Units": "m"} if record.response_kind == "reach" else {})},
         dc.OUTCOME: {"Description": "what happened to the trial's response phase",
                      "Levels": {"answered": "a response was given",
                                 dc.TIMEOUT_RESPONSE: "the response phase timed out (protocol timeout_s)"}},
     }
     sidecar: JsonObject = {
         "TaskName": study,
-        "TaskDescription": str((meta.get("response") or {}).get("question") or study),
+        "TaskDescription": (record.response.question if record.response else None) or study,
         "StimulusPresentation": _stimulus_presentation(used.eyes[eyes[0]], eyes[0]),
         "StimulusPresentationNote": f"{_screen_note(used.eyes[eyes[0]])} {used.note}",
     }
-    phase_names = [str(p.get("name")) for p in meta.get("phases") or []]
+    phase_names = [str(p.get("name")) for p in record.phases]
     for column in events.columns:
         sidecar[column] = described.get(column) or timing_column_description(column, phase_names) or {
             "Description": f"schedule column {column!r} of psyop's trials.parquet (see sourcedata/)"}
@@ -319,13 +319,13 @@ def validation_fields(validations: pd.DataFrame, run: int, display: DisplayProfi
 
 
 def _write_physio(stem: Path, samples: pd.DataFrame, used: RunDisplay, eye: str, ipd_m: float, source: str,
-                  source_file: str, meta: JsonMapping, calibration: Mapping[str, object]) -> None:
+                  source_file: str, record: SessionRecord, calibration: Mapping[str, object]) -> None:
     display = used.eyes[eye]
-    fixation = samples[["fixation_x_m", "fixation_y_m", "fixation_z_m"]].to_numpy(dtype=np.float64)
-    valid = samples["gaze_valid"].fillna(False).astype(bool).to_numpy()
+    fixation = samples[list(dc.FIXATION_COLUMNS)].to_numpy(dtype=np.float64)
+    valid = samples[dc.GAZE_VALID].fillna(False).astype(bool).to_numpy()
     px = gaze_on_image_px(fixation, display, eye, ipd_m)
     px[~valid] = np.nan
-    table = pd.DataFrame({"timestamp": samples["gaze_sample_t_s"].astype(float).to_numpy(),
+    table = pd.DataFrame({"timestamp": samples[dc.GAZE_SAMPLE_T_S].astype(float).to_numpy(),
                           "x_coordinate": px[:, 0], "y_coordinate": px[:, 1]})
     columns: JsonObject = {
         "timestamp": {"Description": "time of the tracker sample on the session clock of this run", "Units": "s"},
@@ -339,14 +339,14 @@ def _write_physio(stem: Path, samples: pd.DataFrame, used: RunDisplay, eye: str,
         table["pupil_size"] = samples[pupil].astype(float).to_numpy()
         columns["pupil_size"] = {"Description": f"pupil diameter of the {eye} eye as the tracker reports it",
                                  "Units": "mm"}
-    table["confidence"] = samples["gaze_confidence"].astype(float).to_numpy()
+    table["confidence"] = samples[dc.GAZE_CONFIDENCE].astype(float).to_numpy()
     table["valid"] = valid.astype(int)
     columns["confidence"] = {"Description": "the tracker's confidence in the sample (0..1; n/a: not reported)"}
     columns["valid"] = {"Description": "1: a usable sample; 0: blink, dropout or low confidence (coordinates n/a)"}
     _write_tsv_gz(stem.with_suffix(".tsv.gz"), table)
     sampling, rate = _sampling(source, display, table)
     sidecar = {
-        "TaskName": str(meta.get("study", "")),
+        "TaskName": record.study or "",
         "PhysioType": "eyetrack",
         "SamplingFrequency": rate,
         "StartTime": float(table["timestamp"].iloc[0]) if len(table) else 0.0,
@@ -355,10 +355,10 @@ def _write_physio(stem: Path, samples: pd.DataFrame, used: RunDisplay, eye: str,
         "SampleCoordinateSystem": "gaze-on-screen",
         "SampleCoordinateUnits": "pixel",
         "EnvironmentCoordinates": "top-left",
-        "Manufacturer": _tracker_manufacturer(meta.get("tracker")),
+        "Manufacturer": _tracker_manufacturer(record.tracker),
         "SoftwareVersions": f"psyop {__version__}",
         "Description": (f"Eye tracking of the {eye} eye from psyop's {source} ({source_file}). "
-                        f"{'Simulated tracker: ' if meta.get(dc.SIMULATED_KEY) else ''}the tracker reports one "
+                        f"{'Simulated tracker: ' if record.simulated else ''}the tracker reports one "
                         "fixation point in head space for both eyes; this file is that point seen by the "
                         f"{eye} eye, on its image. {sampling}"),
         "GazeSource": source,
@@ -427,13 +427,13 @@ def _write_physioevents(stem: Path, trials: pd.DataFrame, phases: Sequence[JsonM
 
 
 # ---- dataset files -----------------------------------------------------------------------------------------
-def _copy_sourcedata(directory: Path, target: Path, meta: JsonMapping) -> None:
+def _copy_sourcedata(directory: Path, target: Path, record: SessionRecord) -> None:
     target.mkdir(parents=True, exist_ok=True)
     shutil.copy2(directory / dc.SESSION_METADATA_FILE, target / dc.SESSION_METADATA_FILE)
-    for name in (meta.get(FINALISED_KEY) or {}):
+    for name in record.finalised_files:
         shutil.copy2(directory / name, target / name)
-    if meta.get("protocol_text"):
-        write_atomic(target / "protocol.yaml", str(meta["protocol_text"]))
+    if record.protocol_text:
+        write_atomic(target / "protocol.yaml", record.protocol_text)
 
 
 def _write_participants(out: Path, exported: Sequence[ExportedSession], data_root: Path) -> None:
@@ -442,8 +442,8 @@ def _write_participants(out: Path, exported: Sequence[ExportedSession], data_roo
         by_participant.setdefault(s.participant, []).append(s)
     simulated = {}
     for participant, sessions in by_participant.items():
-        flags = {bool((read_session_meta(data_root / s.study / f"sub-{s.participant}" / f"ses-{s.session}") or {})
-                      .get(dc.SIMULATED_KEY)) for s in sessions}
+        flags = {bool((read_record_file(data_root / s.study / f"sub-{s.participant}" / f"ses-{s.session}"
+                                        / dc.SESSION_METADATA_FILE) or SessionRecord()).simulated) for s in sessions}
         simulated[participant] = "mixed" if len(flags) > 1 else ("true" if flags == {True} else "false")
     table = pd.DataFrame({
         "participant_id": [f"sub-{p}" for p in sorted(by_participant)],

@@ -32,8 +32,8 @@ from psyop.records import JsonMapping
 #: The raw gaze stream of a session (every tracker sample), finalised beside trials.parquet.
 RAW_GAZE_FILE = "gaze.parquet"
 #: Columns the raw gaze stream must have (the frame log's gaze column names).
-RAW_GAZE_COLUMNS: tuple[str, ...] = ("gaze_sample_t_s", "fixation_x_m", "fixation_y_m", "fixation_z_m",
-                                     "gaze_valid")
+RAW_GAZE_COLUMNS: tuple[str, ...] = (dc.GAZE_SAMPLE_T_S, dc.FIXATION_X_M, dc.FIXATION_Y_M, dc.FIXATION_Z_M,
+                                     dc.GAZE_VALID)
 #: Optional per-eye pupil diameter columns of the raw stream (``{eye}`` is left or right).
 PUPIL_COLUMN = "pupil_diameter_{eye}_mm"
 
@@ -78,8 +78,8 @@ def session_gaze(directory: Path) -> SessionGaze:
         if missing:
             raise UserError(f"raw gaze stream lacks column(s) {missing}; expected {list(RAW_GAZE_COLUMNS)}", str(raw))
         table = table.copy()
-        if "gaze_confidence" not in table:
-            table["gaze_confidence"] = np.nan
+        if dc.GAZE_CONFIDENCE not in table:
+            table[dc.GAZE_CONFIDENCE] = np.nan
         table["trial"] = table["trial"] if "trial" in table else -1
         source, name = RAW_STREAM, RAW_GAZE_FILE
     else:
@@ -88,10 +88,10 @@ def session_gaze(directory: Path) -> SessionGaze:
             raise UserError("no gaze samples: neither a raw gaze stream nor frames.parquet", str(directory))
         table = pd.read_parquet(path)
         source, name = FRAME_LOG, dc.FRAMES_FILE
-    table = table[np.isfinite(pd.to_numeric(table["gaze_sample_t_s"], errors="coerce"))]
-    table = table.sort_values("gaze_sample_t_s", kind="stable")
-    table = table.drop_duplicates(subset="gaze_sample_t_s", keep="first").reset_index(drop=True)
-    keep = [*RAW_GAZE_COLUMNS, "gaze_confidence", "trial", "run",
+    table = table[np.isfinite(pd.to_numeric(table[dc.GAZE_SAMPLE_T_S], errors="coerce"))]
+    table = table.sort_values(dc.GAZE_SAMPLE_T_S, kind="stable")
+    table = table.drop_duplicates(subset=dc.GAZE_SAMPLE_T_S, keep="first").reset_index(drop=True)
+    keep = [*RAW_GAZE_COLUMNS, dc.GAZE_CONFIDENCE, "trial", "run",
             *(c for c in table.columns if c.startswith("pupil_diameter_"))]
     return SessionGaze(source, name, table[[c for c in keep if c in table]])
 

@@ -12,8 +12,8 @@ that says so, and the durable ones cannot be deleted by accident: session.json, 
 finalised trials.parquet (its ``psyop.simulated`` schema metadata) and the log's own header
 (the first schema record of each trial segment). A session is simulated only when every one
 of them that exists says so; a session none of them describes counts as real. Each session's
-finalised files are checked against the SHA-256 recorded in its session.json (psyop.finalised).
-Stdlib only unless a session.json is missing (then pyarrow reads the durable records).
+finalised files are checked against the SHA-256 recorded in its session.json (psyop.finalised). session.json
+is read as its typed record (psyop.session.log.record.read_record_file).
 """
 
 from __future__ import annotations
@@ -29,14 +29,12 @@ from pathlib import Path
 from psyop import datacontract as dc
 from psyop.errors import UserError
 from psyop.finalised import finalisation_interrupted, verify_session
-from psyop.input_files import MAX_LOG_TABLE_BYTES, MAX_SESSION_JSON_BYTES, InputFile
+from psyop.input_files import MAX_LOG_TABLE_BYTES, InputFile
+from psyop.session.log.record import SessionRecord as RecordedSession, read_record_file
 
 #: the largest log segment header read to learn a session's identity (a schema record is a few kB)
 MAX_SCHEMA_RECORD_BYTES = 1 << 20
 
-_META_FILE = InputFile(what="session.json", give="a session's session.json must be a regular file",
-                       max_bytes=MAX_SESSION_JSON_BYTES, typical="a session.json is a few tens of kB",
-                       not_found="no file {path}")
 _TRIALS_FILE = InputFile(what="trials.parquet", give="a session's trials.parquet must be a regular file",
                          max_bytes=MAX_LOG_TABLE_BYTES, typical="a session's trials.parquet is a few MB",
                          not_found="no file {path}")
@@ -98,17 +96,10 @@ def _regular(path: Path) -> os.stat_result | None:
     return info
 
 
-def _read_meta(path: Path, data_root: Path) -> dict | None:  # type: ignore[type-arg]  # session.json: a JSON object
-    if _regular(path) is None:
-        return None
-    raw = _META_FILE.read_bytes(path)
-    try:
-        meta = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise UserError(f"unreadable session metadata ({exc}); run `psyop recover {data_root}`", str(path)) from None
-    if not isinstance(meta, dict):
-        raise UserError(f"session metadata is not a JSON object; run `psyop recover {data_root}`", str(path))
-    return meta
+def _read_record(path: Path) -> RecordedSession | None:
+    """The session.json at ``path`` as its typed record (None if absent); a FIFO, device or folder, or a
+    damaged file, is a UserError naming it."""
+    return None if _regular(path) is None else read_record_file(path)
 
 
 def _parquet_simulated(path: Path) -> bool | None:
@@ -153,7 +144,7 @@ def _segment_simulated(log_dir: Path) -> bool | None:
 
 def session_record(directory: Path, data_root: Path) -> SessionRecord | None:
     """What ``directory`` (``<study>/sub-X/ses-N``) holds; None when it holds no session."""
-    meta = _read_meta(directory / dc.SESSION_METADATA_FILE, data_root)
+    meta = _read_record(directory / dc.SESSION_METADATA_FILE)
     trials = directory / dc.TRIALS_FILE
     trials_info = _regular(trials)
     if trials_info is not None:
@@ -162,15 +153,15 @@ def session_record(directory: Path, data_root: Path) -> SessionRecord | None:
     if meta is None and trials_info is None and not log_dir.is_dir():
         return None
     said: dict[str, bool] = {}
-    if meta is not None and isinstance(meta.get(dc.SIMULATED_KEY), bool):
-        said["session.json"] = meta[dc.SIMULATED_KEY]
+    if meta is not None and meta.simulated is not None:
+        said["session.json"] = meta.simulated
     if trials_info is not None and (value := _parquet_simulated(trials)) is not None:
         said["trials.parquet"] = value
     if (value := _segment_simulated(log_dir)) is not None:
         said["log header"] = value
     simulated = None if not said else all(said.values())
-    unfinished = meta is not None and finalisation_interrupted(meta, directory)
-    complete = meta is not None and meta.get("status") == "complete" and not unfinished
+    unfinished = meta is not None and finalisation_interrupted(meta.raw, directory)
+    complete = meta is not None and meta.status == "complete" and not unfinished
     return SessionRecord(directory, directory.parent.name.removeprefix("sub-"), simulated, complete, tuple(said),
                          unfinished)
 

@@ -25,9 +25,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from psyop.session.rows import JsonObject, TrialRow
+from psyop import datacontract as dc
+from psyop.session.rows import TrialRow
 from psyop.errors import UserError
-from psyop.input_files import read_logged_table, read_session_json
+from psyop.input_files import read_logged_table
+from psyop.session.log.record import SessionRecord, read_record_file
 from psyop.session.pose import IDENTITY_WXYZ, PoseSample
 
 HEAD_COLUMNS = ("head_sample_t_s", "head_x_m", "head_y_m", "head_z_m", "head_qw", "head_qx", "head_qy", "head_qz", "head_valid")
@@ -47,7 +49,7 @@ class ReplaySchedule:
     conditions: tuple[str, ...]  # condition of trial 0, 1, ...
 
 
-def pair_trials(source_meta: JsonObject, source_trials: pd.DataFrame, target: ReplaySchedule,
+def pair_trials(source: SessionRecord, source_trials: pd.DataFrame, target: ReplaySchedule,
                 by_condition: bool, where: str) -> dict[int, int]:
     """Map each trial of ``target`` to the source trial whose hand samples it replays.
 
@@ -60,10 +62,10 @@ def pair_trials(source_meta: JsonObject, source_trials: pd.DataFrame, target: Re
         if "condition" in source_trials.columns else {}
     if not by_condition:
         differs = []
-        if source_meta.get("protocol_sha256") != target.protocol_sha256:
-            differs.append(f"protocol hash {str(source_meta.get('protocol_sha256'))[:12]} vs {target.protocol_sha256[:12]}")
-        if source_meta.get("seed") != target.seed:
-            differs.append(f"seed {source_meta.get('seed')} vs {target.seed}")
+        if source.protocol_sha256 != target.protocol_sha256:
+            differs.append(f"protocol hash {str(source.protocol_sha256)[:12]} vs {target.protocol_sha256[:12]}")
+        if source.seed != target.seed:
+            differs.append(f"seed {source.seed} vs {target.seed}")
         mismatched = [k for k, c in source_conditions.items() if k < len(target.conditions) and target.conditions[k] != c]
         if mismatched:
             k = mismatched[0]
@@ -72,7 +74,7 @@ def pair_trials(source_meta: JsonObject, source_trials: pd.DataFrame, target: Re
         if differs:
             raise UserError("pose replay: the source session ran another schedule (" + "; ".join(differs) + "), so "
                             "replaying by trial number would pair reaches with other targets. Run with the "
-                            f"source's seed (--seed {source_meta.get('seed')}) and protocol, or pair trials by "
+                            f"source's seed (--seed {source.seed}) and protocol, or pair trials by "
                             "condition: --pose replay-by-condition:DIR", where)
         return {k: k for k in source_conditions}
     pools: dict[str, list[int]] = {}
@@ -106,7 +108,7 @@ class ReplayPose:
         if missing:
             raise UserError(f"pose replay: frame log lacks columns {missing} (logged before poses were recorded?)")
         head = frames.dropna(subset=["head_sample_t_s"])
-        available = "render_start_s" if "render_start_s" in head.columns else "head_sample_t_s"
+        available = dc.RENDER_START_S if dc.RENDER_START_S in head.columns else "head_sample_t_s"
         head = head.drop_duplicates(subset="head_sample_t_s").sort_values(available, kind="stable")
         self._head_t = head[available].astype(float).tolist()
         self._head = list(head[list(HEAD_COLUMNS)].itertuples(index=False, name=None))
@@ -137,10 +139,10 @@ class ReplayPose:
         frames = read_logged_table(frames_path, context)
         trials = read_logged_table(trials_path, context) if trials_path.exists() else None
         meta_path = path / "session.json"
-        meta = read_session_json(meta_path, context) if meta_path.exists() else {}
+        source = read_record_file(meta_path) or SessionRecord()  # none: the schedule cannot be matched
         pairs = None
         if target is not None and trials is not None:
-            pairs = pair_trials(meta, trials, target, by_condition, str(path))
+            pairs = pair_trials(source, trials, target, by_condition, str(path))
         return cls(frames, trials, pairs)
 
     def head(self, now_s: float) -> PoseSample | None:

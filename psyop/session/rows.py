@@ -1,36 +1,26 @@
-"""Named types for the session's heterogeneous mappings, so each carries its reason once.
+"""Trial rows as the session builds them: :func:`frame_records` turns a schedule frame into row dicts.
 
-A schedule row or trial record maps column names to values whose columns depend on the protocol (its
-factors, its response kind) and whose values are numpy/pandas scalars, strings or None; session.json and
-the summaries a source reports are JSON objects. None of them can be typed further without a model per
-protocol, so ``Any`` stands here, once, with that reason.
+The aliases (``TrialRow``, ``TrialRecord``, ``JsonObject``, ``JsonMapping``) are defined once, in
+:mod:`psyop.records`, and re-exported here for the session's modules.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from psyop.records import JsonMapping, JsonObject, TrialRecord, TrialRow
 
 if TYPE_CHECKING:  # the command line's --help imports this module: no pandas or numpy at import
     import pandas as pd
 
 __all__ = ["JsonMapping", "JsonObject", "TrialRecord", "TrialRow", "frame_records"]
 
-#: one schedule row (read only): column -> value (protocol-dependent columns, numpy/pandas scalars)
-TrialRow = Mapping[str, Any]  # Any: protocol-dependent columns (module docstring)
-#: one trial's record as the loop fills it (the schedule row plus response, timing and gaze columns)
-TrialRecord = dict[str, Any]  # Any: as TrialRow
-#: a JSON object: session.json, a source's stats/summary, an event's fields
-JsonObject = dict[str, Any]  # Any: JSON values
-#: a JSON-like mapping read, not written: observer parameters, a summary handed to the log, a stream's identity
-JsonMapping = Mapping[str, Any]  # Any: JSON values
-
 
 def frame_records(frame: pd.DataFrame) -> list[TrialRecord]:
     """``frame.to_dict("records")``: one dict per row, Python scalars, in column order. A frame of numpy
     bool, integer and float columns and pandas' default string columns (missing: NaN; a compiled schedule) is read column by
-    column (``Series.tolist``: the same values and types, about 4x faster than pandas' per-cell boxing, which
-    was 3 % of a simulated replication); any other frame (object, nullable or datetime columns, repeated
+    column (``Series.tolist``: the same values and types, about 4x faster than pandas' per-cell
+    boxing); any other frame (object, nullable or datetime columns, repeated
     names, strings whose missing value is pd.NA, which pandas turns into None) goes through pandas itself.
 
     Examples

@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from psyop import datacontract as dc
 from psyop.protocol.timing import TimingSection
 from psyop.session.latency import GAZE_AGE_DESCRIPTIONS, GazeAges, GazeLatency, SessionGazeAges, frame_gaze_ages, frames_gaze_age, \
     gaze_age_lines
@@ -248,14 +249,14 @@ def frames_summary(frames: pd.DataFrame, phases: Sequence[PhaseSpec], refresh_pe
     if not len(frames):
         return interval_summary(np.zeros(0), 0, {}, refresh_period_s)
     ordered = frames.sort_values(["trial", "frame"], kind="stable")
-    intervals = ordered.groupby("trial", sort=False)["display_time_s"].diff().to_numpy(dtype=np.float64)
+    intervals = ordered.groupby("trial", sort=False)[dc.DISPLAY_TIME_S].diff().to_numpy(dtype=np.float64)
     kind_of = {p.name: p.show for p in phases}
     dropped = dict.fromkeys(sorted({kind_of.get(str(n), "response") for n in ordered["phase"].unique()}), 0)
-    missed = ordered["display_missed_frames"].fillna(0).astype(np.int64)
+    missed = ordered[dc.DISPLAY_MISSED_FRAMES].fillna(0).astype(np.int64)
     for trial, rows in ordered.assign(missed=missed).groupby("trial", sort=False):
         if not rows["missed"].any():
             continue
-        timing = TrialTiming(display_time_s=rows["display_time_s"].astype(float).tolist(),
+        timing = TrialTiming(display_time_s=rows[dc.DISPLAY_TIME_S].astype(float).tolist(),
                              period_s=rows["display_period_s"].astype(float).tolist(),
                              missed=rows["missed"].astype(int).tolist(),
                              start_s=(starts_s or {}).get(int(str(trial))))
@@ -345,7 +346,7 @@ def session_report(directory: str, meta: JsonObject, trials: pd.DataFrame, frame
               if "trial_start_s" in trials else {})
     summary = frames_summary(frames, phases, period_s, starts)
     ordered = frames.sort_values(["trial", "frame"], kind="stable") if len(frames) else frames
-    intervals = (ordered.groupby("trial", sort=False)["display_time_s"].diff().dropna().to_numpy(dtype=np.float64)
+    intervals = (ordered.groupby("trial", sort=False)[dc.DISPLAY_TIME_S].diff().dropna().to_numpy(dtype=np.float64)
                  if len(ordered) else np.zeros(0))
     trials = trials.sort_values("trial")
     reports, dropped = [], np.zeros(len(trials), dtype=np.int64)

@@ -15,12 +15,12 @@ study name (:data:`psyop.datacontract.STUDY_PATTERN`), so a unit never collides 
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
+from psyop.session.log.record import read_record_file
 
 SEPARATOR = "@"
 #: hex digits of the protocol hash in a unit's name
@@ -58,15 +58,8 @@ def unit_name(study: str, sha256: str) -> str:
 
 def session_hash(trials_file: Path) -> str | None:
     """The ``protocol_sha256`` of the session.json beside ``trials_file`` (None when not recorded)."""
-    meta_path = trials_file.parent / dc.SESSION_METADATA_FILE
-    if not meta_path.exists():
-        return None
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (OSError, ValueError) as exc:
-        raise UserError(f"unreadable session metadata ({exc})", str(meta_path)) from exc
-    sha = meta.get("protocol_sha256") if isinstance(meta, dict) else None
-    return sha if isinstance(sha, str) and sha else None
+    record = read_record_file(trials_file.parent / dc.SESSION_METADATA_FILE)
+    return (record.protocol_sha256 or None) if record is not None else None
 
 
 def unit_trials_files(data_root: Path, name: str) -> list[Path]:

@@ -99,8 +99,10 @@ def test_a_trials_table_linked_into_another_session_is_refused(data: Path) -> No
 
 def test_an_oversized_session_json_is_refused(data: Path) -> None:
     target = data / "detection" / "sub-B1" / "ses-1" / "session.json"
-    with open(target, "r+b") as handle:  # sparse: 17 MB of nothing, over the 16 MB limit
-        handle.truncate(17 << 20)
+    from psyop.session_json import MAX_SESSION_JSON_BYTES
+
+    with open(target, "r+b") as handle:  # sparse: 1 MB of nothing over the limit
+        handle.truncate(MAX_SESSION_JSON_BYTES + (1 << 20))
     _refused(_sessions(data), str(target), "byte limit")
 
 

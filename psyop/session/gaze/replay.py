@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from psyop import datacontract as dc
 from psyop.errors import UserError
 from psyop.input_files import read_logged_table
 from psyop.session.gaze.plan import FixationPlan
@@ -23,15 +24,15 @@ class ReplayTracker:
     """
 
     def __init__(self, frames: pd.DataFrame, time_offset_s: float = 0.0) -> None:
-        needed = ["gaze_sample_t_s", "fixation_x_m", "fixation_y_m", "fixation_z_m", "gaze_confidence", "gaze_valid"]
+        needed = [dc.GAZE_SAMPLE_T_S, dc.FIXATION_X_M, dc.FIXATION_Y_M, dc.FIXATION_Z_M, dc.GAZE_CONFIDENCE, dc.GAZE_VALID]
         missing = [c for c in needed if c not in frames.columns]
         if missing:
             raise UserError(f"replay: frame log lacks columns {missing}")
-        available = "render_start_s" if "render_start_s" in frames.columns else "gaze_sample_t_s"
-        table = frames[needed + ([available] if available not in needed else [])].dropna(subset=["gaze_sample_t_s"])
-        table = table.drop_duplicates(subset="gaze_sample_t_s").sort_values(available)
+        available = dc.RENDER_START_S if dc.RENDER_START_S in frames.columns else dc.GAZE_SAMPLE_T_S
+        table = frames[needed + ([available] if available not in needed else [])].dropna(subset=[dc.GAZE_SAMPLE_T_S])
+        table = table.drop_duplicates(subset=dc.GAZE_SAMPLE_T_S).sort_values(available)
         self._t = [float(t) + time_offset_s for t in table[available]]
-        self._sample_t = [float(t) + time_offset_s for t in table["gaze_sample_t_s"]]
+        self._sample_t = [float(t) + time_offset_s for t in table[dc.GAZE_SAMPLE_T_S]]
         self._rows = list(table.itertuples(index=False))
         self._delivered = 0
         self._raw = RawBuffer()

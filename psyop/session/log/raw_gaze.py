@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 import pyarrow as pa
 
+from psyop import datacontract as dc
 from psyop.session.gaze.sample import EyeSample, RawGazeSample
 from psyop.session.log.schema import GAZE_SCHEMA
 
@@ -27,9 +28,9 @@ def raw_gaze_table(samples: Sequence[RawGazeSample], *, run: int, trial: int) ->
     n = len(samples)
     columns: dict[str, list[float] | list[int] | list[bool]] = {
         "run": [run] * n, "trial": [trial] * n,
-        "tracker_t_s": [s.tracker_t_s for s in samples], "gaze_sample_t_s": [s.t_s for s in samples],
-        "received_s": [s.received_s for s in samples], "gaze_valid": [bool(s.valid) for s in samples],
-        "gaze_confidence": [s.confidence for s in samples],
+        "tracker_t_s": [s.tracker_t_s for s in samples], dc.GAZE_SAMPLE_T_S: [s.t_s for s in samples],
+        "received_s": [s.received_s for s in samples], dc.GAZE_VALID: [bool(s.valid) for s in samples],
+        dc.GAZE_CONFIDENCE: [s.confidence for s in samples],
     }
     for i, axis in enumerate("xyz"):
         columns[f"fixation_{axis}_m"] = [s.fixation_m[i] for s in samples]
@@ -64,8 +65,8 @@ def raw_gaze_block_table(t_s: np.ndarray, received_s: np.ndarray, valid: np.ndar
     nan = np.full(n, _NAN)
     given: dict[str, np.ndarray] = {
         "run": np.full(n, run, dtype=np.int64), "trial": np.full(n, trial, dtype=np.int64),
-        "tracker_t_s": t_s, "gaze_sample_t_s": t_s, "received_s": received_s,
-        "gaze_valid": np.asarray(valid, dtype=bool), "gaze_confidence": confidence,
+        "tracker_t_s": t_s, dc.GAZE_SAMPLE_T_S: t_s, "received_s": received_s,
+        dc.GAZE_VALID: np.asarray(valid, dtype=bool), dc.GAZE_CONFIDENCE: confidence,
         **{f"fixation_{axis}_m": fixation_m[:, i] for i, axis in enumerate("xyz")},
     }
     return pa.Table.from_pydict({f.name: given.get(f.name, nan) for f in GAZE_SCHEMA}, schema=GAZE_SCHEMA)

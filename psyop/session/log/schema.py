@@ -5,6 +5,7 @@ from __future__ import annotations
 import pandas as pd
 import pyarrow as pa
 
+from psyop import datacontract as dc
 from psyop.session.latency import GAZE_AGE_COLUMNS, GAZE_AGE_FIELDS
 
 #: Columns the session adds to every schedule row (architecture contract + psyop extras).
@@ -19,8 +20,8 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
     pa.field("correct", pa.bool_()),
     pa.field("reach_m", pa.float64()),
     pa.field("chosen_mode", pa.string()),
-    pa.field("trial_start_s", pa.float64()),
-    pa.field("trial_end_s", pa.float64()),
+    pa.field(dc.TRIAL_START_S, pa.float64()),
+    pa.field(dc.TRIAL_END_S, pa.float64()),
     pa.field("response_time_s", pa.float64()),
     pa.field("drift_correction_deg", pa.float64()),
     pa.field("gaze_valid_fraction", pa.float64()),
@@ -51,7 +52,7 @@ TRIAL_LOG_FIELDS: tuple[pa.Field, ...] = (
 #: Columns that depend on wall/virtual time or on where a crash split the session;
 #: everything else in trials.parquet is a pure function of (protocol, seed, participant).
 TIMING_COLUMNS: tuple[str, ...] = (
-    "trial_start_s", "trial_end_s", "response_time_s", "n_frames", "run", "gaze_valid_fraction",
+    dc.TRIAL_START_S, dc.TRIAL_END_S, "response_time_s", "n_frames", "run", "gaze_valid_fraction",
     "gaze_ok", "hand_sample_t_s", *GAZE_AGE_COLUMNS,
 )
 
@@ -82,14 +83,14 @@ FRAME_SCHEMA = pa.schema(
         pa.field("trial", pa.int64()),
         pa.field("phase", pa.string()),
         pa.field("frame", pa.int64()),
-        pa.field("gaze_sample_t_s", pa.float64()),
-        pa.field("fixation_x_m", pa.float64()),
-        pa.field("fixation_y_m", pa.float64()),
-        pa.field("fixation_z_m", pa.float64()),
-        pa.field("gaze_confidence", pa.float64()),
-        pa.field("gaze_valid", pa.bool_()),
+        pa.field(dc.GAZE_SAMPLE_T_S, pa.float64()),
+        pa.field(dc.FIXATION_X_M, pa.float64()),
+        pa.field(dc.FIXATION_Y_M, pa.float64()),
+        pa.field(dc.FIXATION_Z_M, pa.float64()),
+        pa.field(dc.GAZE_CONFIDENCE, pa.float64()),
+        pa.field(dc.GAZE_VALID, pa.bool_()),
         pa.field("gaze_held", pa.bool_()),
-        pa.field("render_start_s", pa.float64()),
+        pa.field(dc.RENDER_START_S, pa.float64()),
         pa.field("submit_s", pa.float64()),
         pa.field("sample_age_s", pa.float64()),
         pa.field("image_checked", pa.bool_()),
@@ -99,10 +100,10 @@ FRAME_SCHEMA = pa.schema(
         # what the display said of this frame (psyop.session.frames.FrameRequest): predicted display
         # time and period (session clock), whether the runtime asked for an image, the display
         # periods it skipped before this frame, and the gaze sample's age at the display time
-        pa.field("display_time_s", pa.float64()),
+        pa.field(dc.DISPLAY_TIME_S, pa.float64()),
         pa.field("display_period_s", pa.float64()),
         pa.field("display_should_render", pa.bool_()),
-        pa.field("display_missed_frames", pa.int64()),
+        pa.field(dc.DISPLAY_MISSED_FRAMES, pa.int64()),
         pa.field("gaze_age_at_display_s", pa.float64()),
         # the latency the protocol added (display.added_latency_ms; 0 without) and the newest sample's age at the
         # display time (the frame's gaze age without the added latency): psyop.session.latency
@@ -160,10 +161,10 @@ GAZE_SCHEMA = pa.schema(
         pa.field("run", pa.int64()),
         pa.field("trial", pa.int64()),
         pa.field("tracker_t_s", pa.float64()),
-        pa.field("gaze_sample_t_s", pa.float64()),
+        pa.field(dc.GAZE_SAMPLE_T_S, pa.float64()),
         pa.field("received_s", pa.float64()),
-        pa.field("gaze_valid", pa.bool_()),
-        pa.field("gaze_confidence", pa.float64()),
+        pa.field(dc.GAZE_VALID, pa.bool_()),
+        pa.field(dc.GAZE_CONFIDENCE, pa.float64()),
         *(pa.field(f"fixation_{axis}_m", pa.float64()) for axis in "xyz"),
         pa.field("norm_pos_x", pa.float64()),
         pa.field("norm_pos_y", pa.float64()),
