@@ -12,7 +12,6 @@ share of each scale point per condition).
 
 from __future__ import annotations
 
-import json
 import sys
 
 import numpy as np
@@ -71,34 +70,26 @@ def main(argv: list[str] | None = None) -> int:
 
 def _scale(data, study: str, trials: pd.DataFrame) -> tuple[int, list[str] | None]:
     """The scale's points (the trials' column, else the protocol's) and labels (the protocol's, if it has them)."""
-    import yaml
-
     from psyop.datacontract import SESSION_METADATA_FILE
     from psyop.errors import UserError
+    from psyop.session.log.record import design_of_record, read_record_file
     from psyop.statistics.dataset import session_files
 
-    scale: dict = {}
+    scale = None  # the first session's recorded scale (session.json study_design; an older session: its protocol)
     for path in session_files(data, study):
-        try:
-            text = json.loads((path.parent / SESSION_METADATA_FILE).read_text()).get("protocol_text")
-            document = yaml.safe_load(text) if isinstance(text, str) else None
-        except (OSError, ValueError, yaml.YAMLError):
-            continue
-        response = document.get("response") if isinstance(document, dict) else None
-        found = response.get("scale") if isinstance(response, dict) else None
-        if isinstance(found, dict):
-            scale = found
+        record = read_record_file(path.parent / SESSION_METADATA_FILE)
+        scale = design_of_record(record).scale if record is not None else None
+        if scale is not None:
             break
     if POINTS_COLUMN in trials and trials[POINTS_COLUMN].notna().any():
         points = int(pd.to_numeric(trials[POINTS_COLUMN]).max())
-    elif isinstance(scale.get("points"), int):
-        points = int(scale["points"])
+    elif scale is not None:
+        points = scale.points
     else:
         raise UserError(f"no column {POINTS_COLUMN!r} and no response.scale.points in the sessions' protocol: the "
                         "scale's points are unknown; re-run the sessions with this psyop", str(data / study))
-    labels = scale.get("labels")
-    ok = isinstance(labels, list) and len(labels) == points and all(isinstance(x, str) for x in labels)
-    return points, labels if ok else None
+    labels = None if scale is None else scale.labels
+    return points, list(labels) if labels is not None and len(labels) == points else None
 
 
 def _label(row: dict, conditions: list[str]) -> str:

@@ -1,32 +1,32 @@
 """What the analysis needs to know of a study in ``data/``: its response kind, the protocol(s) its
 sessions ran (by hash), and the factors' names, descriptions and units (for columns and axis labels).
 
-Read from each session's ``session.json`` (``response_kind``, ``protocol_sha256`` and the
-``protocol_text`` it ran, written by psyop.run.runner). The protocol text is read as plain
-YAML, not re-validated: an old session stays analysable when validation grows stricter. A study
-written without session.json (psyop.statistics.dataset.write_dataset without hashes) has its kind
-read from its trial columns and no protocol hash.
+Read from each session's ``session.json`` as its typed record (psyop.session.log.record: ``response_kind``,
+``protocol_sha256``, the plan's ``response.level_factor``, and ``study_design``: the factors' descriptions and
+units, the response's column fields, ``study.reported``). A session recorded before psyop wrote ``study_design``
+has it read from the protocol text it ran, once per study, by ``design_of_record`` (the one fallback). A study
+written without session.json
+(psyop.statistics.dataset.write_dataset without hashes) has its kind read from its trial columns and no
+protocol hash.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pyarrow.parquet as pq
-import yaml
 
 from psyop import datacontract as dc
 from psyop.errors import UserError
 from psyop.protocol.kinds import KINDS, kind_named
 from psyop.protocol.kinds.base import ResponseKindSpec
+from psyop.session.log.record import SessionRecord, design_of_record, read_record_file
+from psyop.session.log.recorded_design import FACTOR_UNIT_SUFFIXES, RecordedDesign, unit_of
 from psyop.statistics.protocol_versions import session_hash, split_unit, unit_trials_files
 
 #: Units by factor-name suffix (docs/protocols.md: a numeric factor says its unit in its name).
-UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (("_deg", "deg"), ("_arcmin", "arcmin"), ("_mm", "mm"), ("_m", "m"),
-                                              ("_D", "D"), ("_ms", "ms"), ("_s", "s"), ("_hz", "Hz"), ("_px", "px"),
-                                              ("_fraction", "fraction"))
+UNIT_SUFFIXES = FACTOR_UNIT_SUFFIXES
 
 #: Labels of the paper's factors when a study's sessions record no protocol description.
 PLAIN_NAMES = {"back_D": "back surface distance", "offset_D": "relative offset", "level_D": "level",
@@ -107,20 +107,6 @@ def _strip_unit(name: str) -> str:
     return name
 
 
-def unit_of(name: str) -> str | None:
-    """The unit a factor's name ends in, or None.
-
-    Examples
-    --------
-    >>> unit_of("back_D"), unit_of("contrast"), unit_of("eccentricity_deg")
-    ('D', None, 'deg')
-    """
-    for suffix, unit in UNIT_SUFFIXES:
-        if name.endswith(suffix) and len(name) > len(suffix):
-            return unit
-    return None
-
-
 #: Sessions whose session.json records no ``response_kind`` (psyop.statistics.dataset.write_dataset without one,
 #: for tests and demos) are told by the columns only the paper's kinds have; every session psyop runs records it.
 _KIND_COLUMNS: tuple[tuple[frozenset[str], str], ...] = (
@@ -156,35 +142,12 @@ def _recorded_kind(value: object, meta_path: Path) -> ResponseKindSpec | None:
                         str(meta_path)) from None
 
 
-def _protocol_factors(text: str) -> tuple[dict[str, FactorFacts], str | None, dict[str, str]]:
-    try:
-        document = yaml.safe_load(text) or {}
-    except (yaml.YAMLError, ValueError, TypeError, AttributeError, KeyError):  # a bad explicit tag fails outside YAMLError
-        return {}, None, {}
-    design = document.get("design") if isinstance(document, dict) else None
-    factors_in = design.get("factors") if isinstance(design, dict) else None
-    factors = {}
-    for name, spec in (factors_in or {}).items():
-        description = spec.get("description") if isinstance(spec, dict) else None
-        factors[str(name)] = FactorFacts(str(name), description if isinstance(description, str) else None,
-                                         unit_of(str(name)))
-    response = document.get("response") if isinstance(document, dict) else None
-    level = response.get("level_factor", "level_D") if isinstance(response, dict) and \
-        response.get("kind") == "two_interval" else None
-    fields = {str(k): v for k, v in response.items() if isinstance(v, str)} if isinstance(response, dict) else {}
-    return factors, level, fields
-
-
-def _reported(text: str | None) -> tuple[dict[str, object], ...]:
-    """The protocol text's ``study.reported`` entries (validated when the session ran), as plain mappings."""
-    try:
-        document = yaml.safe_load(text or "") or {}
-    except (yaml.YAMLError, ValueError, TypeError, AttributeError, KeyError):
-        return ()
-    study = document.get("study") if isinstance(document, dict) else None
-    entries = study.get("reported") if isinstance(study, dict) else None
-    return tuple(dict(e) for e in entries if isinstance(e, dict) and isinstance(e.get("condition"), dict)) \
-        if isinstance(entries, list) else ()
+def _design_facts(design: RecordedDesign) -> tuple[dict[str, FactorFacts], dict[str, str],
+                                                  tuple[dict[str, object], ...]]:
+    """The factors (name, description, unit), the response's column fields and the ``study.reported`` entries (each
+    {condition, threshold, source}) of a session's recorded design."""
+    factors = {f.name: FactorFacts(f.name, f.description, f.unit) for f in design.factors}
+    return factors, dict(design.column_fields), tuple(r.model_dump() for r in design.reported)
 
 
 def study_facts(data_root: Path, study: str) -> StudyFacts:
@@ -206,33 +169,26 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
                         str(Path(data_root)))
     hashes: list[str] = []
     kind: ResponseKindSpec | None = None
-    text: str | None = None
+    ran: SessionRecord | None = None  # the first session that recorded its design (or, before that, its protocol text)
     recorded_level: str | None = None
     for trials in files:
         meta_path = trials.parent / dc.SESSION_METADATA_FILE
-        if not meta_path.exists():
+        record = read_record_file(meta_path)
+        if record is None:
             continue
-        try:
-            meta = json.loads(meta_path.read_text())
-        except (OSError, ValueError) as exc:
-            raise UserError(f"unreadable session metadata ({exc})", str(meta_path)) from exc
-        sha = meta.get("protocol_sha256")
-        if isinstance(sha, str) and sha and sha not in hashes:
-            hashes.append(sha)
-        kind = kind or _recorded_kind(meta.get("response_kind"), meta_path)
-        text = text or meta.get("protocol_text")
-        response = meta.get("response")
-        if isinstance(response, dict) and isinstance(response.get("level_factor"), str):
-            recorded_level = recorded_level or response["level_factor"]
+        if record.protocol_sha256 and record.protocol_sha256 not in hashes:
+            hashes.append(record.protocol_sha256)
+        kind = kind or _recorded_kind(record.response_kind, meta_path)
+        ran = ran or (record if record.study_design is not None or record.protocol_text else None)
+        recorded_level = recorded_level or (record.response.level_factor if record.response else None)
     kind = kind or _kind_from_columns(files[0])
-    factors, level, fields = _protocol_factors(text) if text else ({}, None, {})
-    level = recorded_level or level  # the session plan's record (every kind with a level), else the protocol's
-    if kind.name == "two_interval" and level is None:
-        level = "level_D"
+    factors, fields, reported = _design_facts(design_of_record(ran) if ran is not None else RecordedDesign())
+    # the session plan's record (every kind with a level), else the two_interval protocol's response.level_factor
+    level = recorded_level or (fields.get("level_factor", "level_D") if kind.name == "two_interval" else None)
     folder = split_unit(study)[0]
     everything = tuple(sorted(hashes)) if folder == study else \
         tuple(sorted({h for f in dc.trials_files(data_root, folder) if (h := session_hash(f))}))
-    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields, _reported(text), everything)
+    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields, reported, everything)
 
 
 def studies_in(data_root: Path) -> list[StudyFacts]:

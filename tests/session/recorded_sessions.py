@@ -28,6 +28,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from psyop.protocol import load_protocol
+from psyop.protocol.luminance import UNCALIBRATED_OUTPUT
 from psyop.run.simulate import plan_jobs, run_job
 from psyop.session.plan import compile_plan
 from psyop.session.latency import GAZE_AGE_COLUMNS
@@ -54,13 +55,18 @@ ADDED_MODELS = (("pencil.glb", "pencil"),)
 #: session.json fields not recorded: wall-clock and machine ones, and inputs (where the protocol lies, its text and
 #: hash: protocols may change on purpose, checked to be the protocol file that ran)
 SESSION_JSON_EXCLUDED = ("finalised", "runs", "host", "python", "packages", "finalised_files", "rendering",
-                         "protocol_file", "protocol_text", "protocol_sha256", "protocol_file_sha256")
+                         "protocol_file", "protocol_text", "protocol_sha256", "protocol_file_sha256",
+                         # issue 40: the protocol's design as the analysis reads it, added after 26cd3cb and checked
+                         # instead to be the protocol file's (tests/statistics/test_recorded_design.py)
+                         "study_design")
 #: session.json keys added since 26cd3cb, on purpose, not recorded and checked instead: issue 27's
 #: ``sim_tracker_faults`` (the analysis rebuilds a requested stream from it)
 ADDED_SESSION_KEYS = {"sim_tracker_faults": {"dropout_rate_hz": 0.0, "nan_burst_rate_hz": 0.0},
                       # issue 44's gaze-latency rules (none in the shipped protocols: psyop.session.latency)
                       "gaze_latency": {"added_latency_ms": 0.0, "added_latency_factor": None,
-                                       "max_gaze_age_ms": None, "max_gaze_age_over_share": 0.05}}
+                                       "max_gaze_age_ms": None, "max_gaze_age_over_share": 0.05},
+                      # issue 42: an uncalibrated display's output stated (psyop.protocol.luminance.output_record)
+                      "display_output": {"calibrated": False, "output": UNCALIBRATED_OUTPUT}}
 #: issue 44's gaze-to-photon latency, added after 26cd3cb on purpose (psyop.session.latency), not recorded and
 #: checked instead (tests/session/test_refactor_equality.py): the trial columns are what the frames give
 #: (``trials_gaze_age``), the frame columns say no latency was added and the intrinsic age is the gaze age of
