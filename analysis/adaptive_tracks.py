@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from _common import out_path, parser, provenance, read_fits, require_columns, results_file, run, write_csv, write_json
-from _twoafc import check_two_interval, condition_column, level_column
+from _twoafc import check_two_interval, condition_column, level_column, with_condition_column
 
 from psyop.errors import UserError
 from psyop.figures.adaptive_figures import plot_tracks
@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     if "adaptive_procedure" not in trials:
         raise UserError(f"study {args.study!r} has no adaptive columns (adaptive_procedure ...): not an adaptive "
                         "run; its levels were fixed by the protocol", str(args.data / args.study))
-    trials = trials[trials["adaptive_procedure"].astype(str) != ""]
+    trials = with_condition_column(trials[trials["adaptive_procedure"].astype(str) != ""], facts, cond)
     require_columns(trials, [cond, level.name, "participant"], str(args.data / args.study), "refit with this psyop")
     groups = ["participant", cond]
     table = estimates_table(trials, level.name, unit, groups, fits)

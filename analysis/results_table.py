@@ -87,7 +87,35 @@ def _statistics(payload: dict, name: str) -> list[str]:
     return lines
 
 
-def write_study_summaries(others: list[tuple[Path, dict]], results: Path) -> list[Path]:
+def display_lines(data: Path, studies: list[str]) -> list[str]:
+    """A section saying, per study, whether its sessions ran on a calibrated display (session.json
+    ``display_output``; docs/calibration.md): an uncalibrated session's stimuli are pixel values, so the luminances and
+    contrasts on its screen are unknown. Empty when no study has sessions under ``data``."""
+    from psyop.session.log.record import read_record_file
+    from psyop.statistics.dataset import session_files
+
+    lines = []
+    for study in studies:
+        try:
+            outputs = [getattr(read_record_file(f.parent / "session.json"), "display_output", None)
+                       for f in session_files(data, study)]
+        except (UserError, OSError) as error:  # an unreadable session.json: said, not skipped
+            lines.append(f"- {study}: display not known ({getattr(error, 'message', None) or error})")
+            continue
+        calibrated = sum(1 for o in outputs if o is not None and o.calibrated)
+        unknown = sum(1 for o in outputs if o is None)
+        if not outputs:
+            continue
+        parts = [f"uncalibrated in {len(outputs) - calibrated - unknown}"] if len(outputs) - calibrated - unknown else []
+        parts += [f"not recorded in {unknown} (sessions before psyop recorded it)"] if unknown else []
+        text = "calibrated display" if calibrated == len(outputs) else (
+            "**uncalibrated display** (stimuli in pixel values: luminances and contrasts on the screen unknown): "
+            f"{', '.join(parts)} of {len(outputs)} sessions")
+        lines.append(f"- {study}: {text}")
+    return ["## Display", "", *lines, ""] if lines else []
+
+
+def write_study_summaries(others: list[tuple[Path, dict]], results: Path, data: Path | None = None) -> list[Path]:
     """results/<study>_summary.md for each study that is not one of the paper's protocols."""
     by_study: dict[str, list[dict]] = {}
     for _, payload in others:
@@ -110,6 +138,7 @@ def write_study_summaries(others: list[tuple[Path, dict]], results: Path) -> lis
         for payload in payloads:
             lines += [f"## {payload['analysis']}", ""] + _statistics(payload, study)[2:]
         lines += quality_lines(results, [study])
+        lines += display_lines(data, [study]) if data is not None else []
         path = results / f"{study}_summary.md"
         write_text(path, "\n".join(lines) + "\n")
         written.append(path)
@@ -193,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     if not found:
         raise UserError("no study results here; run the analysis scripts first (make figures)", str(args.results))
     studies, others = split_paper(found, paper_hashes(args.protocols))
-    for path in write_study_summaries(others, args.results):
+    for path in write_study_summaries(others, args.results, args.data):
         print(f"[psyop] {path} (not a paper protocol: not in the paper's rows)", file=sys.stderr)
     simulated = any(bool(s.get("simulated")) for s in studies.values())
     rows = rows_for(studies)
@@ -216,6 +245,7 @@ def main(argv: list[str] | None = None) -> int:
     lines += versions_lines([p for _, p in found])
     lines += _methods(studies)
     lines += quality_lines(args.results, sorted({str(s.get("study")) for s in studies.values()}))
+    lines += display_lines(args.data, sorted({str(s.get("study")) for s in studies.values()}))
     lines += ["## Every statistic psyop computed", ""]
     for name in PAPER_PROTOCOLS:
         if name in studies:

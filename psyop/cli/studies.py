@@ -54,8 +54,8 @@ def make_escaped(path: Path) -> str:
     return text
 
 
-def targets_for(study: str, kind: ResponseKindSpec, linear_fit: bool, trials: str = "", adaptive: bool = False
-                ) -> list[Target]:
+def targets_for(study: str, kind: ResponseKindSpec, linear_fit: bool, trials: str = "", adaptive: bool = False,
+                level_factor: str | None = None) -> list[Target]:
     """The analysis of one study, as its response kind declares it (psyop.protocol.kinds); ``trials`` is its
     sessions' trials.parquet files as make prerequisites (:func:`make_escaped`, so a data root may hold spaces);
     ``adaptive`` (a study whose levels a staircase or QUEST+ placed) adds what the kind draws of it.
@@ -68,7 +68,7 @@ def targets_for(study: str, kind: ResponseKindSpec, linear_fit: bool, trials: st
     """
     from psyop.protocol.kinds.base import StudyInputs
 
-    return kind.targets(StudyInputs(study, trials, linear_fit, adaptive))
+    return kind.targets(StudyInputs(study, trials, linear_fit, adaptive, level_factor))
 
 
 def analysis_units(data: Path, pool_protocols: bool) -> list[tuple[StudyFacts, list[Path]]]:
@@ -112,7 +112,8 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
         uses_linear = bool(facts.protocol_sha256) and set(facts.protocol_sha256) <= linear
         prerequisites = " ".join(make_escaped(p) for p in sessions)
         adaptive = _adaptive(sessions)
-        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive) + [AnalysisTarget(  # issue 27
+        targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive,
+                              facts.level_factor) + [AnalysisTarget(  # issue 27
             f"{facts.name}_gaze_quality.png", "analysis/gaze_quality.py", f"{prerequisites} $(QUALITY_SRC)",
             f'--study {facts.name} --data "$(DATA)" --results "$(RESULTS)"')]
         figures = [t for t in targets if t.kind == "figure"]

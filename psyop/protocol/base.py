@@ -9,7 +9,7 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict
 
 #: Suffixes a numeric factor name must end with, so that every column says its unit.
 UNIT_SUFFIXES: tuple[str, ...] = ("_D", "_m", "_mm", "_deg", "_rad", "_s", "_ms", "_px", "_arcmin", "_hz", "_fraction",
-                                  "_percent", "_count", "_cd_m2")
+                                  "_percent", "_count", "_cd_m2", "_log10")
 
 
 class StrictModel(BaseModel):

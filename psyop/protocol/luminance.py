@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 from psyop.errors import UserError
 from psyop.optics.transfer import DisplayTransfer
 from psyop.protocol.scene import (
+    Contrast,
     FactorRef,
     GratingSurface,
     ImageSurface,
@@ -197,6 +198,7 @@ def grating_issues(protocol: Protocol, value_sets: Iterable[JsonObject]) -> list
         for name, surface in _luminance_surfaces(item):
             if not isinstance(surface, GratingSurface):
                 continue
+            issues += _log_contrast_issues(surface, ("scene", index, name, "contrast"))
             limit = nyquist_cycles_per_deg(protocol) if limit is None else limit
             for values in sets:
                 try:
@@ -210,3 +212,51 @@ def grating_issues(protocol: Protocol, value_sets: Iterable[JsonObject]) -> list
                                    "Lower cycles_per_deg"))
                     break
     return issues
+
+
+def _log_contrast_issues(surface: GratingSurface, where: Loc) -> list[tuple[Loc, str]]:
+    """A grating's contrast read from a factor in the right units: ``michelson_log10`` from a factor named
+    ``*_log10``, and a log10 factor never read as a linear contrast (``contrast: {factor: x_log10}``)."""
+    contrast = surface.contrast
+    if isinstance(contrast, Contrast) and isinstance(contrast.michelson_log10, FactorRef):
+        ref = contrast.michelson_log10.factor
+        if not ref.endswith("_log10"):
+            return [(where + ("michelson_log10",), f"michelson_log10 reads factor '{ref}' as log10 units, but its "
+                                                   "name says another unit; name the factor '..._log10' (its levels "
+                                                   "are log10 Michelson contrasts, e.g. -2 for 1 %)")]
+        return []
+    linear = contrast.michelson if isinstance(contrast, Contrast) and contrast.michelson is not None else \
+        contrast.weber if isinstance(contrast, Contrast) else contrast
+    key = where + ((("michelson",) if contrast.michelson is not None else ("weber",))
+                   if isinstance(contrast, Contrast) else ())
+    if isinstance(linear, FactorRef) and linear.factor.endswith("_log10"):
+        return [(key, f"factor '{linear.factor}' is in log10 units but is read here as a linear contrast; write "
+                      f"contrast: {{michelson_log10: {{factor: {linear.factor}}}}}")]
+    return []
+
+
+#: How an uncalibrated session's 8-bit output relates to the protocol's values (docs/protocols.md, "The linearised
+#: output")
+UNCALIBRATED_OUTPUT = ("pixel values: code = round(255 v), no transfer function applied (no gamma, no sRGB "
+                       "encoding); luminances and contrasts on the screen are unknown")
+
+
+def output_record(protocol: Protocol, base_dir: Path | None) -> JsonObject:
+    """session.json's ``display_output``: whether the session's stimuli were linearised through a display
+    calibration, and which (its file, SHA-256, grey model, black and peak luminance, the final pass's method), or
+    that they were written as pixel values on an uncalibrated display."""
+    import hashlib
+
+    path = calibration_path(protocol, base_dir)
+    if path is None:
+        return {"calibrated": False, "output": UNCALIBRATED_OUTPUT}
+    transfer = load_transfer(path)
+    record = json.loads(path.read_text())
+    grey = record.get("fit", {}).get("grey", {})
+    return {"calibrated": True, "calibration_file": protocol.display.calibration,
+            "calibration_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+            "calibration_date": record.get("date"), "device": record.get("device", {}).get("model"),
+            "display": record.get("display", {}).get("name"), "model": grey.get("model"),
+            "black_cd_m2": transfer.black_cd_m2, "peak_cd_m2": transfer.peak_cd_m2,
+            "output": "normalised luminance through the grey channel's inverse (a table every 1/64 code), then an "
+                      "8 x 8 ordered spatio-temporal dither to 8-bit codes"}

@@ -234,19 +234,37 @@ class RaisedCosineWindow(StrictModel):
 Window = Annotated[Union[GaussianWindow, RaisedCosineWindow], Field(discriminator="kind")]
 
 
+#: The lowest log10 Michelson contrast a protocol may state (1e-9: below what the renderer's float32 shading resolves)
+MIN_MICHELSON_LOG10 = -9.0
+
+
 class Contrast(StrictModel):
-    """A contrast named by its definition: ``{michelson: 0.01}`` ((Lmax - Lmin) / (Lmax + Lmin)) or ``{weber: 0.01}``
-    ((Lmax - Lmean) / Lmean, the peak increment over the mean). For a grating (sine or square, symmetric about its
-    mean) the two are the same number; each may be ``{factor: NAME}``. Give one."""
+    """A contrast named by its definition: ``{michelson: 0.01}`` ((Lmax - Lmin) / (Lmax + Lmin)), ``{weber: 0.01}``
+    ((Lmax - Lmean) / Lmean, the peak increment over the mean) or ``{michelson_log10: -2}`` (log10 of the Michelson
+    contrast: an adaptive procedure's level on a log axis IS the contrast shown, 10 ** level). For a grating (sine or
+    square, symmetric about its mean) Michelson and Weber are the same number; each may be ``{factor: NAME}`` (for
+    ``michelson_log10`` a factor in log10 units, its name ending in ``_log10``). Give one."""
 
     michelson: UnitFraction | FactorRef | None = None
     weber: UnitFraction | FactorRef | None = None
+    michelson_log10: Annotated[Number, Field(ge=MIN_MICHELSON_LOG10, le=0)] | FactorRef | None = None
 
     @model_validator(mode="after")
     def _one(self) -> "Contrast":
-        if (self.michelson is None) == (self.weber is None):
-            raise ValueError("give one of michelson or weber")
+        if sum(v is not None for v in (self.michelson, self.weber, self.michelson_log10)) != 1:
+            raise ValueError("give one of michelson, weber or michelson_log10")
         return self
+
+    @property
+    def linear(self) -> float | FactorRef:
+        """The Michelson contrast as a fraction (``10 ** michelson_log10``); a factor reference as given (a log10
+        factor's reference stays one: it is a number only once the trial's level is resolved)."""
+        log10 = self.michelson_log10
+        if log10 is not None:
+            return log10 if isinstance(log10, FactorRef) else 10.0 ** float(log10)
+        value = self.michelson if self.michelson is not None else self.weber
+        assert value is not None
+        return value
 
 
 class GratingSurface(StrictModel):
@@ -281,11 +299,7 @@ class GratingSurface(StrictModel):
     def michelson(self) -> float | FactorRef:
         """The Michelson contrast (Weber, as defined on :class:`Contrast`, is the same for these waveforms)."""
         c = self.contrast
-        if isinstance(c, Contrast):
-            value = c.michelson if c.michelson is not None else c.weber
-            assert value is not None
-            return value
-        return c
+        return c.linear if isinstance(c, Contrast) else c
 
 
 Surface = Annotated[Union[SolidSurface, WhiteNoiseSurface, PinkNoiseSurface, ImageSurface, GratingSurface],
