@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
+from collections.abc import Mapping
 from pathlib import Path
 
 from psyop.errors import UserError
-from psyop.run.backends import EXPERIMENTER_WINDOW_HELP, help_text
+from psyop.run.backends import EXPERIMENTER_WINDOW_HELP, MIRROR_EYES, help_text
+
+#: the experimenter window's default mirror width (pixels; psyop.devices.experimenter.MIRROR_WIDTH_PX, not imported
+#: here: the CLI's start-up stays free of the window's modules)
+MIRROR_WIDTH_PX = 320
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -41,6 +47,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="--display window: render and show each eye at S x the display's resolution "
                              "(1 = full resolution; both eyes side by side for stereo; default 0.25)")
     parser.add_argument("--experimenter-window", action="store_true", help=EXPERIMENTER_WINDOW_HELP)
+    parser.add_argument("--no-mirror", action="store_true",
+                        help="no experimenter window, not even the default one of --display openxr")
+    parser.add_argument("--mirror-eye", choices=sorted(MIRROR_EYES), default="left",
+                        help="the experimenter window mirrors the left eye (default), the right one, or both side by side")
+    parser.add_argument("--mirror-width-px", type=int, default=MIRROR_WIDTH_PX, metavar="PX",
+                        help=f"each mirrored eye's width in the experimenter window (pixels; default {MIRROR_WIDTH_PX}; "
+                             "the height follows the eye image's aspect ratio)")
     parser.add_argument("--data", type=Path, default=Path("data"), help="data root (default data/)")
     parser.add_argument("--render", default="auto", choices=["auto", "images", "cameras"],
                         help="images: ray-cast the stimulus; cameras: eye cameras only; auto: images if OpenGL works")
@@ -76,7 +89,9 @@ def main(args: argparse.Namespace) -> int:
         window_scale=args.window_scale, lsl_markers=args.lsl_markers, lsl_wait_s=args.lsl_wait_s,
         progress=not args.no_progress, allow_protocol_change=args.allow_protocol_change, phase_delay_s=args.phase_delay_s, render=args.render, pose=args.pose,
         xr_request_exit_at_frame=args.xr_request_exit_at_frame, mesh_files=mesh_files,
-        experimenter_window=args.experimenter_window,
+        experimenter_window=mirror_wanted(args.display, args.experimenter_window, args.no_mirror, os.environ),
+        experimenter_window_optional=not args.experimenter_window, mirror_eye=args.mirror_eye,
+        mirror_width_px=args.mirror_width_px,
         tracker_faults=SimulatedTrackerConfig(nan_burst_rate_hz=args.sim_nan_burst_rate_hz,
                                               dropout_rate_hz=args.sim_dropout_rate_hz),
     )
@@ -88,6 +103,26 @@ def main(args: argparse.Namespace) -> int:
     print_outcome(outcome)
     _print_integrity_warnings(args.data, protocol.study.name, args.participant, args.session)
     return 128 + int(received[0]) if received and outcome.status == "interrupted" else outcome.exit_code
+
+
+def mirror_wanted(display: str, asked: bool, refused: bool, environ: Mapping[str, str]) -> bool:
+    """Whether the session opens the experimenter window: asked for (``--experimenter-window``), else by default
+    with a headset display where a desktop display exists ($DISPLAY or $WAYLAND_DISPLAY); never with
+    ``--no-mirror`` (asking for both is refused).
+
+    Examples
+    --------
+    >>> mirror_wanted("openxr", False, False, {"DISPLAY": ":0"}), mirror_wanted("openxr", False, True, {"DISPLAY": ":0"})
+    (True, False)
+    >>> mirror_wanted("headless", False, False, {"DISPLAY": ":0"}), mirror_wanted("openxr:egl", False, False, {})
+    (False, False)
+    """
+    if asked and refused:
+        raise UserError("--experimenter-window and --no-mirror contradict each other: keep one", "--no-mirror")
+    if refused:
+        return False
+    return asked or (display.partition(":")[0] == "openxr"
+                     and bool(environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY")))
 
 
 def _print_integrity_warnings(data_root: Path, study: str, participant: str, session: int) -> None:

@@ -1,14 +1,16 @@
 """The experimenter's window (``psyop run --experimenter-window``): a small glfw window on the experimenter's
 screen while a session runs on a headset (or headless), showing
 
-- a mirror of what the participant sees: the first eye's image (the left eye's swapchain image on a headset),
-  downscaled on the GPU to the window's :data:`MIRROR_WIDTH_PX` and shown about :data:`MIRROR_HZ` times a second;
+- a mirror of what the participant sees: one eye's image (``--mirror-eye left``, the default, or ``right``: that
+  eye's swapchain image on a headset) or both side by side (``both``, left eye on the left), each downscaled on the
+  GPU to ``--mirror-width-px`` (default :data:`MIRROR_WIDTH_PX`) and shown about :data:`MIRROR_HZ` times a second;
 - a status strip: trial k of N and its condition, the phase, the last answer, the display's dropped frames so
   far and the share of frames whose gaze sample was valid (``status_line``; ``status_updates`` counts changes).
 
 Its keys are a :class:`~psyop.devices.responses.keyboard.KeyEvents` source: ``--responses keyboard`` reads them
 (the experimenter keys in the participant's spoken answers, or the participant uses a keyboard). Escape ends the
-session as Ctrl-C does (exit 130, resumable), as in the session window.
+session as Ctrl-C does (exit 130, resumable), as in the session window; ``p`` (pause) and ``c`` (recalibrate) go to
+the session's controls (psyop.session.controls), never to the answers.
 
 How it hooks in, through the session's seams (the loop never sees it): :class:`MirroredDisplay` wraps the
 session's display (each frame passes through it; the display itself is unchanged), the window is an
@@ -36,6 +38,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+from psyop.session.controls import ESCAPE_KEY, EscapePressed, SessionControls
 from psyop.session.events import SessionEvent
 from psyop.session.frames import Display, FrameRequest
 from psyop.session.gaze.sample import GazeSample, GazeSource
@@ -58,10 +61,11 @@ DOWNSCALE_SHADER = """
 uniform sampler2D u_image;
 uniform ivec2 u_src;
 uniform ivec2 u_dst;
+uniform int u_offset;
 out vec4 colour;
 void main() {
     vec2 step = vec2(u_src) / vec2(u_dst);
-    vec2 base = floor(gl_FragCoord.xy) * step;
+    vec2 base = (floor(gl_FragCoord.xy) - vec2(float(u_offset), 0.0)) * step;
     vec3 sum = vec3(0.0);
     for (int j = 0; j < 4; ++j) {
         for (int i = 0; i < 4; ++i) {
@@ -85,15 +89,20 @@ void main() {
 class ExperimenterWindow:
     """The window (module docstring): a KeyEvents source, an EventSink, and the mirror's screen.
 
-    ``n_trials``: the schedule's length (the status's N); ``mirror_px``: (width, height) of the mirror;
-    ``egl``: make the window's context through EGL (module docstring)."""
+    ``n_trials``: the schedule's length (the status's N); ``mirror_px``: (width, height) of one eye's mirror;
+    ``eyes``: the eyes mirrored, side by side in this order (``mirror_px`` holds all of them);
+    ``egl``: make the window's context through EGL (module docstring); ``controls``: where Escape, ``p`` and ``c``
+    go (psyop.session.controls; None: Escape alone, raised from :meth:`pump`)."""
 
     def __init__(self, clock: Clock, n_trials: int, mirror_px: tuple[int, int], *, egl: bool,
-                 restore: moderngl.Context | None = None) -> None:
+                 restore: moderngl.Context | None = None, controls: SessionControls | None = None,
+                 eyes: Sequence[str] = ("left",)) -> None:
         from psyop.errors import UserError
         from psyop.rendering.window import Window, WindowUnavailable
 
-        self.mirror_px = (int(mirror_px[0]), int(mirror_px[1]))
+        self.eyes = tuple(eyes)
+        self.eye_px = (int(mirror_px[0]), int(mirror_px[1]))
+        self.mirror_px = (self.eye_px[0] * len(self.eyes), self.eye_px[1])
         width, height = self.mirror_px[0], self.mirror_px[1] + STATUS_HEIGHT_PX
         try:
             self._window = Window(width, height, title="psyop: experimenter", swap_interval=0, egl=egl)
@@ -106,6 +115,9 @@ class ExperimenterWindow:
         self._restore = restore  # the context current before the window's (made current again after each use)
         self._keys: list[tuple[str, float]] = []
         self.escape_pressed = False
+        self.controls = controls
+        if controls is not None:
+            controls.pumps.append(self.pump)
         glfw.set_key_callback(self._window.handle, self._on_key)
         ctx = self._window.ctx
         self._texture = ctx.texture((width, height), 3, dtype="f1")
@@ -118,7 +130,11 @@ void main() { colour = vec4(texelFetch(u_image, ivec2(gl_FragCoord.xy), 0).rgb, 
         self._vao = ctx.vertex_array(self._program, [])
         self._image = np.full((height, width, 3), 40, dtype=np.uint8)  # the window's content, top row first
         self._mirror_seen = False
-        # the status
+        self._reset_status(n_trials)
+        self._draw_status()
+        self._present()
+
+    def _reset_status(self, n_trials: int) -> None:
         self.n_trials = int(n_trials)
         self.trial = -1
         self.condition = ""
@@ -132,8 +148,6 @@ void main() { colour = vec4(texelFetch(u_image, ivec2(gl_FragCoord.xy), 0).rgb, 
         self.status_updates = 0
         self._status_drawn = ""
         self._font: Any = None  # Any: PIL's ImageFont (loaded on first use)
-        self._draw_status()
-        self._present()
 
     # -- keys (KeyEvents) -------------------------------------------------------------------------------
     def _on_key(self, window: object, key: int, scancode: int, action: int, mods: int) -> None:
@@ -142,8 +156,10 @@ void main() { colour = vec4(texelFetch(u_image, ivec2(gl_FragCoord.xy), 0).rgb, 
         from psyop.devices.window import key_name
 
         name = key_name(self._glfw, key, scancode)
-        if name == "escape":  # noted only: an exception raised in a glfw callback is lost in ctypes
+        if name == ESCAPE_KEY:  # noted only: an exception raised in a glfw callback is lost in ctypes
             self.escape_pressed = True
+            return
+        if self.controls is not None and self.controls.press(name, "the experimenter window"):
             return
         self._keys.append((name, self._clock.now_s()))
 
@@ -151,8 +167,8 @@ void main() { colour = vec4(texelFetch(u_image, ivec2(gl_FragCoord.xy), 0).rgb, 
         """Deliver the window system's pending events; Escape ends the session (as Ctrl-C)."""
         self._glfw.poll_events()
         if self.escape_pressed:
-            from psyop.devices.window import EscapePressed
-
+            if self.controls is not None:
+                self.controls.press(ESCAPE_KEY, "the experimenter window")
             raise EscapePressed("Escape pressed in the experimenter window")
 
     def inject_key(self, name: str) -> None:
@@ -330,20 +346,27 @@ class MirroredDisplay:
             self.present_s.append(time.perf_counter() - started)
         return submit_s
 
+    def _sources(self, frame: FrameRequest, images: Sequence[moderngl.Texture]) -> list[tuple[Any, tuple[int, int]]]:
+        """Each mirrored eye's image and its size (Any: a moderngl texture): the eye's swapchain image on a
+        headset, else the renderer's image of that eye (the left one first; a single image serves every eye)."""
+        out: list[tuple[Any, tuple[int, int]]] = []
+        for i, eye in enumerate(self.window.eyes):
+            if frame.targets:
+                target = frame.targets.get(eye) or next(iter(frame.targets.values()))
+                texture = cast("moderngl.Texture", target.framebuffer.color_attachments[0])  # a swapchain image
+                out.append((texture, (target.width_px, target.height_px)))
+            elif images:
+                image = images[min(i if len(self.window.eyes) > 1 else int(eye == "right"), len(images) - 1)]
+                out.append((image, (int(image.size[0]), int(image.size[1]))))
+        return out
+
     def _queue_downscale(self, frame: FrameRequest, images: Sequence[moderngl.Texture]) -> tuple[Any, Any] | None:
-        """Draw the first eye's image, downscaled, into a small framebuffer of its own context (queued, no wait)."""
-        source: moderngl.Texture | None = None
-        size: tuple[int, int] = (0, 0)
-        if frame.targets:
-            eye = "left" if "left" in frame.targets else next(iter(frame.targets))
-            target = frame.targets[eye]
-            source = cast("moderngl.Texture", target.framebuffer.color_attachments[0])  # a swapchain image's texture
-            size = (target.width_px, target.height_px)
-        elif images:
-            source, size = images[0], (int(images[0].size[0]), int(images[0].size[1]))
-        if source is None:
+        """Draw each mirrored eye's image, downscaled, side by side into a small framebuffer of its own context
+        (queued, no wait)."""
+        sources = self._sources(frame, images)
+        if not sources:
             return None
-        ctx = source.ctx
+        ctx = sources[0][0].ctx
         cached = self._programs.get(id(ctx))
         if cached is None:
             program = ctx.program(vertex_shader=FULLSCREEN_VERTEX, fragment_shader=DOWNSCALE_SHADER)
@@ -352,10 +375,13 @@ class MirroredDisplay:
         program, vao, small = cached
         previous = ctx.fbo
         small.use()
-        source.use(0)
-        for name, value in (("u_image", 0), ("u_src", size), ("u_dst", self.window.mirror_px)):
-            cast("moderngl.Uniform", program[name]).value = value  # DOWNSCALE_SHADER declares them as uniforms
-        vao.render(vertices=3)
+        width, height = self.window.eye_px
+        for i, (source, size) in enumerate(sources):
+            ctx.viewport = (i * width, 0, width, height)
+            source.use(0)
+            for name, value in (("u_image", 0), ("u_src", size), ("u_dst", (width, height)), ("u_offset", i * width)):
+                cast("moderngl.Uniform", program[name]).value = value  # DOWNSCALE_SHADER declares them as uniforms
+            vao.render(vertices=3)
         if previous is not None:  # the framebuffer bound before (None before anything was drawn: cameras only)
             previous.use()
         return small, ctx
@@ -373,7 +399,8 @@ class MirroredDisplay:
             ms = np.asarray(values) * 1e3
             return {"median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)), "max_ms": float(ms.max())}
 
-        return {"mirror_px": list(self.window.mirror_px), "mirror_every_frames": self._every,
+        return {"mirror_px": list(self.window.mirror_px), "mirror_eyes": list(self.window.eyes),
+                "mirror_every_frames": self._every,
                 "mirror_updates": self.updates, "queue_before_submit": stats(self.queue_s),
                 "readback_and_present_after_submit": stats(self.present_s), "status_updates": self.window.status_updates,
                 "status": self.window.status_line}

@@ -19,7 +19,9 @@ Escape ends the session as Ctrl-C does (exit 130, the trial in progress discarde
 resumable): the key callback, which glfw calls from C through ctypes (an exception raised there is
 printed and dropped), only notes the press; the window raises :class:`EscapePressed` (a
 KeyboardInterrupt) from the next ``begin_frame`` or ``poll``, in the loop's own Python frames, where
-Ctrl-C would have arrived. Events are pumped at every frame, so Escape works in every phase.
+Ctrl-C would have arrived. Events are pumped at every frame, so Escape works in every phase. The
+other control keys (``p`` pause, ``c`` recalibrate: psyop.session.controls) go to the session's
+:class:`~psyop.session.controls.SessionControls` when it is given, never to the key queue.
 """
 
 from __future__ import annotations
@@ -30,17 +32,16 @@ from typing import TYPE_CHECKING
 
 from psyop.session.rows import JsonObject
 from psyop.session.clock import FlipSync
+from psyop.session.controls import ESCAPE_KEY, EscapePressed, SessionControls
 from psyop.session.frames import FrameRequest, due_slot
+
+__all__ = ["EscapePressed", "GlfwWindow", "key_name"]
 
 if TYPE_CHECKING:
     import moderngl
 
     from psyop.optics.display import DisplayProfile
     from psyop.session.clock import Clock
-
-
-class EscapePressed(KeyboardInterrupt):
-    """Escape was pressed in the session window: the session ends as on Ctrl-C (psyop.session.loop)."""
 
 
 def key_name(glfw: ModuleType, key: int, scancode: int) -> str:
@@ -61,7 +62,8 @@ class GlfwWindow:
     name = "window"
     paced = False
 
-    def __init__(self, display_profile: DisplayProfile, clock: Clock, *, scale: float = 0.25, n_eyes: int = 1) -> None:
+    def __init__(self, display_profile: DisplayProfile, clock: Clock, *, scale: float = 0.25, n_eyes: int = 1,
+                 controls: SessionControls | None = None) -> None:
         from psyop.errors import UserError
         from psyop.rendering.window import Window, WindowUnavailable
 
@@ -80,7 +82,10 @@ class GlfwWindow:
         self._clock = clock
         self._period_s = 1.0 / float(display_profile.refresh_hz)
         self._keys: list[tuple[str, float]] = []
-        self.escape_pressed = False  # set by the key callback; acted on by _pump (never raised from a callback)
+        self.escape_pressed = False  # set by the key callback; acted on by pump (never raised from a callback)
+        self.controls = controls
+        if controls is not None:
+            controls.pumps.append(self.pump)
         glfw.set_key_callback(self._window.handle, self._on_key)
         self.shade = 0.5
         self.scale = scale
@@ -101,15 +106,19 @@ class GlfwWindow:
         if action != self._glfw.PRESS:
             return
         name = key_name(self._glfw, key, scancode)
-        if name == "escape":  # noted only: an exception raised here would be lost in ctypes (module docstring)
+        if name == ESCAPE_KEY:  # noted only: an exception raised here would be lost in ctypes (module docstring)
             self.escape_pressed = True
+            return
+        if self.controls is not None and self.controls.press(name, "the session window"):
             return
         self._keys.append((name, self._clock.now_s()))
 
-    def _pump(self) -> None:
+    def pump(self) -> None:
         """Deliver the window system's pending events (key presses into the queue); Escape ends the session."""
         self._glfw.poll_events()
         if self.escape_pressed:
+            if self.controls is not None:
+                self.controls.press(ESCAPE_KEY, "the session window")
             raise EscapePressed("Escape pressed in the session window")
 
     def inject_key(self, name: str) -> None:
@@ -117,7 +126,7 @@ class GlfwWindow:
         self._keys.append((name, self._clock.now_s()))
 
     def poll(self) -> list[tuple[str, float]]:
-        self._pump()
+        self.pump()
         keys, self._keys = self._keys, []
         return keys
 
@@ -128,7 +137,7 @@ class GlfwWindow:
         """Wait on the session clock until ``not_before_s``. Real clock: the frame due now (module
         docstring); virtual clock: the frame is shown at the next flip (predicted from the flips so far
         once there are enough of them). Escape pressed since the last frame ends the session here."""
-        self._pump()
+        self.pump()
         self._clock.sleep_until(not_before_s)
         self._index += 1
         if not self._clock.virtual:

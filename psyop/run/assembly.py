@@ -26,10 +26,12 @@ from psyop.session.clock import Clock
 from psyop.session.events import EventSink
 from psyop.session.frames import Display
 from psyop.session.gaze.sample import GazeSource
+from psyop.session.headset_calibration import HeadsetCalibration
 from psyop.session.pose import PoseSource
 from psyop.session.responses.base import ResponseSource
 
 if TYPE_CHECKING:
+    from psyop.devices.experimenter import ExperimenterWindow
     from psyop.devices.window import GlfwWindow
 
 __all__ = ["Backends", "assemble", "display_used", "open_markers"]
@@ -54,6 +56,8 @@ class Backends:
     framebuffer_px: tuple[int, int] | None = None
     #: ``--experimenter-window``: the display with the window's mirror (what the loop drives); None without it
     mirrored: Display | None = None
+    #: the tracker's in-headset calibration (``pupil:...,calibrate-hmd``; psyop.session.headset_calibration); None: none
+    headset_calibration: HeadsetCalibration | None = None
 
     @property
     def shown(self) -> Display:
@@ -85,23 +89,32 @@ def open_markers(metadata: JsonObject, clock: Clock, wait_s: float) -> EventSink
 
 
 def assemble(specs: dict[str, str], context: BackendContext, markers: EventSink | None = None, *,
-             experimenter_window: bool = False) -> Backends:
+             experimenter_window: bool = False, window_optional: bool = False, terminal: bool = False) -> Backends:
     """Build the backends ``specs`` names (``{"display": ..., "tracker": ..., "pose": ..., "responses": ...}``),
     and with ``experimenter_window`` the experimenter's window right after the display
     (:func:`psyop.run.backends.experimenter_window`): it mirrors the display (``Backends.shown``), hears the
-    trial events, counts the valid gaze samples and gives keyboard responses its keys.
+    trial events, counts the valid gaze samples and gives keyboard responses its keys (``window_optional``: the
+    window was not asked for but is on by default: one that cannot open is a warning line, and the session runs
+    without it). With ``terminal`` the terminal's keys are read (psyop.devices.responses.terminal) before the
+    display is built, and its settings restored last.
 
     The closing order is the teardown the runner had by hand: responses, tracker, (raw gaze flush), pose,
     event sinks in the order they were added, the experimenter window, display."""
-    window = None
+    keys = None
     with contextlib.ExitStack() as built:  # a backend that cannot be built closes those built before it
         if markers is not None:
             built.callback(markers.close)
+        if terminal:
+            from psyop.devices.responses.terminal import TerminalKeys
+
+            keys = TerminalKeys(context.clock, context.controls)
+            built.callback(keys.close)
+            context = dataclasses.replace(context, terminal=keys)
         display = build("display", specs["display"], context)
         built.callback(display.close)
         context = dataclasses.replace(context, display=display)
-        if experimenter_window:
-            window = make_experimenter_window(context)
+        window = _experimenter_window(context, window_optional) if experimenter_window else None
+        if window is not None:
             built.callback(window.close)
             context = dataclasses.replace(context, experimenter_window=window)
         gaze = build("tracker", specs["tracker"], context)
@@ -114,6 +127,7 @@ def assemble(specs: dict[str, str], context: BackendContext, markers: EventSink 
     bundle = Backends(display, gaze, pose, responses, events + ((window,) if window is not None else ()),
                       framebuffer_px=_framebuffer_px(display))
     stack = bundle.stack
+    stack.callback(keys.close if keys is not None else (lambda: None))
     stack.callback(display.close)
     if window is not None:
         from psyop.devices.experimenter import MirroredDisplay, WatchedGaze
@@ -129,8 +143,24 @@ def assemble(specs: dict[str, str], context: BackendContext, markers: EventSink 
     stack.callback(pose.close)
     stack.callback(lambda: bundle.after_tracker_closed())
     stack.callback(gaze.close)
+    for calibration in context.headset_calibrations:  # closed before the tracker it calibrates
+        stack.callback(calibration.close)
+    bundle.headset_calibration = context.headset_calibrations[0] if context.headset_calibrations else None
     stack.callback(responses.close)
     return bundle
+
+
+def _experimenter_window(context: BackendContext, optional: bool) -> ExperimenterWindow | None:
+    """The experimenter window; when it is only on by default (``optional``), None and one warning line (stderr)
+    where it cannot open."""
+    try:
+        return make_experimenter_window(context)
+    except UserError as exc:
+        if not optional:
+            raise
+        print(f"psyop run: warning: no experimenter window ({exc.message}); the session runs without the mirror "
+              "(--no-mirror silences this)", file=sys.stderr, flush=True)
+        return None
 
 
 def _framebuffer_px(display: Display) -> tuple[int, int] | None:

@@ -35,13 +35,17 @@ from psyop.session.log.record import SessionRecord
 from psyop.session.log.store import log_identity
 
 def check_options(*, clock: str, responses: str, tracker: str, pose: str = "sim", display: str = "headless") -> None:
-    """Refuse a live device on the virtual clock (exit code 2, naming the option).
+    """Refuse a live device on the virtual clock, and a headset source without the headset display (exit code 2,
+    naming the option).
 
     Which backends are live is the registry's ``real_time`` (:mod:`psyop.run.backends`);
     an unknown backend name is refused here too, before anything is written."""
     chosen: dict[Category, str] = {"display": display, "tracker": tracker, "pose": pose, "responses": responses}
     for category, spec in chosen.items():
         lookup(category, spec)
+        if category != "display" and spec.partition(":")[0] == "openxr" and display.partition(":")[0] != "openxr":
+            raise UserError(f"{OPTION[category]} openxr reads the headset's runtime: use it with --display openxr",
+                            OPTION[category])
         if clock == "virtual" and is_real_time(category, spec):
             name = spec.partition(":")[0]
             what = ("a live device whose presses are timed in real time; on --clock virtual its response times "

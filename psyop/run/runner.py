@@ -25,19 +25,22 @@ from psyop.errors import UserError
 from psyop.protocol.model import Protocol
 from psyop.run.assembly import Backends, assemble, display_used, open_markers
 from psyop.run.backends import BackendContext, is_real_time
+from psyop.run.headset import calibrate_before_trials, raise_if_calibration_failed
 from psyop.session.clock import Clock, RealClock, VirtualClock
+from psyop.session.controls import ESCAPE_KEY, PAUSE_KEY, SessionControls, controls_for
 from psyop.session.frames import CameraRenderer, Display, FrameRenderer
 from psyop.session.gaze.simulated import SimulatedTrackerConfig, seed_for
 from psyop.session.log.record import read_record
 from psyop.session.log.layout import SessionPaths, session_paths, write_dataset_description
 from psyop.session.log.schema import trial_schema
 from psyop.adaptive.session import AdaptiveLevels, add_log_columns
+from psyop.session.log.screens_log import ScreenRecorder
 from psyop.session.log.store import SessionLog, SessionStore, recover_tables
 from psyop.session.validation import gaze_validator
 from psyop.session.screens import Pacing, ScreenRunner, session_screens
 from psyop.session.rows import TrialRow
 from psyop.session.gaze.delay import DelayedGaze
-from psyop.session.loop import LoopConfig, LoopFacts, LoopOptions, SessionOutcome, TrialLoop
+from psyop.session.loop import BetweenTrials, LoopConfig, LoopFacts, LoopOptions, SessionOutcome, TrialLoop
 from psyop.session.plan import DEFAULT_IPD_M, SessionPlan, compile_plan
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.run.resume import accept_protocol_change, check_free, check_options, resolve_seed
@@ -80,6 +83,12 @@ class SessionOptions:
     participant_index: int | None = None  # keys block_order: latin_square (None: the number the ID ends in)
     mesh_files: MeshFiles | None = None  # the models validation read (psyop.mesh.MeshFiles), reused (None: read anew)
     experimenter_window: bool = False  # a mirror and status window for the experimenter (psyop.devices.experimenter)
+    experimenter_window_optional: bool = False  # on by default, not asked for: one that cannot open is a warning
+    mirror_eye: str = "left"  # the experimenter window mirrors the left eye, the right one, or both
+    mirror_width_px: int = 320  # each mirrored eye's width in the experimenter window (pixels)
+    #: read the terminal's keys (answers, Escape, p, c); None: when standard input is a foreground terminal and the
+    #: clock is real (psyop.devices.responses.terminal)
+    terminal_keys: bool | None = None
 
     @property
     def simulated_sources(self) -> tuple[str, ...]:
@@ -203,22 +212,47 @@ def run_session(
     opened = _open(protocol, compile_schedule, options, store_factory)
     markers = open_markers(opened.metadata, opened.clock, options.lsl_wait_s) if options.lsl_markers else None
     opened.metadata["lsl_markers"] = options.lsl_markers
+    controls = _controls(opened.plan, options)
     context = BackendContext(clock=opened.clock, seed=opened.seed, plan=opened.plan, participant=options.participant,
                              protocol_sha256=protocol.source_sha256, schedule=opened.schedule,
                              tracker_faults=options.tracker_faults, window_scale=options.window_scale,
-                             session=options.session, xr_request_exit_at_frame=options.xr_request_exit_at_frame)
+                             session=options.session, xr_request_exit_at_frame=options.xr_request_exit_at_frame,
+                             controls=controls, mirror_eye=options.mirror_eye, mirror_width_px=options.mirror_width_px)
     specs = {"display": options.display, "tracker": options.tracker, "pose": options.pose,
              "responses": options.responses}
-    with assemble(specs, context, markers, experimenter_window=options.experimenter_window) as bundle:
-        outcome, loop = _run(opened, bundle, options)
+    with assemble(specs, context, markers, experimenter_window=options.experimenter_window,
+                  window_optional=options.experimenter_window_optional,
+                  terminal=_reads_terminal(options)) as bundle:
+        outcome, loop = _run(opened, bundle, options, controls, context.on_recalibrate)
     _finalise(opened, bundle, loop, outcome, options)
+    raise_if_calibration_failed(outcome)
     return outcome
+
+
+def _controls(plan: SessionPlan, options: SessionOptions) -> SessionControls:
+    """The session's control keys (psyop.session.controls): with ``--responses keyboard`` the key map's keys stay
+    answers, and a control key among them is named on the console (it does not work in this session)."""
+    answers = list(plan.response.inputs.keys) if options.responses.partition(":")[0] == "keyboard" else []
+    controls = controls_for(answers)
+    for key in controls.unavailable():
+        _notice(f"the key {key!r} answers in this session (the response key map), so it does not "
+                f"{'pause' if key == PAUSE_KEY else 'end' if key == ESCAPE_KEY else 'recalibrate'}")
+    return controls
+
+
+def _reads_terminal(options: SessionOptions) -> bool:
+    """Whether the session reads the terminal's keys (``terminal_keys``; by default a live session in a terminal)."""
+    if options.terminal_keys is not None:
+        return options.terminal_keys
+    from psyop.devices.responses.terminal import terminal_usable
+
+    return options.clock == "real" and terminal_usable()
 
 
 def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], options: SessionOptions,
           store_factory: StoreFactory | None) -> _Opened:
     """Resolve the options against any earlier run of the session: plan, seed, schedule, clock, log, metadata."""
-    plan = compile_plan(protocol)
+    plan = compile_plan(protocol, responses=options.responses)
     paths = session_paths(options.data_root, plan.study, options.participant, options.session)
     check_options(clock=options.clock, responses=options.responses, tracker=options.tracker, pose=options.pose,
                   display=options.display)
@@ -260,6 +294,8 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
     """session.json's fields known before the backends are built (in the order they are written)."""
     from psyop.schedule.counterbalance import block_sequence
     from psyop.stimulus.meshes import protocol_mesh_records
+    from psyop.session.achieved import display_output
+    from psyop.session.log.recorded_design import design_of
 
     randomisation = protocol.design.randomisation
     source = Path(protocol.source_name).parent if protocol.source_name else None  # as SceneRenderer reads them
@@ -278,10 +314,14 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
         "tracker": options.tracker, "responses": options.responses,
         "display_mode": options.display, "clock": options.clock,
         "pose": options.pose, "meshes": protocol_mesh_records(protocol, source, opened.mesh_files),
+        # calibrated (the calibration file and the output's method) or pixel values (psyop.protocol.luminance)
+        "display_output": display_output(protocol, opened.schedule, opened.plan, source),
         # the command line's fault rates of the simulated tracker (the analysis rebuilds its stream from them)
         "sim_tracker_faults": {"dropout_rate_hz": options.tracker_faults.dropout_rate_hz,
                                "nan_burst_rate_hz": options.tracker_faults.nan_burst_rate_hz}
         if options.tracker.partition(":")[0] == "sim" else None,
+        # what the analysis reads of the protocol, typed (SessionRecord.study_design reads it through the same model)
+        "study_design": design_of(protocol).model_dump(mode="json"),
     }
 
 
@@ -306,7 +346,8 @@ def _notice(text: str) -> None:
     print(f"psyop run: {text}", file=sys.stderr, flush=True)
 
 
-def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[SessionOutcome, TrialLoop]:
+def _run(opened: _Opened, bundle: Backends, options: SessionOptions, controls: SessionControls | None = None,
+         on_recalibrate: list[BetweenTrials] | None = None) -> tuple[SessionOutcome, TrialLoop]:
     """Start the tracker, open the log, make the renderer (closed first by ``bundle``) and run the loop."""
     plan, clock, store, gaze = opened.plan, opened.clock, opened.store, bundle.gaze
     if plan.latency.adds:  # display.added_latency_ms: frames take past samples from the raw stream (docs/latency.md)
@@ -338,15 +379,20 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
     # the plan's facts (the moving target's path among them: psyop.quality rebuilds it) and this run's options
     config = LoopConfig.of(LoopFacts.of_plan(plan), LoopOptions(every_frame=every_frame, phase_delay_s=options.phase_delay_s,
                                                                 progress=options.progress))
+    recorder = store.screen_recorder() if isinstance(store, SessionStore) else None  # screens, pauses (events.parquet)
+    if recorder is not None:
+        bundle.stack.callback(recorder.close)
     loop = TrialLoop(
         identity={"study": plan.study, "participant": options.participant, "session": options.session},
         phases=plan.phases, clock=clock, gaze=gaze, responses=bundle.responses,
         renderer=renderer, display=bundle.shown, store=store, config=config, pose=bundle.pose,
         response=plan.response, announce=announce, adaptive=adaptive, events=bundle.events,
         validator=gaze_validator(plan.protocol.gaze_validation, store), notice=_notice,
-        screens=_screens(plan, opened, bundle, options, fresh=not completed),
+        screens=_screens(plan, opened, bundle, options, fresh=not completed, recorder=recorder),
+        controls=controls, control_log=recorder,
     )
     loop.timing_reruns = list(opened.earlier_reruns)
+    loop.on_recalibrate.extend(on_recalibrate or ())  # the backends' (a tracker's calibration), before validation
     loop.latency = plan.latency  # the latency each trial adds and the bound it is judged by (psyop.session.latency)
     if loop.validator is not None:
         bundle.stack.callback(loop.validator.close)
@@ -354,11 +400,15 @@ def _run(opened: _Opened, bundle: Backends, options: SessionOptions) -> tuple[Se
         bundle.stack.callback(loop.screens.close)
     bundle.after_tracker_closed = lambda: store.append_gaze(
         raw_gaze_table(gaze.drain_raw(), run=store.run_index, trial=loop.current_trial), key=loop.current_trial)
+    # the tracker's in-headset calibration (pupil:...,calibrate-hmd): before the first trial, and on c (psyop.run.headset)
+    stopped = calibrate_before_trials(bundle, plan, loop, opened.schedule, completed)
+    if stopped is not None:
+        return stopped, loop
     return loop.run(opened.schedule, completed), loop
 
 
 def _screens(plan: SessionPlan, opened: _Opened, bundle: Backends, options: SessionOptions, *,
-             fresh: bool) -> ScreenRunner | None:
+             fresh: bool, recorder: ScreenRecorder | None) -> ScreenRunner | None:
     """The protocol's ``session:`` screens for this run (None: it has none): the simulated participant paces and
     answers them with ``--responses sim``, nobody with ``none``, else the live participant's answer inputs end
     them, and a source's raw input (``poll_raw``: keyboard, response box) answers questionnaire items
@@ -366,8 +416,6 @@ def _screens(plan: SessionPlan, opened: _Opened, bundle: Backends, options: Sess
     section = plan.protocol.session
     if section is None:
         return None
-    store = opened.store
-    recorder = store.screen_recorder() if isinstance(store, SessionStore) else None  # power's log keeps none
     name = options.responses.partition(":")[0]
     pacing: Pacing = "simulated" if name == "sim" else "nobody" if name == "none" else "live"
     responses = bundle.responses

@@ -1,4 +1,4 @@
-"""Keyboard responses through a small event interface (a window supplies the events).
+"""Keyboard responses through a small event interface (a window or the terminal supplies the events).
 
 The keys are raw input; the response kind (psyop.protocol.kinds, carried by the session plan) maps each to
 an answer (its ``keys``) and scores it. A kind whose answer is a hand position (reach) has its keys confirm
@@ -19,6 +19,18 @@ class KeyEvents(Protocol):
     """Source of key presses: ``poll`` returns (key name, time on the session clock) pairs."""
 
     def poll(self) -> list[tuple[str, float]]: ...
+
+
+class MergedKeys:
+    """Several key sources as one (the experimenter window and the terminal): every source's presses, in the
+    order they were made."""
+
+    def __init__(self, sources: list[KeyEvents]) -> None:
+        self.sources = list(sources)
+
+    def poll(self) -> list[tuple[str, float]]:
+        keys = [key for source in self.sources for key in source.poll()]
+        return sorted(keys, key=lambda key: key[1])
 
 
 class KeyboardResponses:
