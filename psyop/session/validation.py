@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 import pandas as pd
 
+from psyop import datacontract as dc
 from psyop.optics.angles import angle_between_deg, fick_angles_deg, fick_direction
 from psyop.protocol.validation import GazeValidation, ValidationRequirement
 from psyop.session.events import SessionEvent
@@ -130,11 +131,11 @@ def point_measures(samples: pd.DataFrame, start_s: float, end_s: float, target_d
                    distance_m: float) -> dict[str, float | int]:
     """Accuracy and precision of the raw samples (gaze.parquet columns) with ``start_s <= t < end_s`` on a
     target at Fick angles ``target_deg`` (from the head origin) and ``distance_m``."""
-    t = samples["gaze_sample_t_s"].to_numpy(dtype=np.float64)
+    t = samples[dc.GAZE_SAMPLE_T_S].to_numpy(dtype=np.float64)
     window = samples[(t >= start_s) & (t < end_s)]
-    fixation = window[["fixation_x_m", "fixation_y_m", "fixation_z_m"]].to_numpy(dtype=np.float64)
+    fixation = window[list(dc.FIXATION_COLUMNS)].to_numpy(dtype=np.float64)
     norm = np.linalg.norm(fixation, axis=1)
-    ok = window["gaze_valid"].to_numpy(dtype=bool) & np.all(np.isfinite(fixation), axis=1) & (norm > 0)
+    ok = window[dc.GAZE_VALID].to_numpy(dtype=bool) & np.all(np.isfinite(fixation), axis=1) & (norm > 0)
     direction = fixation[ok] / norm[ok, None]
     target = fick_direction(*target_deg)
     error = np.asarray(angle_between_deg(direction, target), dtype=np.float64).reshape(-1)
@@ -270,11 +271,13 @@ def gaze_validator(validation: GazeValidation | None, store: SessionLog) -> Gaze
     return GazeValidator(validation, store.validation_recorder())
 
 
-def hold_target(loop: ValidationHost, phase: TargetPhase, start_s: float) -> None:
+def hold_target(loop: ValidationHost, phase: TargetPhase, start_s: float) -> list[float]:
     """Show ``phase``'s target from ``start_s`` for its duration, asking the tracker for gaze each frame:
     every frame rendered (a person watches) or, on the virtual clock without images, one poll per frame
-    period (so a simulated tracker's requested stream has the samples to measure)."""
+    period (so a simulated tracker's requested stream has the samples to measure). Returns the session-clock
+    time each frame was shown (its display time; a poll's time without images)."""
     end_s = start_s + phase.duration_s
+    shown_s: list[float] = []
     t = start_s
     gaze_at = (0.0, 0.0, -phase.target_distance_m)  # the conventional camera ignores it
     row = {"trial": -1, "condition": "gaze_validation"}
@@ -282,6 +285,7 @@ def hold_target(loop: ValidationHost, phase: TargetPhase, start_s: float) -> Non
         if not loop.config.every_frame:
             loop.clock.sleep_until(t)
             loop.gaze.latest(loop.clock.now_s())
+            shown_s.append(t)
             t += loop.frame_period_s
             continue
         request = loop.display.begin_frame(t)
@@ -293,5 +297,7 @@ def hold_target(loop: ValidationHost, phase: TargetPhase, start_s: float) -> Non
         loop.display.end_frame(request, loop.renderer.eye_textures() if loop.renderer is not None else [])
         if check is not None and check.checked and not check.ok:
             raise RuntimeError(f"gaze validation point {phase.name}: rendered frame failed its check")
+        shown_s.append(request.display_time_s)
         t = max(t + loop.frame_period_s, request.display_time_s + request.period_s)
     loop.clock.sleep_until(end_s)
+    return shown_s

@@ -14,6 +14,17 @@ Capture: ``calibration.should_start`` -> ``calibration.started`` then, after ``c
 ``calibration_fails``); ``recording.should_start`` -> ``recording.started`` (with
 ``session_name``); ``recording.should_stop`` -> ``recording.stopped``. Everything it received is
 kept in ``notifications``, ``annotations`` and ``commands`` for the tests to check.
+HMD calibration as Capture's HMD 3D choreography does it (calibration_choreography/hmd_plugin.py; the plugin is
+``HMD3DChoreographyPlugin`` from version 2.0 on, ``HMD_Calibration_3D`` before): ``start_plugin`` of that name
+selects it; then ``calibration.should_start`` needs ``translation_eye0`` / ``translation_eye1`` (3 values each)
+and answers ``calibration.started``; while it runs the participant's pupil data is collected (``eyes``, where the
+test says they look: pupil_hmd_model.Eyes) and every ``calibration.add_ref_data`` ``ref_data`` is kept;
+``calibration.should_stop`` answers ``calibration.stopped``, fits the mapping (pupil_hmd_model.HmdCalibration.fit)
+and answers ``calibration.successful`` then ``calibration.result.v2``, or ``calibration.failed`` with reason
+``CalibrationError`` (Capture >= 2.0's words; ``hmd_failure`` keeps the cause). Once fitted, gaze is the fitted
+mapping of where the eyes look (the reference frame, mm), binocular fields included. A test in another process
+moves the eyes with a notification of its own, ``test.look_at`` (``point_m``: head space, m; ``delay_s``: from
+now, in Pupil time), which Capture would ignore.
 Pupil time = monotonic + ``offset_s`` (+ ``drift`` x elapsed), so the client's clock
 sync has something to find. ``skip_every`` drops messages to create gaps.
 
@@ -29,7 +40,9 @@ import threading
 import time
 
 import msgpack
+import numpy as np
 import zmq
+from pupil_hmd_model import Eyes, HmdCalibration, HmdFit
 
 
 #: the eye fields of Capture's binocular 3-D gaze datum ('gaze.3d.01.', Pupil Core Network API, gaze datum
@@ -44,7 +57,8 @@ BINOCULAR_FIELDS = {"eye_centers_3d": {0: [30.0, 10.0, -20.0], 1: [-30.0, 10.0, 
 class FakePupilCapture:
     def __init__(self, *, offset_s: float = 1000.0, drift: float = 0.0, rate_hz: float = 120.0,
                  point_mm: tuple[float, float, float] = (100.0, -50.0, 800.0), confidence: float = 0.95,
-                 skip_every: int = 0, low_confidence_every: int = 0, binocular: bool = False) -> None:
+                 skip_every: int = 0, low_confidence_every: int = 0, binocular: bool = False,
+                 version: str = "3.5.1") -> None:
         self.offset_s, self.drift, self.rate_hz = offset_s, drift, rate_hz
         self.point_mm, self.confidence = point_mm, confidence
         self.skip_every, self.low_confidence_every = skip_every, low_confidence_every
@@ -54,10 +68,18 @@ class FakePupilCapture:
         self.gaze_time_shift_s = 0.0
         self.gaze_timestamp: float | None = None
         self.t_requests = 0
-        self.version = "3.5.1"
+        self.version = version
         self.calibration_s = 0.2
         self.calibration_fails = False
         self.recording: str | None = None
+        self.eyes = Eyes()  # where the participant looks (the test moves it); their pupil data feeds an HMD calibration
+        self.hmd_plugin: str | None = None  # the HMD calibration plugin started ('start_plugin'), None: none
+        self.hmd: HmdCalibration | None = None  # the HMD calibration running
+        self.hmd_refs: list[dict] = []  # every reference datum the last HMD calibration received
+        self.hmd_fit: HmdFit | None = None  # the mapping the last successful one fitted (gaze follows it)
+        self.hmd_failure: str | None = None  # why the last one failed
+        self.hmd_max_residual_deg = 1.0
+        self._hmd_lock = threading.Lock()
         self.commands: list[str] = []
         self.notifications: list[dict] = []
         self.annotations: list[dict] = []
@@ -106,8 +128,56 @@ class FakePupilCapture:
         payload = {"subject": subject, "topic": f"notify.{subject}", **fields}
         self._on_message([f"notify.{subject}".encode(), msgpack.packb(payload, use_bin_type=True)])
 
+    def hmd_plugin_name(self) -> str:
+        """The HMD 3-D calibration plugin's name in this Capture version."""
+        return "HMD3DChoreographyPlugin" if int(self.version.split(".")[0]) >= 2 else "HMD_Calibration_3D"
+
+    def _act_hmd(self, notification: dict) -> bool:
+        """The HMD calibration's part of acting on a notification; True when it was one of its."""
+        subject = notification.get("subject")
+        if subject == "start_plugin" and notification.get("name") == self.hmd_plugin_name():
+            self.hmd_plugin = self.hmd_plugin_name()
+            return True
+        if self.hmd_plugin is None:
+            return False
+        if subject == "calibration.should_start":
+            t0, t1 = notification.get("translation_eye0"), notification.get("translation_eye1")
+            if self.hmd is None and isinstance(t0, list) and isinstance(t1, list) and len(t0) == len(t1) == 3:
+                with self._hmd_lock:
+                    self.hmd = HmdCalibration((np.asarray(t0, dtype=float), np.asarray(t1, dtype=float)))
+                self.notify("calibration.started")
+            return True  # without both translations Capture logs an error and does not start
+        if subject == "calibration.add_ref_data":
+            if self.hmd is not None:
+                with self._hmd_lock:
+                    self.hmd.refs.extend(notification.get("ref_data") or [])
+            return True
+        if subject == "calibration.should_stop" and self.hmd is not None:
+            with self._hmd_lock:
+                hmd, self.hmd = self.hmd, None
+            self.hmd_refs = list(hmd.refs)
+            self.notify("calibration.stopped")
+            fit = hmd.fit(self.rate_hz, self.hmd_max_residual_deg)
+            gazer = {"gazer_class_name": "GazerHMD3D", "timestamp": self.pupil_time(), "record": True}
+            if isinstance(fit, str):
+                self.hmd_failure = fit
+                self.notify("calibration.failed", reason="CalibrationError", **gazer)
+            else:
+                self.hmd_fit, self.hmd_failure = fit, None
+                self.notify("calibration.successful", **gazer)
+                if self.hmd_plugin == "HMD3DChoreographyPlugin":  # Capture >= 2.0's gazer_base; 1.x sends none
+                    self.notify("calibration.result.v2", params=fit.params(), version=2, **gazer)
+            return True
+        return subject in ("calibration.should_stop",)
+
     def _act(self, notification: dict) -> None:
         subject = notification.get("subject")
+        if subject == "test.look_at":  # the participant of a test in another process (a headset session)
+            point = tuple(float(v) for v in notification["point_m"])
+            self.eyes.look_from(self.pupil_time() + float(notification.get("delay_s", 0.0)), point)  # type: ignore[arg-type]
+            return
+        if self._act_hmd(notification):
+            return
         if subject == "calibration.should_start":
             self.notify("calibration.started")
 
@@ -196,10 +266,21 @@ class FakePupilCapture:
                        "gaze_point_3d": list(self.point_mm), "norm_pos": [0.5, 0.5]}
             if self.binocular:
                 payload.update(BINOCULAR_FIELDS)
+            payload.update(self._hmd_gaze(stamp))
             self._send([b"gaze.3d.01.", msgpack.packb(payload, use_bin_type=True)])
             self.sent += 1
         with self._pub_lock:
             self._pub.close(0)
+
+    def _hmd_gaze(self, stamp: float) -> dict:
+        """Collect the eyes' pupil data for an HMD calibration running; once one fitted, the gaze fields it maps."""
+        self.eyes.at(stamp)
+        normals = self.eyes.pupil_normals()
+        with self._hmd_lock:
+            if self.hmd is not None:
+                self.hmd.pupil.append((float(stamp), normals[0], normals[1]))
+            fit = self.hmd_fit
+        return fit.gaze(normals) if fit is not None else {}
 
     def stop(self) -> None:
         """Disconnect: stop answering and publishing, close the sockets."""

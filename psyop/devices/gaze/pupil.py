@@ -32,13 +32,21 @@ from psyop.session.gaze.plan import FixationPlan
 from psyop.session.gaze.sample import EyeSample, GazeSample, RawBuffer, RawGazeSample, TrackerLost, is_usable
 from psyop.session.gaze.sync import ClockSync, fit_clock_sync
 
-__all__ = ["ClockSync", "PupilClient", "fit_clock_sync", "world_mm_to_head_m"]
+__all__ = ["ClockSync", "PupilClient", "fit_clock_sync", "head_m_to_world_mm", "world_mm_to_head_m"]
 
 
 def world_mm_to_head_m(point_mm: tuple[float, float, float]) -> tuple[float, float, float]:
     """Pupil world camera (x right, y down, z forward, mm) -> head space (y up, -z forward, m)."""
     x, y, z = point_mm
     return (x / 1000.0, -y / 1000.0, -z / 1000.0)
+
+
+def head_m_to_world_mm(point_m: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Head space (x right, y up, -z forward, m) -> Pupil's world-camera frame (x right, y down, z forward, mm):
+    the inverse of :func:`world_mm_to_head_m`. An HMD calibration's reference points are sent in this frame, so
+    the gaze Capture maps after it (in the frame of its reference points) decodes as every Pupil datum does."""
+    x, y, z = point_m
+    return (x * 1000.0, -y * 1000.0, -z * 1000.0)
 
 
 def world_to_head_direction(direction: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -143,6 +151,7 @@ class PupilClient:
         self.record_name = record_name
         self.annotate = annotate
         self.calibration: JsonObject | None = None  # what Capture's calibration said (session.json)
+        self.sub_port: int | None = None  # the IPC backbone's subscription port (known once started)
         self._recording = False
         self._annotations: queue.Queue[JsonObject] = queue.Queue()
         self._annotations_sent = self._annotations_confirmed = 0
@@ -213,7 +222,7 @@ class PupilClient:
             raise self._unreachable(f"did not answer 'SUB_PORT' within {self.request_timeout_s} s")
         if not reply.isdigit() or not 0 < int(reply) < 65536:
             raise self._unreachable(f"answered 'SUB_PORT' with {reply[:40]!r}, not a port number")
-        sub_port = int(reply)
+        sub_port = self.sub_port = int(reply)
         self.sync = self.synchronise()
         if self.annotate:  # Capture records annotations only while its Annotation_Capture plugin runs
             self._forward({"subject": "start_plugin", "name": "Annotation_Capture", "args": {},
