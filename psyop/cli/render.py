@@ -264,16 +264,23 @@ def _scene(args: argparse.Namespace, protocol: Protocol, protocol_path: Path, ro
     from psyop.stimulus.meshes import SessionMeshes
 
     if args.phase == "response" or args.phase in SCREEN_PHASES:
-        from psyop.rendering.text import em_px_for_display, text_image
-        from psyop.stimulus import blank_scene, scene_origin_m, text_scene
-        from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
-
-        em_px = em_px_for_display(view.display, TEXT_LETTER_HEIGHT_DEG)
         from psyop.protocol.kinds import kind_of
+        from psyop.rendering.text import TextDoesNotFit, TextImages, display_views
+        from psyop.session.plan import compile_plan
+        from psyop.session.text_fit import panel_offsets_tan
+        from psyop.stimulus import blank_scene, scene_origin_m, text_scene
 
+        if response_text is None:
+            return blank_scene()
+        # laid out as the session lays it out on this display (docs/rendering.md, "Legible text")
+        plan = compile_plan(protocol, tracker_ipd_m=view.ipd_m)
+        texts = TextImages(views=display_views(view.display, panel_offsets_tan(plan)))
         keep = args.phase in SCREEN_PHASES or kind_of(protocol.response).response_text(protocol.response) is not None
-        image = None if response_text is None else text_image(response_text, em_px, keep_lines=keep)
-        return blank_scene() if image is None else text_scene(image, scene_origin_m(protocol, view.centre_m))
+        try:
+            image = texts.image(response_text, keep_lines=keep)
+        except TextDoesNotFit as error:
+            raise UserError(f"--phase {args.phase}: {error}") from None
+        return text_scene(image, scene_origin_m(protocol, view.centre_m))
     return build_scene(protocol, row, args.time_s, view.centre_m, interval=args.interval, base_dir=protocol_path.parent,
                        meshes=SessionMeshes(protocol_path.parent, mesh_files))
 

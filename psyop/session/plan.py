@@ -32,7 +32,7 @@ from psyop.protocol.model import Protocol
 from psyop.protocol.observer import Observer
 from psyop.protocol.kinds import kind_of
 from psyop.protocol.kinds.adjustment import AdjustmentResponse, AdjustmentSpec
-from psyop.protocol.kinds.base import Inputs, KindResponse, ResponseKindSpec
+from psyop.protocol.kinds.base import INPUT_SOURCES, Inputs, KindResponse, ResponseKindSpec
 from psyop.protocol.kinds.left_right_nearer import LeftRightNearerResponse
 from psyop.protocol.kinds.reach import ReachResponse
 from psyop.protocol.scene import FactorRef, FixationTarget
@@ -174,31 +174,40 @@ class ResponsePlan:
     adjustment: AdjustmentSpec | None = None
     #: the kind's lines under the prompt (ResponseKindSpec.response_text: a rating's scale); None: the prompt alone
     response_text: str | None = None
+    #: the lines a default prompt adds under the question: which inputs of the session's response source give each
+    #: answer (ResponseKindSpec.answer_keys_text); None: no source that names inputs (simulated, nobody, unknown)
+    answer_keys: str | None = None
+
+    @property
+    def _default_prompt(self) -> bool:
+        return not (self.prompt is not None and self.prompt.strip())
 
     @property
     def keeps_lines(self) -> bool:
         """Whether :attr:`participant_text` is drawn with its line breaks kept (each line wrapped on its own):
-        when the kind adds lines; a prompt alone is wrapped as one paragraph, as ever."""
-        return self.response_text is not None
+        when the kind or the source's keys add lines; a prompt alone is wrapped as one paragraph, as ever."""
+        return self.response_text is not None or (self._default_prompt and self.answer_keys is not None)
 
     @property
     def participant_text(self) -> str | None:
         """What the participant reads in the headset during the response phase: the ``prompt``, else the
-        ``question``, then the kind's :attr:`response_text` after an empty line; None when the display is off
-        (docs/protocols.md, "Trial phases")."""
+        ``question`` followed by :attr:`answer_keys` (the default prompt names the keys); then the kind's
+        :attr:`response_text`, each part after an empty line; None when the display is off (docs/protocols.md,
+        "Trial phases")."""
         if self.display_off or self.phase.show in ("off", "stimulus"):  # an adjustment shows what it adjusts
             return None
-        for text in (self.prompt, self.question):
-            if text is not None and text.strip():
-                return text.strip() if self.response_text is None else f"{text.strip()}\n\n{self.response_text}"
-        return self.response_text
+        head = self.question if self._default_prompt else self.prompt
+        keys = self.answer_keys if self._default_prompt else None
+        parts = [text.strip() for text in (head, keys, self.response_text) if text is not None and text.strip()]
+        return "\n\n".join(parts) if parts else None
 
     def as_dict(self) -> dict[str, Any]:  # Any: session.json values
         return {"kind": self.kind.name, "question": self.question,
                 "prompt": self.prompt, "timeout_s": self.timeout_s, "display_off": self.display_off,
                 "average_last_samples": self.average_last_samples, "level_factor": self.level_factor} | \
             ({} if self.adjustment is None else {"adjustment": self.adjustment.as_dict()}) | \
-            ({} if self.response_text is None else {"response_text": self.response_text})
+            ({} if self.response_text is None else {"response_text": self.response_text}) | \
+            ({} if self.answer_keys is None else {"answer_keys": self.answer_keys})
 
 
 @dataclass(frozen=True)
@@ -352,10 +361,12 @@ def _response_phase(protocol: Protocol, display_off: bool) -> PhaseSpec:
     return PhaseSpec("response", 0.0, "off" if display_off else "blank", "none")
 
 
-def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> SessionPlan:
+def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None, responses: str | None = None) -> SessionPlan:
     """The plan of a session of ``protocol``. ``tracker_ipd_m``: the ipd the tracker measured
     (used when the protocol says ``ipd: tracker``; None: :data:`DEFAULT_IPD_M`, recorded as
-    the default)."""
+    the default). ``responses``: the session's response source as ``psyop run --responses`` names it
+    (``keyboard``, ``serial:DEVICE``, ``openxr``, ...): a default prompt names that source's inputs
+    (:func:`answer_keys`); None (the default): no source known, the default prompt is the question alone."""
     from psyop.protocol.display import FixedIpd, rendering_nc_rule, resolve_display_profile, resolve_eye_model
 
     spec = protocol.display
@@ -384,6 +395,7 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
         average_last_samples=int(r.average_last_samples) if isinstance(r, ReachResponse) else 10,
         level_factor=r.level(),
         response_text=kind_of(r).response_text(r),
+        answer_keys=answer_keys(r, responses),
         phase=_response_phase(protocol, display_off),
         adjustment=AdjustmentSpec.of(r) if isinstance(r, AdjustmentResponse) else None,
     )
@@ -392,6 +404,17 @@ def compile_plan(protocol: Protocol, *, tracker_ipd_m: float | None = None) -> S
                        adaptive=adaptive_plan(protocol),
                        min_valid_gaze_share=float(protocol.trial.min_valid_gaze_share),
                        latency=gaze_latency(protocol))
+
+
+def answer_keys(response: KindResponse, responses: str | None) -> str | None:
+    """The lines a default prompt adds for the response source ``responses`` (``psyop run --responses``; its name
+    before any ``:``): the kind's inputs of a keyboard, a serial response box or OpenXR controllers; None for any
+    other source (simulated, nobody) and for None."""
+    source = None if responses is None else responses.partition(":")[0]
+    for known in INPUT_SOURCES:
+        if source == known:
+            return kind_of(response).answer_keys_text(response, known)
+    return None
 
 
 def gaze_latency(protocol: Protocol) -> GazeLatency:

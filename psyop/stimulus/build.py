@@ -504,18 +504,21 @@ def text_scene(
     text: TextImage,
     origin_m: ArrayLike,
     distance_m: float = TEXT_DISTANCE_M,
-    letter_height_deg: float = TEXT_LETTER_HEIGHT_DEG,
+    letter_height_deg: float | None = None,
     background: tuple[float, float, float] = (0.5, 0.5, 0.5),
 ) -> Scene:
     """A head-fixed panel with ``text`` (psyop.rendering.text), straight ahead of ``origin_m`` at
-    ``distance_m``: one em subtends ``letter_height_deg`` there and the panel keeps the image's aspect ratio.
+    ``distance_m``: one em subtends ``letter_height_deg`` there (None: the text's own ``em_deg``, its legible
+    size on the display it was laid out for) and the panel keeps the image's aspect ratio.
     ``origin_m``: :func:`scene_origin_m` (the eye's centre when monocular, the head origin in stereo, so both
     eyes see one panel at ``distance_m`` with its disparity)."""
     origin = np.asarray(origin_m, dtype=np.float64).reshape(3)
-    em_m = 2.0 * distance_m * math.tan(math.radians(letter_height_deg) / 2.0)
+    em_deg = text.em_deg if letter_height_deg is None else letter_height_deg
+    em_m = 2.0 * distance_m * math.tan(math.radians(em_deg) / 2.0)
     half_w, half_h = text.width_em * em_m / 2.0, text.height_em * em_m / 2.0
+    # its outline is no stimulus edge: 4x4 samples there (32x32 cost 13x per frame on llvmpipe: bench_text_panel)
     panel = Primitive(Shape.RECT, tuple(origin + np.array([0.0, 0.0, -distance_m])), (half_w, 0.0, 0.0),
-                      (0.0, half_h, 0.0), text.texture, name=TEXT_PRIMITIVE_NAME)
+                      (0.0, half_h, 0.0), text.texture, name=TEXT_PRIMITIVE_NAME, edge_samples_per_axis=4)
     return Scene((panel,), background=background)
 
 

@@ -139,7 +139,18 @@ def test_every_phase_of_a_generated_protocol_renders_for_a_watching_participant(
         return
     plan = compile_plan(protocol)
     row = compile_schedule(protocol, 1).iloc[-1].to_dict()
-    renderer = SceneRenderer(plan, scale=0.25, ctx=gl_context, owns_ctx=False)
+    if plan.adaptive is not None:  # the session places the adaptive level each trial: its first level here
+        from psyop.adaptive.staircase import StaircaseSpec
+
+        spec = plan.adaptive.spec
+        row[plan.adaptive.factor] = float(spec.start if isinstance(spec, StaircaseSpec) else spec.stimulus[0])
+    scale = min(1.0, max(0.25, 400 / plan.display.height_px))  # 400 px tall at least: room for legible text
+    try:
+        renderer = SceneRenderer(plan, scale=scale, ctx=gl_context, owns_ctx=False)
+    except UserError as refused:  # text that cannot be drawn legibly even so is refused at start, in one line
+        assert "px view" in refused.message and "\n" not in str(refused), refused
+        event("refused at start: its text does not fit the display legibly")
+        return
     try:
         for phase in (*plan.phases, plan.response.phase):
             check = renderer.render(row, phase, plan.mode_for(phase, row), 0.05, (0.0, 0.0, -1.0))

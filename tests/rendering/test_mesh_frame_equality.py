@@ -48,7 +48,7 @@ def _images(text: str, tmp_path: Path, former: bool, ctx, monkeypatch: pytest.Mo
     with monkeypatch.context() as m:
         if former:
             m.setattr(mesh_pass, "MeshPass", FormerMeshPass)
-        r = SceneRenderer(plan, scale=0.08, ctx=ctx, owns_ctx=False, check_every=WATCHED_CHECK_EVERY)
+        r = SceneRenderer(plan, scale=0.12, ctx=ctx, owns_ctx=False, check_every=WATCHED_CHECK_EVERY)
         r.settings = dataclasses.replace(r.settings, samples_per_axis=8)  # the same for both, affordable on llvmpipe
         images = []
         try:

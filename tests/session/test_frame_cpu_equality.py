@@ -61,7 +61,7 @@ def test_cached_scenes_give_the_same_scenes_images_and_checks(tmp_path: Path, na
     from psyop.rendering.renderer import create_headless_context
 
     ctx = create_headless_context()
-    renderers = {flag: (SceneRenderer if flag else FormerSceneRenderer)(plan, scale=0.05, ctx=ctx, owns_ctx=False,
+    renderers = {flag: (SceneRenderer if flag else FormerSceneRenderer)(plan, scale=0.12, ctx=ctx, owns_ctx=False,
                                                                         check_every=WATCHED_CHECK_EVERY)
                  for flag in (True, False)}
     for r in renderers.values():  # 8x8 samples at edges, not 32x32: the same for both, and affordable on llvmpipe
@@ -110,7 +110,7 @@ def test_a_stereo_frame_builds_its_scene_once_for_both_eyes(tmp_path: Path, monk
         return real(*args, **kwargs)
 
     monkeypatch.setattr(stimulus, "build_scene", counting)
-    renderer = SceneRenderer(plan, scale=0.05)
+    renderer = SceneRenderer(plan, scale=0.12)
     try:
         renderer.render(row, phase, "ocular", 0.0, (0.0, 0.0, -1.0))  # the phase's static parts are built here
         built.clear()
@@ -122,15 +122,15 @@ def test_a_stereo_frame_builds_its_scene_once_for_both_eyes(tmp_path: Path, monk
 
 
 def _session_tables(root: Path, protocol_path: Path, former: bool, monkeypatch: pytest.MonkeyPatch) -> dict[str, pd.DataFrame]:
-    class Small(FormerSceneRenderer if former else SceneRenderer):  # both runs at 72x80 px
+    class Small(FormerSceneRenderer if former else SceneRenderer):  # both runs at 173x192 px (legible text needs it)
         def __init__(self, plan, **kwargs) -> None:  # (a watched session renders full size: minutes on llvmpipe)
-            kwargs["scale"] = 0.05
+            kwargs["scale"] = 0.12
             super().__init__(plan, **kwargs)
 
     with monkeypatch.context() as patch:
         patch.setattr(scene_renderer, "SceneRenderer", Small)
         options = SessionOptions(participant="P1", seed=5, data_root=root, progress=False, fsync=False,
-                                 every_frame=True, render="images", check_scale=0.05)
+                                 every_frame=True, render="images", check_scale=0.12)
         outcome = run_session(load_protocol(protocol_path), compile_schedule, options)
     assert outcome.status == "complete", outcome.message
     session = next(root.glob("*/sub-P1/ses-1"))

@@ -92,7 +92,7 @@ def test_image_surfaces_are_decoded_once_per_session(tmp_path: Path, monkeypatch
     decoded = []
     real_imread = mpimg.imread
     monkeypatch.setattr(mpimg, "imread", lambda p, *a, **k: decoded.append(p) or real_imread(p, *a, **k))
-    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=IPD_M), scale=0.1)
+    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=IPD_M), scale=0.12)
     try:
         row = compile_schedule(protocol, 1).iloc[0].to_dict()
         interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)
@@ -137,7 +137,7 @@ def test_a_real_session_checks_a_sample_of_its_frames_and_says_which() -> None:
     from psyop.session.scene_renderer import WATCHED_CHECK_EVERY
 
     protocol = load_protocol(REPO / "protocols" / "detection.yaml")
-    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=IPD_M), scale=0.1, check_every=WATCHED_CHECK_EVERY)
+    renderer = SceneRenderer(compile_plan(protocol, tracker_ipd_m=IPD_M), scale=0.12, check_every=WATCHED_CHECK_EVERY)
     try:
         row = compile_schedule(protocol, 1).iloc[0].to_dict()
         interval = PhaseSpec("interval1", 2.0, "stimulus", "pursuit", "mode_interval1", interval=1)

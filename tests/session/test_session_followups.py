@@ -210,7 +210,7 @@ WINDOW_SCRIPT = textwrap.dedent(
     window.GlfwWindow.poll = poll
     outcome = run_session(load_protocol(Path({protocol!r})), compile_schedule, SessionOptions(
         participant="W1", data_root=Path({data!r}), clock="real", display="window", responses="keyboard",
-        tracker="sim", progress=False, render="auto", window_scale=0.08))
+        tracker="sim", progress=False, render="auto", window_scale=0.2))
     print(outcome.status)
     """
 )

@@ -30,7 +30,7 @@ SCRIPT = textwrap.dedent(
     protocol = load_protocol(fast_protocol(Path({tmp!r}), "detection", 1, 0.03))
     outcome = run_session(protocol, compile_schedule, SessionOptions(
         participant="W1", data_root=Path({tmp!r}) / "data", clock="real", display="window",
-        responses="keyboard", tracker="sim", progress=False, render="auto", window_scale=0.08))
+        responses="keyboard", tracker="sim", progress=False, render="auto", window_scale=0.2))
     print(outcome.status, outcome.latency["n_frames"])
     """
 )

@@ -19,7 +19,7 @@ import pytest
 
 from psyop.cli import main
 
-SCALE = 0.08
+SCALE = 0.2
 SCRIPT = textwrap.dedent(
     """
     import sys

@@ -113,7 +113,7 @@ class Session:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "E1", "--data", str(data),
              "--display", "window", "--responses", "keyboard", "--clock", "real", "--no-progress",
-             "--window-scale", "0.08"], cwd=ROOT, env=dict(os.environ, DISPLAY=display),
+             "--window-scale", "0.2"], cwd=ROOT, env=dict(os.environ, DISPLAY=display),
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.err: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
