@@ -108,12 +108,24 @@ class _Precision:
         return math.sqrt(self.s2s_sq_deg2 / self.n_steps), math.sqrt(self.deviation_sq_deg2 / self.n_steps)
 
 
+def _span(t_s: np.ndarray, start_s: float, end_s: float) -> slice:
+    """The samples of ascending ``t_s`` in ``[start_s, end_s)``, as a slice (empty for a non-finite bound)."""
+    if not (math.isfinite(start_s) and math.isfinite(end_s)):
+        return slice(0, 0)
+    return slice(int(np.searchsorted(t_s, start_s, side="left")), int(np.searchsorted(t_s, end_s, side="left")))
+
+
 def _saccade_masks(t_s: np.ndarray, events: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-    """(in a saccade, within 2 samples of one) per sample: a velocity next to a saccade still carries part
-    of it."""
-    in_saccade = np.zeros(len(t_s), dtype=bool)
-    for onset, offset in events.loc[events["name"] != "fixation", ["onset_s", "offset_s"]].itertuples(index=False):
-        in_saccade |= (t_s >= onset) & (t_s <= offset)
+    """(in a saccade: ``onset_s <= t <= offset_s`` of a non-fixation event, within 2 samples of one) per
+    sample of ascending ``t_s``: a velocity next to a saccade still carries part of it."""
+    bounds = events.loc[events["name"] != "fixation", ["onset_s", "offset_s"]].to_numpy(dtype=np.float64)
+    first = np.searchsorted(t_s, bounds[:, 0], side="left")  # each saccade's samples: [first, last)
+    last = np.searchsorted(t_s, bounds[:, 1], side="right")
+    some = first < last
+    depth = np.zeros(len(t_s) + 1, dtype=np.int64)
+    np.add.at(depth, first[some], 1)
+    np.add.at(depth, last[some], -1)
+    in_saccade = np.cumsum(depth[:-1]) > 0
     near_saccade = in_saccade.copy()
     for k in (1, 2):
         near_saccade[k:] |= in_saccade[:-k]
@@ -121,10 +133,10 @@ def _saccade_masks(t_s: np.ndarray, events: pd.DataFrame) -> tuple[np.ndarray, n
     return in_saccade, near_saccade
 
 
-def _loss_measures(grid: GazeGrid, window: np.ndarray, start_s: float, end_s: float) -> dict[str, float | int]:
+def _loss_measures(grid: GazeGrid, window: slice, start_s: float, end_s: float) -> dict[str, float | int]:
     """Valid and expected sample counts, data loss share and longest gap of one trial's ``window``."""
     expected = max(1, int(round((end_s - start_s) * grid.rate_hz))) if math.isfinite(grid.rate_hz) else 0
-    valid_t = grid.t_s[window & grid.valid]
+    valid_t = grid.t_s[window][grid.valid[window]]
     edges = np.concatenate([[start_s], valid_t, [end_s]])
     return {"n_samples_valid": int(len(valid_t)), "n_samples_expected": expected,
             "data_loss_share": max(0.0, 1.0 - len(valid_t) / expected) if expected else 1.0,
@@ -152,7 +164,8 @@ class _TrialParts:
 
 @dataclass(frozen=True)
 class _Samples:
-    """The valid samples of one phase: ``sel`` over the grid, and their az, el (deg) and times (s)."""
+    """The valid samples of one phase: ``sel`` (their indices into the grid, ascending), and their az, el (deg)
+    and times (s)."""
 
     sel: np.ndarray
     az: np.ndarray
@@ -175,7 +188,7 @@ def _cross_phase(parts: _TrialParts, grid: GazeGrid, s: _Samples, fplan: Fixatio
     if parts.offset is not None:
         parts.fix_corr.append(_err(s.az - parts.offset[0], s.el - parts.offset[1], taz, tel))
     still = ~in_saccade[s.sel]
-    parts.precision.add(np.flatnonzero(s.sel)[still], s.az[still], s.el[still])
+    parts.precision.add(s.sel[still], s.az[still], s.el[still])
 
 
 def _pursuit_phase(parts: _TrialParts, s: _Samples, target: Callable[[float], tuple[float, float]], t0: float,
@@ -249,12 +262,14 @@ def _trial_row(session: _SessionGaze, row: TrialRow, plan: SessionPlan, config: 
     """One trial's measures; marks the events that began in it with its trial number and phase."""
     grid = session.grid
     start, end = float(row["trial_start_s"]), float(row["trial_end_s"])
-    window = (grid.t_s >= start) & (grid.t_s < end)
+    window = _span(grid.t_s, start, end)  # the grid and the event onsets ascend: spans, not masks
     out: dict[str, object] = {"trial": int(row["trial"]), **_loss_measures(grid, window, start, end)}
     parts = _TrialParts()
     for p in trial_phases(plan, row, config):
-        sel = window & grid.valid & (grid.t_s >= p.start_s) & (grid.t_s < p.end_s)
-        ev = (session.onset_s >= p.start_s) & (session.onset_s < p.end_s)
+        phase = _span(grid.t_s, p.start_s, p.end_s)
+        first, last = max(window.start, phase.start), min(window.stop, phase.stop)
+        sel = first + np.flatnonzero(grid.valid[first:last]) if last > first else np.zeros(0, dtype=np.int64)
+        ev = _span(session.onset_s, p.start_s, p.end_s)
         session.event_trial[ev], session.event_phase[ev] = int(row["trial"]), p.phase.name
         s = _Samples(sel, grid.az_deg[sel], grid.el_deg[sel], grid.t_s[sel])
         if p.phase.gaze in ("cross", "fixate") and len(s.t):
@@ -262,7 +277,7 @@ def _trial_row(session: _SessionGaze, row: TrialRow, plan: SessionPlan, config: 
         elif p.phase.gaze == "pursuit" and p.fixation.target is not None and len(s.t):
             _pursuit_phase(parts, s, p.fixation.target, p.start_s, session.velocity[sel], session.near_saccade[sel])
             parts.pursuit_s += p.phase.duration_s
-            parts.n_catch += int((ev & ~session.is_fixation).sum())
+            parts.n_catch += int((~session.is_fixation[ev]).sum())
     out.update(_summary(parts))
     in_trial = session.event_trial == int(row["trial"])
     out["n_fixations"] = int((in_trial & session.is_fixation).sum())

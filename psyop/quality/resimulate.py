@@ -124,8 +124,12 @@ def in_trial_windows(gaze: pd.DataFrame, trials: pd.DataFrame) -> np.ndarray:
     inside = np.zeros(len(gaze), dtype=bool)
     for run, rows in runs_of(trials):
         mine = runs == run
-        for start, end in zip(rows["trial_start_s"].to_numpy(float), rows["trial_end_s"].to_numpy(float)):
-            inside |= mine & (t_s >= start) & (t_s < end)
+        start, end = rows["trial_start_s"].to_numpy(float), rows["trial_end_s"].to_numpy(float)
+        some = start < end  # a window that holds a time (neither bound NaN)
+        # a time is inside as many windows as there are starts at or before it less ends at or before it
+        opened = np.searchsorted(np.sort(start[some]), t_s[mine], side="right")
+        closed = np.searchsorted(np.sort(end[some]), t_s[mine], side="right")
+        inside[mine] = opened > closed
     return inside
 
 
@@ -188,7 +192,7 @@ def resimulate_gaze(plan: SessionPlan, record: SessionRecord, participant: str, 
     if bad:
         why = ("; on a real clock a sample asked for late (after its phase's nominal start, before the loop set "
                "that phase's gaze plan) follows the earlier plan, so only a session that kept up is rebuilt"
-               if record.raw.get("clock") == "real" else "")
+               if record.clock == "real" else "")
         return _refused(f"{bad} of {n} recorded samples differ from the rebuilt stream (largest difference "
                         f"{worst:.3g} m; tolerance {TOLERANCE_M:g} m){why}", n, bad, worst)
     return Resimulation(rebuilt, n, 0, worst, "")

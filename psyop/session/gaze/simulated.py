@@ -391,7 +391,7 @@ class SimulatedTracker:
 
     def _free_block(self, plan: FixationPlan, t_rel_s: np.ndarray) -> np.ndarray:
         """:meth:`_free_viewing` at many times at once (the same arithmetic)."""
-        self._free_viewing(plan, float(np.max(t_rel_s)))  # fills the fixation list far enough
+        self._free_viewing(plan, float(np.max(t_rel_s)), horizon_s=0.0)  # fills the fixation list far enough
         assert self._fixations is not None
         fixations = np.array(self._fixations[1])
         t = np.asarray(t_rel_s, dtype=np.float64)
@@ -404,13 +404,15 @@ class SimulatedTracker:
             out[moving] = previous + w * (fixations[index[moving], 1:] - previous)
         return out
 
-    def _free_viewing(self, plan: FixationPlan, t_rel_s: float) -> tuple[float, float]:
+    def _free_viewing(self, plan: FixationPlan, t_rel_s: float, horizon_s: float = 10.0) -> tuple[float, float]:
+        """The eye's (az, el) at ``t_rel_s`` into a free-viewing plan; the fixation list is drawn (in one
+        sequence from the plan's seed: a longer list starts with the shorter) up to ``t_rel_s`` or ``horizon_s``."""
         c = self.config
         key = (plan.seed, plan.start_s)
         if self._fixations is None or self._fixations[0] != key or self._fixations[1][-1][0] < t_rel_s:
             rng = self._scratch.at(self.seed, 7, plan.seed)  # drawn here, at once
             fixations, t = [], 0.0
-            while t <= max(t_rel_s, 10.0):
+            while t <= max(t_rel_s, horizon_s):
                 r = plan.radius_deg * math.sqrt(rng.uniform())
                 a = rng.uniform(0, 2 * math.pi)
                 # r deg from the centre at polar angle a (docs/optics.md, "Angles"), as Fick angles
