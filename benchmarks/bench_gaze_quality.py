@@ -76,7 +76,6 @@ def run(out_dir: Path, quick: bool) -> str:
 
 def _rebuild(out_dir: Path, repetitions: int) -> tuple[float, int, int]:
     """(seconds, samples rebuilt, recorded samples checked) of one rebuild of a simulated detection session."""
-    import json
     import re
     import shutil
 
@@ -84,7 +83,7 @@ def _rebuild(out_dir: Path, repetitions: int) -> tuple[float, int, int]:
     from psyop.quality.session import session_gaze
     from psyop.run.runner import SessionOptions, run_session
     from psyop.schedule import compile_schedule
-    from psyop.session.log.record import SessionRecord
+    from psyop.session.log.record import read_record_file
 
     work = out_dir / "bench_gaze_quality_rebuild"
     shutil.rmtree(work, ignore_errors=True)
@@ -95,7 +94,8 @@ def _rebuild(out_dir: Path, repetitions: int) -> tuple[float, int, int]:
     run_session(load_protocol(work / "detection.yaml"), compile_schedule, options)
     session = work / "data" / "detection" / "sub-B1" / "ses-1"
     s = session_gaze(session)  # (the imports, once)
-    record = SessionRecord.model_validate(json.loads((session / "session.json").read_text()))
+    record = read_record_file(session / "session.json")
+    assert record is not None
     recorded = pd.read_parquet(session / "gaze.parquet")
     t0 = time.perf_counter()
     r = resimulate_gaze(s.plan, record, "B1", s.trials, recorded)

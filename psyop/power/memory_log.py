@@ -197,7 +197,8 @@ def session_measures(log: MemoryLog, plans: dict[tuple[object, object], SessionP
         raise RuntimeError(f"{log.paths.directory}: the session was not finalised with its raw gaze kept")
     meta = log.metadata
     meta_path = Path(log.paths.directory) / dc.SESSION_METADATA_FILE
-    s = stream_of(cached_plan(meta, meta_path, plans), record_of(meta, meta_path), log.trials, log.gaze)
+    record = record_of(meta, meta_path)
+    s = stream_of(cached_plan(record, meta_path, plans), record, log.trials, log.gaze)
     measures, _ = stream_measures(s)
     validation = trial_validation_measures(s.trials, log.validations)  # NaN: no gaze_validation
     for name in VALIDATION_MEASURES:

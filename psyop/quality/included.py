@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -12,8 +11,10 @@ import pandas as pd
 from psyop import datacontract as dc
 from psyop.protocol.model import Protocol
 from psyop.protocol.quality import QualitySection
+from psyop.quality.cache import QualityCache
 from psyop.quality.latency import latency_sentence
 from psyop.quality.validation import validation_sentence
+from psyop.session.log.record import read_record_file
 from psyop.quality.rules import (
     apply_rules,
     included_mask,
@@ -39,9 +40,9 @@ def _first_recorded_protocol(session_dirs: list[Path]) -> Protocol | None:
 
     for directory in session_dirs:
         meta_path = Path(directory) / dc.SESSION_METADATA_FILE
-        meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-        if "protocol_text" in meta:
-            return recorded_protocol(meta, meta_path)
+        record = read_record_file(meta_path)
+        if record is not None and record.protocol_text is not None:
+            return recorded_protocol(record, meta_path)
     return None
 
 
@@ -59,12 +60,14 @@ def validation_bounded(session_dirs: list[Path]) -> bool:
     return validation is not None and validation.require is not None
 
 
-def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> StudyQuality:
-    """Measure every session, apply ``rules`` and state the counts."""
+def study_quality(session_dirs: list[Path], rules: QualitySection | None,
+                  cache: QualityCache | None = None) -> StudyQuality:
+    """Measure every session (through ``cache`` when given: :mod:`psyop.quality.cache`), apply ``rules`` and
+    state the counts."""
     from psyop.quality.session import PlanCache, measure_session
 
     plans: PlanCache = {}  # one compiled plan per recorded protocol, shared by the sessions that ran it
-    tables = [measure_session(d, plans) for d in session_dirs]
+    tables = [measure_session(d, plans, cache) for d in session_dirs]
     measures = pd.concat([t[0] for t in tables], ignore_index=True) if tables else pd.DataFrame()
     events = pd.concat([t[1] for t in tables], ignore_index=True) if tables else pd.DataFrame()
     exclusions = apply_rules(measures, rules)
@@ -77,14 +80,15 @@ def study_quality(session_dirs: list[Path], rules: QualitySection | None) -> Stu
     return StudyQuality(measures, events, exclusions, sentence + (" " + extra if extra else ""))
 
 
-def include(trials: pd.DataFrame, session_dirs: list[Path]) -> pd.DataFrame:
+def include(trials: pd.DataFrame, session_dirs: list[Path], cache: QualityCache | None = None) -> pd.DataFrame:
     """``trials`` without what the study's ``quality:`` rules exclude; ``attrs["quality"]`` states the counts
-    and ``attrs["n_quality_excluded"]`` how many trials went. Without the section: ``trials`` as given."""
+    and ``attrs["n_quality_excluded"]`` how many trials went. Without the section: ``trials`` as given.
+    ``cache``: as :func:`study_quality`'s."""
     rules = quality_rules(session_dirs)
     if rules is None:
         trials.attrs["quality"], trials.attrs["n_quality_excluded"] = "no quality: rules (nothing excluded)", 0
         return trials
-    quality = study_quality(session_dirs, rules)
+    quality = study_quality(session_dirs, rules, cache)
     keep = included_mask(trials, quality.exclusions)
     kept = trials[keep].reset_index(drop=True)
     kept.attrs.update(trials.attrs)

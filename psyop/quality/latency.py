@@ -4,13 +4,13 @@ nothing."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from psyop import datacontract as dc
+from psyop.session.log.record import read_record_file
 from psyop.session.latency import TRIAL_KIND, GazeLatency, age_stats, frame_gaze_ages
 from psyop.session.timing import _recorded_phase
 
@@ -32,9 +32,9 @@ def latency_sentence(session_dirs: list[Path]) -> str:
         frames = pd.read_parquet(frames_file)
         if "gaze_age_at_display_s" not in frames or not len(frames):
             continue
-        meta = json.loads(meta_file.read_text())
-        phases = [_recorded_phase(p) for p in meta.get("phases") or []]
-        rule = GazeLatency.of_record(meta.get("gaze_latency"))
+        record = read_record_file(meta_file)
+        phases = [_recorded_phase(p) for p in record.phases] if record is not None else []
+        rule = GazeLatency.of_record(record.gaze_latency if record is not None else None)
         interval = frames[[kind == TRIAL_KIND for kind, _ in _kinds(frames, phases)]] if len(frames) else frames
         ages.append(np.asarray([a for _, a in frame_gaze_ages(interval, phases)], dtype=np.float64))
         if "gaze_age_intrinsic_s" in interval:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -12,26 +11,28 @@ import pandas as pd
 from psyop import datacontract as dc
 from psyop.errors import UserError
 from psyop.finalised import verify_session
+from psyop.quality.cache import QualityCache
 from psyop.quality.measures import trial_measures
 from psyop.protocol.validation import VALIDATION_MEASURES
 from psyop.quality.resimulate import resimulate_gaze, runs_of
 from psyop.quality.samples import gaze_grid
-from psyop.session.log.record import SessionRecord, record_of
-from psyop.session.rows import JsonMapping
+from psyop.session.log.record import SessionRecord, read_record_file
 from psyop.quality.validation import read_validations, trial_validation_measures
 
 if TYPE_CHECKING:
     from psyop.session.plan import SessionPlan
 
 
-def recorded_protocol(meta: JsonMapping, meta_path: Path):
+def recorded_protocol(record: SessionRecord, meta_path: Path):
     """The protocol a session recorded (session.json ``protocol_text``), its files (a mesh) resolved beside
     the protocol file it was run from (``protocol_file``), as the session resolved them."""
     from psyop.protocol import parse_protocol
 
-    source = meta.get("protocol_file")
-    base_dir = Path(source).parent if isinstance(source, str) and source and Path(source).parent.is_dir() else None
-    return parse_protocol(meta["protocol_text"], f"{meta_path} (protocol_text)", base_dir=base_dir)
+    source = record.protocol_file
+    base_dir = Path(source).parent if source and Path(source).parent.is_dir() else None
+    if record.protocol_text is None:
+        raise UserError("session.json records no protocol_text: the session's protocol is unknown", str(meta_path))
+    return parse_protocol(record.protocol_text, f"{meta_path} (protocol_text)", base_dir=base_dir)
 
 
 def recorded_plan(directory: Path) -> SessionPlan:
@@ -40,7 +41,10 @@ def recorded_plan(directory: Path) -> SessionPlan:
     from psyop.session.plan import compile_plan
 
     meta_path = Path(directory) / dc.SESSION_METADATA_FILE
-    return compile_plan(recorded_protocol(json.loads(meta_path.read_text()), meta_path))
+    record = read_record_file(meta_path)
+    if record is None:
+        raise UserError("no session.json: not a finalised psyop session", str(directory))
+    return compile_plan(recorded_protocol(record, meta_path))
 
 
 @dataclass(frozen=True)
@@ -66,30 +70,46 @@ class SessionGaze:
 PlanCache = dict[tuple[object, object], "SessionPlan"]
 
 
-def cached_plan(meta: JsonMapping, meta_path: Path, plans: PlanCache) -> SessionPlan:
-    """The compiled plan of the protocol session.json ``meta`` recorded, from ``plans`` when a session of the
+def cached_plan(record: SessionRecord, meta_path: Path, plans: PlanCache) -> SessionPlan:
+    """The compiled plan of the protocol session.json (``record``) recorded, from ``plans`` when a session of the
     same protocol text and file was compiled before (then added)."""
     from psyop.session.plan import compile_plan
 
-    key = (meta.get("protocol_text"), meta.get("protocol_file"))
+    key = (record.protocol_text, record.protocol_file)
     if key not in plans:
-        plans[key] = compile_plan(recorded_protocol(meta, meta_path))
+        plans[key] = compile_plan(recorded_protocol(record, meta_path))
     return plans[key]
 
 
-def session_gaze(directory: Path, plans: PlanCache | None = None) -> SessionGaze:
+def first_trials(trials: pd.DataFrame, n_trials: int) -> pd.DataFrame:
+    """The trials of the first run that start before the first ``n_trials`` of its rows end: what a figure of
+    those trials shows. They are the first trials in start order, which the rebuilt stream steps through in
+    order (:func:`psyop.quality.resimulate.rebuilt_stream`), so their rebuilt samples are those of the whole
+    session's rebuild, exactly."""
+    rows = (runs_of(trials) or [(0, trials)])[0][1]
+    if rows.empty:
+        return rows
+    end_s = float(rows["trial_end_s"].head(n_trials).max())
+    return rows[rows["trial_start_s"].to_numpy(float) <= end_s]
+
+
+def session_gaze(directory: Path, plans: PlanCache | None = None, n_trials: int | None = None) -> SessionGaze:
     """The verified session in ``directory`` and the gaze stream its quality is measured from; ``plans``:
-    the compiled plans of sessions measured before (filled in)."""
+    the compiled plans of sessions measured before (filled in); ``n_trials``: only the :func:`first_trials`
+    (a requested stream rebuilt and checked over those alone)."""
     directory = Path(directory)
     meta_path = directory / dc.SESSION_METADATA_FILE
     if not meta_path.is_file() or not (directory / dc.TRIALS_FILE).is_file():
         raise UserError("not a finalised psyop session (no session.json and trials.parquet)", str(directory))
     verify_session(directory)
-    meta = json.loads(meta_path.read_text())
-    plan = cached_plan(meta, meta_path, {} if plans is None else plans)
+    record = read_record_file(meta_path)
+    if record is None:  # removed after the check above
+        raise UserError("not a finalised psyop session (no session.json)", str(directory))
+    plan = cached_plan(record, meta_path, {} if plans is None else plans)
     gaze_path = directory / dc.GAZE_FILE
     gaze = pd.read_parquet(gaze_path) if gaze_path.is_file() else pd.DataFrame()
-    return stream_of(plan, record_of(meta, meta_path), pd.read_parquet(directory / dc.TRIALS_FILE), gaze)
+    trials = pd.read_parquet(directory / dc.TRIALS_FILE)
+    return stream_of(plan, record, trials if n_trials is None else first_trials(trials, n_trials), gaze)
 
 
 def stream_of(plan: SessionPlan, record: SessionRecord, trials: pd.DataFrame, recorded: pd.DataFrame) -> SessionGaze:
@@ -97,7 +117,7 @@ def stream_of(plan: SessionPlan, record: SessionRecord, trials: pd.DataFrame, re
     gaze (from the finalised files, or a replication's in-memory log: psyop.power.memory_log)."""
     from psyop.session.gaze.simulated import tracker_config
 
-    participant = str(record.raw.get("participant", ""))
+    participant = record.participant or ""
     rate, stream, note, gaze = None, "every_sample", "", recorded
     if (record.tracker or "").partition(":")[0] == "sim":
         config = tracker_config(plan.observer.eye if plan.observer is not None else None, participant)
@@ -109,7 +129,8 @@ def stream_of(plan: SessionPlan, record: SessionRecord, trials: pd.DataFrame, re
             note = f"rebuilt from the seed; equal to all {rebuilt.n_checked} recorded samples in trials"
         else:
             note = f"not rebuilt: {rebuilt.reason}"
-    return SessionGaze(plan, trials, gaze, stream, note, rate, participant, int(str(record.raw.get("session", 1))))
+    return SessionGaze(plan, trials, gaze, stream, note, rate, participant,
+                       record.session if record.session is not None else 1)
 
 
 def stream_measures(s: SessionGaze) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -133,8 +154,11 @@ def stream_measures(s: SessionGaze) -> tuple[pd.DataFrame, pd.DataFrame]:
     return measures, events
 
 
-def measure_session(directory: Path, plans: PlanCache | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(per-trial measures, events) of the session in ``directory``, each with participant and session.
+def measure_session(directory: Path, plans: PlanCache | None = None,
+                    cache: QualityCache | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(per-trial measures, events) of the session in ``directory``, each with participant and session;
+    from ``cache`` when it holds this session's files measured by this psyop (:mod:`psyop.quality.cache`),
+    else measured (:func:`measured_session`) and stored there.
 
     The nominal rate is the simulated tracker's ``rate_hz`` (protocol ``observer: eye:``, default 120 Hz)
     for a simulated session, else the median interval between samples. A simulated session whose raw stream
@@ -144,6 +168,19 @@ def measure_session(directory: Path, plans: PlanCache | None = None) -> tuple[pd
     (:func:`requested_stream_measures`, ``raw_stream`` = ``requested``). Column ``raw_stream`` says which
     stream each row was measured from, ``raw_stream_note`` how a rebuilt one was checked or why it was not.
     ``plans``: as :func:`session_gaze`'s."""
+    if cache is None:
+        return measured_session(directory, plans)
+    key = cache.key(Path(directory))
+    kept = cache.get(key)
+    if kept is not None:
+        return kept
+    measures, events = measured_session(directory, plans)
+    cache.put(key, measures, events)
+    return measures, events
+
+
+def measured_session(directory: Path, plans: PlanCache | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """:func:`measure_session` without a cache: the session verified, its stream rebuilt and measured."""
     s = session_gaze(directory, plans)
     measures, events = stream_measures(s)
     validation = trial_validation_measures(s.trials, read_validations(Path(directory)))  # NaN: no gaze_validation

@@ -16,6 +16,7 @@ from psyop.atomic import write_atomic
 from psyop.errors import UserError
 from psyop.finalised import record_finalised, verify_session
 from psyop.input_files import MAX_LOG_TABLE_BYTES, InputFile
+from psyop.quality.cache import QualityCache
 from psyop.quality.included import include as include_quality
 from psyop.statistics.protocol_versions import unit_trials_files
 
@@ -158,7 +159,8 @@ def load_dataset(data_root: Path, study: str, include_practice: bool = False,
         trials = dc.drop_timeouts(trials)
         n_timeout = trials.attrs["n_timeout_dropped"]
     trials, n_low, n_late = _gaze_flags(trials, study, drop_low_gaze, drop_late_gaze)
-    trials = include_quality(trials, [f.parent for f in files])  # the protocol's quality: rules (issue 27)
+    # the protocol's quality: rules, each session's measures kept in the data root's quality cache (docs/quality.md)
+    trials = include_quality(trials, [f.parent for f in files], QualityCache.beside(data_root))
     # simulated only when the description says so and no session's own trials.parquet says real
     # (a real session whose session.json was deleted still carries its flag in its finalised table)
     simulated = is_simulated(data_root) and False not in file_flags
