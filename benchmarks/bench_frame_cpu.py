@@ -242,7 +242,7 @@ def _slope(rows: list[tuple[int, dict[str, Any]]], key: str) -> float:
 def run(out_dir: Path, quick: bool) -> str:
     from psyop.rendering.renderer import create_headless_context
 
-    scale = 0.05 if quick else 0.1
+    scale = 0.12  # the smallest scale at which the shipped protocols' text is legible (psyop.session.text_fit)
     frames, block = (8, 4) if quick else (160, 8)
     ctx = create_headless_context()
     try:

@@ -115,7 +115,7 @@ def test_model_figures_on_a_full_disk_are_one_line(tmp_path: Path, script: str) 
 
 
 #: the analysis/ files that are modules, not scripts (imported by the scripts, or make's runner)
-MODULES = {"_common.py", "_twoafc.py", "paper_values.py", "batch.py"}
+MODULES = {"_common.py", "_twoafc.py", "_confidence.py", "paper_values.py", "batch.py"}
 SCRIPTS = sorted(p.name for p in ANALYSIS.glob("*.py") if p.name not in MODULES)
 
 

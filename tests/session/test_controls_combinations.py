@@ -45,7 +45,8 @@ scene:
     depth: {D: 0.5}
     surface: {kind: solid, rgb: [0.2, 0.2, 0.6]}
 """ + TWO_INTERVAL_TAIL.replace("duration_s: 1}", "duration_s: 0.1}").replace(
-    "{kind: response, expected_s: 1}", "{kind: response, expected_s: 0.2, timeout_s: 0.3}") + """observer:
+    "{kind: response, expected_s: 1}",  # a short prompt: Monado's 320x240 view fits 8 lines of legible text
+    "{kind: response, expected_s: 0.2, timeout_s: 0.3, prompt: '1 or 2?'}") + """observer:
   kind: psychometric_2afc
   level_column: level_D
   threshold_D: 0.36

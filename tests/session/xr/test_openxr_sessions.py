@@ -48,7 +48,8 @@ def _protocol(tmp_path: Path, repetitions: int = 1, interval_s: float = 0.3, tim
     """A small stereo 2IFC study (the shared two-interval tail) with short phases and a response
     timeout, so ``--responses none`` runs it."""
     tail = (TWO_INTERVAL_TAIL.replace("duration_s: 1}", f"duration_s: {interval_s}}}")
-            .replace("{kind: response, expected_s: 1}", f"{{kind: response, expected_s: 0.2, timeout_s: {timeout_s}}}")
+            .replace("{kind: response, expected_s: 1}",  # a short prompt: the runtime's 320x240 view fits 8 lines
+                     f"{{kind: response, expected_s: 0.2, timeout_s: {timeout_s}, prompt: '1 or 2?'}}")
             .replace("repetitions: 1", f"repetitions: {repetitions}"))
     path = tmp_path / "xr_tiny.yaml"
     path.write_text(TINY_HEAD + tail)

@@ -68,6 +68,6 @@ def test_the_right_stick_adjusts_at_its_rate_and_the_trigger_confirms(tmp_path: 
     path = json.loads(trials["match_D_path"].iloc[0])
     (t0, v0), (t_release, v_release) = path[0], path[-1]
     assert (t0, v0) == (0.0, 1.0) and len(path) == 2, path  # the start; the release, where the value stopped
-    assert 1.0 < t_release < HOLD_S and value == v_release, (value, path)
+    assert t_release > 1.0 and value == v_release, (value, path)  # held a while (the phase may start before the driver)
     # held at full deflection from the phase's start to the release: the protocol's rate, to the runtime's timing
     assert abs((v_release - v0) / t_release - RATE_PER_S) < 0.05 * RATE_PER_S, path
