@@ -1,4 +1,4 @@
-"""Gaze quality of one study (issue 27): the per-trial measures of every session (psyop.quality, from the
+"""Gaze quality of one study: the per-trial measures of every session (psyop.quality, from the
 raw gaze stream each session finalised; a ``requested`` simulated stream is rebuilt from its seed and checked
 against every recorded sample, else measured from the samples it holds: psyop.quality.resimulate),
 the fixation/saccade events (pymovements; built here from the finalised session files, not stored in

@@ -113,7 +113,7 @@ def make_rules(data: Path, protocols: Path, pool_protocols: bool = False) -> tup
         prerequisites = " ".join(make_escaped(p) for p in sessions)
         adaptive = _adaptive(sessions)
         targets = targets_for(facts.name, facts.kind, uses_linear, prerequisites, adaptive,
-                              facts.level_factor) + [AnalysisTarget(  # issue 27
+                              facts.level_factor) + [AnalysisTarget(  # the study's gaze quality
             f"{facts.name}_gaze_quality.png", "analysis/gaze_quality.py", f"{prerequisites} $(QUALITY_SRC)",
             f'--study {facts.name} --data "$(DATA)" --results "$(RESULTS)"')]
         figures = [t for t in targets if t.kind == "figure"]

@@ -1,4 +1,4 @@
-"""Gaze data quality, eye-movement events (pymovements) and the protocol's exclusion rules (issue 27).
+"""Gaze data quality, eye-movement events (pymovements) and the protocol's exclusion rules.
 
 Reads what sessions recorded (the raw gaze stream, the trial log, the protocol in session.json) and
 never changes it: ``samples`` puts a session's samples on the tracker's clock grid, ``target`` rebuilds

@@ -1,4 +1,4 @@
-"""Per-trial gaze data quality in degrees (issue 27 item 1), against the target the participant was asked
+"""Per-trial gaze data quality in degrees, against the target the participant was asked
 to look at (rebuilt with :func:`psyop.session.loop.fixation_plan` from the trial row and the phase timing:
 phase k starts at ``trial_start_s`` plus the durations before it; exact on the virtual clock, within a
 frame of it on a real one).

@@ -1,4 +1,4 @@
-"""The full raw stream of a simulated session that recorded only the samples it asked for (issue 27).
+"""The full raw stream of a simulated session that recorded only the samples it asked for.
 
 A ``--tracker sim`` session whose protocol says ``raw_stream: requested`` (the shipped protocols' choice: an
 ``every_sample`` stream is about 30 times the disk) holds a few samples per trial, so precision, pursuit

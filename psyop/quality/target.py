@@ -1,4 +1,4 @@
-"""What the participant was asked to look at, rebuilt from a trial row and the phase timing (issue 27):
+"""What the participant was asked to look at, rebuilt from a trial row and the phase timing:
 phase k of a trial starts at ``trial_start_s`` plus the durations of the phases before it (exact on the
 virtual clock, within about a frame per phase on a real one), and its target is the loop's own
 :func:`psyop.session.loop.fixation_plan`. :func:`psyop.quality.measures.trial_measures` measures the gaze
