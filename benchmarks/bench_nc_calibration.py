@@ -4,7 +4,7 @@ End to end, like a user: ``psyop simulate`` runs protocols/examples/nc_calibrati
 participants (whole headless sessions: schedule, plan, cameras, the nc_nulling observer answering from the
 NC each trial is rendered with), then analysis/nc_calibration.py fits each participant's PSS with its 95 %
 interval (results/<study>_pss.csv). The truth is each participant's own NC, drawn by the simulated observer
-(``NcNulling.own_nc_mm``, rebuilt from the session's seed as the session built it). A participant counts as
+(``participant_state["own_nc_mm"]`` of its ``nc_nulling`` observer, rebuilt from the session's seed as the session built it). A participant counts as
 covered when its fit is ``ok`` and its interval holds the truth; a censored fit counts as a miss.
 Target (issue 18): coverage >= 0.90 over 200 participants.
 """
@@ -37,7 +37,7 @@ def true_nc_mm(data_root: Path, study: str) -> dict[str, float]:
     for meta_path in sorted((data_root / study).glob("sub-*/ses-1/session.json")):
         meta = json.loads(meta_path.read_text())
         participant = meta_path.parts[-3][len("sub-"):]
-        out[participant] = make_observer(params, seed=int(meta["seed"]), participant=participant).own_nc_mm
+        out[participant] = make_observer(params, seed=int(meta["seed"]), participant=participant).participant_state["own_nc_mm"]
     return out
 
 

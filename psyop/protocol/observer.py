@@ -1,6 +1,7 @@
-"""Simulated-observer parameters (``observer:`` section); ``psyop.session`` implements them.
+"""Simulated-observer parameters (``observer:`` section).
 
-Each response kind (psyop.protocol.kinds) owns the observer models that may answer it; this is their
+Each response kind (psyop.protocol.kinds) owns the observer models that may answer it, their behaviour
+included (psyop.session.responses.simulated draws for them); this is their
 union, discriminated by ``kind``. See docs/architecture.md, "Simulated observers".
 """
 

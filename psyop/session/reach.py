@@ -14,10 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Head space: x right, y up, -z ahead. ReachTarget objects are straight ahead.
-TARGET_POSITION_M = (0.0, -0.15, -1.0)
-#: ReachTarget's default height relative to the eyes (``height_m``), where a simulated hand ends.
-HAND_HEIGHT_M = -0.15
+from psyop.protocol.kinds.reach import HAND_HEIGHT_M  # ReachTarget's default height, where a simulated hand ends
+
+#: Head space: x right, y up, -z ahead. ReachTarget objects are straight ahead, at HAND_HEIGHT_M.
+TARGET_POSITION_M = (0.0, HAND_HEIGHT_M, -1.0)
+
+__all__ = ["HAND_HEIGHT_M", "TARGET_POSITION_M", "horizontal_direction", "horizontal_reach_m"]
 
 
 def horizontal_direction(target_m=TARGET_POSITION_M) -> np.ndarray:

@@ -115,13 +115,13 @@ def test_the_shipped_example_validates_and_its_observer_answers_from_the_rendere
     protocol = load_protocol(EXAMPLE)
     plan = compile_plan(protocol)
     observer = make_observer(plan.observer_params(), seed=3, participant="S01")
-    own = observer.own_nc_mm
+    own = observer.participant_state["own_nc_mm"]
     assert own != pytest.approx(7.6916)  # between-subject sd: each participant's NC is its own
     row = {"trial": 0, "trial_seed": 1, "mode_interval1": "ocular", "nc_mm": own, "rendered_nc_mm": -99.0}
-    assert observer.p_against(row) == pytest.approx(0.5)
+    assert observer.model.probability(row, observer.participant_state) == pytest.approx(0.5)
     from scipy.stats import norm
 
     for level, mode in ((-4.0, "reversed"), (0.0, "conventional"), (own + 6.0, "ocular")):
         expected = 0.02 + 0.96 * norm.cdf((level - own) / 4.0)  # the example's lapse and width
-        assert observer.p_against({**row, "nc_mm": abs(level) if level else 0.0, "mode_interval1": mode}) \
-            == pytest.approx(expected, abs=1e-12), level
+        assert observer.model.probability({**row, "nc_mm": abs(level) if level else 0.0, "mode_interval1": mode},
+                                         observer.participant_state) == pytest.approx(expected, abs=1e-12), level

@@ -50,7 +50,7 @@ def test_the_fits_recover_the_papers_latency_thresholds() -> None:
         schedule = compile_schedule(protocol, 300 + j)
         answering = make_observer(params, seed=300 + j, participant=participant)
         for separation, paper in PAPER_MS.items():
-            truth[(participant, separation)] = paper + answering.participant_shift_D + z75 * width
+            truth[(participant, separation)] = paper + answering.participant_state["participant_shift_D"] + z75 * width
         answers = [answering.collect(row, 0.0).correct for row in schedule.to_dict("records")]
         frames.append(schedule.assign(participant=participant, correct=answers))
     fits = fit_psychometric_table(pd.concat(frames), "added_latency_ms", ["participant", "separation_D"], "correct",

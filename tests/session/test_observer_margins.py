@@ -67,7 +67,7 @@ def test_no_shipped_answer_is_within_reach_of_the_last_bits(study: str) -> None:
     assert smallest[0] > FLIP_MARGIN, f"{study}: trial {smallest[1]} answers by |u - p| = {smallest[0]:.3g}"
 
 
-def test_the_margin_check_can_fail() -> None:
+def test_the_margin_check_can_fail(monkeypatch: pytest.MonkeyPatch) -> None:
     """An observer whose probability equals its draw has margin 0, which the check reports."""
     path = ROOT / "protocols" / "detection.yaml"
     protocol = load_protocol(path)
@@ -76,7 +76,7 @@ def test_the_margin_check_can_fail() -> None:
     observer = make_observer(params, seed=1, participant="S01")
     row = compile_schedule(protocol, 1, participant_index=1).to_dict("records")[0]
     u, p = observer.decision(row) or (0.0, 0.0)
-    observer.p_correct = lambda _row: u  # type: ignore[attr-defined,method-assign]
+    monkeypatch.setattr(type(observer.model), "probability", lambda _self, _row, _participant: u)
     assert margins(observer, [row]) == [(0.0, int(row["trial"]))]
     assert 0.0 < abs(u - p)
 

@@ -38,9 +38,10 @@ def test_psychometric_answers_follow_the_curve_and_do_not_depend_on_order() -> N
 
 def test_between_subject_threshold_shift_is_per_participant() -> None:
     params = {"kind": "psychometric_2afc", "threshold_D": 0.36, "width_D": 0.2, "between_subject_sd_D": 0.1}
-    shifts = [make_observer(params, seed=1, participant=f"S{i:02d}").participant_shift_D for i in range(200)]
+    shifts = [make_observer(params, seed=1, participant=f"S{i:02d}").participant_state["participant_shift_D"]
+              for i in range(200)]
     assert np.std(shifts) == pytest.approx(0.1, rel=0.2)
-    assert make_observer(params, seed=1, participant="S01").participant_shift_D == shifts[1]
+    assert make_observer(params, seed=1, participant="S01").participant_state["participant_shift_D"] == shifts[1]
 
 
 def test_ordinal_preference_and_reach() -> None:
@@ -100,7 +101,47 @@ def test_a_two_interval_observer_takes_a_threshold_offset_per_level_of_a_word_fa
     protocol = load_protocol(path)
     observer = make_observer(compile_plan(protocol).observer_params(), seed=1, participant="S01")
     schedule = compile_schedule(protocol, 1)
-    thresholds = {row["mode"]: observer.threshold_for(row) for row in schedule.to_dict("records")}
+    thresholds = {row["mode"]: observer.model.threshold_for(row, observer.participant_state)
+                  for row in schedule.to_dict("records")}
     assert thresholds["reversed"] - thresholds["ocular"] == pytest.approx(0.3, abs=1e-12)
     path.write_text(text.replace("{ocular: 0.0, reversed: 0.3}", "{ocular: 0.0}"))
     assert main(["validate", str(path)]) == 2  # a level without its offset is refused at its line
+
+
+def test_every_kind_declares_its_observers_in_its_own_module() -> None:
+    """simulated.py holds no per-kind code: each observer a kind accepts answers through its own module's model
+    (``declared``), except the image observer, which has its own response source."""
+    from psyop.protocol.image_observer import ImageObserver
+    from psyop.protocol.kinds import KINDS
+    from psyop.protocol.kinds.base import observer_kind_name
+    from psyop.session.responses.simulated import DeclaredObserver, declared_observer
+
+    names = [observer_kind_name(m) for kind in KINDS.values() for m in kind.observer_models if m is not ImageObserver]
+    assert {"psychometric_2afc", "ordinal_accuracy", "pairwise_preference", "reach", "nc_nulling"} <= set(names)
+    for kind in KINDS.values():
+        for model in kind.observer_models:
+            assert model.declared is (model is not ImageObserver), model.__name__
+            if model.declared:
+                assert declared_observer(observer_kind_name(model)) == (kind, model)
+    observer = make_observer({"kind": "pairwise_preference", "strength": {"ocular": 2.0, "reversed": 1.0}}, seed=1,
+                             participant="S01")
+    assert isinstance(observer, DeclaredObserver) and observer.kind.name == "pairwise_preference"
+
+
+def test_the_simulated_hand_ends_at_the_session_reach_height() -> None:
+    """The reach observer's hand height is the one the session measures reaches at (a reach target's default)."""
+    from psyop.protocol.kinds.reach import HAND_HEIGHT_M as KIND_HEIGHT_M
+    from psyop.session.reach import HAND_HEIGHT_M
+
+    assert KIND_HEIGHT_M == HAND_HEIGHT_M
+
+
+def test_an_nc_nulling_observer_without_the_rigs_rule_is_a_user_error() -> None:
+    params = {"kind": "nc_nulling", "nc_mm": 7.7, "width_mm": 4.0, "eye_model_nc_m": 0.0077}
+    with pytest.raises(UserError, match="rendering_nc"):
+        make_observer(dict(params, rendering_nc=None), seed=1, participant="S01")
+    observer = make_observer(dict(params, rendering_nc={"column": "nc_mm", "column_unit": "mm", "signed": True}),
+                             seed=1, participant="S01")
+    assert observer.participant_state == {"own_nc_mm": 7.7}
+    with pytest.raises(UserError, match="no rendering mode"):
+        observer.collect({"trial": 3, "trial_seed": 1, "mode_interval1": "sideways", "nc_mm": 1.0}, 0.0)

@@ -34,7 +34,7 @@ def test_reaches_never_exceed_the_physical_bound():
     for p in ("S01", "S02", "S03"):
         obs = _observer(p, max_reach_fraction=1.0, slope_sd=0.1, intercept_sd_m=0.03)
         _, reach = _reaches(obs)
-        assert np.all(np.hypot(reach, HAND_HEIGHT_M) <= 1.0 * obs.arm_reach_m + 1e-12)
+        assert np.all(np.hypot(reach, HAND_HEIGHT_M) <= 1.0 * obs.participant_state["arm_reach_m"] + 1e-12)
         assert np.all(reach >= 0)
 
 

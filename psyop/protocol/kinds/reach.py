@@ -4,16 +4,19 @@ confirms."""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
 
+from psyop.errors import UserError
 from psyop.protocol.base import Number, StrictModel
-from psyop.protocol.kinds.base import (AnalysisTarget, Checks, KindResponse, ObserverBase, ResponseKindSpec,
-                                       ScheduleInput, StudyInputs, figure_target)
-from psyop.protocol.scene import RenderingMode
-from psyop.records import Loc
+from psyop.protocol.kinds.base import (AnalysisTarget, Checks, DrawnAnswer, KindResponse, ObserverBase,
+                                       ResponseKindSpec, ScheduleInput, StudyInputs, figure_target)
+from psyop.protocol.scene import ReachTarget, RenderingMode
+from psyop.records import Loc, TrialRow
 
 
 def _reach_modes() -> dict[str, RenderingMode]:
@@ -37,6 +40,10 @@ class ReachResponse(KindResponse):
         return {self.rendering_factor, self.target_factor}
 
 
+#: where a simulated hand ends relative to the eyes (m, up positive): a reach target's default ``height_m``
+HAND_HEIGHT_M: float = float(ReachTarget.model_fields["height_m"].default)
+
+
 class ReachCondition(StrictModel):
     """reach_m = slope * target_m + intercept_m + N(0, noise_sd_m)."""
 
@@ -46,7 +53,14 @@ class ReachCondition(StrictModel):
 
 
 class Reach(ObserverBase):
-    """Blind-reach model per rendering condition (keys: levels of the rendering factor)."""
+    """Blind-reach model per rendering condition (keys: levels of the rendering factor): the hand's horizontal
+    distance = intercept_m + slope * target_m + the participant's own deviations + N(0, noise_sd_m).
+
+    ``target_m = target_fraction * arm_reach_m`` (the target's horizontal distance); each participant's arm reach
+    deviates from ``arm_reach_m`` by N(0, ``arm_reach_sd_m``), and its line from the condition's by one draw of
+    N(0, ``slope_sd``) and one of N(0, ``intercept_sd_m``) (shared by the conditions). The hand ends at
+    :data:`HAND_HEIGHT_M` below the eyes, straight ahead, at most ``max_reach_fraction`` of the arm reach from
+    the eyes (3-D) and never behind them; a hand tracker (the session's pose source) then measures it."""
 
     kind: Literal["reach"]
     arm_reach_m: Number = Field(gt=0.2, le=1.5)
@@ -56,6 +70,35 @@ class Reach(ObserverBase):
     max_reach_fraction: Number = Field(default=1.0, gt=0.3, le=1.5,
                                        description="the hand ends at most this fraction of arm reach from the eyes")
     by_condition: dict[str, ReachCondition] = Field(min_length=1)
+    declared: ClassVar[bool] = True
+    draws_stream: ClassVar[bool] = True  # the trial's normal motor noise
+
+    def participant_draws(self, rng: np.random.Generator) -> dict[str, float]:
+        """The participant's ``arm_reach_m``, ``slope_offset`` and ``intercept_offset_m``, drawn in that order."""
+        draws = {"arm_reach_m": float(self.arm_reach_m)}
+        for key, sd in (("arm_reach_m", self.arm_reach_sd_m), ("slope_offset", self.slope_sd),
+                        ("intercept_offset_m", self.intercept_sd_m)):
+            draws[key] = draws.get(key, 0.0) + (float(rng.normal(0.0, float(sd))) if sd > 0 else 0.0)
+        return draws
+
+    def answer_drawn(self, row: TrialRow, participant: Mapping[str, float], rng: np.random.Generator) -> DrawnAnswer:
+        """Where the hand really ends (``reach_m``, its horizontal distance, written to 6 decimals as the answer)
+        and the hand's position, the arm reach and the target distance beside it."""
+        rendering = str(row.get("rendering", ""))
+        condition = self.by_condition.get(rendering)
+        if condition is None:
+            raise UserError(f"observer: no reach model for rendering {rendering!r}; add it under by_condition",
+                            "protocol observer")
+        arm_m = participant["arm_reach_m"]
+        target_m = float(row["target_fraction"]) * arm_m
+        reach_m = (float(condition.intercept_m) + participant["intercept_offset_m"]
+                   + (float(condition.slope) + participant["slope_offset"]) * target_m
+                   + float(rng.normal(0.0, float(condition.noise_sd_m))))
+        max_reach_m = float(self.max_reach_fraction) * arm_m
+        horizontal_max_m = math.sqrt(max(max_reach_m ** 2 - HAND_HEIGHT_M ** 2, 0.0))
+        reach_m = min(max(reach_m, 0.0), horizontal_max_m)  # not behind the eyes, not beyond the arm
+        return DrawnAnswer(f"{reach_m:.6f}", reach_m, {"arm_reach_m": arm_m, "target_m": target_m, "hand_x_m": 0.0,
+                                                       "hand_y_m": HAND_HEIGHT_M, "hand_z_m": -reach_m})
 
 
 class ReachKind(ResponseKindSpec):
@@ -68,10 +111,9 @@ class ReachKind(ResponseKindSpec):
     needs_hand_pose = True
     fields = {"ReachResponse": {"kind": "plan", "question": "plan", "rendering_factor": "kinds",
                                 "target_factor": "kinds", "modes": "kinds", "average_last_samples": "plan"},
-              "Reach": {"kind": "observer", "arm_reach_m": "observer", "arm_reach_sd_m": "observer",
-                        "by_condition": "observer", "slope_sd": "observer", "intercept_sd_m": "observer",
-                        "max_reach_fraction": "observer"},
-              "ReachCondition": {"slope": "observer", "intercept_m": "observer", "noise_sd_m": "observer"}}
+              "Reach": {k: "kinds" for k in ("kind", "arm_reach_m", "arm_reach_sd_m", "by_condition", "slope_sd",
+                                             "intercept_sd_m", "max_reach_fraction")},
+              "ReachCondition": {"slope": "kinds", "intercept_m": "kinds", "noise_sd_m": "kinds"}}
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         """The mode of each trial's rendering level, and the rendering/target columns under their standard names."""

@@ -3,16 +3,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import ClassVar, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, PrivateAttr
 
+from psyop.errors import UserError
+from psyop.optics.rig import NcRule
 from psyop.protocol.base import Number
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, KindResponse, ObserverBase, ProtocolParts,
-                                       ResponseKindSpec, ScheduleInput, StudyInputs, figure_target)
+                                       ResponseKindSpec, ScheduleInput, StudyInputs, figure_target, normal_cdf)
 from psyop.protocol.scene import FactorRef
-from psyop.records import Loc
+from psyop.records import Loc, TrialRow
 
 
 class WithAgainstResponse(KindResponse):
@@ -30,6 +33,11 @@ class WithAgainstResponse(KindResponse):
         return {self.nc_factor}
 
 
+#: The sign of the NC each rendering mode renders (psyop.optics.camera: the centre of projection's lateral
+#: offset from the centre of rotation is +N ocular, 0 conventional, mirrored reversed).
+MODE_NC_SIGN: dict[str, float] = {"ocular": 1.0, "conventional": 0.0, "reversed": -1.0}
+
+
 class NcNulling(ObserverBase):
     """An observer whose own NC is ``nc_mm`` (each simulated participant's drawn around it with sd
     ``between_subject_sd_mm``): p(against) = lapse + (1 - 2 lapse) * Phi((r - nc) / width_mm), r the signed NC
@@ -41,6 +49,46 @@ class NcNulling(ObserverBase):
     width_mm: Number = Field(gt=0, le=30, description="sd of the cumulative normal, mm")
     lapse: Number = Field(default=0.0, ge=0, lt=0.5)
     between_subject_sd_mm: Number = Field(default=0.0, ge=0, le=10)
+    declared: ClassVar[bool] = True
+    #: the camera's NC rule and the eye model's NC (m), which the plan passes (``rendering_nc``, ``eye_model_nc_m``)
+    _rule: NcRule | None = PrivateAttr(default=None)
+    _eye_model_nc_m: float = PrivateAttr(default=0.0)
+
+    @classmethod
+    def for_session(cls, params: Mapping[str, object]) -> "NcNulling":
+        """The model with the rig's NC rule and eye model NC (the plan's ``rendering_nc`` and ``eye_model_nc_m``)."""
+        model = cls.model_validate({k: v for k, v in params.items() if k in cls.model_fields})
+        rule, eye_nc_m = params.get("rendering_nc"), params.get("eye_model_nc_m")
+        for key, value in (("rendering_nc", rule), ("eye_model_nc_m", eye_nc_m)):
+            if value is None:
+                raise UserError(f"observer: missing parameter {key!r}", "protocol observer")
+        assert isinstance(rule, Mapping) and isinstance(eye_nc_m, (int, float))
+        model._rule, model._eye_model_nc_m = NcRule(**dict(rule)), float(eye_nc_m)
+        return model
+
+    def participant_draws(self, rng: np.random.Generator) -> dict[str, float]:
+        """The participant's own NC, ``own_nc_mm`` = nc_mm + N(0, between_subject_sd_mm)."""
+        sd = float(self.between_subject_sd_mm)
+        shift = float(rng.normal(0.0, sd)) if sd > 0 else 0.0
+        return {"own_nc_mm": float(self.nc_mm) + shift}
+
+    def rendered_nc_mm(self, row: TrialRow) -> float:
+        """The signed NC this trial is rendered with (mm): the mode's sign times the camera's NC."""
+        mode = str(row["mode_interval1"])
+        if mode not in MODE_NC_SIGN:
+            raise UserError(f"observer: trial {row.get('trial')} has no rendering mode ({mode!r})", "protocol observer")
+        if self._rule is None:
+            raise UserError("observer: missing parameter 'rendering_nc'", "protocol observer")
+        return MODE_NC_SIGN[mode] * self._rule.nc_m_for(self._eye_model_nc_m, row) * 1000.0
+
+    def probability(self, row: TrialRow, participant: Mapping[str, float]) -> float:
+        """p(against) in trial ``row``."""
+        z = (self.rendered_nc_mm(row) - participant["own_nc_mm"]) / float(self.width_mm)
+        return float(self.lapse) + (1.0 - 2.0 * float(self.lapse)) * normal_cdf(z)
+
+    def answer(self, row: TrialRow, participant: Mapping[str, float], u: float) -> str:
+        """``against`` when ``u < p``, else ``with``."""
+        return "against" if u < self.probability(row, participant) else "with"
 
 
 def with_against_columns(protocol: ProtocolParts, levels: np.ndarray) -> dict[str, np.ndarray]:
@@ -58,13 +106,14 @@ def with_against_columns(protocol: ProtocolParts, levels: np.ndarray) -> dict[st
 class WithAgainst(ResponseKindSpec):
     name = "with_against"
     label = "with/against (NC calibration)"
+    takes_confidence = True  # one discrete choice: a confidence rating may follow
     model = WithAgainstResponse
     observer_models = (NcNulling,)
     keys = {"w": "with", "a": "against", "left": "with", "right": "against"}
     buttons = {"1": "with", "2": "against", "L": "with", "R": "against"}
     controller = {"left": "with", "right": "against"}
     fields = {"WithAgainstResponse": {"kind": "plan", "question": "plan", "nc_factor": "kinds"},
-              "NcNulling": {k: "observer" for k in ("kind", "nc_mm", "width_mm", "lapse", "between_subject_sd_mm")}}
+              "NcNulling": {k: "kinds" for k in ("kind", "nc_mm", "width_mm", "lapse", "between_subject_sd_mm")}}
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         assert isinstance(response, WithAgainstResponse)
