@@ -102,7 +102,10 @@ def main(args: argparse.Namespace) -> int:
         return 130
     where = args.scheduler or f"{run.jobs} local process(es)"
     again = f", {sum(resumed)} of them resumed from {checkpoint}/" if sum(resumed) else ""
-    print(f"psyop power: {args.protocol} -- SIMULATED, {n_studies} studies{again} on {where} in "
+    from psyop.power.run import observer_named
+
+    print(f"psyop power: {args.protocol} -- SIMULATED ({observer_named(args.protocol)}), {n_studies} studies{again} "
+          f"on {where} in "
           f"{time.perf_counter() - start:.1f} s (seed {args.seed}, alpha {args.alpha:g})")
     print(format_table(table))
     for line in short:

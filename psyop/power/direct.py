@@ -6,8 +6,9 @@ each participant's schedule with the session seed :func:`psyop.power.replicate.s
 ask the same observer (same seed and participant) for each main trial's answer, and run the same
 :func:`psyop.power.study_tests.study_tests` on the table. Its p values must equal the session path's
 exactly; a difference means the session (logging, scoring, dataset loading, rendering order) changed
-what the analysis sees. Reach observers depend on the rendered geometry and adaptive levels on the
-procedure, so those protocols are refused.
+what the analysis sees. Reach observers depend on the rendered geometry, the image observer
+(``observer: {kind: image}``) on the rendered frames and adaptive levels on the procedure, so those
+protocols are refused (the image observer's at its ``kind:`` line, naming the session path instead).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import pandas as pd
 from psyop.errors import UserError
 from psyop.power.replicate import ReplicationResult, ReplicationTask, session_seed
 from psyop.power.study_tests import study_tests
+from psyop.protocol.model import Protocol
 
 
 def direct_trials(task: ReplicationTask) -> pd.DataFrame:
@@ -36,6 +38,8 @@ def direct_trials(task: ReplicationTask) -> pd.DataFrame:
     if params is None:
         raise UserError("the direct re-simulation needs the protocol's simulated observer (an observer: section)",
                         "protocol observer")
+    if params.get("kind") == "image":
+        raise UserError(*_image_refusal(protocol))
     if plan.kind.needs_hand_pose or plan.adaptive is not None:
         raise UserError("the direct re-simulation covers constant stimuli answered from the trial row only",
                         "protocol design")
@@ -54,6 +58,18 @@ def direct_trials(task: ReplicationTask) -> pd.DataFrame:
         table["chosen_mode"] = [a.chosen_mode for a in answers]
         frames.append(table)
     return pd.concat(frames, ignore_index=True)
+
+
+def _image_refusal(protocol: Protocol) -> tuple[str, str]:
+    """The one-line refusal of the image observer, located at the protocol's ``observer: kind:``."""
+    from psyop.protocol.source import read_yaml
+
+    document = read_yaml(protocol.source_text, protocol.source_name)
+    _, mark = document.nearest(("observer", "kind"))
+    return ("the image observer answers from the frames a session renders, which the direct re-simulation does not "
+            "draw; run `psyop power` (it runs each simulated session, rendering every interval: about 1 s of CPU "
+            "per trial at the observer's defaults), or use a schedule-based observer (e.g. kind: psychometric_2afc) "
+            "for the direct path", document.location(mark))
 
 
 def run_direct_replication(task: ReplicationTask) -> ReplicationResult:

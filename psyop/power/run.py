@@ -34,6 +34,18 @@ class PowerRun:
     first_replication: int = 0
 
 
+def observer_named(path: Path) -> str:
+    """Which simulated observer answers the protocol at ``path`` in every replication, as a power run's output
+    names it: ``observer: image (from the rendered frames)`` or ``observer: <kind> (from the schedule)``."""
+    from psyop.protocol import load_protocol
+
+    observer = load_protocol(path).observer
+    if observer is None:
+        return "observer: none"
+    source = "from the rendered frames" if observer.kind == "image" else "from the schedule"
+    return f"observer: {observer.kind} ({source})"
+
+
 def plan_tasks(run: PowerRun) -> list[ReplicationTask]:
     from psyop.power.effects import apply_effects
     from psyop.protocol import load_protocol

@@ -1,0 +1,87 @@
+"""The image observer (``observer: {kind: image}``) answering ``n_afc`` (``alternatives: intervals``) and
+``yes_no`` trials from the frames the session's renderer draws for each interval
+(psyop.session.image_observer.frames): each interval's internal response is its relative-motion energy
+(psyop.session.image_observer.response), as for ``two_interval``, and the decision rules are stated in
+psyop.session.image_observer.decisions: n-AFC picks the interval with the largest noisy response; yes/no says yes
+when the noisy response exceeds ``criterion_sd`` noise sds. Each answer is decided against the trial's one keyed
+uniform draw (psyop.session.responses.simulated): the same session seed gives the same answers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from psyop.protocol.kinds import kind_named
+from psyop.session.gaze.keyed import keyed_uniform
+from psyop.session.image_observer.decisions import p_largest, p_yes
+from psyop.session.image_observer.frames import FrameSource
+from psyop.session.image_observer.response import interval_response
+from psyop.session.image_observer.stages import model_of, stages_of
+from psyop.session.plan import SessionPlan
+from psyop.session.responses.base import Response, score
+from psyop.session.responses.simulated import SimulatedObserver
+from psyop.session.rows import JsonMapping, TrialRow
+
+
+class ImageIntervalSource(SimulatedObserver):
+    """The image observer's internal response to each interval of a trial (computed once per trial)."""
+
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str, plan: SessionPlan) -> None:
+        super().__init__(params, seed=seed, participant=participant)
+        self.model = model_of(params)
+        self.eye, self.motion = stages_of(self.model)
+        self.frames = FrameSource(plan, scale=float(self.model.render_scale),
+                                  frames_per_interval=self.model.frames_per_interval)
+        self._last: tuple[int, tuple[float, ...]] | None = None  # (trial seed, its responses)
+
+    def responses(self, row: TrialRow) -> tuple[float, ...]:
+        """Each interval's internal response to trial ``row`` (contrast^2 deg^2)."""
+        key = int(row["trial_seed"])
+        if self._last is None or self._last[0] != key:
+            self._last = key, tuple(interval_response(f, self.eye, self.motion) for f in self.frames.intervals(row))
+        return self._last[1]
+
+    def close(self) -> None:
+        self.frames.close()
+
+
+class ImageNafcSource(ImageIntervalSource):
+    """n-AFC over intervals: the interval with the largest noisy response (decisions.p_largest)."""
+
+    kind = kind_named("n_afc")
+
+    def choices(self, row: TrialRow) -> np.ndarray:
+        """Each interval's probability of being answered."""
+        return p_largest(self.responses(row), float(self.model.noise_sd_c2deg2), float(self.model.lapse))
+
+    def decision(self, row: TrialRow) -> tuple[float, float]:
+        return keyed_uniform(*self.trial_keys(row)), float(self.choices(row)[int(row["correct_interval"]) - 1])
+
+    def collect(self, row: TrialRow, now_s: float) -> Response:
+        """The right interval when ``u < p(right)``; else the wrong one whose share of the rest covers ``u``."""
+        u, _ = self.decision(row)
+        p = self.choices(row)
+        right = int(row["correct_interval"])
+        order = [right] + [k for k in range(1, len(p) + 1) if k != right]
+        cumulative = np.cumsum([p[k - 1] for k in order])
+        chosen = order[min(int(np.searchsorted(cumulative, u, side="right")), len(order) - 1)]
+        return score(self.kind, row, str(chosen))
+
+
+class ImageYesNoSource(ImageIntervalSource):
+    """Yes/no: yes when the one interval's noisy response exceeds ``criterion_sd`` noise sds (decisions.p_yes)."""
+
+    kind = kind_named("yes_no")
+
+    def p_yes(self, row: TrialRow) -> float:
+        (response,) = self.responses(row)
+        return p_yes(response, float(self.model.noise_sd_c2deg2), float(self.model.criterion_sd),
+                     float(self.model.lapse))
+
+    def decision(self, row: TrialRow) -> tuple[float, float]:
+        yes = self.p_yes(row)
+        return keyed_uniform(*self.trial_keys(row)), (yes if bool(row["signal"]) else 1.0 - yes)
+
+    def collect(self, row: TrialRow, now_s: float) -> Response:
+        u, p = self.decision(row)
+        right = "yes" if bool(row["signal"]) else "no"
+        return score(self.kind, row, right if u < p else ("no" if right == "yes" else "yes"))

@@ -1,0 +1,131 @@
+"""The image observer (protocol ``observer: {kind: image}``, psyop.protocol.image_observer): a simulated
+participant that answers from the frames the session's renderer draws for each interval
+(psyop.session.image_observer.frames), not from the schedule, by the decision rule of the response kind
+(:func:`image_observer_source` picks it).
+
+``two_interval`` (:class:`ImageObserverSource`): each interval's internal response is the relative-motion energy
+its eye sees (psyop.session.image_observer.response, through the eye of psyop.session.image_observer.eye). With
+Gaussian internal noise of sd ``noise_sd_c2deg2`` on each response it picks the larger, so it answers correctly
+with probability ``lapse / 2 + (1 - lapse) Phi((R_correct - R_other) / (noise_sd_c2deg2 sqrt 2))``. Two intervals
+with the same frames have the same response: it answers at chance wherever the stimulus carries no cue.
+
+``left_right_nearer`` (:class:`ImageOrdinalSource`): the side whose shift against each gaze shift says nearer
+(psyop.session.image_observer.ordinal), with noise ``shift_noise_arcmin`` on each pair of frames' evidence;
+``border_strip_deg`` about the midline is left out of both half fields. Frames that do not change with the gaze
+(conventional rendering) carry no evidence: a coin toss.
+
+Each answer is decided against the trial's one keyed uniform draw (as every simulated observer,
+psyop.session.responses.simulated): the same session seed gives the same answers, resumed or not.
+"""
+
+from __future__ import annotations
+
+import math
+
+from psyop.protocol.kinds import kind_named
+from psyop.session.gaze.keyed import keyed_uniform
+from psyop.session.image_observer.frames import FrameSource
+from psyop.session.image_observer.ordinal import interval_evidence_arcmin, p_left
+from psyop.session.image_observer.response import interval_response
+from psyop.session.image_observer.stages import model_of, stages_of
+from psyop.session.plan import SessionPlan
+from psyop.session.responses.base import Response, score
+from psyop.session.responses.simulated import SimulatedObserver
+from psyop.session.rows import JsonMapping, TrialRow
+
+
+def p_correct(responses: tuple[float, ...], correct_interval: int, noise_sd: float, lapse: float) -> float:
+    """p(correct) of the noisy comparison of two interval responses (see the module docstring)."""
+    right, other = responses[correct_interval - 1], responses[2 - correct_interval]
+    z = (right - other) / (noise_sd * math.sqrt(2.0))
+    return 0.5 * lapse + (1.0 - lapse) * 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+class ImageObserverSource(SimulatedObserver):
+    """The image observer as the session's response source (see the module docstring)."""
+
+    kind = kind_named("two_interval")
+
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str, plan: SessionPlan) -> None:
+        super().__init__(params, seed=seed, participant=participant)
+        self.model = model_of(params)
+        self.eye, self.motion = stages_of(self.model)
+        self.frames = FrameSource(plan, scale=float(self.model.render_scale),
+                                  frames_per_interval=self.model.frames_per_interval)
+        if len(self.frames.interval_phases()) != 2:
+            raise ValueError(f"the image observer answers two-interval trials; this plan has "
+                             f"{len(self.frames.interval_phases())} interval(s)")
+        self._last: tuple[int, tuple[float, ...]] | None = None  # (trial seed, its responses): computed once
+
+    def responses(self, row: TrialRow) -> tuple[float, ...]:
+        """Each interval's internal response to trial ``row`` (contrast^2 deg^2)."""
+        key = int(row["trial_seed"])
+        if self._last is None or self._last[0] != key:
+            self._last = key, tuple(interval_response(f, self.eye, self.motion) for f in self.frames.intervals(row))
+        return self._last[1]
+
+    def decision(self, row: TrialRow) -> tuple[float, float]:
+        p = p_correct(self.responses(row), int(row["correct_interval"]), float(self.model.noise_sd_c2deg2),
+                      float(self.model.lapse))
+        return keyed_uniform(*self.trial_keys(row)), p
+
+    def collect(self, row: TrialRow, now_s: float) -> Response:
+        u, p = self.decision(row)
+        right = int(row["correct_interval"])
+        return score(self.kind, row, str(right if u < p else 3 - right))
+
+    def close(self) -> None:
+        self.frames.close()
+
+
+class ImageOrdinalSource(SimulatedObserver):
+    """The image observer answering a left/right-nearer trial (see the module docstring)."""
+
+    kind = kind_named("left_right_nearer")
+
+    def __init__(self, params: JsonMapping, *, seed: int, participant: str, plan: SessionPlan) -> None:
+        super().__init__(params, seed=seed, participant=participant)
+        self.model = model_of(params)
+        self.eye, self.motion = stages_of(self.model)
+        self.frames = FrameSource(plan, scale=float(self.model.render_scale),
+                                  frames_per_interval=self.model.frames_per_interval)
+        if len(self.frames.interval_phases()) != 1:
+            raise ValueError(f"the image observer answers a left/right-nearer trial from one interval; this plan has "
+                             f"{len(self.frames.interval_phases())}")
+        self._last: tuple[int, list[float]] | None = None  # (trial seed, its evidence): computed once
+
+    def evidence_arcmin(self, row: TrialRow) -> list[float]:
+        """Each pair of successive frames' evidence (arcmin) that the left side is nearer in trial ``row``."""
+        key = int(row["trial_seed"])
+        if self._last is None or self._last[0] != key:
+            frames = next(iter(self.frames.intervals(row)))
+            self._last = key, interval_evidence_arcmin(frames, self.eye, self.motion.scale_deg,
+                                                       float(self.model.border_strip_deg))
+        return self._last[1]
+
+    def decision(self, row: TrialRow) -> tuple[float, float]:
+        """``(u, p)``: the trial's uniform draw and p(the near side is answered)."""
+        left = p_left(self.evidence_arcmin(row), float(self.model.shift_noise_arcmin), float(self.model.lapse))
+        return keyed_uniform(*self.trial_keys(row)), (left if str(row["near_side"]) == "left" else 1.0 - left)
+
+    def collect(self, row: TrialRow, now_s: float) -> Response:
+        u, p = self.decision(row)
+        near = str(row["near_side"])
+        return score(self.kind, row, near if u < p else ("right" if near == "left" else "left"))
+
+    def close(self) -> None:
+        self.frames.close()
+
+
+def image_observer_source(params: JsonMapping, *, seed: int, participant: str,
+                          plan: SessionPlan) -> SimulatedObserver:
+    """The image observer for the plan's response kind (``two_interval``, ``left_right_nearer``, ``n_afc`` or
+    ``yes_no``: psyop.session.responses.image_choices)."""
+    if plan.kind.name == "left_right_nearer":
+        return ImageOrdinalSource(params, seed=seed, participant=participant, plan=plan)
+    if plan.kind.name in ("n_afc", "yes_no"):
+        from psyop.session.responses.image_choices import ImageNafcSource, ImageYesNoSource
+
+        source = ImageNafcSource if plan.kind.name == "n_afc" else ImageYesNoSource
+        return source(params, seed=seed, participant=participant, plan=plan)
+    return ImageObserverSource(params, seed=seed, participant=participant, plan=plan)
