@@ -57,7 +57,9 @@ def test_window_session_with_keyboard_responses(tmp_path: Path) -> None:
     # submits are one 90 Hz frame period apart
     frames["gap_s"] = frames.groupby("trial")["submit_s"].diff()
     gaps = frames.loc[~frames["phase"].str.startswith("interval"), "gap_s"].dropna()
-    assert gaps.median() >= 0.5 / 90  # paced by the clock, not free-running (the period itself: make bench)
+    # paced by the clock, not free-running (free-running submits come a fraction of a ms apart; a loaded machine's
+    # late frames are followed by catch-up ones, so the median sits below the period: the period itself is make bench's)
+    assert gaps.median() >= 0.25 / 90
 
 
 STEREO_SCRIPT = textwrap.dedent(

@@ -59,13 +59,14 @@ def test_headset_frames_use_the_gaze_of_50_ms_earlier(tmp_path: Path) -> None:
     frames = pd.read_parquet(session / "frames.parquet")
     gaze = pd.read_parquet(session / "gaze.parquet").sort_values("gaze_sample_t_s").drop_duplicates("gaze_sample_t_s")
     rendered = frames[frames["phase"].str.startswith("interval") & frames["gaze_valid"]].reset_index(drop=True)
-    assert len(rendered) >= 10 and (rendered["added_latency_s"] == 0.05).all()  # frames: as many as the CPU renders
+    # frames: as many as the CPU renders (about 20 a second here, a few under heavy load); five show the rule
+    assert len(rendered) >= 5 and (rendered["added_latency_s"] == 0.05).all()
     t_raw = gaze["gaze_sample_t_s"].to_numpy()
     period = float(np.median(np.diff(t_raw)))  # the runtime's sample period (one per frame)
     asked = (rendered["display_time_s"] - rendered["gaze_age_intrinsic_s"] - 0.05).to_numpy()
     used = rendered["gaze_sample_t_s"].to_numpy()
     late = asked > t_raw[0] + period  # frames after the stream's first 50 ms
-    assert late.sum() >= 10
+    assert late.sum() >= 5
     # the raw stream's sample at or before (newest - 50 ms): never after it, and no later sample before it (the
     # runtime's samples come one per frame: on this software renderer about 20 frames a second)
     index = np.searchsorted(t_raw, asked + 1e-9, side="right") - 1
