@@ -105,7 +105,19 @@ def main(argv: list[str] | None = None) -> int:
     fig = plot_thresholds(fits, cond, cond_label, title, simulated=simulated, level_unit=unit or "level units")
     caption(fig, _caption(payload["group_model"]))
     save_figure(fig, out_path(args))
+    _confidence(args, cond, level.name, simulated)
     return 0
+
+
+def _confidence(args, cond: str, level: str, simulated: bool) -> None:
+    """A study that asked a confidence rating after each choice: its confidence per condition and level and its
+    type-2 ROC areas beside the thresholds (analysis/_confidence.py); nothing for a study without one."""
+    from _confidence import confidence_analysis
+    from psyop.statistics.dataset import load_dataset
+
+    trials = load_dataset(args.data, args.study).trials
+    conditions = [c for c in dict.fromkeys((cond, level)) if c in trials and trials[c].nunique() > 1]
+    confidence_analysis(trials, conditions, args.study, args.results, out_path(args), simulated)
 
 
 def _dropped_text(dropped) -> str:

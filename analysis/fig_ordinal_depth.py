@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 
 from _common import out_path, parser, provenance, require_columns, require_kind, results_file, run, write_csv, write_json
+from _confidence import confidence_analysis
 
 from psyop.figures.output import save_figure
 from psyop.figures.study_figures import plot_ordinal
@@ -60,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     save_figure(plot_ordinal(cells[~cells["participant"].isin(aov.dropped["subject"])], posthoc,
                              simulated=ds.simulated, separation_column=sep, separation_label=facts.factor(sep).text,
                              separation_unit=unit, title=title), out_path(args))
+    confidence_analysis(ds.trials, ["mode", sep], args.study, args.results, out_path(args), ds.simulated)  # if rated
     return 0
 
 

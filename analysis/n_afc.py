@@ -14,6 +14,7 @@ import sys
 
 import numpy as np
 from _common import out_path, parser, provenance, require_columns, require_kind, results_file, run, write_csv, write_json
+from _confidence import confidence_analysis
 
 from psyop.statistics.studies import study_facts
 
@@ -55,6 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         "thresholds": means.to_dict("records"),
     })
     _figure(trials, fits, means, level, others, n, args.study, ds.simulated, out_path(args))
+    confidence_analysis(trials, [*others, level], args.study, args.results, out_path(args), ds.simulated)  # if rated
     print(means.to_string(index=False))
     return 0
 

@@ -15,6 +15,7 @@ import sys
 
 import numpy as np
 from _common import out_path, parser, provenance, require_columns, require_kind, results_file, run, write_csv, write_json
+from _confidence import confidence_analysis
 
 from psyop.statistics.studies import study_facts
 
@@ -50,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         "fits_by_status": {} if fits is None else fits["status"].value_counts().to_dict(),
     })
     _figure(table, means, fits, trials, conditions, level, args.study, ds.simulated, out_path(args))
+    confidence_analysis(trials, conditions, args.study, args.results, out_path(args), ds.simulated)  # if rated
     print(means.to_string(index=False))
     return 0
 

@@ -276,8 +276,13 @@ def _scene(args: argparse.Namespace, protocol: Protocol, protocol_path: Path, ro
         plan = compile_plan(protocol, tracker_ipd_m=view.ipd_m)
         texts = TextImages(views=display_views(view.display, panel_offsets_tan(plan)))
         keep = args.phase in SCREEN_PHASES or kind_of(protocol.response).response_text(protocol.response) is not None
+        from psyop.session.screens import instruction_picture
+
+        picture = instruction_picture(protocol.session, args.screen, protocol_path.parent) \
+            if args.phase == "instructions" else None  # an instruction page's image above its text
         try:
-            image = texts.image(response_text, keep_lines=keep)
+            image = texts.image(response_text, keep_lines=keep) if picture is None else \
+                texts.page(response_text, picture)
         except TextDoesNotFit as error:
             raise UserError(f"--phase {args.phase}: {error}") from None
         return text_scene(image, scene_origin_m(protocol, view.centre_m))

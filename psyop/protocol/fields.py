@@ -39,6 +39,8 @@ USERS: dict[str, tuple[str, ...]] = {
     "stimulus": ("psyop/stimulus/build.py", "psyop/protocol/scene.py"),
     "display": ("psyop/protocol/display.py", "psyop/optics/display.py"),
     "observer": ("psyop/session/responses/simulated.py",),
+    "image_observer": ("psyop/session/responses/image_observer.py", "psyop/session/responses/image_choices.py",
+                       "psyop/session/image_observer/stages.py"),
     "summary": ("psyop/schedule/summary.py", "psyop/protocol/conditions.py"),
     "validation": ("psyop/protocol/semantics.py", "psyop/protocol/model.py", "psyop/protocol/scene.py",
                    "psyop/protocol/trial.py", "psyop/protocol/response.py", "psyop/protocol/observer.py",
@@ -73,7 +75,7 @@ FIELD_USERS: dict[str, dict[str, str]] = {
     "Feedback": {k: "screens" for k in ("practice", "main", "text", "duration_s")},
     "FeedbackText": {k: "screens" for k in ("correct", "incorrect", "answer", "timeout")},
     # image: refused at validation (psyop.protocol.session_screens: only text is drawn in the headset)
-    "InstructionPage": {"text": "screens", "image": "refused", "expected_s": "screens"},
+    "InstructionPage": {"text": "screens", "image": "screens", "image_width_deg": "screens", "expected_s": "screens"},
     "Instructions": {"pages": "screens", "at_blocks": "screens"},
     "Breaks": {k: "screens" for k in ("every_trials", "between_blocks", "text", "expected_s")},
     "Questionnaire": {k: "screens" for k in ("name", "when", "items", "scale", "title", "item_expected_s")},
@@ -110,7 +112,7 @@ FIELD_USERS: dict[str, dict[str, str]] = {
                                                "drift_deg_s", "mean", "luminance", "contrast", "window")},
     "GaussianWindow": {"kind": "validation", "sigma_deg": "stimulus"},
     "RaisedCosineWindow": {"kind": "validation", "plateau_radius_deg": "stimulus", "ramp_deg": "stimulus"},
-    "Contrast": {"michelson": "stimulus", "weber": "stimulus"},
+    "Contrast": {"michelson": "stimulus", "weber": "stimulus", "michelson_log10": "stimulus"},
     "Luminance": {"cd_m2": "stimulus"},
     "ImageSurface": {"kind": "validation", "path": "stimulus", "tile_deg": "stimulus"},
     "Quad": _scene(width_deg="stimulus", height_deg="stimulus", depth="stimulus", surface="stimulus",
@@ -179,3 +181,8 @@ for _kind in KINDS.values():
         FIELD_USERS[_model] = dict(_users)
     for _observer in _kind.observer_models:
         FIELD_USERS[_observer.__name__]["eye"] = "tracker"  # observer: eye: (psyop.protocol.simulated_eye)
+        FIELD_USERS[_observer.__name__]["confidence"] = "observer"  # its confidence model (simulated.py)
+    FIELD_USERS.setdefault(_kind.model.__name__, {})["confidence"] = "kinds"  # psyop.protocol.kinds.confidence
+# the confidence rating after a choice: the scale (its checks, keys and text) and the simulated observer's model
+FIELD_USERS["ConfidenceScale"] = {"points": "kinds", "labels": "kinds", "question": "kinds"}
+FIELD_USERS["ObserverConfidence"] = {"criteria": "observer", "meta_noise_sd": "observer", "evidence_weight": "observer"}

@@ -23,6 +23,7 @@ from psyop.protocol.base import UNIT_SUFFIXES, has_unit_suffix
 from psyop.protocol.conditions import expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.kinds import kind_of
+from psyop.protocol.kinds.confidence import check_confidence
 from psyop.protocol.kinds.two_interval import TwoIntervalResponse
 from psyop.protocol.primitive_count import primitive_count
 from psyop.protocol.scene import (RENDERING_MODES, Depth, FactorRef, FixationTarget, ImageSurface, LevelRef, Mesh,
@@ -432,6 +433,7 @@ class _Checker:
             self.add(("trial", "phases"), f"a {response.kind} response needs {needed} interval phase(s), "
                                           f"but trial.phases has {intervals}; add or remove '- kind: interval'")
         kind_of(response).check(response, self, ("response",))
+        check_confidence(kind_of(response), response, self.p.observer, self, ("response",))
         if response.kind != "with_against" and self.p.display.rendering_nc is not None \
                 and self.p.display.rendering_nc.signed:
             self.add(("display", "rendering_nc", "signed"), "a signed rendering NC sets each trial's mode from its "
@@ -611,6 +613,26 @@ class _Checker:
                          f"block {block} does not exist: the design has {n_blocks} block(s), numbered 0 to "
                          f"{n_blocks - 1} in run order; list only those")
 
+    def check_page_images(self) -> None:
+        """Every ``session: instructions: pages: image:`` names an image file (relative to the protocol) that
+        decodes, as an image surface's path must."""
+        screens = self.p.session
+        pages = screens.instructions.pages if screens is not None and screens.instructions is not None else []
+        base = self.base_dir or FsPath.cwd()
+        for index, page in enumerate(pages):
+            if page.image is None:
+                continue
+            where: Loc = ("session", "instructions", "pages", index, "image")
+            target = base / page.image
+            if not target.is_file():
+                self.add(where, f"image file '{page.image}' not found (looked for {target}); paths are relative to "
+                                "the protocol file. Fix the path or add the file.")
+                continue
+            try:
+                check_image_file(target, page.image)
+            except UserError as error:
+                self.add(where, error.message)
+
     def check_observer(self) -> None:
         observer = self.p.observer
         if observer is None:
@@ -685,5 +707,6 @@ def check_protocol(protocol: Protocol, base_dir: FsPath | None, meshes: MeshFile
     checker.check_observer()
     checker.check_validation()
     checker.check_session_blocks(conditions)
+    checker.check_page_images()
     checker.check_reported()
     return checker.issues

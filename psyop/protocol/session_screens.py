@@ -1,4 +1,4 @@
-"""The optional ``session:`` section: what a participant sees around the trials (issue 40, item 3).
+"""The optional ``session:`` section: what a participant sees around the trials.
 
 Instructions before the first trial (and again at the start of chosen blocks), rest breaks (every N trials
 and/or between blocks), questionnaires (at the start, between blocks, at the end; ``name: ssq`` is the
@@ -18,9 +18,11 @@ from pydantic import Field, field_validator, model_validator
 from psyop.protocol import ssq
 from psyop.protocol.base import Integer, Number, StrictModel
 
-#: a screen's text is wrapped at this many characters per line (psyop.rendering.text.WRAP_CHARS, which draws it)
+#: a screen's text is wrapped at this many characters per line (psyop.rendering.text.WRAP_CHARS, which draws it),
+#: or fewer where the display's view is too narrow for them at the legible minimum (psyop.session.text_fit)
 WRAP_CHARS = 40
-#: the most lines a screen's text may take once wrapped: 1 deg letters, 1.2 deg a line, inside the headset's view
+#: the most lines a screen's text may take once wrapped at WRAP_CHARS, on any display; a display with too few pixels
+#: for it at the legible minimum (capitals of 12 px) refuses it when the session starts (psyop.session.text_fit)
 MAX_LINES = 16
 #: the placeholders a break's text may hold
 BREAK_FIELDS: tuple[str, ...] = ("done", "left", "total")
@@ -45,10 +47,16 @@ def _fits(text: str) -> str:
 
 
 class InstructionPage(StrictModel):
-    """One page of instructions: ``text`` (its own line breaks kept); the participant ends it."""
+    """One page of instructions: ``text`` (its own line breaks kept), optionally an ``image`` drawn above it on the
+    panel, ``image_width_deg`` wide (None: as wide as the view leaves room for); the participant ends it. The image
+    file (relative to the protocol) is decoded at validation (psyop.protocol.semantics) and the page laid out on
+    the display when the session starts (psyop.rendering.text: refused at its line when it cannot fit)."""
 
     text: str = Field(max_length=2000, description="what the participant reads (line breaks kept)")
-    image: str | None = Field(default=None, description="not shown yet: refused")
+    image: str | None = Field(default=None, description="an image file (PNG, JPEG; relative to the protocol) drawn "
+                                                        "above the text")
+    image_width_deg: Number | None = Field(default=None, gt=0, le=120,
+                                           description="the image's width, deg (default: as wide as fits the view)")
     expected_s: Number = Field(default=15.0, gt=0, le=600,
                                description="how long a simulated participant reads it, s")
 
@@ -60,10 +68,16 @@ class InstructionPage(StrictModel):
     @field_validator("image")
     @classmethod
     def _image(cls, value: str | None) -> str | None:
-        if value is not None:  # a protocol field is used or refused: an image would be silently missing
-            raise ValueError("images on instruction pages are not shown yet (only text is drawn in the headset); "
-                             "remove image: and describe the picture in text:")
+        if value is not None and not value.strip():
+            raise ValueError("image is empty; name an image file (relative to the protocol) or remove image:")
         return value
+
+    @model_validator(mode="after")
+    def _width_needs_image(self) -> "InstructionPage":
+        if self.image_width_deg is not None and self.image is None:
+            raise ValueError("image_width_deg is given but the page has no image; add image: FILE or remove "
+                             "image_width_deg")
+        return self
 
 
 class Instructions(StrictModel):

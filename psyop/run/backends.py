@@ -35,10 +35,13 @@ if TYPE_CHECKING:
     from psyop.devices.experimenter import ExperimenterWindow
     from psyop.devices.responses.keyboard import KeyEvents
     from psyop.session.clock import Clock
+    from psyop.session.controls import SessionControls
     from psyop.session.events import EventSink
     from psyop.session.frames import Display
     from psyop.session.gaze.sample import GazeSource
     from psyop.session.gaze.simulated import SimulatedTrackerConfig
+    from psyop.session.loop import BetweenTrials
+    from psyop.session.headset_calibration import HeadsetCalibration
     from psyop.session.plan import SessionPlan
     from psyop.session.pose import PoseSource
     from psyop.session.responses.base import ResponseSource
@@ -75,6 +78,21 @@ class BackendContext:
     #: the experimenter window (``--experimenter-window``; None without it): keyboard responses read its keys
     #: when the display is no window of its own
     experimenter_window: KeyEvents | None = None
+    #: the terminal's keys (psyop.devices.responses.terminal; None: standard input is no foreground terminal, or
+    #: the clock is virtual): keyboard responses read them too
+    terminal: KeyEvents | None = None
+    #: where every key source hands Escape, ``p`` and ``c`` (psyop.session.controls; None: no controls)
+    controls: SessionControls | None = None
+    #: the experimenter window's mirror: which eye (left, right or both) and each eye's width (pixels)
+    mirror_eye: str = "left"
+    mirror_width_px: int = 320
+    #: where a backend adds what ``c`` (recalibrate now) runs at the next trial boundary, before the protocol's gaze
+    #: validation, e.g. a tracker's own calibration: fn(loop, trial about to run) (psyop.session.loop.BetweenTrials;
+    #: the runner hands them to the loop's ``on_recalibrate``)
+    on_recalibrate: list[BetweenTrials] = field(default_factory=list)
+    #: where a tracker calibrated in the headset (``pupil:...,calibrate-hmd``) adds its calibration
+    #: (psyop.session.headset_calibration); the runner runs it before the first trial
+    headset_calibrations: list[HeadsetCalibration] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -134,7 +152,7 @@ def _replay_tracker(arg: str, ctx: BackendContext) -> GazeSource:
     return ReplayTracker.from_path(Path(arg))
 
 
-PUPIL_FLAGS = ("calibrate", "record", "annotate")
+PUPIL_FLAGS = ("calibrate", "calibrate-hmd", "record", "annotate")
 
 
 def _pupil_tracker(arg: str, ctx: BackendContext) -> GazeSource:
@@ -143,15 +161,23 @@ def _pupil_tracker(arg: str, ctx: BackendContext) -> GazeSource:
     address, *flags = arg.split(",")
     host, _, port = address.rpartition(":")
     if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise UserError(f"expected pupil:HOST:PORT[,calibrate][,record][,annotate], got 'pupil:{arg}'", "--tracker")
+        raise UserError(f"expected pupil:HOST:PORT[,calibrate|,calibrate-hmd][,record][,annotate], got 'pupil:{arg}'",
+                        "--tracker")
     unknown = [f for f in flags if f not in PUPIL_FLAGS]
     if unknown:
         raise UserError(f"unknown pupil option(s) {unknown}; use {', '.join(PUPIL_FLAGS)}", "--tracker")
+    if "calibrate" in flags and "calibrate-hmd" in flags:
+        raise UserError("pupil options calibrate (Capture's own markers, on a monitor) and calibrate-hmd (psyop's "
+                        "targets in the headset) are two calibrations: keep one", "--tracker")
     record = f"{ctx.plan.study}_sub-{ctx.participant}_ses-{ctx.session}" if "record" in flags else None
     client = PupilClient(host, int(port), clock=ctx.clock.now_s, calibrate="calibrate" in flags,
                          record_name=record, annotate="annotate" in flags)
     if client.annotate:
         ctx.event_sinks.append(client)
+    if "calibrate-hmd" in flags:
+        from psyop.devices.gaze.pupil_hmd_calibration import PupilHmdCalibration
+
+        ctx.headset_calibrations.append(PupilHmdCalibration(client))
     return client
 
 
@@ -193,6 +219,10 @@ def _sim_responses(arg: str, ctx: BackendContext) -> ResponseSource:
     params = ctx.plan.observer_params()
     if params is None:
         raise UserError("--responses sim needs an observer: section in the protocol", "protocol")
+    if params.get("kind") == "image":  # answers from the frames it renders: it takes the session plan
+        from psyop.session.responses.image_observer import image_observer_source
+
+        return image_observer_source(params, seed=ctx.seed, participant=ctx.participant, plan=ctx.plan)
     return make_observer(params, seed=ctx.seed, participant=ctx.participant)
 
 
@@ -216,17 +246,22 @@ def _serial_responses(arg: str, ctx: BackendContext) -> ResponseSource:
 
 
 def _keyboard_responses(arg: str, ctx: BackendContext) -> ResponseSource:
-    from psyop.devices.responses.keyboard import KeyboardResponses
+    from psyop.devices.responses.keyboard import KeyboardResponses, MergedKeys
     from psyop.devices.window import GlfwWindow
 
-    keys: KeyEvents | None = ctx.display if isinstance(ctx.display, GlfwWindow) else ctx.experimenter_window
-    if keys is None:
-        raise UserError(KEYBOARD_NEEDS_A_WINDOW, "--responses")
+    window: KeyEvents | None = ctx.display if isinstance(ctx.display, GlfwWindow) else ctx.experimenter_window
+    sources = [s for s in (window, ctx.terminal) if s is not None]
+    if not sources:
+        raise UserError(KEYBOARD_NEEDS_KEYS, "--responses")
+    keys = sources[0] if len(sources) == 1 else MergedKeys(sources)
     return KeyboardResponses(keys, ctx.plan.kind, keymap=ctx.plan.response.inputs.keys)
 
 
-KEYBOARD_NEEDS_A_WINDOW = ("--responses keyboard reads the keys of a window: the session window (--display window) "
-                           "or the experimenter window (--experimenter-window, with --display openxr or headless)")
+KEYBOARD_NEEDS_KEYS = (
+    "--responses keyboard reads the keys of a window (the session window of --display window, or the experimenter "
+    "window of --experimenter-window) or of the terminal psyop run was started from, and none is here: standard "
+    "input is not a terminal in the foreground; run it from a terminal (`psyop run ... --display headless "
+    "--responses keyboard --clock real`), or add --display window or --experimenter-window")
 
 
 def _openxr_tracker(arg: str, ctx: BackendContext) -> GazeSource:
@@ -242,9 +277,13 @@ def _openxr_pose(arg: str, ctx: BackendContext) -> PoseSource:
 
 
 def _openxr_responses(arg: str, ctx: BackendContext) -> ResponseSource:
-    from psyop.devices.xr.tracking import OpenXRResponses
+    from psyop.devices.xr.tracking import THUMBSTICK_X, OpenXRResponses
+    from psyop.protocol.kinds.confidence import SCALE_CONTROLLER
 
-    return OpenXRResponses.on_display(ctx.display, ctx.plan.kind, ctx.plan.response.inputs.controller)
+    controller = dict(ctx.plan.response.inputs.controller)
+    if ctx.plan.protocol.response.confidence is not None and controller:  # the stick picks the confidence point
+        controller[THUMBSTICK_X] = SCALE_CONTROLLER[THUMBSTICK_X]
+    return OpenXRResponses.on_display(ctx.display, ctx.plan.kind, controller)
 
 
 def _headless_display(arg: str, ctx: BackendContext) -> Display:
@@ -271,15 +310,20 @@ def _openxr_display(arg: str, ctx: BackendContext) -> Display:
 def _window_display(arg: str, ctx: BackendContext) -> Display:
     from psyop.devices.window import GlfwWindow
 
-    return GlfwWindow(ctx.plan.display, ctx.clock, scale=ctx.window_scale, n_eyes=len(ctx.plan.rig.eyes))
+    return GlfwWindow(ctx.plan.display, ctx.clock, scale=ctx.window_scale, n_eyes=len(ctx.plan.rig.eyes),
+                      controls=ctx.controls)
 
 
 #: what ``--experimenter-window`` does (its ``--help``)
 EXPERIMENTER_WINDOW_HELP = (
-    "open a small window on the experimenter's screen: a mirror of the first eye's image (downscaled, about "
-    "15 updates a second) and a status line (trial k of N, condition, phase, last answer, dropped frames, gaze valid "
-    "share); --responses keyboard then reads its keys. With --display openxr or headless (pip install "
-    "'psyop[window]')")
+    "open a small window on the experimenter's screen: a mirror of the participant's view (--mirror-eye, "
+    "--mirror-width-px; downscaled, about 15 updates a second) and a status line (trial k of N, condition, phase, "
+    "last answer, dropped frames, gaze valid share); --responses keyboard then reads its keys, and Escape, p (pause) "
+    "and c (recalibrate) work in it. With --display openxr or headless; on by default with --display openxr where "
+    "a desktop display exists ($DISPLAY or $WAYLAND_DISPLAY; --no-mirror: off) (pip install 'psyop[window]')")
+
+#: the eyes ``--mirror-eye`` may name, and the eyes each mirrors (side by side)
+MIRROR_EYES: dict[str, tuple[str, ...]] = {"left": ("left",), "right": ("right",), "both": ("left", "right")}
 
 
 def experimenter_window(ctx: BackendContext) -> ExperimenterWindow:
@@ -302,8 +346,15 @@ def experimenter_window(ctx: BackendContext) -> ExperimenterWindow:
         if isinstance(ctx.display, OpenXRDisplay):
             width_px, height_px = ctx.display.runtime.facts.recommended_sizes_px[0]
             egl = ctx.display.runtime.facts.graphics != "xlib"
-    mirror_px = (MIRROR_WIDTH_PX, max(16, round(MIRROR_WIDTH_PX * height_px / width_px)))
-    return ExperimenterWindow(ctx.clock, len(ctx.schedule), mirror_px, egl=egl, restore=ctx.display.gl_context)
+    if ctx.mirror_eye not in MIRROR_EYES:
+        raise UserError(f"--mirror-eye {ctx.mirror_eye}: expected one of {', '.join(MIRROR_EYES)}", "--mirror-eye")
+    if not 16 <= ctx.mirror_width_px <= 4096:
+        raise UserError(f"--mirror-width-px {ctx.mirror_width_px}: expected 16 to 4096 pixels per eye "
+                        f"(default {MIRROR_WIDTH_PX})", "--mirror-width-px")
+    width = int(ctx.mirror_width_px)
+    mirror_px = (width, max(16, round(width * height_px / width_px)))
+    return ExperimenterWindow(ctx.clock, len(ctx.schedule), mirror_px, egl=egl, restore=ctx.display.gl_context,
+                              controls=ctx.controls, eyes=MIRROR_EYES[ctx.mirror_eye])
 
 
 #: Every backend, in the order ``--help`` lists them.
@@ -312,9 +363,10 @@ BACKENDS: tuple[AnyBackend, ...] = (
             False, _sim_tracker),
     Backend("tracker", "replay", "replay:FILE", "the gaze of a logged session (frames.parquet or its session "
             "directory)", False, _replay_tracker, takes_arg=True),
-    Backend("tracker", "pupil", "pupil:HOST:PORT[,calibrate][,record][,annotate]", "Pupil Capture/Service over the "
-            "Pupil Core Network API (Pupil Remote's port, usually 50020); calibrate: run Capture's calibration first "
-            "and stop if it fails; record: a Capture recording named after the session; annotate: one annotation "
+    Backend("tracker", "pupil", "pupil:HOST:PORT[,calibrate|,calibrate-hmd][,record][,annotate]", "Pupil "
+            "Capture/Service over the Pupil Core Network API (Pupil Remote's port, usually 50020); calibrate: run "
+            "Capture's calibration first and stop if it fails; calibrate-hmd: calibrate in the headset before the "
+            "first trial (psyop shows the targets, Capture's HMD 3D calibration fits them) and stop if it fails; record: a Capture recording named after the session; annotate: one annotation "
             "per recorded trial", True, _pupil_tracker, takes_arg=True),
     Backend("tracker", "serial", "serial:DEVICE", "a serial device sending 'G x_m y_m z_m confidence' lines",
             True, _serial_tracker, takes_arg=True),
@@ -332,8 +384,9 @@ BACKENDS: tuple[AnyBackend, ...] = (
             "adds the hand: left or right (grip pose), left:aim or right:aim (pointing pose), or vive_tracker:ROLE",
             True, _openxr_pose, takes_arg=None),
     Backend("responses", "sim", "sim", "the protocol's simulated observer", False, _sim_responses),
-    Backend("responses", "keyboard", "keyboard", "keys of the session window (--display window) or of the "
-            "experimenter window (--experimenter-window)", True,
+    Backend("responses", "keyboard", "keyboard", "keys of the session window (--display window), of the "
+            "experimenter window (--experimenter-window) and of the terminal psyop run was started from (any display)",
+            True,
             _keyboard_responses),
     Backend("responses", "serial", "serial:DEVICE", "a response box sending 'B<button>' lines", True,
             _serial_responses, takes_arg=True),

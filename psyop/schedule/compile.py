@@ -16,6 +16,7 @@ from psyop.errors import UserError
 from psyop.protocol.conditions import condition_label, expand_conditions
 from psyop.protocol.model import Protocol
 from psyop.protocol.kinds import kind_of
+from psyop.protocol.kinds.confidence import confidence_columns
 from psyop.protocol.kinds.base import ScheduleInput
 from psyop.protocol.scene import FixationTarget, SinusoidalBorder
 from psyop.schedule.counterbalance import latin_square_order
@@ -132,6 +133,7 @@ def compile_schedule(protocol: Protocol, seed: int, participant_index: int | Non
 
     kind_input = ScheduleInput(protocol, columns, binary, cond_index, columns["practice"], _rng(seed, _STREAM_KIND))
     columns.update(kind_of(protocol.response).columns(protocol.response, kind_input))
+    columns.update(confidence_columns(protocol.response.confidence, kind_input.n))  # the confidence's log columns
     columns.update(_stimulus_columns(protocol, n, _rng(seed, _STREAM_STIMULUS)))
     return pd.DataFrame(columns)
 

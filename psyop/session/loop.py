@@ -6,6 +6,11 @@ RESPONSE (poll the response source) -> RECORD (durable append). A trial counts o
 once its record is fsynced; anything that stops the loop mid-trial (Ctrl-C, tracker
 lost) discards that trial and finalises the log, and the session can be resumed.
 
+Between trials the loop runs what was asked for the boundary (:attr:`TrialLoop.between_trials_requests`), and
+the experimenter's keys (psyop.session.controls): ``c`` runs :attr:`TrialLoop.on_recalibrate` and the protocol's
+gaze validation, ``p`` pauses until pressed again; both are logged in events.parquet (screens ``recalibrate`` and
+``pause``). A pause comes only between trials: the trial in progress when ``p`` is pressed runs to its end.
+
 Two frame regimes:
 - every frame (a person is watching, or the observer wants images): one frame per
   refresh period, each logged with its gaze sample time, render start, submit time
@@ -19,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
@@ -30,6 +36,8 @@ import pyarrow as pa
 from psyop.session.rows import JsonMapping, JsonObject, TrialRecord, TrialRow, frame_records
 from psyop.adaptive.session import AdaptiveLevels
 from psyop.session.clock import Clock
+from psyop.session.controls import SessionControls
+from psyop.session.log.screens_log import ScreenRecorder
 from psyop.session.events import EventKind, EventSink, SessionEvent
 from psyop.session.frames import Display, DisplayInterrupted, FrameRecorder, FrameRenderer, FrameRequest, latency_summary
 from psyop.session.log.schema import VIEW_TANGENTS
@@ -55,11 +63,23 @@ from psyop.session.progress import Progress, session_progress
 from psyop.session.responses.base import RawInputSource, Response, ResponseSource, score
 from psyop.protocol.kinds.adjustment import AdjustmentSpec, path_column
 from psyop.session.screens import ScreenRunner
+from psyop.protocol.kinds.confidence import ConfidenceScale
+from psyop.session.confidence import ConfidenceAsker
+from psyop.protocol.kinds.rating import RatingResponse
+from psyop.session.rating_stick import ask_rating
+from psyop.session.scale_picker import MappedRawSource, PickerPacing, picks_on_scale
 
 
 class TimingStopped(Exception):
     """The protocol's ``timing.max_rerun_share`` is spent: the session stops (exit 3, resumable) rather than
     discarding trial after trial; the message names the rule and what to change."""
+
+
+#: one thing to do at the next trial boundary: called with the loop and the trial about to run (psyop.session.loop
+#: TrialLoop.between_trials_requests, TrialLoop.on_recalibrate)
+BetweenTrials = Callable[["TrialLoop", int], None]
+#: what the display shows while the session is paused (no stimulus, the background)
+PAUSE_PHASE = PhaseSpec("pause", 0.0, "blank", "none")
 
 
 class TrialState(str, Enum):
@@ -89,6 +109,8 @@ class LoopFacts:
     hand_last_n: int = 10  # reach = mean of the last N hand samples (protocol response.average_last_samples)
     min_valid_gaze_share: float = 0.5  # protocol trial.min_valid_gaze_share: below it gaze_ok is False
     timing: TimingSection | None = None  # protocol timing: the dropped-frame rule of a trial's intervals
+    confidence: ConfidenceScale | None = None  # protocol response.confidence: asked after the choice
+    rating: RatingResponse | None = None  # protocol response, when a rating: the controllers' stick picks its point
 
     @classmethod
     def of_plan(cls, plan: SessionPlan) -> LoopFacts:
@@ -96,7 +118,8 @@ class LoopFacts:
         return cls(refresh_hz=float(plan.display.refresh_hz), **pursuit_fields(plan.fixation),
                    fixate_point=plan.fixation_point,
                    hand_last_n=plan.response.average_last_samples, min_valid_gaze_share=plan.min_valid_gaze_share,
-                   timing=plan.protocol.timing)
+                   timing=plan.protocol.timing, confidence=plan.protocol.response.confidence,
+                   rating=plan.protocol.response if isinstance(plan.protocol.response, RatingResponse) else None)
 
 
 @dataclass(frozen=True)
@@ -173,6 +196,8 @@ class TrialLoop:
         validator: GazeValidator | None = None,
         notice: Callable[[str], None] | None = None,
         screens: ScreenRunner | None = None,
+        controls: SessionControls | None = None,
+        control_log: ScreenRecorder | None = None,
     ) -> None:
         self.identity = dict(identity)  # study, participant, session
         self.phases = phases
@@ -184,6 +209,7 @@ class TrialLoop:
         self.validator = validator  # the protocol's gaze validations (psyop.session.validation); None: none
         self.notice = notice  # one console line per timing rerun (the experimenter's console); None: silent
         self.screens = screens  # the protocol's session: screens (psyop.session.screens); None: none
+        self._init_controls(controls, control_log)
         self._last_block: int | None = None  # the block of the last trial this run ran (None: none yet)
         self.clock, self.gaze, self.responses = clock, gaze, responses
         self.renderer, self.display, self.store, self.config = renderer, display, store, config
@@ -209,6 +235,16 @@ class TrialLoop:
         self.timing_reruns: list[JsonObject] = []
         self.n_scheduled = 0  # the schedule's trials (run() sets it): timing.max_rerun_share's base
         self._last_trial = -1  # the trial last given to the log (the message of a Ctrl-C during its write)
+
+    def _init_controls(self, controls: SessionControls | None, control_log: ScreenRecorder | None) -> None:
+        self.controls = controls  # the experimenter's keys (psyop.session.controls); None: none
+        self.control_log = control_log  # where pauses and recalibrations are logged (events.parquet); None: nowhere
+        #: done (in order, once each) at the next trial boundary, before any pause: fn(loop, trial about to run)
+        self.between_trials_requests: deque[BetweenTrials] = deque()
+        #: run, in order, when ``c`` asks for a recalibration, before the protocol's gaze validation (e.g. a tracker's
+        #: own calibration): fn(loop, trial about to run)
+        self.on_recalibrate: list[BetweenTrials] = []
+        self._said_no_recalibration = False
 
     # session -------------------------------------------------------------------------
     def run(self, schedule: pd.DataFrame, completed: set[int]) -> SessionOutcome:
@@ -252,6 +288,7 @@ class TrialLoop:
                 bar.update(1)
                 continue
             row = self.adaptive.fill(row) if self.adaptive is not None else row
+            self.between_trials(row, len(recorded), n_total)
             if self.screens is not None:  # instructions, breaks, questionnaires due before this trial
                 self.screens.before_trial(self, row, len(recorded), n_total)
             self._validate_before(row)
@@ -277,6 +314,8 @@ class TrialLoop:
         discarded = f"the trial in progress was discarded, {counted}"
         if isinstance(exc, KeyboardInterrupt):  # Ctrl-C, a stop signal, or Escape in the window (its own words)
             why = f"{exc}: " if str(exc) else ""
+            if not why and self.controls is not None and self.controls.stop_reason:  # Escape in the terminal
+                why = f"{self.controls.stop_reason}: "
             if self.state is TrialState.RECORD and self._last_trial in recorded:
                 return "interrupted", f"{why}interrupted just after trial {self._last_trial} was recorded, {counted}"
             return "interrupted", (f"{why}interrupted during trial (state {self.state.value}); that trial was "
@@ -290,6 +329,84 @@ class TrialLoop:
         if isinstance(exc, TimingStopped):
             return "timing_stopped", f"{exc}; {discarded}"
         return "validation_failed", f"{exc}; {counted}"
+
+    def between_trials(self, row: TrialRow, done: int, n_total: int) -> None:
+        """The trial boundary before ``row``: every request queued for it, then a recalibration (``c``) and a
+        pause (``p``) when the keys asked for them (module docstring)."""
+        trial = int(row["trial"])
+        while self.between_trials_requests:
+            self.between_trials_requests.popleft()(self, trial)
+        if self.controls is None:
+            return
+        source = self.controls.take_recalibrate()
+        if source is not None:
+            self._recalibrate(row, source, done, n_total)
+        if self.controls.pause_wanted:
+            self._pause(row, done, n_total)
+
+    def _recalibrate(self, row: TrialRow, source: str, done: int, n_total: int) -> None:
+        """``c`` was pressed: the recalibration hooks, then the protocol's gaze validation (when ``recalibrate``),
+        logged; without either, one line (console and events.parquet) the first time."""
+        trial, start_s = int(row["trial"]), self.clock.now_s()
+        if not self.on_recalibrate and self.validator is None:
+            if not self._said_no_recalibration:
+                text = ("c (recalibrate) does nothing in this session: the protocol has no gaze_validation: and no "
+                        "tracker calibration is hooked in")
+                self._say(text)
+                self._log_control("recalibrate", row, start_s, start_s, 0.0, source, text, done, n_total)
+                self._said_no_recalibration = True
+            return
+        self._say(f"recalibrating before trial {trial} (c pressed in {source})")
+        for hook in list(self.on_recalibrate):
+            hook(self, trial)
+        text = "recalibration hooks run"
+        if self.validator is not None:
+            rows = self.validator.run("recalibrate", self, trial)
+            text = f"gaze validation run (when recalibrate; mean error {float(rows['mean_error_deg'].iloc[-1]):.2f} deg)"
+        end_s = self.clock.now_s()
+        self._log_control("recalibrate", row, start_s, end_s, end_s - start_s, source, text, done, n_total)
+
+    def _pause(self, row: TrialRow, done: int, n_total: int) -> None:
+        """Wait until ``p`` is pressed again (Escape ends the session meanwhile). A live display keeps getting frames
+        (the background, no stimulus); headless, on a virtual clock or without frames the keys are pumped on the wall
+        clock (a virtual session clock does not move). Logged with its wall-clock duration."""
+        assert self.controls is not None
+        controls, trial = self.controls, int(row["trial"])
+        self._say(f"paused before trial {trial} (p pressed in {controls.pause_source}); p resumes, Escape ends "
+                  "the session")
+        start_s, started = self.clock.now_s(), time.monotonic()
+        t = start_s
+        pause_row = {"trial": -1, "condition": "pause"}
+        while controls.pause_wanted:
+            if self.clock.virtual or not self.config.every_frame or self.display.name == "headless":
+                controls.pump()
+                time.sleep(0.02)
+                continue
+            request = self.display.begin_frame(t)
+            if self.renderer is not None and request.should_render:
+                self.renderer.render(pause_row, PAUSE_PHASE, "conventional", 0.0, (0.0, 0.0, -1.0), frame=request)
+            self.display.end_frame(request, self.renderer.eye_textures() if self.renderer is not None else [])
+            t = max(t + self.frame_period_s, request.display_time_s + request.period_s)
+        waited_s = time.monotonic() - started
+        self._say(f"resumed after {waited_s:.1f} s (p pressed in {controls.pause_source})")
+        self._log_control("pause", row, start_s, self.clock.now_s(), waited_s, controls.pause_source,
+                          f"paused before trial {trial}", done, n_total)
+
+    def _say(self, text: str) -> None:
+        if self.notice is not None:
+            self.notice(text)
+
+    def _log_control(self, screen: str, row: TrialRow, start_s: float, end_s: float, duration_s: float,
+                     source: str, text: str, done: int, n_total: int) -> None:
+        """One events.parquet row of a pause or a recalibration (psyop.session.log.screens_log.EVENTS_SCHEMA);
+        ``duration_s``: wall-clock seconds for a pause (a virtual clock stands still)."""
+        if self.control_log is None:
+            return
+        self.control_log.append_event({
+            "run": self.store.run_index, "screen": screen, "name": screen, "page": 0, "n_pages": 1,
+            "when": "between_trials", "before_trial": int(row["trial"]), "block": int(row.get("block", 0)),
+            "after_trial": -1, "trials_done": done, "trials_left": n_total - done, "start_s": start_s,
+            "end_s": end_s, "duration_s": duration_s, "ended_by": f"key in {source}", "text": text})
 
     def _validate_before(self, row: TrialRow) -> None:
         """The protocol's validation before this trial: at the run's first trial (``start``) or when the
@@ -416,7 +533,7 @@ class TrialLoop:
         self._timing, self._pending = TrialTiming(start_s=start_s), None
         valid, total, drift_deg = self._present(row, frames, start_s, sampled)
         self.state = TrialState.RESPONSE
-        response = self._await_response(row, frames)
+        response = self._await_confidence(row, frames, self._await_response(row, frames))
         end = self.clock.now_s()
         response, hand_columns = self._track_reach(row, response, end)
         self._emit("response", row, end, response.response)
@@ -638,6 +755,8 @@ class TrialLoop:
         adjustment = plan.adjustment if plan is not None else None
         if adjustment is not None and isinstance(self.responses, RawInputSource):  # a person adjusts, frame by frame
             return self._await_adjustment(row, frames, prompt, adjustment, start_s, slot_s, timeout_s)
+        if self.config.rating is not None and picks_on_scale(self.responses):  # the stick picks the point
+            return self._await_rating_stick(row, frames, prompt, start_s, timeout_s)
         while True:
             response = self.responses.collect(row, self.clock.now_s())
             if response is not None:
@@ -657,6 +776,30 @@ class TrialLoop:
             else:
                 wake_s = self.clock.now_s() + 0.01
             self.clock.sleep_until(wake_s if timeout_s is None else min(wake_s, start_s + timeout_s))
+
+    def _await_confidence(self, row: TrialRow, frames: FrameRecorder, response: Response) -> Response:
+        """The confidence rating after the choice, when the protocol asks one (psyop.session.confidence): its scale
+        on the text panel each frame until the source gives a point or the response's timeout passes."""
+        if self.config.confidence is None:
+            return response
+        plan = self.response_plan
+        asker = ConfidenceAsker(self.config.confidence, self.responses, self.clock, self.display,
+                                timeout_s=plan.timeout_s if plan is not None else None,
+                                every_frame=self.config.every_frame, frame_period_s=self.frame_period_s)
+        self._emit("phase", row, self.clock.now_s(), asker.phase.name)
+        return asker.ask(row, response, lambda request: self._frame(row, asker.phase, frames, request))
+
+    def _await_rating_stick(self, row: TrialRow, frames: FrameRecorder, prompt: PhaseSpec, start_s: float,
+                            timeout_s: float | None) -> Response:
+        """A rating answered with the controllers (psyop.session.rating_stick), drawn on the loop's frame path."""
+        assert self.config.rating is not None and self.response_plan is not None
+        assert isinstance(self.responses, MappedRawSource)
+        pacing = PickerPacing(self.clock, self.display, timeout_s, self.config.every_frame, self.frame_period_s)
+        response = ask_rating(row, self.response_plan, self.config.rating, self.responses, pacing, start_s,
+                              lambda request, phase: self._frame(row, phase, frames, request), prompt.name)
+        if response.response == TIMEOUT_RESPONSE:
+            self.responses.timed_out()
+        return response
 
     def _await_adjustment(self, row: TrialRow, frames: FrameRecorder, prompt: PhaseSpec, adjustment: AdjustmentSpec,
                           start_s: float, slot_s: float, timeout_s: float | None) -> Response:

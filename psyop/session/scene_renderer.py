@@ -99,11 +99,10 @@ class SceneRenderer:
         from psyop.stimulus.meshes import SessionMeshes
 
         self._meshes = SessionMeshes(self._base_dir, mesh_files)  # glTF models loaded once per session (uploaded once)
-        from psyop.rendering.text import TextImages, em_px_for_display
-        from psyop.stimulus.build import TEXT_LETTER_HEIGHT_DEG
+        from psyop.session.text_fit import session_texts
 
-        # the response phase's text, rasterised once per session at the display's pixel density
-        self._texts = TextImages(em_px_for_display(self.display, TEXT_LETTER_HEIGHT_DEG))
+        # the session's text, laid out legibly on this display (refused here when it cannot fit), rasterised once
+        self._texts = session_texts(plan, self.display, drawn=max_images is None)
         self.images_rendered = 0
         self.max_images = max_images  # None: every stimulus frame; n: only the first n (sampled checks)
         from psyop.rendering import AntiAliasing, RenderSettings
@@ -133,6 +132,12 @@ class SceneRenderer:
 
             if not (watched and isinstance(phase, ScreenPhase) and phase.text.strip()):
                 return None
+            if phase.image is not None:  # an instruction page's picture above its text
+                from psyop.rendering.text import Picture
+
+                page = self._texts.page(phase.text, Picture(str((self._base_dir or Path(".")) / phase.image),
+                                                           phase.image_width_deg))
+                return text_scene(page, scene_origin_m(self.protocol, centre))
             return text_scene(self._texts.image(phase.text, keep_lines=True), scene_origin_m(self.protocol, centre))
         text = self.plan.response.participant_text
         if phase == self.plan.response.phase and text is not None:  # head-fixed, like the cross
@@ -258,6 +263,12 @@ class SceneRenderer:
         cameras_ok = True
         ok = True
         images = checked = 0
+        if self.max_images is None and frame is not None and frame.targets:  # a headset's images: text fits them
+            from psyop.session.text_fit import refit_texts
+
+            texts = refit_texts(self._texts, self.plan, self.display, frame)
+            if texts is not self._texts:  # laid out anew: no scene built with the former layout is reused
+                self._texts, self._parts_row = texts, None
         frame_scenes: dict[tuple[float, ...], Scene | None] = {}
         for eye in self.eyes:
             camera = self._camera(eye, fixation_m, mode, frame, row)
@@ -322,6 +333,11 @@ class SceneRenderer:
         if self._ctx is not None and self._owns_ctx:
             self._ctx.release()
         self._ctx = None
+
+    def linear_image(self, eye: str) -> np.ndarray | None:
+        """(H, W, 3) float32, top row first: ``eye``'s latest image before the display's final pass
+        (psyop.rendering.Renderer.linear_image); None before anything is drawn."""
+        return None if self._renderer is None else self._renderer.linear_image(eye)
 
     def eye_textures(self) -> list[moderngl.Texture]:
         """Each eye's latest image as a colour texture, left eye first; [] until every eye has one."""

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 import zlib
+from pathlib import Path
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, Protocol
@@ -50,6 +51,7 @@ import numpy as np
 
 from psyop.protocol import ssq
 from psyop.datacontract import TIMEOUT_RESPONSE
+from psyop.rendering.text import Picture
 from psyop.protocol.session_screens import Feedback, Questionnaire, SessionScreens as ScreensSection
 from psyop.session.events import SessionEvent
 from psyop.session.gaze.plan import FixationPlan
@@ -58,6 +60,7 @@ from psyop.session.phases import PhaseSpec
 from psyop.session.rows import JsonMapping, JsonObject, TrialRow
 
 if TYPE_CHECKING:
+    from psyop.session.plan import SessionPlan
     from psyop.session.clock import Clock
     from psyop.session.events import EventSink
     from psyop.session.frames import Display, DisplayInterrupted, FrameRenderer
@@ -77,9 +80,13 @@ SCREEN_ROW: JsonObject = {"trial": -1, "condition": "session_screen"}
 
 @dataclass(frozen=True)
 class ScreenPhase(PhaseSpec):
-    """A phase showing a session screen: ``text`` on a head-fixed panel (``show`` 'text'), its line breaks kept."""
+    """A phase showing a session screen: ``text`` on a head-fixed panel (``show`` 'text'), its line breaks kept,
+    under ``image`` (an instruction page's picture: its path relative to the protocol, ``image_width_deg`` wide,
+    None: as wide as fits; psyop.rendering.text.picture_page)."""
 
     text: str = ""
+    image: str | None = None
+    image_width_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -97,9 +104,13 @@ class Screen:
     questionnaire: Questionnaire | None = None
     #: shown for ``expected_s`` whoever participates, never ended by an input (feedback)
     timed: bool = False
+    #: an instruction page's picture above the text (its path relative to the protocol) and width (None: fits)
+    image: str | None = None
+    image_width_deg: float | None = None
 
     def phase(self) -> ScreenPhase:
-        return ScreenPhase(f"{self.screen}_{self.page}", self.expected_s, "text", "cross", text=self.text)
+        return ScreenPhase(f"{self.screen}_{self.page}", self.expected_s, "text", "cross", text=self.text,
+                           image=self.image, image_width_deg=self.image_width_deg)
 
 
 @dataclass(frozen=True)
@@ -147,8 +158,33 @@ def questionnaire_screens(questionnaire: Questionnaire) -> list[Screen]:
 
 def instruction_screens(section: ScreensSection) -> list[Screen]:
     pages = section.instructions.pages if section.instructions is not None else []
-    return [Screen("instructions", "instructions", i, len(pages), page.text, float(page.expected_s))
+    return [Screen("instructions", "instructions", i, len(pages), page.text, float(page.expected_s), image=page.image,
+                   image_width_deg=None if page.image_width_deg is None else float(page.image_width_deg))
             for i, page in enumerate(pages)]
+
+
+def instruction_picture(section: ScreensSection | None, page: int, base_dir: Path) -> Picture | None:
+    """The picture of instruction page ``page`` (its file under ``base_dir``, the protocol's folder), or None."""
+    pages = section.instructions.pages if section is not None and section.instructions is not None else []
+    if not 0 <= page < len(pages) or pages[page].image is None:
+        return None
+    width = pages[page].image_width_deg
+    return Picture(str(base_dir / str(pages[page].image)), None if width is None else float(width))
+
+
+def page_pictures(plan: "SessionPlan") -> list[tuple[tuple[str | int, ...], str, Picture]]:
+    """Every instruction page with an image: its protocol path (its ``image_width_deg``, else its ``image``), its
+    text and its :class:`~psyop.rendering.text.Picture` (the file relative to the protocol)."""
+    section = plan.protocol.session
+    pages = section.instructions.pages if section is not None and section.instructions is not None else []
+    base = Path(plan.protocol.source_name).parent if plan.protocol.source_name else Path(".")
+    out: list[tuple[tuple[str | int, ...], str, Picture]] = []
+    for i, page in enumerate(pages):
+        picture = instruction_picture(section, i, base)
+        if picture is not None:
+            key = "image" if page.image_width_deg is None else "image_width_deg"
+            out.append((("session", "instructions", "pages", i, key), page.text, picture))
+    return out
 
 
 def break_screen(section: ScreensSection, moment: Moment) -> Screen:
@@ -194,6 +230,33 @@ def screens_of_kind(section: ScreensSection, kind: str, *, done: int = 0, total:
         return [] if section.feedback is None else [feedback_screen(section.feedback, {"correct": c})
                                                     for c in (True, False)]
     raise ValueError(f"unknown screen kind {kind!r}")
+
+
+#: the trial counts a break's text is checked with before the session (as wide as any count a session reaches)
+WIDEST_BREAK_COUNT = 99999
+
+
+def screen_texts(section: ScreensSection) -> list[tuple[tuple[str | int, ...], str]]:
+    """Every text a screen of ``section`` can show, with the protocol path it is written at (a break's with
+    :data:`WIDEST_BREAK_COUNT` trials, an answer's feedback with a six-decimal answer): what a display checks
+    for room before the session (psyop.session.text_fit)."""
+    out: list[tuple[tuple[str | int, ...], str]] = [(("session", "instructions", "pages", s.page, "text"), s.text)
+                                                    for s in instruction_screens(section)]
+    if section.breaks is not None:
+        count = WIDEST_BREAK_COUNT
+        moment = Moment("break", 0, 0, count, count * 2)
+        out.append((("session", "breaks", "text"), break_screen(section, moment).text))
+    for index, questionnaire in enumerate(section.questionnaires):
+        path: tuple[str | int, ...] = ("session", "questionnaires", index)
+        out += [(path + (("items", s.page) if questionnaire.items else ()), s.text)
+                for s in questionnaire_screens(questionnaire)]
+    out += [(("session", "end_screen", "text"), s.text) for s in end_screens(section)]
+    feedback = section.feedback
+    if feedback is not None:
+        out += [(("session", "feedback", "text", name), text) for name, text in (
+            ("correct", feedback.text.correct), ("incorrect", feedback.text.incorrect),
+            ("timeout", feedback.text.timeout), ("answer", feedback.text.answer.format(answer="0.000000")))]
+    return out
 
 
 # ---- the simulated participant's answers ----------------------------------------------------------------

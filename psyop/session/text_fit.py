@@ -21,7 +21,8 @@ from psyop.protocol.trial import ResponsePhase
 from psyop.rendering.text import EyeView, TextDoesNotFit, TextImages, display_views
 from psyop.session.frames import FrameRequest
 from psyop.session.plan import SessionPlan
-from psyop.session.screens import screen_texts
+from psyop.session.rating_stick import marked_texts
+from psyop.session.screens import page_pictures, screen_texts
 from psyop.stimulus.build import TEXT_DISTANCE_M, scene_origin_m
 
 #: a protocol path (keys and list indices) and the text written there
@@ -75,6 +76,7 @@ def protocol_texts(plan: SessionPlan) -> list[tuple[PathText, bool]]:
         path: tuple[str | int, ...] = ("trial", "phases", index, "prompt") if given and index is not None \
             else ("response", "question")
         out.append(((path, text), response.keeps_lines))
+        out += [((("response", "scale"), marked), True) for marked in marked_texts(plan)]  # the stick's marker
     if plan.protocol.session is not None:
         out += [(item, True) for item in screen_texts(plan.protocol.session)]
     return out
@@ -96,6 +98,11 @@ def session_texts(plan: SessionPlan, display: DisplayProfile, *, drawn: bool = T
             texts.layout(text, keep_lines)
         except TextDoesNotFit as error:
             raise UserError(f"on a {sizes} view, {error}", _location(plan, path)) from None
+    for where, text, picture in page_pictures(plan):  # an instruction page's picture above its text
+        try:
+            texts.page(text, picture)
+        except TextDoesNotFit as error:
+            raise UserError(f"on a {sizes} view, {error}", _location(plan, where)) from None
     return texts
 
 

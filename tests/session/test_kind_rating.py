@@ -23,7 +23,6 @@ from session_helpers import wait_until
 from test_serial import PtyDevice
 
 from psyop.datacontract import typed_response
-from psyop.errors import UserError
 from psyop.protocol import load_protocol
 from psyop.protocol.kinds import kind_named
 from psyop.protocol.kinds.rating import RatingResponse
@@ -91,7 +90,7 @@ def test_keys_1_to_k_answer_keys_above_k_are_ignored_and_nothing_is_correct() ->
     assert set(kind.inputs(_response(9)).buttons) == {str(j) for j in range(1, 10)}
 
 
-def test_a_response_box_answers_with_its_digit_buttons_and_the_controllers_cannot(monkeypatch) -> None:
+def test_a_response_box_answers_with_its_digit_buttons_and_the_controllers_with_the_stick(monkeypatch) -> None:
     import psyop.devices.xr.tracking as tracking
     from psyop.devices.responses.serial_box import SerialResponseBox
     from psyop.session.clock import RealClock
@@ -109,11 +108,12 @@ def test_a_response_box_answers_with_its_digit_buttons_and_the_controllers_canno
     finally:
         box.close()
         device.close()
-    # --responses openxr: two select buttons cannot pick one of k points; refused in one line
-    assert inputs.controller == {}
-    monkeypatch.setattr(tracking, "_openxr_display", lambda built, flag: SimpleNamespace())
-    with pytest.raises(UserError, match="the controllers cannot give rating responses"):
-        tracking.OpenXRResponses.on_display(None, kind, inputs.controller)
+    # --responses openxr: the stick's sideways axis moves the highlighted point, a select button confirms it
+    # (psyop.session.scale_picker; tests/session/xr/test_openxr_rating.py answers on the real runtime)
+    assert inputs.controller == {"thumbstick_x": "scale_axis", "left": "confirm", "right": "confirm"}
+    monkeypatch.setattr(tracking, "_openxr_display", lambda built, flag: SimpleNamespace(runtime=None))
+    source = tracking.OpenXRResponses.on_display(None, kind, inputs.controller)
+    assert source.keymap == inputs.controller
 
 
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (Debian xvfb)")

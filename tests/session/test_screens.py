@@ -286,7 +286,7 @@ BAD = [
     ("breaks every 0 trials", "every_trials: 2,", "every_trials: 0,", "session.breaks.every_trials",
      "every_trials must be 1 or more"),
     ("an image", "      - text: Answer which", "      - image: a.png\n        text: Answer which",
-     "session.instructions.pages[1].image", "images on instruction pages are not shown yet"),
+     "session.instructions.pages[1].image", "image file 'a.png' not found"),
     ("a block that does not exist", "  instructions:\n", "  instructions:\n    at_blocks: [3]\n",
      "session.instructions.at_blocks[0]", "block 3 does not exist"),
 ]

@@ -465,16 +465,17 @@ class XrRuntime:
         return out
 
     @signals_held
-    def thumbsticks(self) -> dict[str, tuple[float, int]]:
-        """Per hand with an active stick: its forward deflection now (y in [-1, 1], forward positive) and the
-        runtime's time of its last change (``lastChangeTime``, XrTime ns)."""
+    def thumbsticks(self) -> dict[str, tuple[float, int, float]]:
+        """Per hand with an active stick: its forward deflection now (y in [-1, 1], forward positive), the
+        runtime's time of its last change (``lastChangeTime``, XrTime ns) and its sideways deflection (x in [-1, 1],
+        right positive)."""
         xr = self.xr
         out = {}
         for hand, path in self.hand_paths.items():
             state = xr.get_action_state_vector2f(self.session, xr.ActionStateGetInfo(action=self.stick,
                                                                                       subaction_path=path))
             if state.is_active:
-                out[hand] = (float(state.current_state.y), int(state.last_change_time))
+                out[hand] = (float(state.current_state.y), int(state.last_change_time), float(state.current_state.x))
         return out
 
     # -- teardown -------------------------------------------------------------------------------------

@@ -173,6 +173,8 @@ class OpenXRPose:
 #: the raw input name of a controller's stick in a response kind's ``controller`` map (its value is the kind's
 #: name for the deflection, e.g. an adjustment's "axis"); the select buttons are "left" and "right"
 THUMBSTICK = "thumbstick"
+#: the raw input name of a stick's sideways deflection (right positive; a rating's scale axis)
+THUMBSTICK_X = "thumbstick_x"
 
 
 class XrButtons:
@@ -184,6 +186,8 @@ class XrButtons:
         self._seen_sync = -1
         #: the stick as the last :meth:`poll` saw it: (session time s of its last change, forward deflection)
         self.stick: tuple[float, float] = (0.0, 0.0)
+        #: the same for the sideways deflection (right positive)
+        self.stick_x: tuple[float, float] = (0.0, 0.0)
 
     def poll(self) -> list[tuple[str, float]]:
         rt = self.runtime
@@ -192,14 +196,23 @@ class XrButtons:
         self._seen_sync = rt.sync_count
         presses = rt.select_presses()  # the runtime's own press times: a response time is not frame-quantised
         sticks = rt.thumbsticks()
-        if sticks:  # the stick deflected furthest, when both hands hold one
-            y, t_ns = max(sticks.values(), key=lambda state: abs(state[0]))
-            if y != self.stick[1]:  # a runtime may report no change time (0, Monado on a return to rest): this sync's
-                changed_s = self.display.to_session_s(t_ns if t_ns > 0 else self.display.frame_time_ns)  # frame time
-                self.stick = (max(changed_s, self.stick[0]), y)
+        if sticks:  # the stick deflected furthest, when both hands hold one (forward and sideways apart)
+            y, t_ns, _ = max(sticks.values(), key=lambda state: abs(state[0]))
+            self.stick = self._changed(self.stick, y, t_ns)
+            _, t_x_ns, x = max(sticks.values(), key=lambda state: abs(state[2]))
+            self.stick_x = self._changed(self.stick_x, x, t_x_ns)
         events = sorted((self.display.to_session_s(t_ns), hand)
                         for hand, t_ns in presses.items())
         return [(name, t_s) for t_s, name in events[:1]]
+
+    def _changed(self, last: tuple[float, float], value: float, t_ns: int) -> tuple[float, float]:
+        """(time, deflection) after a poll that read ``value``: unchanged when it equals the last one. A runtime may
+        report no change time (0, Monado on a return to rest): this sync's frame time stands for it."""
+        if value == last[1]:
+            return last
+        assert self.display.frame_time_ns is not None  # poll returns before the first frame
+        changed_s = self.display.to_session_s(t_ns if t_ns > 0 else self.display.frame_time_ns)
+        return (max(changed_s, last[0]), value)
 
 
 class OpenXRResponses(KeyboardResponses):
@@ -210,7 +223,7 @@ class OpenXRResponses(KeyboardResponses):
                  keymap: Mapping[str, str] | None = None) -> None:
         super().__init__(events, kind, reach_m=reach_m, keymap=keymap)
         self._stick_phase_s = math.nan  # the response phase whose stick deflection was last reported
-        self._stick_reported = 0.0
+        self._stick_reported = {THUMBSTICK: 0.0, THUMBSTICK_X: 0.0}
 
     @classmethod
     def on_display(cls, built: Display | None, kind: ResponseKindSpec,
@@ -232,18 +245,17 @@ class OpenXRResponses(KeyboardResponses):
         return cls(XrButtons(display), kind, reach_m=right_hand_reach_m, keymap=keymap)
 
     def raw_inputs(self, since_s: float, now_s: float) -> list[RawInput]:
-        """The select buttons through the kind's map (as keys), and, where the map names ``thumbstick``, the stick's
-        deflection as that input (an adjustment's axis) whenever it differs from the one last reported in this
-        phase: a stick already held when the phase begins counts from the phase's start."""
+        """The select buttons through the kind's map (as keys), and, where the map names ``thumbstick`` (forward)
+        or ``thumbstick_x`` (sideways), the stick's deflection as that input (an adjustment's axis, a rating's scale
+        axis) whenever it differs from the one last reported in this phase: a stick already held when the phase
+        begins counts from the phase's start."""
         out = super().raw_inputs(since_s, now_s)
-        axis = self.keymap.get(THUMBSTICK)
-        if axis is None:
-            return out
         if self._stick_phase_s != since_s:  # a new response phase: nothing reported yet (a resting stick reads 0)
-            self._stick_phase_s, self._stick_reported = since_s, 0.0
+            self._stick_phase_s, self._stick_reported = since_s, {THUMBSTICK: 0.0, THUMBSTICK_X: 0.0}
         assert isinstance(self.events, XrButtons)
-        changed_s, deflection = self.events.stick
-        if deflection != self._stick_reported:
-            self._stick_reported = deflection
-            out.append(RawInput(axis, max(changed_s, since_s), deflection))
+        for raw_name, (changed_s, deflection) in ((THUMBSTICK, self.events.stick), (THUMBSTICK_X, self.events.stick_x)):
+            axis = self.keymap.get(raw_name)
+            if axis is not None and deflection != self._stick_reported[raw_name]:
+                self._stick_reported[raw_name] = deflection
+                out.append(RawInput(axis, max(changed_s, since_s), deflection))
         return sorted(out, key=lambda raw: raw.t_s)

@@ -21,15 +21,17 @@ the checker is the structural :class:`Checks`, the analysis targets are data (:c
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar, Literal, Protocol
 
 import numpy as np
 from pydantic import Field
 
 from psyop.protocol.base import Number, StrictModel
+from psyop.protocol.kinds.confidence import ConfidenceScale, ObserverConfidence
 from psyop.protocol.design import Design, Factor
 from psyop.protocol.display import DisplaySpec
 from psyop.protocol.scene import Primitive, RenderingMode
@@ -67,6 +69,8 @@ class KindResponse(StrictModel):
 
     kind: str
     question: str
+    #: a confidence rating asked after the choice (psyop.protocol.kinds.confidence; only where the kind takes one)
+    confidence: ConfidenceScale | None = None
     intervals_needed: ClassVar[int] = 1
 
     @property
@@ -101,21 +105,54 @@ class KindResponse(StrictModel):
         return {}
 
 
+def normal_cdf(z: float) -> float:
+    """The standard normal CDF (``math.erf``; a simulated observer's psychometric functions, without scipy)."""
+    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+@dataclass(frozen=True)
+class DrawnAnswer:
+    """An answer drawn from a trial's keyed generator (:meth:`ObserverBase.answer_drawn`): the answer, the reach
+    distance it reports (None: no reach) and its trial-log values beside it."""
+
+    answer: str
+    reach_m: float | None = None
+    extras: Mapping[str, float | str] = field(default_factory=dict)
+
+
 class ObserverBase(StrictModel):
     """What every simulated observer has: ``eye``, the simulated eye and tracker (psyop.protocol.simulated_eye).
 
-    A kind's own observer answers through :meth:`participant_draws` and :meth:`answer`, which the session's
-    simulated-observer source (psyop.session.responses.simulated) calls with seeded draws; the paper's five
-    observers are implemented there instead (:attr:`declared` False)."""
+    A kind's own observer (:attr:`declared` True) answers through :meth:`participant_draws` and :meth:`answer`
+    (or :meth:`answer_drawn`), which the session's simulated-observer source (psyop.session.responses.simulated)
+    calls with seeded draws; an observer that is not declared has its own source (the image observer,
+    psyop.session.responses.image_observer)."""
 
     kind: str
     eye: SimulatedEye | None = None
-    #: this model answers through :meth:`answer` (False: psyop.session.responses.simulated implements it)
+    #: how it rates its confidence after a choice (psyop.protocol.kinds.confidence; only with a confidence scale)
+    confidence: ObserverConfidence | None = None
+    #: this model answers through :meth:`answer` (False: a response source of its own implements it)
     declared: ClassVar[bool] = False
+    #: the answer needs more than the trial's one uniform draw: :meth:`answer_drawn` answers from the trial's
+    #: keyed generator instead of :meth:`answer` and :meth:`extras`
+    draws_stream: ClassVar[bool] = False
+
+    @classmethod
+    def for_session(cls, params: Mapping[str, object]) -> "ObserverBase":
+        """The model from the session plan's observer parameters (psyop.session.plan.SessionPlan.observer_params:
+        this section's fields and what the plan adds, the schedule columns and rig values it reads); the default
+        validates the model's own fields and ignores the rest."""
+        return cls.model_validate({k: v for k, v in params.items() if k in cls.model_fields})
 
     def participant_draws(self, rng: np.random.Generator) -> dict[str, float]:
         """What varies between simulated participants, drawn once per participant from ``rng``."""
         return {}
+
+    def answer_drawn(self, row: TrialRow, participant: Mapping[str, float], rng: np.random.Generator) -> DrawnAnswer:
+        """The answer to trial ``row`` of an observer that :attr:`draws_stream`, from the participant's draws and
+        ``rng``, the trial's keyed generator freshly seeded (its first uniform is :meth:`answer`'s ``u``)."""
+        raise NotImplementedError(f"{type(self).__name__} answers from the trial's one uniform draw (answer)")
 
     def answer(self, row: TrialRow, participant: Mapping[str, float], u: float) -> str:
         """The answer (a value of the kind's key map) to trial ``row``, from the participant's draws and ``u``,
@@ -198,6 +235,58 @@ class Inputs:
     controller: Mapping[str, str]
 
 
+#: the response sources whose inputs a default prompt names (psyop run --responses), and how each names one input
+InputSource = Literal["keyboard", "serial", "openxr"]
+INPUT_SOURCES: tuple[InputSource, ...] = ("keyboard", "serial", "openxr")
+#: keyboard key names (psyop.devices.responses.keyboard) as a participant reads them; a letter is written upper case
+KEY_NAMES: Mapping[str, str] = {"left": "left arrow", "right": "right arrow", "up": "up arrow", "down": "down arrow",
+                                "space": "space bar", "enter": "Enter", "kp_enter": "keypad Enter",
+                                "kp_add": "keypad +", "kp_subtract": "keypad -"}
+
+
+def input_name(source: InputSource, raw: str) -> str:
+    """How a prompt names raw input ``raw`` of ``source``: a key (``left arrow``, ``Y``, ``keypad 1``), a response-box
+    button (``button L``), a controller's select button (``left trigger``: the trigger on the Vive, Index and Touch
+    controllers, select on the Khronos simple controller).
+
+    Examples
+    --------
+    >>> input_name("keyboard", "left"), input_name("keyboard", "y"), input_name("serial", "1"), input_name("openxr", "right")
+    ('left arrow', 'Y', 'button 1', 'right trigger')
+    """
+    if source == "serial":
+        return f"button {raw}"
+    if source == "openxr":
+        return f"{raw} trigger"
+    if raw in KEY_NAMES:
+        return KEY_NAMES[raw]
+    if raw.startswith("kp_"):
+        return f"keypad {raw.removeprefix('kp_')}"
+    return raw.upper() if len(raw) == 1 else raw
+
+
+def inputs_text(inputs: Inputs, source: InputSource, labels: Mapping[str, str] | None = None) -> str | None:
+    """One line per answer naming the inputs of ``source`` that give it, answers in the map's order, e.g.
+    ``left: left arrow / L`` (an answer written as ``labels`` names it, else as itself); a keypad key is left out
+    where its top-row twin is named. None: ``source`` cannot answer (an empty map).
+
+    Examples
+    --------
+    >>> print(inputs_text(Inputs({"y": "yes", "n": "no", "kp_1": "yes", "1": "yes"}, {}, {}), "keyboard"))
+    yes: Y / 1
+    no: N
+    """
+    raw_map = {"keyboard": inputs.keys, "serial": inputs.buttons, "openxr": inputs.controller}[source]
+    by_answer: dict[str, list[str]] = {}
+    for raw, answer in raw_map.items():
+        if source == "keyboard" and raw.startswith("kp_") and raw.removeprefix("kp_") in raw_map:
+            continue
+        by_answer.setdefault(answer, []).append(input_name(source, raw))
+    names_of = labels or {}
+    return "\n".join(f"{names_of.get(answer, answer)}: {' / '.join(names)}"
+                     for answer, names in by_answer.items()) or None
+
+
 @dataclass(frozen=True)
 class AnalysisTarget:
     """One output of a study's analysis in ``make figures``: the file (relative to $(FIGDIR) or $(RESULTS)),
@@ -214,12 +303,13 @@ class AnalysisTarget:
 class StudyInputs:
     """What a kind's analysis targets are built from: the study (or protocol version) name, its sessions'
     trials.parquet files as make prerequisites, whether it is a linear-fit (discrimination) study, and
-    whether an adaptive procedure placed its levels."""
+    whether an adaptive procedure placed its levels, and its level factor (None: unknown, or a kind without one)."""
 
     study: str
     trials: str = ""
     linear_fit: bool = False
     adaptive: bool = False
+    level_factor: str | None = None
 
     @property
     def common_arguments(self) -> str:
@@ -244,8 +334,12 @@ class ResponseKindSpec(ABC):
     buttons: ClassVar[Mapping[str, str]] = {}
     #: OpenXR controller select button ('left' / 'right' hand) -> answer
     controller: ClassVar[Mapping[str, str]] = {}
+    #: how a default prompt names an answer (e.g. '1' -> 'first interval'); an answer not listed: as itself
+    answer_labels: ClassVar[Mapping[str, str]] = {}
     #: the answer is a hand position read when the participant confirms (keys map to 'confirm')
     needs_hand_pose: ClassVar[bool] = False
+    #: the answer is one discrete choice, which a confidence rating may follow (psyop.protocol.kinds.confidence)
+    takes_confidence: ClassVar[bool] = False
     #: who reads each field of this kind's models (model name -> field -> user of psyop.protocol.fields:
     #: ``kinds`` for this module, ``plan``, ``observer``, ...); a test checks each user's source names it
     fields: ClassVar[Mapping[str, Mapping[str, str]]] = {}
@@ -282,6 +376,11 @@ class ResponseKindSpec(ABC):
         """Lines the participant reads under the prompt on the response panel (e.g. a rating scale's points and
         labels), each kept on its own line; None: the prompt alone (psyop.session.plan.ResponsePlan)."""
         return None
+
+    def answer_keys_text(self, response: KindResponse, source: InputSource) -> str | None:
+        """The lines a default prompt (no ``prompt:`` given) adds under the question: which inputs of ``source``
+        give each answer (:func:`inputs_text` of :meth:`inputs`); None: nothing to add."""
+        return inputs_text(self.inputs(response), source, self.answer_labels)
 
     @abstractmethod
     def targets(self, study: StudyInputs) -> list[AnalysisTarget]:

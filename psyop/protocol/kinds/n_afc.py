@@ -26,6 +26,7 @@ from psyop.protocol.scene import FactorRef
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, Inputs, IntervalSpec, KindResponse,
                                        ObserverBase, ResponseKindSpec, ScheduleInput, Scored, StudyInputs, figure_target)
 from psyop.protocol.kinds.modes import check_specs, interval_spec_columns, specs_factors
+from psyop.protocol.image_observer import ImageObserver, unread_fields
 from psyop.records import Loc, TrialRow
 
 #: the alternatives n-AFC supports (psyop.statistics.psychometric fits guess 1/n for these)
@@ -165,13 +166,15 @@ def check_locations(response: NAfcResponse, checks: Checks, path: Loc) -> None:
 class NAfc(ResponseKindSpec):
     name = "n_afc"
     label = "n-AFC"
+    takes_confidence = True  # one discrete choice: a confidence rating may follow
     model = NAfcResponse
-    observer_models = (PsychometricNafc,)
+    observer_models = (PsychometricNafc, ImageObserver)
     fields = {"NAfcResponse": {"kind": "plan", "question": "plan", "n": "kinds", "alternatives": "kinds",
                                "target": "kinds", "reference": "kinds", "locations_deg": "kinds",
                                "level_factor": "kinds", "order": "kinds"},
               "PsychometricNafc": {k: "kinds" for k in ("kind", "level_column", "threshold", "width", "lapse",
-                                                        "between_subject_sd")}}
+                                                        "between_subject_sd")},
+              "ImageObserver": {k: "image_observer" for k in ImageObserver.model_fields if k != "eye"}}
 
     def inputs(self, response: KindResponse) -> Inputs:
         """Keys 1..n (and the keypad's); box buttons 1..n; the controllers' two buttons for n = 2 only."""
@@ -225,6 +228,14 @@ class NAfc(ResponseKindSpec):
                                               "(e.g. set: {level_D: 0})")
 
     def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
+        if isinstance(observer, ImageObserver):  # answers from the frames of each interval
+            assert isinstance(response, NAfcResponse)
+            if response.alternatives != "intervals":
+                checks.add(path + ("kind",), "the image observer answers n_afc over intervals only (the interval with "
+                                             "the most relative motion); use kind: psychometric_nafc for locations")
+            for name in unread_fields(observer, self.name):
+                checks.add(path + (name,), f"the image observer's n-AFC rule does not read {name}; remove it")
+            return
         assert isinstance(observer, PsychometricNafc) and isinstance(response, NAfcResponse)
         if checks.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
                 observer.level_column != response.level_factor:

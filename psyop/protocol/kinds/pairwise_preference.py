@@ -3,11 +3,13 @@ written ``first|second``; columns ``mode_a``, ``mode_b`` (in shown order) and ``
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
 
+from psyop.errors import UserError
 from psyop.protocol.base import Number
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, KindResponse, ObserverBase,
                                        ResponseKindSpec, ScheduleInput, Scored, StudyInputs, figure_target)
@@ -40,20 +42,36 @@ class PairwisePreference(ObserverBase):
 
     kind: Literal["pairwise_preference"]
     strength: dict[RenderingMode, Annotated[Number, Field(gt=0)]] = Field(min_length=2)
+    declared: ClassVar[bool] = True
+
+    def probability(self, row: TrialRow, participant: Mapping[str, float]) -> float:
+        """p(the trial's mode ``a`` is chosen)."""
+        a, b = str(row["mode_a"]), str(row["mode_b"])
+        strengths: dict[str, float] = {str(mode): float(s) for mode, s in self.strength.items()}
+        for mode in (a, b):
+            if mode not in strengths:
+                raise UserError(f"observer: no strength for mode {mode!r}", "protocol observer")
+        return strengths[a] / (strengths[a] + strengths[b])
+
+    def answer(self, row: TrialRow, participant: Mapping[str, float], u: float) -> str:
+        """``a`` when ``u < p``, else ``b``."""
+        return "a" if u < self.probability(row, participant) else "b"
 
 
 class PairwisePreferenceKind(ResponseKindSpec):
     name = "pairwise_preference"
     former_names = ("preference",)
     label = "pairwise preference"
+    takes_confidence = True  # one discrete choice: a confidence rating may follow
     model = PairwisePreferenceResponse
     observer_models = (PairwisePreference,)
     keys = {"1": "a", "2": "b", "a": "a", "b": "b", "left": "a", "right": "b"}
     buttons = {"1": "a", "2": "b", "A": "a", "B": "b", "L": "a", "R": "b"}
     controller = {"left": "a", "right": "b"}
+    answer_labels = {"a": "first", "b": "second"}
     fields = {"PairwisePreferenceResponse": {"kind": "plan", "question": "plan", "pair_factor": "kinds",
                                              "order": "kinds"},
-              "PairwisePreference": {"kind": "observer", "strength": "observer"}}
+              "PairwisePreference": {"kind": "kinds", "strength": "kinds"}}
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         """The two modes in shown order (``binary`` True: the pair's second mode first)."""

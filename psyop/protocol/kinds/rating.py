@@ -1,6 +1,9 @@
 """``rating``: how much of a quality the stimulus had, on a k-point scale (2 to 9 points, keys 1..k). Each trial
 shows the ``stimulus`` once (its mode fixed or a mode factor's level, with factor overrides); the answer is the
-point's number, which the trial table also holds as ``response_value``. No answer is correct. The analysis
+point's number, which the trial table also holds as ``response_value``. The keyboard answers with the digits 1..k, a
+response box with its buttons 1..k; the OpenXR controllers move a highlighted point along the scale with a stick and
+confirm it with a select button (psyop.session.scale_picker), and the points highlighted go to ``rating_path``
+(JSON ``[[t_s, point], ...]``). No answer is correct. The analysis
 (analysis/rating.py) reports the mean rating per condition with t intervals, the repeated-measures ANOVA of the
 participants' means and a cumulative-link (ordinal probit) model (psyop.statistics.ratings).
 """
@@ -16,8 +19,10 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from psyop.protocol.base import Integer, Number, StrictModel, format_level
-from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Inputs, IntervalSpec, KindResponse, ObserverBase,
-                                       ResponseKindSpec, ScheduleInput, Scored, StudyInputs, figure_target)
+from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Inputs, InputSource, IntervalSpec, KindResponse,
+                                       ObserverBase, ResponseKindSpec, ScheduleInput, Scored, StudyInputs,
+                                       figure_target)
+from psyop.protocol.kinds.confidence import SCALE_CONTROLLER, STICK_HELP, scale_lines
 from psyop.protocol.kinds.modes import check_specs, interval_spec_columns, specs_factors
 from psyop.records import Loc, TrialRow
 
@@ -25,6 +30,8 @@ from psyop.records import Loc, TrialRow
 MIN_POINTS, MAX_POINTS = 2, 9
 #: the schedule column holding the scale's number of points (what the simulated observer and the analysis read)
 POINTS_COLUMN = "scale_points"
+#: the trial-log column of the points the controllers highlighted before the answer ('' for other sources)
+PATH_COLUMN = "rating_path"
 
 
 class RatingScale(StrictModel):
@@ -113,23 +120,26 @@ class Rating(ResponseKindSpec):
     # the maps depend on the scale's points: inputs() gives them for a protocol (none without one)
     keys: ClassVar[Mapping[str, str]] = {}
     buttons: ClassVar[Mapping[str, str]] = {}
-    controller: ClassVar[Mapping[str, str]] = {}  # two select buttons cannot pick one of k points
+    #: a stick moves the highlighted point, a select button confirms it (psyop.session.scale_picker)
+    controller: ClassVar[Mapping[str, str]] = SCALE_CONTROLLER
     fields = {"RatingResponse": {"kind": "plan", "question": "plan", "stimulus": "kinds", "scale": "kinds"},
               "RatingScale": {"points": "kinds", "labels": "kinds"},
               "RatingObserver": {k: "kinds" for k in ("kind", "factor", "means", "sd", "between_subject_sd")}}
 
     def inputs(self, response: KindResponse) -> Inputs:
-        """Keys 1..k (and the keypad's), response-box buttons 1..k; no controller (two buttons, k points)."""
+        """Keys 1..k (and the keypad's), response-box buttons 1..k; the controllers' stick and select buttons."""
         assert isinstance(response, RatingResponse)
         points = max(0, min(int(response.scale.points), MAX_POINTS))
-        return Inputs(keys=_scale_keys(points), buttons={str(j): str(j) for j in range(1, points + 1)}, controller={})
+        return Inputs(keys=_scale_keys(points), buttons={str(j): str(j) for j in range(1, points + 1)},
+                      controller=dict(SCALE_CONTROLLER))
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
-        """The interval's mode, the factors the stimulus sets, and the scale's points."""
+        """The interval's mode, the factors the stimulus sets, the scale's points and the empty path."""
         assert isinstance(response, RatingResponse)
         every = np.ones(schedule.n, dtype=bool)
         out = interval_spec_columns(1, response.stimulus, response.stimulus, every, schedule.columns)
         out[POINTS_COLUMN] = np.full(schedule.n, int(response.scale.points), dtype=np.int64)
+        out[PATH_COLUMN] = np.full(schedule.n, "", dtype=object)
         return out
 
     def check(self, response: KindResponse, checks: Checks, path: Loc) -> None:
@@ -177,10 +187,18 @@ class Rating(ResponseKindSpec):
     def response_text(self, response: KindResponse) -> str | None:
         """The scale under the prompt: each point's key and label, lowest first; without labels the keys' range."""
         assert isinstance(response, RatingResponse)
-        points = int(response.scale.points)
-        if response.scale.labels is None:
-            return f"1 (lowest) to {points} (highest)"
-        return "\n".join(f"{point}  {label}" for point, label in enumerate(response.scale.labels, start=1))
+        return self.scale_text(response, None)
+
+    @staticmethod
+    def scale_text(response: RatingResponse, highlighted: int | None) -> str:
+        """The scale's lines, with ``highlighted`` marked (the point a controller has moved to), or none."""
+        return scale_lines(int(response.scale.points), response.scale.labels, ("lowest", "highest"), highlighted)
+
+    def answer_keys_text(self, response: KindResponse, source: InputSource) -> str | None:
+        """For the controllers, how to move along the scale and answer (:data:`STICK_HELP`); else None: the scale
+        under the prompt (:meth:`response_text`) already names each point by its digit, the key and the
+        response-box button that give it."""
+        return STICK_HELP if source == "openxr" else None
 
     def targets(self, study: StudyInputs) -> list[AnalysisTarget]:
         """Mean ratings, the ANOVA and the ordinal model in results/ and their figure (analysis/rating.py)."""

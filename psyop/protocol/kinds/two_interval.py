@@ -4,16 +4,19 @@ discrimination). Columns ``mode_interval1/2``, ``correct_interval``, the level c
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
 
 from psyop.protocol.base import Number, format_level
+from psyop.errors import UserError
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, IntervalSpec, KindResponse,
                                        ModeFromFactor, ObserverBase, ResponseKindSpec, ScheduleInput, Scored,
-                                       StudyInputs, mode_factor_of)
+                                       StudyInputs, mode_factor_of, normal_cdf)
 from psyop.protocol.kinds.modes import mode_values
+from psyop.protocol.image_observer import ImageObserver, unread_fields
 from psyop.records import Loc, TrialRow
 
 
@@ -61,13 +64,15 @@ class Psychometric2afc(ObserverBase):
 
     kind: Literal["psychometric_2afc"]
     level_column: str = "level_D"
-    threshold_D: Number = Field(gt=0)
+    threshold_D: Number = Field(description="the 75 % point in the level's unit (negative on a log axis, e.g. "
+                                            "log10 contrast)")
     width_D: Number = Field(gt=0)
     lapse: Number = Field(default=0.0, ge=0, lt=0.5)
     threshold_slope: Number = 0.0
     threshold_offset_column: str | None = None
     threshold_offset_D: dict[str, Number] | None = Field(default=None, min_length=1)
     between_subject_sd_D: Number = Field(default=0.0, ge=0)
+    declared: ClassVar[bool] = True
 
     @model_validator(mode="after")
     def _offset(self) -> "Psychometric2afc":
@@ -79,6 +84,34 @@ class Psychometric2afc(ObserverBase):
             raise ValueError("give threshold_slope (a factor of numbers) or threshold_offset_D (an offset per level), "
                              "not both")
         return self
+
+    def participant_draws(self, rng: np.random.Generator) -> dict[str, float]:
+        """The participant's threshold shift ``participant_shift_D`` ~ N(0, between_subject_sd_D)."""
+        sd = float(self.between_subject_sd_D)
+        return {"participant_shift_D": float(rng.normal(0.0, sd)) if sd > 0 else 0.0}
+
+    def threshold_for(self, row: TrialRow, participant: Mapping[str, float]) -> float:
+        """The participant's 75 % point in trial ``row`` (its offset column's slope or per-level offset)."""
+        base = float(self.threshold_D) + participant["participant_shift_D"]
+        column = self.threshold_offset_column
+        if column and self.threshold_offset_D is not None:
+            level = format_level(row[column])
+            if level not in self.threshold_offset_D:
+                raise UserError(f"observer: threshold_offset_D has no offset for {column} = {level}",
+                                "protocol observer")
+            return base + float(self.threshold_offset_D[level])
+        offset = float(row[column]) if column else 0.0
+        return base + float(self.threshold_slope) * offset
+
+    def probability(self, row: TrialRow, participant: Mapping[str, float]) -> float:
+        """p(correct) in trial ``row``."""
+        z = (float(row[self.level_column]) - self.threshold_for(row, participant)) / float(self.width_D)
+        return 0.5 + (0.5 - float(self.lapse)) * normal_cdf(z)
+
+    def answer(self, row: TrialRow, participant: Mapping[str, float], u: float) -> str:
+        """The correct interval when ``u < p``, else the other."""
+        right = int(row["correct_interval"])
+        return str(right if u < self.probability(row, participant) else 3 - right)
 
 
 def interval_columns(test: IntervalSpec, reference: IntervalSpec, schedule: ScheduleInput, test_first: np.ndarray
@@ -103,16 +136,19 @@ class TwoInterval(ResponseKindSpec):
     name = "two_interval"
     former_names = ("2afc_interval",)
     label = "two-interval"
+    takes_confidence = True  # one discrete choice: a confidence rating may follow
     model = TwoIntervalResponse
-    observer_models = (Psychometric2afc,)
+    observer_models = (Psychometric2afc, ImageObserver)
     keys = {"1": "1", "2": "2", "left": "1", "right": "2", "kp_1": "1", "kp_2": "2"}
     buttons = {"1": "1", "2": "2", "L": "1", "R": "2"}
     controller = {"left": "1", "right": "2"}
+    answer_labels = {"1": "first interval", "2": "second interval"}
     fields = {"TwoIntervalResponse": {"kind": "plan", "question": "plan", "test": "kinds", "reference": "kinds",
                                       "level_factor": "plan", "order": "kinds", "identical_intervals": "kinds"},
-              "Psychometric2afc": {k: "observer" for k in ("kind", "level_column", "threshold_D", "width_D", "lapse",
+              "Psychometric2afc": {k: "kinds" for k in ("kind", "level_column", "threshold_D", "width_D", "lapse",
                                                            "threshold_slope", "threshold_offset_column",
-                                                           "threshold_offset_D", "between_subject_sd_D")}}
+                                                           "threshold_offset_D", "between_subject_sd_D")},
+              "ImageObserver": {k: "image_observer" for k in ImageObserver.model_fields if k != "eye"}}
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         assert isinstance(response, TwoIntervalResponse)
@@ -156,6 +192,10 @@ class TwoInterval(ResponseKindSpec):
                 return
 
     def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
+        if isinstance(observer, ImageObserver):  # answers from the frames: nothing of the schedule to check
+            for name in unread_fields(observer, self.name):
+                checks.add(path + (name,), f"the image observer's two-interval rule does not read {name}; remove it")
+            return
         assert isinstance(observer, Psychometric2afc) and isinstance(response, TwoIntervalResponse)
         level_factor = response.level_factor
         if checks.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
@@ -179,14 +219,19 @@ class TwoInterval(ResponseKindSpec):
         return Scored(correct=answer == str(int(row["correct_interval"])))
 
     def targets(self, study: StudyInputs) -> list[AnalysisTarget]:
-        """The fits, threshold figure, psychometric panels and (adaptive) track plot."""
+        """The fits, threshold figure, psychometric panels and (adaptive) track plot. A level in log10 Michelson
+        contrast (a ``*_log10`` level factor) gets its thresholds as contrasts and in dB (analysis/contrast_detection.py)
+        instead of the threshold figure, which reads levels as non-negative (dioptres, milliseconds)."""
         name, trials, common = study.study, study.trials, study.common_arguments
         fits = f"$(RESULTS)/{name}_fits.csv"
         script = "analysis/fig_discrimination_thresholds.py" if study.linear_fit else \
             "analysis/fig_detection_thresholds.py"
+        log_contrast = (study.level_factor or "").endswith("_log10")
+        thresholds = AnalysisTarget(f"{name}_contrast_thresholds.png", "analysis/contrast_detection.py",
+                                    f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"') if log_contrast else \
+            AnalysisTarget(f"{name}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"')
         return [AnalysisTarget(f"{name}_fits.csv", "analysis/fit_psychometric.py", f"$(STATS_SRC) {trials}",
-                               f"{common} --n-jobs $(JOBS)", kind="fits"),
-                AnalysisTarget(f"{name}_thresholds.png", script, f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"'),
+                               f"{common} --n-jobs $(JOBS)", kind="fits"), thresholds,
                 AnalysisTarget(f"supp_psychometric_{name}.png", "analysis/supp_psychometric_functions.py",
                                f"{fits} $(DRAW_SRC)", f'{common} --fits "{fits}"')] + ([
                 AnalysisTarget(f"{name}_tracks.png", "analysis/adaptive_tracks.py",

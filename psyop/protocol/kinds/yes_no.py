@@ -17,6 +17,7 @@ from psyop.protocol.base import Number
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, IntervalSpec, KindResponse, ObserverBase,
                                        ResponseKindSpec, ScheduleInput, Scored, StudyInputs)
 from psyop.protocol.kinds.modes import check_specs, interval_spec_columns, specs_factors
+from psyop.protocol.image_observer import ImageObserver, unread_fields
 from psyop.records import Loc, TrialRow
 
 
@@ -84,15 +85,17 @@ class PsychometricYesNo(ObserverBase):
 class YesNo(ResponseKindSpec):
     name = "yes_no"
     label = "yes/no"
+    takes_confidence = True  # one discrete choice: a confidence rating may follow
     model = YesNoResponse
-    observer_models = (PsychometricYesNo,)
+    observer_models = (PsychometricYesNo, ImageObserver)
     keys = {"y": "yes", "n": "no", "left": "yes", "right": "no"}
     buttons = {"1": "yes", "2": "no", "L": "yes", "R": "no", "Y": "yes", "N": "no"}
     controller = {"left": "yes", "right": "no"}
     fields = {"YesNoResponse": {"kind": "plan", "question": "plan", "signal": "kinds", "noise": "kinds",
                                 "level_factor": "kinds", "signal_trials": "kinds"},
               "PsychometricYesNo": {k: "kinds" for k in ("kind", "level_column", "threshold", "width",
-                                                         "false_alarm_rate", "lapse", "between_subject_sd")}}
+                                                         "false_alarm_rate", "lapse", "between_subject_sd")},
+              "ImageObserver": {k: "image_observer" for k in ImageObserver.model_fields if k != "eye"}}
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         """``signal`` (the counterbalanced choice), the interval's mode and the factors signal or noise set."""
@@ -110,6 +113,10 @@ class YesNo(ResponseKindSpec):
                                           "give noise another mode or a set: (e.g. set: {level_D: 0})")
 
     def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
+        if isinstance(observer, ImageObserver):  # answers from the interval's frames
+            for name in unread_fields(observer, self.name):
+                checks.add(path + (name,), f"the image observer's yes/no rule does not read {name}; remove it")
+            return
         assert isinstance(observer, PsychometricYesNo) and isinstance(response, YesNoResponse)
         if checks.factor_exists(observer.level_column, path + ("level_column",), numeric=True) and \
                 observer.level_column != response.level_factor:
@@ -121,13 +128,11 @@ class YesNo(ResponseKindSpec):
         return Scored(correct=answer == ("yes" if bool(row["signal"]) else "no"))
 
     def targets(self, study: StudyInputs) -> list[AnalysisTarget]:
-        """Rates, d' and criterion per condition (and "yes" fits) in results/, and their figure."""
-        name, common = study.study, study.common_arguments
-        table = f"$(RESULTS)/{name}_yes_no.csv"
-        return [AnalysisTarget(f"{name}_yes_no.csv", "analysis/yes_no.py", f"$(STATS_SRC) {study.trials}",
-                               f"{common} --n-jobs $(JOBS)", kind="fits"),
-                AnalysisTarget(f"{name}_yes_no.png", "analysis/yes_no.py", f"{table} $(DRAW_SRC)",
-                               f'{common} --figure')]
+        """Rates, d' and criterion per condition (and "yes" fits) in results/, and their figure: one run of
+        analysis/yes_no.py writes them all (as analysis/n_afc.py does)."""
+        name = study.study
+        return [AnalysisTarget(f"{name}_yes_no.png", "analysis/yes_no.py",
+                               f"$(STATS_SRC) $(DRAW_SRC) {study.trials}", f"{study.common_arguments} --n-jobs $(JOBS)")]
 
 
 KIND = YesNo()

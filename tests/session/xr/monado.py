@@ -81,6 +81,7 @@ class RemoteState:
     gaze_pitch_deg: float = -10.0  # relative to the head
     right_trigger: bool = False
     right_thumbstick_y: float = 0.0  # the right stick's forward deflection, in [-1, 1]
+    right_thumbstick_x: float = 0.0  # the right stick's sideways deflection, in [-1, 1], right positive
     right_controller_position_m: tuple[float, float, float] = (0.2, 1.2, -0.5)  # left: mirrored in x
     extra: dict[str, float] = field(default_factory=dict)
 
@@ -105,7 +106,7 @@ class RemoteState:
             x, y, z = self.right_controller_position_m
             floats = [0.0] * 19  # velocities (6), hand curls (5), trigger, squeeze, squeeze force, stick x y (14, 15),
             if side == "right":  # trackpad force, trackpad x y: Monado's r_remote_controller_data, in order
-                floats[15] = self.right_thumbstick_y
+                floats[14], floats[15] = self.right_thumbstick_x, self.right_thumbstick_y
             controllers += (_pose((0.0, 0.0, 0.0, 1.0), (x if side == "right" else -x, y, z))
                             + struct.pack("<19f", *floats) + bytes(buttons))
         gaze = _pose(self.gaze_quat_xyzw(), (0.0, 0.0, 0.0)) + struct.pack("<?3x", True)
