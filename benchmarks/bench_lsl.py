@@ -1,7 +1,7 @@
 """LSL gaze in vs the Pupil Network API path, and the raw gaze stream's cost per sample.
 
 1. Gaze-in to frame latency: a sender pushes 200 Hz gaze on loopback, once as Pupil Capture does
-   (ZMQ PUB, msgpack, the ``tests/session/pupil_server.py`` stand-in) and once as Pupil Capture's
+   (ZMQ PUB, msgpack, the ``tests/devices/pupil_server.py`` stand-in) and once as Pupil Capture's
    LSL relay does (a real pylsl outlet, 22 channels); psyop's source for each (``PupilClient``,
    ``LslGazeSource``) is polled at 90 Hz like the frame loop, and each poll records the age of the
    newest sample on the session clock (``now - sample.timestamp_s``: transport, parsing, clock
@@ -31,7 +31,7 @@ from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.log.schema import GAZE_SCHEMA
 from psyop.session.log.stream import DurableStreamWriter
 
-_TESTS = Path(__file__).resolve().parents[1] / "tests" / "session"
+_TESTS = Path(__file__).resolve().parents[1] / "tests" / "devices"
 
 
 def _ages_ms(source, clock: RealClock, duration_s: float) -> np.ndarray:  # type: ignore[no-untyped-def]

@@ -2,7 +2,7 @@
 
 - RealClock.sleep_until overshoot (was tests/session/test_clock.py: < 5 ms);
 - 100 000 degenerate camera cases (was tests/optics/test_optics_stability.py: < 10 s);
-- a Pupil client's sample age on the loopback fake (was tests/session/test_pupil.py: median < 20 ms).
+- a Pupil client's sample age on the loopback fake (was tests/devices/test_pupil.py: median < 20 ms).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def _camera_cases_s(n: int) -> float:
 
 
 def _pupil_age_ms(seconds: float) -> np.ndarray:
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "session"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "devices"))
     from pupil_server import FakePupilCapture
 
     from psyop.session.clock import RealClock

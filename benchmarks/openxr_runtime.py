@@ -1,5 +1,5 @@
 """Where ../shared/openxr/build-monado.sh installs the OpenXR test runtime (Monado), for the headset
-benchmark and the headset tests alike (tests/session/xr/monado.py imports it from here)."""
+benchmark and the headset tests alike (tests/devices/xr/monado.py imports it from here)."""
 
 from __future__ import annotations
 

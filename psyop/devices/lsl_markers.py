@@ -76,7 +76,7 @@ class LslMarkerOutlet:
     def close(self, linger_s: float = 1.0) -> None:
         """Destroy the outlet, first lingering ``linger_s`` while a consumer is connected: liblsl sends
         asynchronously and an outlet destroyed at once drops what it has not sent yet (without the
-        linger, tests/session/test_lsl_markers.py lost the last trial_end marker)."""
+        linger, tests/devices/test_lsl_markers.py lost the last trial_end marker)."""
         if self._outlet is not None and linger_s > 0 and self._outlet.have_consumers():
             time.sleep(linger_s)
         self._outlet = None

@@ -1,7 +1,7 @@
-"""Meshes on the OpenXR display (issue 26), against the Monado runtime (tests/session/xr/monado.py; skipped
+"""Meshes on the OpenXR display (issue 26), against the Monado runtime (tests/devices/xr/monado.py; skipped
 with the reason without one): a stereo scene of two glTF nodes (assets/teaser.glb's candle and bottle) and an
 analytic wall, drawn by the session's renderer into the runtime's swapchain images and read back before
-release (tests/session/xr/probe.py readback), equals the headless (EGL) renderer's frame of the same
+release (tests/devices/xr/probe.py readback), equals the headless (EGL) renderer's frame of the same
 per-eye cameras (the OpenXR views' off-axis frusta, ocular mode) pixel for pixel."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-XR = Path(__file__).resolve().parents[1] / "session" / "xr"
+XR = Path(__file__).resolve().parents[1] / "devices" / "xr"
 sys.path.insert(0, str(XR))
 sys.path.insert(0, str(XR.parents[1]))
 from monado import runtime_env  # noqa: E402

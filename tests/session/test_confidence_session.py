@@ -154,7 +154,7 @@ def test_keys_1_to_k_rate_a_key_pressed_before_the_scale_does_not_and_a_silent_s
 
 
 def test_a_response_box_rates_with_its_digit_buttons() -> None:
-    """The serial box (a pseudo-terminal speaking its line protocol, as tests/session/test_serial.py): after the
+    """The serial box (a pseudo-terminal speaking its line protocol, as tests/devices/test_serial.py): after the
     choice, B9 (off a 4-point scale) and BL (no digit) are ignored and B2 rates 2."""
     from test_serial import PtyDevice
 
@@ -218,7 +218,7 @@ def test_the_controllers_choose_with_the_select_buttons_and_rate_with_the_stick(
     plan = compile_plan(load_protocol(EXAMPLE))
     source = backend.make("", SimpleNamespace(plan=plan, display=None))
     assert source.keymap == {**plan.response.inputs.controller, "thumbstick_x": "scale_axis"}
-    assert picks_on_scale(source)  # tests/session/xr/test_openxr_rating.py answers on the real runtime
+    assert picks_on_scale(source)  # tests/devices/xr/test_openxr_rating.py answers on the real runtime
 
 
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (Debian xvfb)")

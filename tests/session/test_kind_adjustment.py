@@ -173,7 +173,7 @@ def test_response_box_buttons_adjust_over_a_real_pty() -> None:
 
 
 def test_the_thumbstick_mapping_moves_continuously_at_rate_times_deflection() -> None:
-    """The controller's mapping logic without a runtime (on Monado: tests/session/xr/test_openxr_thumbstick.py): an axis input
+    """The controller's mapping logic without a runtime (on Monado: tests/devices/xr/test_openxr_thumbstick.py): an axis input
     sets the deflection from its time on; the value moves at rate_per_s x deflection, a rest inside the dead zone
     moves nothing, the bounds stop it and a frame's value is carried to its display time."""
     spec = AdjustmentSpec("match_D", 0.0, 2.0, 0.05, 0.5)

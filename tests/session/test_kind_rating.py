@@ -109,7 +109,7 @@ def test_a_response_box_answers_with_its_digit_buttons_and_the_controllers_with_
         box.close()
         device.close()
     # --responses openxr: the stick's sideways axis moves the highlighted point, a select button confirms it
-    # (psyop.session.scale_picker; tests/session/xr/test_openxr_rating.py answers on the real runtime)
+    # (psyop.session.scale_picker; tests/devices/xr/test_openxr_rating.py answers on the real runtime)
     assert inputs.controller == {"thumbstick_x": "scale_axis", "left": "confirm", "right": "confirm"}
     monkeypatch.setattr(tracking, "_openxr_display", lambda built, flag: SimpleNamespace(runtime=None))
     source = tracking.OpenXRResponses.on_display(None, kind, inputs.controller)

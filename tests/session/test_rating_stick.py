@@ -1,7 +1,7 @@
 """The scale picker a rating and a confidence rating use with the OpenXR controllers (psyop.session.scale_picker):
 its flick, dead-zone and re-arm rule on raw stick inputs, the path it logs, and the text the panel shows with the
 highlighted point marked, laid out and checked before the session. The controllers themselves answer on the real
-runtime in tests/session/xr/test_openxr_rating.py."""
+runtime in tests/devices/xr/test_openxr_rating.py."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Trackers report faults truthfully (issue 12): real ZMQ sockets (tests/session/pupil_server.py)
+"""Trackers report faults truthfully (issue 12): real ZMQ sockets (tests/devices/pupil_server.py)
 and real ptys; every wait polls with a deadline."""
 
 from __future__ import annotations

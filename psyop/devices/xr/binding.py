@@ -10,7 +10,7 @@ handed that context in one of two Linux bindings:
 
 ``--display openxr`` chooses ``egl`` when the runtime offers it, else ``xlib`` when an X display is
 there; ``--display openxr:egl`` / ``openxr:xlib`` force one. Windows (WGL) and Wayland bindings
-are not implemented. Both bindings are tested against Monado (``tests/session/xr``: ``xlib`` under
+are not implemented. Both bindings are tested against Monado (``tests/devices/xr``: ``xlib`` under
 Xvfb); SteamVR itself could not be run here.
 
 The handles come from the context current on this thread, through the system's libEGL / libGL and

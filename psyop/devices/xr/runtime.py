@@ -274,7 +274,7 @@ class XrRuntime:
     def _suggest_controller_bindings(self) -> None:
         """Each controller profile's grip and aim poses, select button and (where it has one) stick, suggested in one
         call per profile (a runtime that rejects one path drops that profile's whole suggestion: tested on Monado's
-        Index profile, tests/session/xr/test_openxr_thumbstick.py)."""
+        Index profile, tests/devices/xr/test_openxr_thumbstick.py)."""
         xr = self.xr
         for profile, button in _SELECT_BINDINGS.items():
             bindings = []

@@ -118,8 +118,8 @@ BOTH_EYES_SCRIPT = textwrap.dedent(
 
 @pytest.fixture
 def private_x(tmp_path):
-    """A private Xvfb server and its keyboard (XTest key events, as tests/session/test_window_escape.py sends)."""
-    sys.path.insert(0, str(REPO / "tests" / "session"))
+    """A private Xvfb server and its keyboard (XTest key events, as tests/devices/test_window_escape.py sends)."""
+    sys.path.insert(0, str(REPO / "tests" / "devices"))
     from test_window_escape import _start_xvfb, _xtest
 
     xvfb = shutil.which("Xvfb")

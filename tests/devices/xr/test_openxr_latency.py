@@ -1,5 +1,5 @@
 """Added gaze latency on a real OpenXR runtime (issue 44 item 2; Monado's remote driver, as
-tests/session/xr/test_openxr_sessions.py): with ``display.added_latency_ms: 50`` every headset frame is rendered
+tests/devices/xr/test_openxr_sessions.py): with ``display.added_latency_ms: 50`` every headset frame is rendered
 with the runtime's eye-gaze sample at or before (the newest sample's time - 50 ms) while the injected gaze moves (the
 runtime's samples come one per rendered frame, so "within one tracker sample" is within one frame here); the frames
 record the added and the intrinsic latency."""

@@ -3,7 +3,7 @@ per-eye swapchain size, fields of view and measured display rate in session.json
 ``display_used``), and the BIDS export describes ``StimulusPresentation`` and places gaze pixels with them,
 not with the protocol's profile (``vive_pro``: 1440x1600 at 90 Hz, while Monado draws 320x240 at 20 Hz).
 
-Against the real runtime (Monado, headless; tests/session/xr/monado.py): the remote driver injects
+Against the real runtime (Monado, headless; tests/devices/xr/monado.py): the remote driver injects
 asymmetric fields of view and a gaze 10 deg down; the expected values are computed here from what was
 injected and from the frame log's display times, independently of psyop's code."""
 

@@ -47,7 +47,7 @@ SCRIPT = textwrap.dedent(
 
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (Debian xvfb)")
 def test_a_window_session_records_and_exports_its_real_size_and_flip_rate(tmp_path: Path) -> None:
-    script = SCRIPT.format(helpers=str(Path(__file__).parent), tmp=str(tmp_path), scale=SCALE)
+    script = SCRIPT.format(helpers=str(Path(__file__).parents[1] / "session"), tmp=str(tmp_path), scale=SCALE)
     result = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 640x480x24", sys.executable, "-c", script],
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr[-2000:]

@@ -38,7 +38,7 @@ SCRIPT = textwrap.dedent(
 
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (Debian xvfb)")
 def test_window_session_with_keyboard_responses(tmp_path: Path) -> None:
-    script = SCRIPT.format(helpers=str(Path(__file__).parent), tmp=str(tmp_path))
+    script = SCRIPT.format(helpers=str(Path(__file__).parents[1] / "session"), tmp=str(tmp_path))
     result = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
     status, n_frames = result.stdout.split()[-2:]

@@ -1,5 +1,5 @@
 """Controller answers of the new response kinds on a real OpenXR runtime (Monado's remote driver, as
-tests/session/xr/test_openxr_sessions.py): the right controller's select button answers "no" in a yes_no study
+tests/devices/xr/test_openxr_sessions.py): the right controller's select button answers "no" in a yes_no study
 and "2" in a 2-AFC n_afc study, each trial's answer scored against its schedule; an n_afc with 4 alternatives
 is refused in one line, exit 2 (two select buttons cannot pick one of four)."""
 

@@ -2,7 +2,7 @@
 simulated HMD, whose swapchain images are far smaller than the protocol's Vive Pro profile), the response phase's
 default prompt is laid out for each eye's swapchain image at its size and field of view, drawn into it, and read
 back from the swapchain image: each line's ink is at least MIN_CAP_HEIGHT_PX rows tall, every line is drawn and the
-panel lies inside the image. Without a runtime the test skips with the reason (tests/session/xr/monado.py)."""
+panel lies inside the image. Without a runtime the test skips with the reason (tests/devices/xr/monado.py)."""
 
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ def _line_heights_px(frame: np.ndarray) -> list[int]:
 
 
 def test_the_prompt_is_legible_in_each_swapchain_image_at_its_own_size(tmp_path: Path) -> None:
-    script = SCRIPT.format(protocol=str(_protocol(tmp_path)), tmp=str(tmp_path))
+    script = SCRIPT.format(protocol=str(_protocol(tmp_path, prompt=None)), tmp=str(tmp_path))
     result = subprocess.run([sys.executable, "-c", script], env=runtime_env(tmp_path), cwd=REPO, capture_output=True,
                             text=True, timeout=180, stdin=subprocess.DEVNULL)
     assert result.returncode == 0, result.stderr[-3000:]

@@ -1,7 +1,7 @@
 """Headset sessions against a real OpenXR runtime: Monado, headless (null compositor), with its
 simulated HMD or its remote driver (injected head pose, per-eye poses and fields of view, eye gaze,
 controller buttons). Every test runs psyop in a child process (the runtime lives in the process
-that opens it). Without a runtime the tests skip with the reason (tests/session/xr/monado.py)."""
+that opens it). Without a runtime the tests skip with the reason (tests/devices/xr/monado.py)."""
 
 from __future__ import annotations
 
@@ -44,12 +44,15 @@ scene:
 """
 
 
-def _protocol(tmp_path: Path, repetitions: int = 1, interval_s: float = 0.3, timeout_s: float = 0.2) -> Path:
+def _protocol(tmp_path: Path, repetitions: int = 1, interval_s: float = 0.3, timeout_s: float = 0.2,
+              prompt: str | None = "1 or 2?") -> Path:
     """A small stereo 2IFC study (the shared two-interval tail) with short phases and a response
-    timeout, so ``--responses none`` runs it."""
+    timeout, so ``--responses none`` runs it; a short ``prompt`` (None: the default prompt, whose key lines
+    with ``--responses openxr`` need more than the 8 lines the runtime's 320x240 view fits at session start)."""
+    given = "" if prompt is None else f", prompt: '{prompt}'"
     tail = (TWO_INTERVAL_TAIL.replace("duration_s: 1}", f"duration_s: {interval_s}}}")
-            .replace("{kind: response, expected_s: 1}",  # a short prompt: the runtime's 320x240 view fits 8 lines
-                     f"{{kind: response, expected_s: 0.2, timeout_s: {timeout_s}, prompt: '1 or 2?'}}")
+            .replace("{kind: response, expected_s: 1}",
+                     f"{{kind: response, expected_s: 0.2, timeout_s: {timeout_s}{given}}}")
             .replace("repetitions: 1", f"repetitions: {repetitions}"))
     path = tmp_path / "xr_tiny.yaml"
     path.write_text(TINY_HEAD + tail)

@@ -25,7 +25,7 @@ from test_controls_terminal import _controlling_tty
 from test_window_escape import _start_xvfb, _xtest
 
 ROOT = Path(__file__).resolve().parents[2]
-XR_DIR = Path(__file__).parent / "xr"
+XR_DIR = Path(__file__).parents[1] / "devices" / "xr"
 
 PROTOCOL = """
 psyop_protocol: 1

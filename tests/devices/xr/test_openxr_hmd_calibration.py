@@ -1,6 +1,6 @@
 """Pupil Core's in-headset calibration (``pupil:...,calibrate-hmd``) in a headset session on the Monado runtime:
 the targets are drawn into the runtime's swapchains once the session is FOCUSED, Capture's HMD calibration (the
-stand-in of tests/session/pupil_server.py, which fits a real mapping) succeeds, and the gaze validation that follows
+stand-in of tests/devices/pupil_server.py, which fits a real mapping) succeeds, and the gaze validation that follows
 measures the mapped gaze on its targets. psyop runs in a child process (the runtime lives there); the participant,
 who looks at each target the drawing path shows, tells the stand-in where through Pupil Remote (``test.look_at``).
 """
