@@ -69,7 +69,7 @@ lint: $(STAMP)
 # x86-64 only: the names are x86 kernels.
 NARROW_CPU_ENV := NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR" OPENBLAS_CORETYPE=Haswell
 ifeq ($(shell uname -m),x86_64)
-CROSS_CPU_RUN = $(NARROW_CPU_ENV) "$(PY)" -m pytest -n $(TEST_JOBS) -q -m cross_cpu -p no:cacheprovider
+CROSS_CPU_RUN = $(NARROW_CPU_ENV) "$(PY)" -m pytest -n $(TEST_JOBS) -q -m "cross_cpu and not bench" -p no:cacheprovider
 else
 CROSS_CPU_RUN = @echo "[psyop] not x86-64: the cross_cpu tests ran once, with this machine's kernels"
 endif
@@ -85,7 +85,7 @@ test: lint $(STAMP) $(SYSDEPS_STAMP)
 
 # only the cross_cpu tests, both ways (the machine's widest kernels, then narrowed to AVX2)
 test-cross-cpu: $(STAMP) $(SYSDEPS_STAMP)
-	"$(PY)" -m pytest -n $(JOBS) -q -m cross_cpu
+	"$(PY)" -m pytest -n $(JOBS) -q -m "cross_cpu and not bench"
 	$(CROSS_CPU_RUN)
 
 bench: $(STAMP) $(SYSDEPS_STAMP)

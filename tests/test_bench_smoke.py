@@ -24,6 +24,7 @@ def test_bench_openxr_frame_quick_reports_the_ratio_or_why_not(tmp_path: Path) -
     assert "| ratio openxr / headless |" in report or "Skipped: " in report, report
 
 
+@pytest.mark.bench  # 14 s; the export's validity: tests/export/test_bids_export.py (the BIDS validator on five studies)
 def test_bench_export_quick_validates_the_export(tmp_path: Path) -> None:
     from benchmarks import bench_export
 
@@ -62,6 +63,7 @@ def test_bench_statistics_lapse_coverage_quick_writes_its_table(tmp_path: Path) 
     assert "Lowest coverage over the rows:" in report and "grid peaks joined" in report
 
 
+@pytest.mark.bench  # 14 s; the recovery it reports: tests/test_nc_calibration.py
 def test_bench_nc_calibration_quick_writes_its_coverage_table(tmp_path: Path) -> None:
     from benchmarks import bench_nc_calibration
 
@@ -84,6 +86,7 @@ def test_bench_figures_power_speed_quick_compares_before_and_after(tmp_path: Pat
     assert "| 4 | 12 |" in report and "nan" not in report
 
 
+@pytest.mark.bench  # 24 s; the equality it reports: tests/session/test_frame_cpu_equality.py
 def test_bench_frame_cpu_quick_reports_every_protocol_before_and_after(tmp_path: Path) -> None:
     from benchmarks import bench_frame_cpu
 
@@ -96,6 +99,7 @@ def test_bench_frame_cpu_quick_reports_every_protocol_before_and_after(tmp_path:
     assert "nan" not in report
 
 
+@pytest.mark.bench  # 20 s, twice with cross_cpu; both paths' equality: tests/power/test_memory_log.py, test_direct_pairing.py
 @pytest.mark.cross_cpu
 def test_bench_power_stages_quick_reports_both_paths_for_every_study(tmp_path: Path) -> None:
     from benchmarks import bench_power_stages

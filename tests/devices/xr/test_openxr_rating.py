@@ -49,10 +49,11 @@ response:
   level_factor: level_D
   confidence: {points: 4}
 """
-#: the first trial's response phase begins a few seconds after the child starts (the runtime, the first frames, the
-#: controller's wait and the intervals); what the participant does in trial k starts at CHOOSE_S[k]
-CHOOSE_S = (15.0, 30.0)
-#: (start, end) from CHOOSE_S of the choice's trigger press, of each right flick (full deflection, then rest) and of
+#: the participant starts trial k CHOOSE_AFTER_S[k] after the session's folder appears (the log opens once the
+#: runtime is focused and a controller is active, before the first trial, whose intervals last 0.2 s each; the next
+#: trial begins when this one's trigger confirms, CONFIRM_S below), not at a fixed time from the start
+CHOOSE_AFTER_S = (3.0, 12.0)
+#: (start, end) from each trial's start of the choice's trigger press, of each right flick (full deflection, then rest) and of
 #: the confirming trigger press: each a second long, so that a slow frame loop (llvmpipe on a loaded machine) still
 #: syncs the runtime's input while it is held
 CHOICE_S = (0.0, 1.0)
@@ -62,14 +63,20 @@ CONFIRM_S = (6.5, 7.5)
 
 def _run(tmp_path: Path, text: str, choose: bool) -> pd.DataFrame:
     """``psyop run`` on the remote driver with, in each trial, the stick flicked right twice, then the trigger
-    (after a first trigger press at CHOOSE_S when ``choose``: a two_interval choice); the trials in order."""
+    (after a first trigger press when ``choose``: a two_interval choice); the trials in order."""
     protocol = tmp_path / "xr_scale.yaml"
     protocol.write_text(text)
     cmd = [sys.executable, "-m", "psyop", "run", str(protocol), "--participant", "H1", "--data",
            str(tmp_path / "data"), "--display", "openxr", "--responses", "openxr", "--clock", "real", "--no-progress"]
 
+    session = tmp_path / "data" / "xr_scale" / "sub-H1" / "ses-1"
+    opened: list[float] = []
+
     def drive(state: RemoteState, elapsed_s: float) -> None:
-        t = elapsed_s - max([c for c in CHOOSE_S if c <= elapsed_s], default=-100.0)
+        if not opened and session.is_dir():
+            opened.append(elapsed_s)
+        starts = [opened[0] + s for s in CHOOSE_AFTER_S if opened and elapsed_s >= opened[0] + s]
+        t = elapsed_s - starts[-1] if starts else -100.0
         state.right_thumbstick_x = 1.0 if any(a <= t < b for a, b in FLICKS_S) else 0.0
         state.right_trigger = (choose and CHOICE_S[0] <= t < CHOICE_S[1]) or CONFIRM_S[0] <= t < CONFIRM_S[1]
 
