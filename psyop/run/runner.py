@@ -38,6 +38,8 @@ from psyop.session.log.screens_log import ScreenRecorder
 from psyop.session.log.store import SessionLog, SessionStore, recover_tables
 from psyop.session.validation import gaze_validator
 from psyop.session.screens import Pacing, ScreenRunner, session_screens
+from psyop.session.scale_picker import RemappableSource
+from psyop.protocol.kinds.confidence import SCALE_CONTROLLER
 from psyop.session.rows import TrialRow
 from psyop.session.gaze.delay import DelayedGaze
 from psyop.session.loop import BetweenTrials, LoopConfig, LoopFacts, LoopOptions, SessionOutcome, TrialLoop
@@ -425,8 +427,11 @@ def _screens(plan: SessionPlan, opened: _Opened, bundle: Backends, options: Sess
         return None if answer is None else answer.response
 
     raw = getattr(responses, "poll_raw", None) if pacing == "live" else None
+    # the controllers pick a questionnaire item's point with the stick (psyop.session.scale_picker)
+    scale = responses.with_keymap(SCALE_CONTROLLER) if pacing == "live" and isinstance(responses, RemappableSource) \
+        else None
     return session_screens(section, pacing=pacing, seed=int(opened.seed), recorder=recorder, fresh=fresh,
-                           live_input=live_input if pacing == "live" else None, raw_input=raw)
+                           live_input=live_input if pacing == "live" else None, raw_input=raw, scale_input=scale)
 
 
 def _finalise(opened: _Opened, bundle: Backends, loop: TrialLoop, outcome: SessionOutcome,

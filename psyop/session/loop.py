@@ -65,8 +65,7 @@ from psyop.protocol.kinds.adjustment import AdjustmentSpec, path_column
 from psyop.session.screens import ScreenRunner
 from psyop.protocol.kinds.confidence import ConfidenceScale
 from psyop.session.confidence import ConfidenceAsker
-from psyop.protocol.kinds.rating import RatingResponse
-from psyop.session.rating_stick import ask_rating
+from psyop.session.rating_stick import StickQuestion, ask_on_stick, stick_question
 from psyop.session.scale_picker import MappedRawSource, PickerPacing, picks_on_scale
 
 
@@ -110,7 +109,8 @@ class LoopFacts:
     min_valid_gaze_share: float = 0.5  # protocol trial.min_valid_gaze_share: below it gaze_ok is False
     timing: TimingSection | None = None  # protocol timing: the dropped-frame rule of a trial's intervals
     confidence: ConfidenceScale | None = None  # protocol response.confidence: asked after the choice
-    rating: RatingResponse | None = None  # protocol response, when a rating: the controllers' stick picks its point
+    #: protocol response, when the controllers' stick picks its answer (a rating, n_afc with n > 2)
+    stick: StickQuestion | None = None
 
     @classmethod
     def of_plan(cls, plan: SessionPlan) -> LoopFacts:
@@ -119,7 +119,7 @@ class LoopFacts:
                    fixate_point=plan.fixation_point,
                    hand_last_n=plan.response.average_last_samples, min_valid_gaze_share=plan.min_valid_gaze_share,
                    timing=plan.protocol.timing, confidence=plan.protocol.response.confidence,
-                   rating=plan.protocol.response if isinstance(plan.protocol.response, RatingResponse) else None)
+                   stick=stick_question(plan.protocol.response))
 
 
 @dataclass(frozen=True)
@@ -755,7 +755,7 @@ class TrialLoop:
         adjustment = plan.adjustment if plan is not None else None
         if adjustment is not None and isinstance(self.responses, RawInputSource):  # a person adjusts, frame by frame
             return self._await_adjustment(row, frames, prompt, adjustment, start_s, slot_s, timeout_s)
-        if self.config.rating is not None and picks_on_scale(self.responses):  # the stick picks the point
+        if self.config.stick is not None and picks_on_scale(self.responses):  # the stick picks the answer
             return self._await_rating_stick(row, frames, prompt, start_s, timeout_s)
         while True:
             response = self.responses.collect(row, self.clock.now_s())
@@ -791,12 +791,13 @@ class TrialLoop:
 
     def _await_rating_stick(self, row: TrialRow, frames: FrameRecorder, prompt: PhaseSpec, start_s: float,
                             timeout_s: float | None) -> Response:
-        """A rating answered with the controllers (psyop.session.rating_stick), drawn on the loop's frame path."""
-        assert self.config.rating is not None and self.response_plan is not None
+        """A rating or an n_afc answered with the controllers' stick (psyop.session.rating_stick), drawn on the
+        loop's frame path."""
+        assert self.config.stick is not None and self.response_plan is not None
         assert isinstance(self.responses, MappedRawSource)
         pacing = PickerPacing(self.clock, self.display, timeout_s, self.config.every_frame, self.frame_period_s)
-        response = ask_rating(row, self.response_plan, self.config.rating, self.responses, pacing, start_s,
-                              lambda request, phase: self._frame(row, phase, frames, request), prompt.name)
+        response = ask_on_stick(row, self.response_plan, self.config.stick, self.responses, pacing, start_s,
+                                lambda request, phase: self._frame(row, phase, frames, request), prompt.name)
         if response.response == TIMEOUT_RESPONSE:
             self.responses.timed_out()
         return response

@@ -1,5 +1,5 @@
-"""A k-point scale (a rating, a confidence rating) answered with the OpenXR controllers: a stick moves a highlighted
-point along the scale, a select button confirms it.
+"""A k-point scale (a rating, a confidence rating, an n_afc's n > 2 alternatives, a questionnaire item) answered with
+the OpenXR controllers: a stick moves a highlighted point along the scale, a select button confirms it.
 
 The source reports the stick's sideways deflection x in [-1, 1] (right positive) as the raw input
 :data:`~psyop.protocol.kinds.confidence.SCALE_AXIS` whenever it changes, and a select button as any other mapped
@@ -53,6 +53,14 @@ class MappedRawSource(Protocol):
     keymap: Mapping[str, str]
 
     def raw_inputs(self, since_s: float, now_s: float) -> list[RawInput]: ...
+
+
+@runtime_checkable
+class RemappableSource(Protocol):
+    """A device source that reads its raw inputs through any map it is given (the OpenXR controllers,
+    psyop.devices.xr.tracking): a questionnaire item reads them as a scale whatever the trial's kind maps."""
+
+    def with_keymap(self, keymap: Mapping[str, str]) -> MappedRawSource: ...
 
 
 def picks_on_scale(source: object) -> bool:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from psyop.session.choice_marker import with_marker
 from psyop.session.rows import JsonObject, TrialRecord, TrialRow
 from psyop.session.frames import FrameCheck, FrameRequest, HeadPose
 from psyop.session.phases import PhaseSpec
@@ -138,7 +139,9 @@ class SceneRenderer:
                 page = self._texts.page(phase.text, Picture(str((self._base_dir or Path(".")) / phase.image),
                                                            phase.image_width_deg))
                 return text_scene(page, scene_origin_m(self.protocol, centre))
-            return text_scene(self._texts.image(phase.text, keep_lines=True), scene_origin_m(self.protocol, centre))
+            origin = scene_origin_m(self.protocol, centre)
+            return with_marker(text_scene(self._texts.image(phase.text, keep_lines=True), origin), phase.marker_deg,
+                               tuple(origin))
         text = self.plan.response.participant_text
         if phase == self.plan.response.phase and text is not None:  # head-fixed, like the cross
             image = self._texts.image(text, keep_lines=self.plan.response.keeps_lines) if watched else None

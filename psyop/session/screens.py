@@ -25,9 +25,11 @@ Each screen is participant-paced:
   response kind's keys on the keyboard, its buttons on a response box or a headset controller; "any key" means
   any answer key). A questionnaire item is answered with a scale point: the digit keys 0 .. points - 1 (top row
   or keypad) or the response box's digit buttons, read raw from a source that offers them (``poll_raw``: the
-  keyboard, the response box) and interpreted here; any other input leaves the item showing. A source without
-  raw input (the headset's controllers: two buttons cannot pick one of several points) ends an item with an
-  answer input as before, the item's ``answer`` null and ``answered_by`` naming that input.
+  keyboard, the response box) and interpreted here; any other input leaves the item showing. The headset's
+  controllers pick the point with a stick, as on a rating's scale (``scale_input``: the controllers read through
+  :data:`~psyop.protocol.kinds.confidence.SCALE_CONTROLLER`, psyop.session.scale_picker): the item's scale is drawn
+  with the highlighted point marked (``>  1  slight  <``, starting at the scale's middle), a sideways flick moves
+  it one point, either select button confirms it; ``answered_by`` is ``controllers:POINT``.
 - feedback after a trial (``feedback``) is timed, not participant-paced: it shows for its ``duration_s``
   whoever answers (``ended_by`` ``timed``).
 
@@ -40,6 +42,7 @@ and questionnaires.parquet. Each screen's onset is also a ``phase`` event (trial
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zlib
 from pathlib import Path
@@ -58,12 +61,13 @@ from psyop.session.gaze.plan import FixationPlan
 from psyop.session.log.raw_gaze import raw_gaze_table
 from psyop.session.phases import PhaseSpec
 from psyop.session.rows import JsonMapping, JsonObject, TrialRow
+from psyop.session.scale_picker import MappedRawSource, PickerPacing, ScalePicker, run_picker
 
 if TYPE_CHECKING:
     from psyop.session.plan import SessionPlan
     from psyop.session.clock import Clock
     from psyop.session.events import EventSink
-    from psyop.session.frames import Display, DisplayInterrupted, FrameRenderer
+    from psyop.session.frames import Display, DisplayInterrupted, FrameRenderer, FrameRequest
     from psyop.session.gaze.sample import GazeSource
     from psyop.session.log.screens_log import ScreenRecorder
     from psyop.session.log.store import SessionLog
@@ -87,6 +91,9 @@ class ScreenPhase(PhaseSpec):
     text: str = ""
     image: str | None = None
     image_width_deg: float | None = None
+    #: a location to mark in front of the panel (Fick [azimuth, elevation] deg: the n_afc location the controllers'
+    #: stick highlights, psyop.session.choice_marker); None: the panel alone
+    marker_deg: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -145,15 +152,22 @@ def scale_labels(questionnaire: Questionnaire) -> tuple[str, ...]:
     return tuple(questionnaire.scale.labels)
 
 
-def questionnaire_screens(questionnaire: Questionnaire) -> list[Screen]:
-    """One screen per item: the title, the item's number, the item, then the scale's points and labels."""
+def questionnaire_text(questionnaire: Questionnaire, index: int, marked: int | None = None) -> str:
+    """Item ``index``'s screen: the title, the item's number, the item, then the scale's points and labels, with
+    point ``marked`` (0 .. points - 1: the one the controllers' stick highlights) between ``>`` and ``<``."""
     items, labels = item_texts(questionnaire), scale_labels(questionnaire)
     title = questionnaire.title or (ssq.TITLE if questionnaire.name == ssq.NAME else questionnaire.name)
-    scale = "\n".join(f"{point}  {label}" for point, label in enumerate(labels))
-    return [Screen("questionnaire", questionnaire.name, index, len(items),
-                   f"{title}\nitem {index + 1} of {len(items)}\n\n{item}\n\n{scale}",
+    scale = "\n".join((f">  {point}  {label}  <" if point == marked else f"{point}  {label}") if marked is not None
+                      else f"{point}  {label}" for point, label in enumerate(labels))
+    return f"{title}\nitem {index + 1} of {len(items)}\n\n{items[index]}\n\n{scale}"
+
+
+def questionnaire_screens(questionnaire: Questionnaire) -> list[Screen]:
+    """One screen per item (:func:`questionnaire_text`)."""
+    items = item_texts(questionnaire)
+    return [Screen("questionnaire", questionnaire.name, index, len(items), questionnaire_text(questionnaire, index),
                    float(questionnaire.item_expected_s), questionnaire)
-            for index, item in enumerate(items)]
+            for index in range(len(items))]
 
 
 def instruction_screens(section: ScreensSection) -> list[Screen]:
@@ -238,7 +252,8 @@ WIDEST_BREAK_COUNT = 99999
 
 def screen_texts(section: ScreensSection) -> list[tuple[tuple[str | int, ...], str]]:
     """Every text a screen of ``section`` can show, with the protocol path it is written at (a break's with
-    :data:`WIDEST_BREAK_COUNT` trials, an answer's feedback with a six-decimal answer): what a display checks
+    :data:`WIDEST_BREAK_COUNT` trials, an answer's feedback with a six-decimal answer, a questionnaire item also
+    with its widest scale point marked as the controllers mark it): what a display checks
     for room before the session (psyop.session.text_fit)."""
     out: list[tuple[tuple[str | int, ...], str]] = [(("session", "instructions", "pages", s.page, "text"), s.text)
                                                     for s in instruction_screens(section)]
@@ -248,8 +263,11 @@ def screen_texts(section: ScreensSection) -> list[tuple[tuple[str | int, ...], s
         out.append((("session", "breaks", "text"), break_screen(section, moment).text))
     for index, questionnaire in enumerate(section.questionnaires):
         path: tuple[str | int, ...] = ("session", "questionnaires", index)
-        out += [(path + (("items", s.page) if questionnaire.items else ()), s.text)
-                for s in questionnaire_screens(questionnaire)]
+        labels = scale_labels(questionnaire)
+        widest = max(range(len(labels)), key=lambda point: len(f"{point}  {labels[point]}"))
+        for s in questionnaire_screens(questionnaire):  # as shown, and with the widest point marked (controllers)
+            at = path + (("items", s.page) if questionnaire.items else ())
+            out += [(at, s.text), (at, questionnaire_text(questionnaire, s.page, marked=widest))]
     out += [(("session", "end_screen", "text"), s.text) for s in end_screens(section)]
     feedback = section.feedback
     if feedback is not None:
@@ -329,6 +347,7 @@ class ScreenRunner:
     fresh: bool = True
     live_input: ScreenInput | None = None
     raw_input: RawInput | None = None  # a live source's raw input: questionnaire items answered with digits
+    scale_input: MappedRawSource | None = None  # the controllers read as a scale: questionnaire items picked with a stick
     _block: int | None = None
     _break_mark: int = 0
     _administrations: int = 0
@@ -416,8 +435,8 @@ class ScreenRunner:
         if self.pacing == "simulated":
             return self.answerer.answer(name, moment, item, points), "simulated"
         if self.pacing == "live":
-            given = ended_by.removeprefix("input:")
-            if given.isdigit() and int(given) < points:
+            source, _, given = ended_by.partition(":")
+            if source in ("input", "controllers") and given.isdigit() and int(given) < points:
                 return int(given), ended_by
             return None, ended_by
         return None, ended_by
@@ -473,6 +492,8 @@ class ScreenRunner:
         if paced_end is not None and not loop.config.every_frame:
             clock.sleep_until(paced_end)
             return start, clock.now_s(), by
+        if paced_end is None and screen.questionnaire is not None and self.scale_input is not None:
+            return self._pick_item(loop, screen, self.scale_input, start)
         t = start
         while True:
             if paced_end is not None and t >= paced_end - 1e-9:
@@ -489,6 +510,23 @@ class ScreenRunner:
             t = _screen_frame(loop, phase, start, t)
 
 
+    def _pick_item(self, loop: ScreenHost, screen: Screen, source: MappedRawSource, start: float
+                   ) -> tuple[float, float, str]:
+        """A questionnaire item answered with the controllers' stick (psyop.session.scale_picker): its screen drawn
+        each frame with the highlighted point marked until a select button confirms it (no timeout)."""
+        questionnaire = screen.questionnaire
+        assert questionnaire is not None
+        phase = screen.phase()
+
+        def draw(request: FrameRequest, point: int) -> None:
+            marked = dataclasses.replace(phase, text=questionnaire_text(questionnaire, screen.page, point - 1))
+            _draw_screen(loop, marked, start, request)
+
+        pacing = PickerPacing(loop.clock, loop.display, None, loop.config.every_frame, loop.frame_period_s)
+        picker = run_picker(ScalePicker(len(scale_labels(questionnaire)), start), source, pacing, draw)
+        return start, loop.clock.now_s(), f"controllers:{picker.point - 1}"
+
+
 def scale_point(name: str, points: int) -> int | None:
     """The scale point a raw input names: a digit key (``3``, keypad ``kp_3``) or box button 0 .. points - 1."""
     digit = name.removeprefix("kp_")
@@ -498,6 +536,12 @@ def scale_point(name: str, points: int) -> int | None:
 def _screen_frame(loop: ScreenHost, phase: ScreenPhase, start: float, t: float) -> float:
     """One frame of the screen at display slot ``t``; the next slot."""
     request = loop.display.begin_frame(t)
+    _draw_screen(loop, phase, start, request)
+    return max(t + loop.frame_period_s, request.display_time_s + request.period_s)
+
+
+def _draw_screen(loop: ScreenHost, phase: ScreenPhase, start: float, request: FrameRequest) -> None:
+    """Draw ``phase`` (shown since ``start``) into the display's frame ``request`` and hand it to the display."""
     loop.gaze.latest(loop.clock.now_s())
     check = None
     if loop.renderer is not None and request.should_render:
@@ -506,7 +550,6 @@ def _screen_frame(loop: ScreenHost, phase: ScreenPhase, start: float, t: float) 
     loop.display.end_frame(request, loop.renderer.eye_textures() if loop.renderer is not None else [])
     if check is not None and check.checked and not check.ok:
         raise RuntimeError(f"session screen {phase.name}: rendered frame failed its check")
-    return max(t + loop.frame_period_s, request.display_time_s + request.period_s)
 
 
 def event_row(run: int, screen: Screen, moment: Moment, start: float, end: float, ended_by: str) -> JsonMapping:
@@ -519,9 +562,9 @@ def event_row(run: int, screen: Screen, moment: Moment, start: float, end: float
 
 
 def session_screens(section: ScreensSection | None, *, pacing: Pacing, seed: int, recorder: ScreenRecorder | None,
-                    fresh: bool, live_input: ScreenInput | None = None,
-                    raw_input: RawInput | None = None) -> ScreenRunner | None:
+                    fresh: bool, live_input: ScreenInput | None = None, raw_input: RawInput | None = None,
+                    scale_input: MappedRawSource | None = None) -> ScreenRunner | None:
     """The screens of a run (None: the protocol has no ``session:``, and the loop runs as without it)."""
     if section is None:
         return None
-    return ScreenRunner(section, pacing, int(seed), recorder, fresh, live_input, raw_input)
+    return ScreenRunner(section, pacing, int(seed), recorder, fresh, live_input, raw_input, scale_input)

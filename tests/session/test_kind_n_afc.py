@@ -56,7 +56,9 @@ def test_keys_and_buttons_one_to_n_answer_and_others_are_ignored() -> None:
     from psyop.session.clock import RealClock
 
     plan = compile_plan(load_protocol(EXAMPLE))
-    assert plan.response.inputs.controller == {}  # two select buttons cannot pick one of four
+    from psyop.protocol.kinds.confidence import SCALE_CONTROLLER
+
+    assert plan.response.inputs.controller == SCALE_CONTROLLER  # the stick picks one of four, a select button confirms
     keyboard = KeyboardResponses(ScriptedKeys([]), plan.kind, keymap=plan.response.inputs.keys)
     row = {"correct_interval": 3}
     assert keyboard.collect(row, 1.0) is None

@@ -244,6 +244,13 @@ class OpenXRResponses(KeyboardResponses):
                             "--experimenter-window (its keys), or --responses serial:DEVICE", "--responses")
         return cls(XrButtons(display), kind, reach_m=right_hand_reach_m, keymap=keymap)
 
+    def with_keymap(self, keymap: Mapping[str, str]) -> "OpenXRResponses":
+        """The same controllers read through another map of their raw inputs (``left``, ``right``, ``thumbstick``,
+        ``thumbstick_x``), e.g. a questionnaire item's scale whatever the trial's kind maps (psyop.session.screens);
+        both read the one input sync, so only one of them is read at a time."""
+        assert isinstance(self.events, XrButtons)
+        return OpenXRResponses(self.events, self.kind, reach_m=self._reach_m, keymap=keymap)
+
     def raw_inputs(self, since_s: float, now_s: float) -> list[RawInput]:
         """The select buttons through the kind's map (as keys), and, where the map names ``thumbstick`` (forward)
         or ``thumbstick_x`` (sideways), the stick's deflection as that input (an adjustment's axis, a rating's scale

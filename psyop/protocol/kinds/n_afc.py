@@ -7,7 +7,13 @@
   variables ``target_azimuth_deg`` and ``target_elevation_deg``, which the target item reads as its
   ``centre_deg: [{factor: target_azimuth_deg}, {factor: target_elevation_deg}]``; the other locations are empty.
   The answer is the location's number.
- The analysis fits a psychometric function with guess rate 1/n per participant
+
+Answers: keys 1..n (top row or keypad), response-box buttons 1..n; the OpenXR controllers answer n = 2 with their
+select buttons (left: 1, right: 2) and n > 2 with a stick that moves the highlighted alternative (the response panel
+names it, "interval 3 of 4" or "location 3 of 4", and a frame marks a highlighted location) and a select button that
+confirms it (psyop.session.scale_picker, psyop.session.rating_stick); the alternatives highlighted go to
+``choice_path`` (JSON ``[[t_s, alternative], ...]``; '' for other sources).
+The analysis fits a psychometric function with guess rate 1/n per participant
 and condition (psyop.statistics.psychometric, psignifit's nAFC type); the threshold is the level where the
 proportion correct is halfway between 1/n and 1.
 """
@@ -19,12 +25,14 @@ from collections.abc import Mapping
 from typing import ClassVar, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from psyop.protocol.base import Number
 from psyop.protocol.scene import FactorRef
-from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, Inputs, IntervalSpec, KindResponse,
-                                       ObserverBase, ResponseKindSpec, ScheduleInput, Scored, StudyInputs, figure_target)
+from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, Inputs, InputSource, IntervalSpec,
+                                       KindResponse, ObserverBase, ResponseKindSpec, ScheduleInput, Scored, StudyInputs,
+                                       figure_target)
+from psyop.protocol.kinds.confidence import SCALE_CONTROLLER, STICK_HELP
 from psyop.protocol.kinds.modes import check_specs, interval_spec_columns, specs_factors
 from psyop.protocol.image_observer import ImageObserver, unread_fields
 from psyop.records import Loc, TrialRow
@@ -33,6 +41,9 @@ from psyop.records import Loc, TrialRow
 N_CHOICES = range(2, 9)
 #: locations: the scene variables (and schedule columns) holding the target's centre in each trial
 LOCATION_AZIMUTH, LOCATION_ELEVATION = "target_azimuth_deg", "target_elevation_deg"
+#: the trial-log column of the alternatives the controllers' stick highlighted before the answer (n > 2; '' for
+#: other sources): JSON ``[[t_s, alternative], ...]``, as a rating's ``rating_path``
+CHOICE_PATH = "choice_path"
 
 
 def correct_alternative(row: TrialRow) -> int:
@@ -45,7 +56,8 @@ class NAfcResponse(KindResponse):
     locations (``locations_deg``, the target item placed at one per trial)."""
 
     kind: Literal["n_afc"]
-    question: str = "Which interval showed the target?"
+    #: the default: "Which interval showed the target?" (intervals), "Where was the target?" (locations)
+    question: str = ""
     n: int = Field(ge=2, le=8, description="number of alternatives (2..8)")
     alternatives: Literal["intervals", "locations"] = "intervals"
     target: IntervalSpec
@@ -55,6 +67,14 @@ class NAfcResponse(KindResponse):
     level_factor: str | None = None
     #: which interval holds the target: each equally often within a condition (balanced), or uniformly at random
     order: Counterbalance = "balanced"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_question(cls, data: object) -> object:
+        if isinstance(data, dict) and "question" not in data:
+            where = data.get("alternatives") == "locations"
+            return {**data, "question": "Where was the target?" if where else "Which interval showed the target?"}
+        return data
 
     def intervals(self) -> int:
         return self.n if self.alternatives == "intervals" else 1
@@ -74,6 +94,22 @@ class NAfcResponse(KindResponse):
 
     def factors_read(self) -> set[str]:
         return specs_factors(self.interval_specs(), self.level_factor)
+
+    def picks_with_stick(self) -> bool:
+        """Whether the controllers answer with the stick (n > 2: two select buttons cannot pick one of n)."""
+        return self.n > 2
+
+    def alternative_text(self, k: int) -> str:
+        """How the response panel names alternative ``k`` (1..n) while the stick highlights it.
+
+        Examples
+        --------
+        >>> NAfcResponse(kind="n_afc", n=4, target={"mode": "ocular"}, reference={"mode": "conventional"}
+        ...              ).alternative_text(3)
+        'interval 3 of 4'
+        """
+        noun = "interval" if self.alternatives == "intervals" else "location"
+        return f"{noun} {int(k)} of {self.n}"
 
 
 def _phi(z: float) -> float:
@@ -177,17 +213,27 @@ class NAfc(ResponseKindSpec):
               "ImageObserver": {k: "image_observer" for k in ImageObserver.model_fields if k != "eye"}}
 
     def inputs(self, response: KindResponse) -> Inputs:
-        """Keys 1..n (and the keypad's); box buttons 1..n; the controllers' two buttons for n = 2 only."""
+        """Keys 1..n (and the keypad's); box buttons 1..n; the controllers' two select buttons for n = 2, their
+        stick and select buttons (the scale's map, :data:`SCALE_CONTROLLER`) for n > 2."""
         assert isinstance(response, NAfcResponse)
         numbers = [str(k) for k in range(1, response.n + 1)]
         keys = {k: k for k in numbers} | {f"kp_{k}": k for k in numbers} | \
             ({"left": "1", "right": "2"} if response.n == 2 else {})
-        return Inputs(keys, {k: k for k in numbers}, {"left": "1", "right": "2"} if response.n == 2 else {})
+        controller = dict(SCALE_CONTROLLER) if response.picks_with_stick() else {"left": "1", "right": "2"}
+        return Inputs(keys, {k: k for k in numbers}, controller)
+
+    def answer_keys_text(self, response: KindResponse, source: InputSource) -> str | None:
+        """For the controllers with n > 2, how to move among the alternatives and answer (:data:`STICK_HELP`); else
+        each answer's inputs."""
+        assert isinstance(response, NAfcResponse)
+        if source == "openxr" and response.picks_with_stick():
+            return STICK_HELP
+        return super().answer_keys_text(response, source)
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
-        """``n_alternatives``; intervals: ``correct_interval`` (1..n), each interval's mode and the factors an
-        interval sets; locations: ``correct_location`` (1..n), the target's centre (``target_azimuth_deg``,
-        ``target_elevation_deg``) and the one interval's mode and factors."""
+        """``n_alternatives``; n > 2: the empty ``choice_path``; intervals: ``correct_interval`` (1..n), each
+        interval's mode and the factors an interval sets; locations: ``correct_location`` (1..n), the target's centre
+        (``target_azimuth_deg``, ``target_elevation_deg``) and the one interval's mode and factors."""
         assert isinstance(response, NAfcResponse)
         n, columns, rows = response.n, schedule.columns, schedule.n
         if response.order == "balanced":
@@ -195,6 +241,8 @@ class NAfc(ResponseKindSpec):
         else:
             right = schedule.rng.integers(1, n + 1, size=rows)
         out: dict[str, np.ndarray] = {"n_alternatives": np.full(rows, n, dtype=np.int64)}
+        if response.picks_with_stick():
+            out[CHOICE_PATH] = np.full(rows, "", dtype=object)
         if response.alternatives == "locations":
             places = np.asarray(response.locations_deg, dtype=np.float64)
             out |= {"correct_location": right, LOCATION_AZIMUTH: places[right - 1, 0],
