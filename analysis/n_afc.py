@@ -5,7 +5,8 @@ mean per condition with a 95 % t interval (fits of other statuses are counted, n
 
 Writes results/<study>_n_afc_fits.csv (one row per participant x condition), results/<study>.json (the summary)
 and figures/<study>_n_afc.png (proportion correct by level with each participant's fitted curve; thresholds by
-condition).
+condition). The fits' level-valued columns carry the level factor's unit (psyop.statistics.level_units:
+``threshold_fraction`` for a ``contrast_fraction`` level, ``threshold_D`` for ``level_D``).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     from psyop.errors import UserError
     from psyop.statistics.dataset import load_dataset
+    from psyop.statistics.level_units import in_level_units, level_suffix, level_unit_text
     from psyop.statistics.psychometric import USABLE_STATUSES, fit_psychometric_table, nafc_options
     from psyop.statistics.signal_detection import t_summary
 
@@ -45,13 +47,16 @@ def main(argv: list[str] | None = None) -> int:
     others = [name for name in facts.factors if name != level and name in trials and trials[name].nunique() > 1]
     fits = fit_psychometric_table(trials, level_column=level, group_columns=["participant", *others],
                                   correct_column="correct", options=nafc_options(n), n_jobs=args.n_jobs)
+    fits = in_level_units(fits, level)  # threshold_fraction for contrast_fraction, threshold_D for level_D
+    threshold = "threshold" + level_suffix(level)
     usable = fits[fits["status"].isin(USABLE_STATUSES)]
-    means = t_summary(usable, others, ["threshold_D"], 0.95)
+    means = t_summary(usable, others, [threshold], 0.95)
     args.results.mkdir(parents=True, exist_ok=True)
     write_csv(fits, results_file(args.results, args.study, "n_afc_fits", "csv"))
     write_json(results_file(args.results, args.study), {
         **provenance(facts, "n_afc", args.pool_protocols), "simulated": ds.simulated, "n_alternatives": n,
-        "guess": 1.0 / n, "target_p": (1.0 + 1.0 / n) / 2.0, "level_factor": level, "conditions": others,
+        "guess": 1.0 / n, "target_p": (1.0 + 1.0 / n) / 2.0, "level_factor": level,
+        "level_unit": level_unit_text(level), "conditions": others,
         "fits_by_status": fits["status"].value_counts().to_dict(),
         "thresholds": means.to_dict("records"),
     })
@@ -69,14 +74,16 @@ def _figure(trials, fits, means, level, others, n, study, simulated, out) -> Non
 
     from psyop.figures.output import save_figure
     from psyop.figures.study_figures import mark_simulated
+    from psyop.statistics.level_units import level_suffix
     from psyop.statistics.psychometric import USABLE_STATUSES, predicted_pc
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(10.0, 4.0))
     share = trials.groupby(level)["correct"].mean()
     left.plot(share.index, share.to_numpy(), "o", color="k", label="all participants")
     grid = np.linspace(float(trials[level].min()), float(trials[level].max()), 200)
+    suffix = level_suffix(level)
     for row in fits[fits["status"].isin(USABLE_STATUSES)].to_dict("records"):
-        left.plot(grid, predicted_pc(grid, row["location_D"], row["width_D"], row["lapse"], guess=1.0 / n),
+        left.plot(grid, predicted_pc(grid, row["location" + suffix], row["width" + suffix], row["lapse"], guess=1.0 / n),
                   color="0.5", lw=0.6, alpha=0.6)
     left.axhline(1.0 / n, color="0.7", lw=0.8, ls=":")
     left.axhline((1.0 + 1.0 / n) / 2.0, color="0.7", lw=0.8, ls="--")

@@ -5,6 +5,7 @@ typed under Xvfb, simulated sessions analysed by make figures' script, and bad i
 from __future__ import annotations
 
 import re
+import json
 from pathlib import Path
 
 import numpy as np
@@ -80,6 +81,13 @@ def test_simulated_sessions_are_analysed_with_guess_one_quarter(tmp_path: Path, 
                                                str(results), "--out", str(tmp_path / "fig.png")]) == 0
     fits = pd.read_csv(results / "nafc_locations_n_afc_fits.csv")
     assert len(fits) == 2 and (fits["guess"] == 0.25).all()
+    # levels are contrast fractions: every level-valued column says so, none claims diopters
+    assert {"threshold_fraction", "threshold_ci_low_fraction", "width_fraction", "level_max_fraction"} <= set(fits)
+    assert not [name for name in fits if name.endswith("_D")], list(fits)
+    assert fits["level_max_fraction"].max() == pytest.approx(0.32)
+    summary = json.loads((results / "nafc_locations.json").read_text())
+    assert summary["level_unit"] == "fraction"
+    assert {r["measure"] for r in summary["thresholds"]} == {"threshold_fraction"}
 
 
 @pytest.mark.parametrize(("old", "new", "says"), [
