@@ -315,8 +315,10 @@ def _old_reader_survives(path: Path) -> bool:
     pid = os.fork()
     if pid == 0:  # pragma: no cover - child
         import faulthandler
+        import resource
 
         faulthandler.disable()
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))  # an abort writes no core file
         os.dup2(os.open(os.devnull, os.O_WRONLY), 2)  # the abort message is expected
         try:
             with open(path, "rb") as handle:
@@ -357,6 +359,8 @@ def test_a_corrupt_legacy_ipc_segment_never_aborts_the_process(reference: tuple[
         path.write_bytes(bytes(damaged))
         if not _old_reader_survives(path):
             killers.append(offset)
+            if len(killers) == 3:  # the three checked below
+                break
     assert killers, "no flip kills a direct pyarrow reader any more: the hazard guarded against is gone"
     for offset in killers[:3]:
         damaged = bytearray(original)
