@@ -197,6 +197,13 @@ def low_gaze_mask(trials: pd.DataFrame, legacy_threshold: float = MIN_VALID_GAZE
     return (marked.astype(bool) | legacy).rename(None)
 
 
+#: Per trial, in sessions whose protocol's observer is ``kind: image`` (psyop.session.log.schema.trial_schema):
+#: the values the image observer's decision used, as JSON (its rule, each interval's internal response or
+#: evidence, the noise, the trial's uniform draw ``u`` and the probability ``p`` it was compared with:
+#: psyop.session.responses.image_choices.observer_extras); null where a person answered.
+OBSERVER_RESPONSES = "observer_responses"
+
+
 #: Per trial: whether the intervals' frames stayed within the protocol's ``trial.max_gaze_age_ms`` on all but
 #: ``trial.max_gaze_age_over_share`` of them (null: no bound, or no interval frame with valid gaze;
 #: psyop.session.latency).

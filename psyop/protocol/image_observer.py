@@ -37,6 +37,9 @@ FIELDS_READ: dict[str, frozenset[str]] = {
     "left_right_nearer": frozenset({"kind", "eye", "pupil_mm", "defocus_D", "mar0_arcmin", "e2_deg",
                                     "motion_scale_deg", "shift_noise_arcmin", "border_strip_deg", "lapse",
                                     "render_scale", "frames_per_interval"}),
+    "pairwise_preference": frozenset({"kind", "eye", "pupil_mm", "defocus_D", "mar0_arcmin", "e2_deg",
+                                      "motion_scale_deg", "motion_window_deg", "shift_noise_arcmin", "lapse",
+                                      "render_scale", "frames_per_interval"}),
 }
 
 
@@ -47,7 +50,10 @@ class ImageObserver(ObserverBase):
     ``noise_sd_c2deg2`` on each; a left/right-nearer trial from the direction of the two half fields' relative
     shift at each gaze shift (psyop.session.image_observer.ordinal), with noise ``shift_noise_arcmin``; an n-AFC
     trial (over intervals) by the largest noisy energy; a yes/no trial by the noisy energy against
-    ``criterion_sd`` (psyop.session.image_observer.decisions). It lapses (guesses) at rate ``lapse``."""
+    ``criterion_sd`` (psyop.session.image_observer.decisions); a pairwise-preference trial by the interval whose
+    frames carry more depth evidence from the eye's own movements (the spread of the local image shifts along each
+    gaze shift, noise ``shift_noise_arcmin``: psyop.session.image_observer.preference; a hypothesis about
+    preference, not a fit). It lapses (guesses) at rate ``lapse``."""
 
     kind: Literal["image"]
     #: pupil diameter (mm): diffraction, and with ``defocus_D`` the defocus blur
@@ -60,7 +66,7 @@ class ImageObserver(ObserverBase):
     e2_deg: Number = Field(default=2.5, gt=0.0, le=30.0)
     #: the spatial scale of the relative-motion stage (sd, deg)
     motion_scale_deg: Number = Field(default=0.25, gt=0.0, le=5.0)
-    #: the window a local translation is fitted over (sd, deg)
+    #: the window a local translation is fitted over (sd, deg; the two-interval, n-AFC, yes/no and preference rules)
     motion_window_deg: Number = Field(default=1.0, gt=0.0, le=10.0)
     #: around the gaze, what pursuit holds on the fovea (deg): not counted as motion
     pursued_deg: Number = Field(default=2.0, ge=0.0, le=20.0)
@@ -70,8 +76,8 @@ class ImageObserver(ObserverBase):
     noise_sd_c2deg2: Number = Field(default=CALIBRATED_NOISE_SD_C2DEG2, gt=0.0)
     #: the share of trials answered by a guess
     lapse: Number = Field(default=0.0, ge=0.0, lt=0.5)
-    #: left_right_nearer only: the sd of the observer's estimate of the two half fields' relative shift along each
-    #: gaze shift (arcmin; stated, not calibrated: a differential-displacement threshold of about 1 arcmin)
+    #: left_right_nearer and pairwise_preference only: the sd of the observer's estimate of a relative shift along
+    #: each gaze shift (arcmin; stated, not calibrated: a differential-displacement threshold of about 1 arcmin)
     shift_noise_arcmin: Number = Field(default=1.0, gt=0.0, le=60.0)
     #: left_right_nearer only: the strip about the view's vertical midline left out of both half fields (deg each
     #: side; the border between the two surfaces runs in it)

@@ -278,7 +278,8 @@ def _open(protocol: Protocol, compile_schedule: Callable[..., pd.DataFrame], opt
     else:
         raise UserError(f"unknown clock {options.clock!r}; use virtual or real", "--clock")
     try:  # the schedule's columns, the log's, then the measured timing of each drawn phase (psyop.session.timing)
-        schema = with_timing_fields(trial_schema(schedule), plan.phases)
+        image_observer = plan.observer is not None and plan.observer.kind == "image"  # its decision values logged
+        schema = with_timing_fields(trial_schema(schedule, image_observer=image_observer), plan.phases)
     except ValueError as exc:
         raise UserError(str(exc), protocol.source_name or plan.study) from exc
     store = (SessionStore(paths, schema, fsync=options.fsync) if store_factory is None

@@ -102,6 +102,19 @@ def test_a_simulated_session_is_answered_by_the_image_observer(tmp_path: Path) -
     assert "responses:sim" in record["simulated_sources"] and "\nobserver:\n  kind: image\n" in record["protocol_text"]
     trials = pd.read_parquet(session.parent / "trials.parquet")
     assert trials["response"].isin(["1", "2"]).all() and trials["correct"].notna().all()
+    for _, row in trials.iterrows():  # the decision's values, logged: the answer is the one they give
+        values = json.loads(row["observer_responses"])
+        assert values["observer"] == "image" and len(values["responses_c2deg2"]) == 2
+        assert values["noise_sd_c2deg2"] == 1.0e-7 and bool(row["correct"]) == (values["u"] < values["p"])
+
+
+def test_only_an_image_observer_s_session_logs_its_decision_values() -> None:
+    from psyop.datacontract import OBSERVER_RESPONSES
+    from psyop.session.log.schema import trial_schema
+
+    schedule = compile_schedule(load_protocol(DETECTION), 1)
+    assert OBSERVER_RESPONSES not in trial_schema(schedule).names
+    assert str(trial_schema(schedule, image_observer=True).field(OBSERVER_RESPONSES).type) == "string"
 
 
 ORDINAL = DETECTION.parent / "ordinal.yaml"
@@ -130,7 +143,9 @@ def test_ordinal_without_a_cue_is_answered_at_chance(tmp_path: Path) -> None:
         correct = 0
         for row in rows[:16]:
             assert source.evidence_arcmin(row) == [0.0, 0.0]  # the same frames at every fixation: no cue
-            correct += bool(source.collect(row, 0.0).correct)
+            answer = source.collect(row, 0.0)
+            correct += bool(answer.correct)
+            assert json.loads(dict(answer.extras)["observer_responses"])["evidence_arcmin"] == [0.0, 0.0]
     finally:
         source.close()
     assert binomtest(correct, 16, 0.5).pvalue > 0.01, correct
@@ -154,17 +169,6 @@ def test_an_unread_field_is_refused_at_its_line() -> None:
     line = next(i for i, t in enumerate(text.splitlines(), 1) if "noise_sd_c2deg2" in t)
     assert info.value.location is not None and info.value.location.startswith(f"study.yaml:{line}:"), str(info.value)
     assert "does not read noise_sd_c2deg2" in str(info.value) and info.value.exit_code == 2
-
-
-def test_the_realism_study_refuses_the_image_observer_at_its_line() -> None:
-    """A preference for realism has no stated image-computable rule: ``kind: image`` is refused there, with the fix."""
-    text = (DETECTION.parent / "realism.yaml").read_text()
-    text = text[:text.index("\nobserver:")] + "\nobserver:\n  kind: image\n"
-    with pytest.raises(UserError) as info:
-        parse_protocol(text, "study.yaml")
-    line = next(i for i, t in enumerate(text.splitlines(), 1) if t == "  kind: image")
-    assert info.value.location == f"study.yaml:{line}:9" and info.value.exit_code == 2, str(info.value)
-    assert "cannot answer a pairwise_preference response; use kind: pairwise_preference" in info.value.message
 
 
 def test_the_half_field_warp_is_scipy_s_linear_shift() -> None:

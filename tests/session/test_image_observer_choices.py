@@ -5,6 +5,7 @@ of the display's resolution and three frames per interval."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -54,7 +55,10 @@ def test_n_afc_without_a_cue_is_answered_at_chance() -> None:
         correct = 0
         for row in rows[:16]:
             assert len(set(source.responses(row))) == 1  # every interval the same response: no cue
-            correct += bool(source.collect(row, 0.0).correct)
+            answer = source.collect(row, 0.0)
+            correct += bool(answer.correct)
+            values = json.loads(dict(answer.extras)["observer_responses"])  # the decision's values, for the log
+            assert values["responses_c2deg2"] == list(source.responses(row)) and values["p"] == pytest.approx(0.25)
     finally:
         source.close()
     assert binomtest(correct, 16, 0.25).pvalue > 0.01, correct
@@ -79,7 +83,11 @@ def test_yes_no_without_a_cue_says_yes_as_often_on_signal_and_noise_trials() -> 
         for row in trials:
             # the same p(yes), signal or noise (to float rounding of the pursued target's pixels): no cue
             assert source.p_yes(row) == pytest.approx(first, abs=1e-6)
-            yes[bool(row["signal"])] += source.collect(row, 0.0).response == "yes"
+            answer = source.collect(row, 0.0)
+            yes[bool(row["signal"])] += answer.response == "yes"
+            values = json.loads(dict(answer.extras)["observer_responses"])
+            assert values["criterion_sd"] == 1.0 and (answer.response == "yes") == (
+                (values["u"] < values["p"]) == bool(row["signal"]))
     finally:
         source.close()
     assert fisher_exact([[yes[True], 8 - yes[True]], [yes[False], 8 - yes[False]]]).pvalue > 0.01, yes

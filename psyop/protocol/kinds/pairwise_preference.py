@@ -11,6 +11,7 @@ from pydantic import Field
 
 from psyop.errors import UserError
 from psyop.protocol.base import Number
+from psyop.protocol.image_observer import ImageObserver, unread_fields
 from psyop.protocol.kinds.base import (AnalysisTarget, Checks, Counterbalance, KindResponse, ObserverBase,
                                        ResponseKindSpec, ScheduleInput, Scored, StudyInputs, figure_target)
 from psyop.protocol.scene import RENDERING_MODES, RenderingMode
@@ -64,14 +65,15 @@ class PairwisePreferenceKind(ResponseKindSpec):
     label = "pairwise preference"
     takes_confidence = True  # one discrete choice: a confidence rating may follow
     model = PairwisePreferenceResponse
-    observer_models = (PairwisePreference,)
+    observer_models = (PairwisePreference, ImageObserver)
     keys = {"1": "a", "2": "b", "a": "a", "b": "b", "left": "a", "right": "b"}
     buttons = {"1": "a", "2": "b", "A": "a", "B": "b", "L": "a", "R": "b"}
     controller = {"left": "a", "right": "b"}
     answer_labels = {"a": "first", "b": "second"}
     fields = {"PairwisePreferenceResponse": {"kind": "plan", "question": "plan", "pair_factor": "kinds",
                                              "order": "kinds"},
-              "PairwisePreference": {"kind": "kinds", "strength": "kinds"}}
+              "PairwisePreference": {"kind": "kinds", "strength": "kinds"},
+              "ImageObserver": {k: "image_observer" for k in ImageObserver.model_fields if k != "eye"}}
 
     def columns(self, response: KindResponse, schedule: ScheduleInput) -> dict[str, np.ndarray]:
         """The two modes in shown order (``binary`` True: the pair's second mode first)."""
@@ -118,6 +120,10 @@ class PairwisePreferenceKind(ResponseKindSpec):
             seen.setdefault(parts, str(level))
 
     def check_observer(self, observer: ObserverBase, response: KindResponse, checks: Checks, path: Loc) -> None:
+        if isinstance(observer, ImageObserver):  # prefers from the frames: nothing of the schedule to check
+            for name in unread_fields(observer, self.name):
+                checks.add(path + (name,), f"the image observer's preference rule does not read {name}; remove it")
+            return
         assert isinstance(observer, PairwisePreference) and isinstance(response, PairwisePreferenceResponse)
         if response.pair_factor in checks.factors:
             modes = {m for level in checks.factors[response.pair_factor].all_levels() for m in str(level).split("|")}

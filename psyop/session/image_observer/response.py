@@ -108,9 +108,11 @@ def _translation(before: np.ndarray, after: np.ndarray, window_px: float) -> tup
     return -(jyy * bx - jxy * by) / det, -(jxx * by - jxy * bx) / det
 
 
-def residual_change(before: np.ndarray, after: np.ndarray, window_px: float, steps: int = LK_STEPS) -> np.ndarray:
-    """``after - before`` (H, W, C) less the local translation that best explains it (see the module docstring):
-    ``steps`` Lucas-Kanade steps, each warping ``after`` back by the translation found so far."""
+def local_translation(before: np.ndarray, after: np.ndarray, window_px: float, steps: int = LK_STEPS
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The per-pixel translation ``(dx, dy)`` (pixels, x right, y down) of ``after`` (H, W, C) from ``before``
+    within a Gaussian window of sd ``window_px``, and ``after`` warped back by it: ``steps`` Lucas-Kanade steps,
+    each warping ``after`` back by the translation found so far."""
     from scipy.ndimage import map_coordinates
 
     rows, cols = np.indices(before.shape[:2], dtype=np.float64)
@@ -122,7 +124,13 @@ def residual_change(before: np.ndarray, after: np.ndarray, window_px: float, ste
         dx, dy = dx + step_x, dy + step_y
         warped = np.stack([map_coordinates(after[..., c], [rows + dy, cols + dx], order=1, mode="nearest")
                            for c in range(after.shape[-1])], axis=-1)
-    return warped - before
+    return dx, dy, warped
+
+
+def residual_change(before: np.ndarray, after: np.ndarray, window_px: float, steps: int = LK_STEPS) -> np.ndarray:
+    """``after - before`` (H, W, C) less the local translation that best explains it (see the module docstring):
+    :func:`local_translation`'s ``after`` warped back, less ``before``."""
+    return local_translation(before, after, window_px, steps)[2] - before
 
 
 def changed_box(images: np.ndarray, margin_px: int) -> tuple[slice, slice]:

@@ -118,12 +118,20 @@ FRAME_SCHEMA = pa.schema(
 )
 
 
-def trial_schema(schedule: pd.DataFrame) -> pa.Schema:
-    """The schedule's columns (their own types) followed by the log columns."""
+#: The image observer's per-trial decision values (JSON, psyop.datacontract.OBSERVER_RESPONSES): a column of the
+#: sessions whose protocol's observer is ``kind: image`` only
+OBSERVER_RESPONSES_FIELD = pa.field(dc.OBSERVER_RESPONSES, pa.string())
+
+
+def trial_schema(schedule: pd.DataFrame, *, image_observer: bool = False) -> pa.Schema:
+    """The schedule's columns (their own types) followed by the log columns (with :data:`OBSERVER_RESPONSES_FIELD`
+    where ``image_observer``: the protocol's observer is ``kind: image``)."""
     base = pa.Schema.from_pandas(schedule, preserve_index=False).remove_metadata()
     fields = [f if not pa.types.is_large_string(f.type) else pa.field(f.name, pa.string()) for f in base]
     names = {f.name for f in fields}
     fields += [f for f in TRIAL_LOG_FIELDS if f.name not in names]
+    if image_observer and dc.OBSERVER_RESPONSES not in names:
+        fields.append(OBSERVER_RESPONSES_FIELD)
     return pa.schema(fields)
 
 

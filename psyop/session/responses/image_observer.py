@@ -14,8 +14,13 @@ with the same frames have the same response: it answers at chance wherever the s
 ``border_strip_deg`` about the midline is left out of both half fields. Frames that do not change with the gaze
 (conventional rendering) carry no evidence: a coin toss.
 
+``n_afc``, ``yes_no`` and ``pairwise_preference`` (the interval whose frames carry more depth evidence from the
+eye's own movements: psyop.session.image_observer.preference) are answered by psyop.session.responses.image_choices.
+
 Each answer is decided against the trial's one keyed uniform draw (as every simulated observer,
-psyop.session.responses.simulated): the same session seed gives the same answers, resumed or not.
+psyop.session.responses.simulated): the same session seed gives the same answers, resumed or not. Each answer
+carries the values its decision used (image_choices.observer_extras: each interval's response or evidence, the
+noise, ``u`` and ``p``), which the session logs in the trial's ``observer_responses`` column.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from psyop.session.image_observer.response import interval_response
 from psyop.session.image_observer.stages import model_of, stages_of
 from psyop.session.plan import SessionPlan
 from psyop.session.responses.base import Response, score
+from psyop.session.responses.image_choices import observer_extras
 from psyop.session.responses.simulated import SimulatedObserver
 from psyop.session.rows import JsonMapping, TrialRow
 
@@ -72,7 +78,9 @@ class ImageObserverSource(SimulatedObserver):
     def collect(self, row: TrialRow, now_s: float) -> Response:
         u, p = self.decision(row)
         right = int(row["correct_interval"])
-        return score(self.kind, row, str(right if u < p else 3 - right))
+        values = {"responses_c2deg2": list(self.responses(row)), "noise_sd_c2deg2": float(self.model.noise_sd_c2deg2)}
+        return observer_extras(score(self.kind, row, str(right if u < p else 3 - right)), "larger noisy response",
+                               values, u, p)
 
     def close(self) -> None:
         self.frames.close()
@@ -111,7 +119,9 @@ class ImageOrdinalSource(SimulatedObserver):
     def collect(self, row: TrialRow, now_s: float) -> Response:
         u, p = self.decision(row)
         near = str(row["near_side"])
-        return score(self.kind, row, near if u < p else ("right" if near == "left" else "left"))
+        values = {"evidence_arcmin": self.evidence_arcmin(row), "noise_arcmin": float(self.model.shift_noise_arcmin)}
+        return observer_extras(score(self.kind, row, near if u < p else ("right" if near == "left" else "left")),
+                               "side the shifts say nearer", values, u, p)
 
     def close(self) -> None:
         self.frames.close()
@@ -119,10 +129,14 @@ class ImageOrdinalSource(SimulatedObserver):
 
 def image_observer_source(params: JsonMapping, *, seed: int, participant: str,
                           plan: SessionPlan) -> SimulatedObserver:
-    """The image observer for the plan's response kind (``two_interval``, ``left_right_nearer``, ``n_afc`` or
-    ``yes_no``: psyop.session.responses.image_choices)."""
+    """The image observer for the plan's response kind (``two_interval``, ``left_right_nearer``; ``n_afc``,
+    ``yes_no`` or ``pairwise_preference``: psyop.session.responses.image_choices)."""
     if plan.kind.name == "left_right_nearer":
         return ImageOrdinalSource(params, seed=seed, participant=participant, plan=plan)
+    if plan.kind.name == "pairwise_preference":
+        from psyop.session.responses.image_choices import ImagePreferenceSource
+
+        return ImagePreferenceSource(params, seed=seed, participant=participant, plan=plan)
     if plan.kind.name in ("n_afc", "yes_no"):
         from psyop.session.responses.image_choices import ImageNafcSource, ImageYesNoSource
 
