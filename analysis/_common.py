@@ -70,7 +70,8 @@ def results_file(results: Path, study: str, what: str = "", ext: str = "json") -
 
 def provenance(facts, analysis: str, pool_protocols: bool = False) -> dict:
     """The keys every results JSON starts with: which study, its response kind, which analysis
-    wrote it and the protocol hashes its sessions ran (psyop.statistics.studies.StudyFacts).
+    wrote it, the protocol hashes its sessions ran and the simulated observers that answered them (``observers``:
+    session.json's ``observer`` kinds; empty where people answered) (psyop.statistics.studies.StudyFacts).
 
     Sessions under more than one protocol hash are refused (a UserError naming the hashes and each
     version's ``--study <study>@<hash12>``, which `make figures` runs) unless ``pool_protocols``
@@ -88,7 +89,7 @@ def provenance(facts, analysis: str, pool_protocols: bool = False) -> dict:
                         "them on purpose with --pool-protocols (`make figures POOL=1`)", facts.name)
     return {"study": facts.name, "analysis": analysis, "response_kind": facts.kind.name, "protocol_sha256": hashes,
             "protocols_pooled": len(hashes) > 1, "study_folder": facts.folder,
-            "study_protocol_versions": list(facts.folder_protocol_sha256)}
+            "study_protocol_versions": list(facts.folder_protocol_sha256), "observers": list(facts.observers)}
 
 
 def require_kind(facts, kind: str, script: str) -> None:

@@ -306,6 +306,9 @@ def _metadata(protocol: Protocol, opened: _Opened, options: SessionOptions, part
         "study": opened.plan.study, "participant": options.participant, "session": options.session,
         "seed": opened.seed, "simulated": _simulated(options, opened.plan),
         "simulated_sources": list(options.simulated_sources),
+        # who answered when no person did: the protocol's observer kind (psychometric_2afc, image, ...); None: a person
+        "observer": opened.plan.observer.kind if options.responses == "sim" and opened.plan.observer is not None
+        else None,
         "protocol_sha256": protocol_sha256,
         "protocol_file_sha256": protocol.source_sha256,
         "protocol_text": protocol.source_text, "protocol_file": protocol.source_name,

@@ -81,6 +81,9 @@ class StudyFacts:
     #: the protocol hashes of every session in the study's folder (more than ``protocol_sha256`` when
     #: this is one version of it, ``study@<hash12>``: psyop.statistics.protocol_versions)
     folder_protocol_sha256: tuple[str, ...] = ()
+    #: the simulated observers' kinds that answered its sessions (session.json ``observer``), sorted; empty: people
+    #: answered, or the sessions did not record it
+    observers: tuple[str, ...] = ()
 
     @property
     def folder(self) -> str:
@@ -168,6 +171,7 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
         raise UserError(f"no sessions found for study {study!r} (expected {study}/sub-<ID>/ses-<N>/trials.parquet)",
                         str(Path(data_root)))
     hashes: list[str] = []
+    observers: set[str] = set()
     kind: ResponseKindSpec | None = None
     ran: SessionRecord | None = None  # the first session that recorded its design (or, before that, its protocol text)
     recorded_level: str | None = None
@@ -178,6 +182,8 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
             continue
         if record.protocol_sha256 and record.protocol_sha256 not in hashes:
             hashes.append(record.protocol_sha256)
+        if record.observer:
+            observers.add(record.observer)
         kind = kind or _recorded_kind(record.response_kind, meta_path)
         ran = ran or (record if record.study_design is not None or record.protocol_text else None)
         recorded_level = recorded_level or (record.response.level_factor if record.response else None)
@@ -188,7 +194,8 @@ def study_facts(data_root: Path, study: str) -> StudyFacts:
     folder = split_unit(study)[0]
     everything = tuple(sorted(hashes)) if folder == study else \
         tuple(sorted({h for f in dc.trials_files(data_root, folder) if (h := session_hash(f))}))
-    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields, reported, everything)
+    return StudyFacts(study, kind, tuple(sorted(hashes)), factors, level, fields, reported, everything,
+                      tuple(sorted(observers)))
 
 
 def studies_in(data_root: Path) -> list[StudyFacts]:

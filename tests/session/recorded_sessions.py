@@ -58,7 +58,10 @@ SESSION_JSON_EXCLUDED = ("finalised", "runs", "host", "python", "packages", "fin
                          "protocol_file", "protocol_text", "protocol_sha256", "protocol_file_sha256",
                          # issue 40: the protocol's design as the analysis reads it, added after 26cd3cb and checked
                          # instead to be the protocol file's (tests/statistics/test_recorded_design.py)
-                         "study_design")
+                         "study_design",
+                         # the simulated observer's kind that answered, added after 26cd3cb and checked instead to be
+                         # the protocol's (tests/session/test_simulated_sources.py)
+                         "observer")
 #: session.json keys added since 26cd3cb, on purpose, not recorded and checked instead: issue 27's
 #: ``sim_tracker_faults`` (the analysis rebuilds a requested stream from it)
 ADDED_SESSION_KEYS = {"sim_tracker_faults": {"dropout_rate_hz": 0.0, "nan_burst_rate_hz": 0.0},

@@ -87,6 +87,7 @@ def test_simulated_sessions_are_analysed_with_guess_one_quarter(tmp_path: Path, 
     assert fits["level_max_fraction"].max() == pytest.approx(0.32)
     summary = json.loads((results / "nafc_locations.json").read_text())
     assert summary["level_unit"] == "fraction"
+    assert summary["observers"] == ["psychometric_nafc"]  # who answered, from session.json
     assert {r["measure"] for r in summary["thresholds"]} == {"threshold_fraction"}
 
 

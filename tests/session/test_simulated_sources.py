@@ -64,3 +64,20 @@ def test_session_json_marks_a_reach_study_answered_on_a_simulated_hand() -> None
     options = SessionOptions("P1", tracker="pupil:127.0.0.1:50020", responses="keyboard", pose="sim", display="window")
     assert _simulated(options, compile_plan(load_protocol(root / "egocentric.yaml"))) is True  # reach: the hand's
     assert _simulated(options, compile_plan(load_protocol(root / "ordinal.yaml"))) is False
+
+
+def test_session_json_names_the_observer_that_answered_and_none_where_nobody_did(tmp_path: Path) -> None:
+    from psyop.protocol import load_protocol
+
+    protocol = small_protocol(tmp_path, "ordinal", 1)
+    text = protocol.read_text()
+    protocol.write_text(text.replace("      expected_s: 1.5", "      timeout_s: 1.5\n      expected_s: 1.5", 1))
+    data = tmp_path / "data"
+    base = ["run", str(protocol), "--data", str(data), "--no-progress", "--render", "cameras"]
+    assert main([*base, "--participant", "A1"]) == 0
+    assert main([*base, "--participant", "N1", "--responses", "none"]) == 0  # every response phase times out
+    answered = json.loads(next(data.glob("*/sub-A1/ses-1/session.json")).read_text())
+    nobody = json.loads(next(data.glob("*/sub-N1/ses-1/session.json")).read_text())
+    observer = load_protocol(protocol).observer
+    assert observer is not None and answered["observer"] == observer.kind
+    assert nobody["observer"] is None

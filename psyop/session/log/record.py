@@ -118,6 +118,9 @@ class SessionRecord(BaseModel):
     session: int | None = None
     #: whether every source of the session was simulated (psyop.datacontract.SIMULATED_KEY); not a bool: none
     simulated: bool | None = None
+    #: the simulated observer's kind that answered (``psychometric_2afc``, ``image``, ...); None: a person answered,
+    #: or a session before psyop recorded it
+    observer: str | None = None
     #: the response kind's name as the session recorded it (an older spelling is one of the kind's former names)
     response_kind: str | None = None
     response: RecordedResponse | None = None
