@@ -22,6 +22,7 @@ coin toss. Reversed ocular parallax shifts the sides the other way: this rule th
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -78,13 +79,30 @@ def static_edge(luminance: np.ndarray, margin_px: int) -> np.ndarray:
     return black if not black.any() else binary_dilation(black, iterations=margin_px)
 
 
-def pair_evidence_arcmin(frames: IntervalFrames, k: int, eye: EyeStage, scale_deg: float, strip_deg: float) -> float:
-    """The evidence (arcmin) of frames ``k`` and ``k + 1`` that the left side is nearer (see the module docstring)."""
+@dataclass(frozen=True)
+class SeenPair:
+    """Frames ``k`` and ``k + 1`` as the eye sees them: the gaze shift (deg, Fick [azimuth, elevation]) and its
+    size, each pixel's direction, pitch (deg) and eccentricity (deg), the two frames' opponent channels after the
+    eye's blur and ``scale_deg`` (``before``, ``after``: (H, W, 3)), the blur (px) and the pixels near what is black
+    in both frames (``edge``)."""
+
+    shift_deg: np.ndarray
+    size_deg: float
+    directions: np.ndarray
+    pitch_deg: np.ndarray
+    eccentricity_deg: np.ndarray
+    before: np.ndarray
+    after: np.ndarray
+    edge: np.ndarray
+
+
+def seen_pair(frames: IntervalFrames, k: int, eye: EyeStage, scale_deg: float) -> SeenPair | None:
+    """Frames ``k`` and ``k + 1`` as seen (:class:`SeenPair`); None without a gaze shift or a change between them."""
     shift_deg = np.array(fick_angles_deg(frames.gaze[k + 1]), dtype=np.float64) - \
         np.array(fick_angles_deg(frames.gaze[k]), dtype=np.float64)
     size = float(np.hypot(*shift_deg))
     if size == 0.0 or np.array_equal(frames.images[k], frames.images[k + 1]):
-        return 0.0
+        return None
     images = np.asarray(frames.images[k:k + 2], dtype=np.float64) @ OPPONENT.T
     _, height, width, _ = images.shape
     directions = pixel_directions(frames.pixel_to_ray, width, height)
@@ -92,12 +110,23 @@ def pair_evidence_arcmin(frames: IntervalFrames, k: int, eye: EyeStage, scale_de
     eccentricity = eccentricity_deg(directions, frames.gaze[k])
     sigma_px = np.hypot(eye.sigma_deg(eccentricity), scale_deg) / pitch_deg
     seen = variable_blur(np.concatenate([images[0], images[1]], axis=-1), sigma_px)
-    azimuth_deg = np.asarray(fick_angles_deg(directions)[0]) - float(fick_angles_deg(directions[height // 2, width // 2])[0])
-    weight = eye.weight(eccentricity) * ~static_edge(images[..., 0], math.ceil(3.0 * float(sigma_px.max())) + 1)
-    left = half_shift_px(seen[..., :3], seen[..., 3:], weight * (azimuth_deg < -strip_deg))
-    right = half_shift_px(seen[..., :3], seen[..., 3:], weight * (azimuth_deg > strip_deg))
-    relative_deg = (left - right) * pitch_deg * np.array([1.0, -1.0])  # pixels (x right, y down) -> (az, el)
-    return float(-(relative_deg @ shift_deg) / size * 60.0)
+    edge = static_edge(images[..., 0], math.ceil(3.0 * float(sigma_px.max())) + 1)
+    return SeenPair(shift_deg, size, directions, pitch_deg, eccentricity, seen[..., :3], seen[..., 3:], edge)
+
+
+def pair_evidence_arcmin(frames: IntervalFrames, k: int, eye: EyeStage, scale_deg: float, strip_deg: float) -> float:
+    """The evidence (arcmin) of frames ``k`` and ``k + 1`` that the left side is nearer (see the module docstring)."""
+    pair = seen_pair(frames, k, eye, scale_deg)
+    if pair is None:
+        return 0.0
+    height, width = pair.edge.shape
+    azimuth_deg = np.asarray(fick_angles_deg(pair.directions)[0]) - \
+        float(fick_angles_deg(pair.directions[height // 2, width // 2])[0])
+    weight = eye.weight(pair.eccentricity_deg) * ~pair.edge
+    left = half_shift_px(pair.before, pair.after, weight * (azimuth_deg < -strip_deg))
+    right = half_shift_px(pair.before, pair.after, weight * (azimuth_deg > strip_deg))
+    relative_deg = (left - right) * pair.pitch_deg * np.array([1.0, -1.0])  # pixels (x right, y down) -> (az, el)
+    return float(-(relative_deg @ pair.shift_deg) / pair.size_deg * 60.0)
 
 
 def interval_evidence_arcmin(frames: IntervalFrames, eye: EyeStage, scale_deg: float, strip_deg: float) -> list[float]:

@@ -45,10 +45,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from psyop.optics.angles import fick_angles_deg
-from psyop.session.image_observer.eye import EyeStage, eccentricity_deg, pixel_directions
+from psyop.session.image_observer.eye import EyeStage
 from psyop.session.image_observer.frames import IntervalFrames
-from psyop.session.image_observer.ordinal import half_shift_px, sampled_at_offset, static_edge
-from psyop.session.image_observer.response import OPPONENT, local_translation, pixel_pitch_deg, variable_blur
+from psyop.session.image_observer.ordinal import half_shift_px, sampled_at_offset, seen_pair
+from psyop.session.image_observer.response import local_translation
 
 
 def corner_strength(image: np.ndarray, window_px: float) -> np.ndarray:
@@ -94,32 +94,22 @@ def pair_shifts(frames: IntervalFrames, k: int, eye: EyeStage, scale_deg: float,
                 ) -> PairShifts | None:
     """Frames ``k`` and ``k + 1``'s relative shifts (see the module docstring); None without a gaze shift, without
     a change between the frames or without any weight."""
-    shift_deg = np.array(fick_angles_deg(frames.gaze[k + 1]), dtype=np.float64) - \
-        np.array(fick_angles_deg(frames.gaze[k]), dtype=np.float64)
-    size = float(np.hypot(*shift_deg))
-    if size == 0.0 or np.array_equal(frames.images[k], frames.images[k + 1]):
+    pair = seen_pair(frames, k, eye, scale_deg)
+    if pair is None:
         return None
-    images = np.asarray(frames.images[k:k + 2], dtype=np.float64) @ OPPONENT.T
-    _, height, width, _ = images.shape
-    directions = pixel_directions(frames.pixel_to_ray, width, height)
-    pitch_deg = pixel_pitch_deg(directions)
-    eccentricity = eccentricity_deg(directions, frames.gaze[k])
-    sigma_px = np.hypot(eye.sigma_deg(eccentricity), scale_deg) / pitch_deg
-    seen = variable_blur(np.concatenate([images[0], images[1]], axis=-1), sigma_px)
-    window_px = window_deg / pitch_deg
-    edge = static_edge(images[..., 0], math.ceil(3.0 * float(sigma_px.max())) + 1)
-    before, after = seen[..., :3], seen[..., 3:]
+    before, after, edge, eccentricity = pair.before, pair.after, pair.edge, pair.eccentricity_deg
+    window_px = window_deg / pair.pitch_deg
     common_px = half_shift_px(before, after, eye.weight(eccentricity) * ~edge)  # what every surface shares
     dx, dy, _ = local_translation(before, sampled_at_offset(after, float(common_px[0]), float(common_px[1])),
                                   window_px)
-    along_arcmin = angular_shift_along_arcmin(directions, dx, dy, shift_deg / size)
+    along_arcmin = angular_shift_along_arcmin(pair.directions, dx, dy, pair.shift_deg / pair.size_deg)
     weight = eye.weight(eccentricity) * corner_strength(before, window_px) * ~edge
     total = float(np.sum(weight))
     if total <= 0.0:
         return None
     weight = weight / total
     mean = float(np.sum(weight * along_arcmin))
-    return PairShifts((along_arcmin - mean) / size, weight, size)
+    return PairShifts((along_arcmin - mean) / pair.size_deg, weight, pair.size_deg)
 
 
 def interval_depth_arcmin(frames: IntervalFrames, eye: EyeStage, scale_deg: float, window_deg: float) -> float:
