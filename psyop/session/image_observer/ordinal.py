@@ -89,7 +89,7 @@ class SeenPair:
     shift_deg: np.ndarray
     size_deg: float
     directions: np.ndarray
-    pitch_deg: np.ndarray
+    pitch_deg: float
     eccentricity_deg: np.ndarray
     before: np.ndarray
     after: np.ndarray

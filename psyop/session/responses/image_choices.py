@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -30,6 +31,8 @@ from psyop.session.responses.base import Response, score
 from psyop.session.responses.simulated import SimulatedObserver
 from psyop.session.rows import JsonMapping, TrialRow
 
+T = TypeVar("T")
+
 
 def observer_extras(response: Response, rule: str, values: Mapping[str, object], u: float, p: float) -> Response:
     """``response`` with the decision's values as its ``observer_responses`` trial-log column (JSON): the observer
@@ -39,8 +42,14 @@ def observer_extras(response: Response, rule: str, values: Mapping[str, object],
     return dataclasses.replace(response, extras=response.extras + ((OBSERVER_RESPONSES, json.dumps(record)),))
 
 
-class ImageIntervalSource(SimulatedObserver):
-    """The image observer's internal response to each interval of a trial (computed once per trial)."""
+class RenderedSource(SimulatedObserver):
+    """An image-observer response source: its model, the eye and motion stages, the frames it renders of each
+    interval (the plan must have :attr:`intervals` of them; None: any number), and one trial's values computed once
+    (:meth:`per_trial`)."""
+
+    #: how many interval phases the kind's plan must have (None: any), and what the observer does, for the refusal
+    intervals: ClassVar[int | None] = None
+    does: ClassVar[str] = "answers"
 
     def __init__(self, params: JsonMapping, *, seed: int, participant: str, plan: SessionPlan) -> None:
         super().__init__(params, seed=seed, participant=participant)
@@ -48,17 +57,29 @@ class ImageIntervalSource(SimulatedObserver):
         self.eye, self.motion = stages_of(self.model)
         self.frames = FrameSource(plan, scale=float(self.model.render_scale),
                                   frames_per_interval=self.model.frames_per_interval)
-        self._last: tuple[int, tuple[float, ...]] | None = None  # (trial seed, its responses)
+        count = len(self.frames.interval_phases())
+        if self.intervals is not None and count != self.intervals:
+            raise ValueError(f"the image observer {self.does}; this plan has {count} interval(s)")
+        self._last: tuple[int, Any] | None = None  # Any: (trial seed, that trial's values of the subclass's rule)
 
-    def responses(self, row: TrialRow) -> tuple[float, ...]:
-        """Each interval's internal response to trial ``row`` (contrast^2 deg^2)."""
+    def per_trial(self, row: TrialRow, compute: Callable[[], T]) -> T:
+        """``compute()`` for trial ``row``, computed once per trial (keyed by its ``trial_seed``)."""
         key = int(row["trial_seed"])
         if self._last is None or self._last[0] != key:
-            self._last = key, tuple(interval_response(f, self.eye, self.motion) for f in self.frames.intervals(row))
+            self._last = key, compute()
         return self._last[1]
 
     def close(self) -> None:
         self.frames.close()
+
+
+class ImageIntervalSource(RenderedSource):
+    """The image observer's internal response to each interval of a trial (computed once per trial)."""
+
+    def responses(self, row: TrialRow) -> tuple[float, ...]:
+        """Each interval's internal response to trial ``row`` (contrast^2 deg^2)."""
+        return self.per_trial(row, lambda: tuple(interval_response(f, self.eye, self.motion)
+                                                 for f in self.frames.intervals(row)))
 
 
 class ImageNafcSource(ImageIntervalSource):
@@ -110,29 +131,17 @@ class ImageYesNoSource(ImageIntervalSource):
                                "noisy response above the criterion", values, u, p)
 
 
-class ImagePreferenceSource(SimulatedObserver):
+class ImagePreferenceSource(RenderedSource):
     """Pairwise preference: the interval whose frames carry more depth evidence (image_observer.preference)."""
 
     kind = kind_named("pairwise_preference")
-
-    def __init__(self, params: JsonMapping, *, seed: int, participant: str, plan: SessionPlan) -> None:
-        super().__init__(params, seed=seed, participant=participant)
-        self.model = model_of(params)
-        self.eye, self.motion = stages_of(self.model)
-        self.frames = FrameSource(plan, scale=float(self.model.render_scale),
-                                  frames_per_interval=self.model.frames_per_interval)
-        if len(self.frames.interval_phases()) != 2:
-            raise ValueError(f"the image observer prefers one of two intervals; this plan has "
-                             f"{len(self.frames.interval_phases())}")
-        self._last: tuple[int, tuple[float, ...]] | None = None  # (trial seed, its evidence)
+    intervals, does = 2, "prefers one of two intervals"
 
     def evidence_arcmin(self, row: TrialRow) -> tuple[float, ...]:
         """Each interval's depth evidence (arcmin) in trial ``row``, in shown order (a, b)."""
-        key = int(row["trial_seed"])
-        if self._last is None or self._last[0] != key:
-            self._last = key, tuple(interval_depth_arcmin(f, self.eye, self.motion.scale_deg, self.motion.window_deg)
-                                    for f in self.frames.intervals(row))
-        return self._last[1]
+        return self.per_trial(row, lambda: tuple(
+            interval_depth_arcmin(f, self.eye, self.motion.scale_deg, self.motion.window_deg)
+            for f in self.frames.intervals(row)))
 
     def decision(self, row: TrialRow) -> tuple[float, float]:
         """``(u, p)``: the trial's uniform draw and p(the first interval, ``a``, is preferred)."""
@@ -146,6 +155,3 @@ class ImagePreferenceSource(SimulatedObserver):
         values = {"evidence_arcmin": [first, second], "noise_arcmin": float(self.model.shift_noise_arcmin),
                   "modes": [str(row["mode_a"]), str(row["mode_b"])]}
         return observer_extras(score(self.kind, row, "a" if u < p else "b"), "more depth evidence", values, u, p)
-
-    def close(self) -> None:
-        self.frames.close()

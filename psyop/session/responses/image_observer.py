@@ -29,13 +29,11 @@ import math
 
 from psyop.protocol.kinds import kind_named
 from psyop.session.gaze.keyed import keyed_uniform
-from psyop.session.image_observer.frames import FrameSource
 from psyop.session.image_observer.ordinal import interval_evidence_arcmin, p_left
 from psyop.session.image_observer.response import interval_response
-from psyop.session.image_observer.stages import model_of, stages_of
 from psyop.session.plan import SessionPlan
 from psyop.session.responses.base import Response, score
-from psyop.session.responses.image_choices import observer_extras
+from psyop.session.responses.image_choices import RenderedSource, observer_extras
 from psyop.session.responses.simulated import SimulatedObserver
 from psyop.session.rows import JsonMapping, TrialRow
 
@@ -47,28 +45,16 @@ def p_correct(responses: tuple[float, ...], correct_interval: int, noise_sd: flo
     return 0.5 * lapse + (1.0 - lapse) * 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
 
 
-class ImageObserverSource(SimulatedObserver):
+class ImageObserverSource(RenderedSource):
     """The image observer as the session's response source (see the module docstring)."""
 
     kind = kind_named("two_interval")
-
-    def __init__(self, params: JsonMapping, *, seed: int, participant: str, plan: SessionPlan) -> None:
-        super().__init__(params, seed=seed, participant=participant)
-        self.model = model_of(params)
-        self.eye, self.motion = stages_of(self.model)
-        self.frames = FrameSource(plan, scale=float(self.model.render_scale),
-                                  frames_per_interval=self.model.frames_per_interval)
-        if len(self.frames.interval_phases()) != 2:
-            raise ValueError(f"the image observer answers two-interval trials; this plan has "
-                             f"{len(self.frames.interval_phases())} interval(s)")
-        self._last: tuple[int, tuple[float, ...]] | None = None  # (trial seed, its responses): computed once
+    intervals, does = 2, "answers two-interval trials"
 
     def responses(self, row: TrialRow) -> tuple[float, ...]:
         """Each interval's internal response to trial ``row`` (contrast^2 deg^2)."""
-        key = int(row["trial_seed"])
-        if self._last is None or self._last[0] != key:
-            self._last = key, tuple(interval_response(f, self.eye, self.motion) for f in self.frames.intervals(row))
-        return self._last[1]
+        return self.per_trial(row, lambda: tuple(interval_response(f, self.eye, self.motion)
+                                                 for f in self.frames.intervals(row)))
 
     def decision(self, row: TrialRow) -> tuple[float, float]:
         p = p_correct(self.responses(row), int(row["correct_interval"]), float(self.model.noise_sd_c2deg2),
@@ -82,34 +68,17 @@ class ImageObserverSource(SimulatedObserver):
         return observer_extras(score(self.kind, row, str(right if u < p else 3 - right)), "larger noisy response",
                                values, u, p)
 
-    def close(self) -> None:
-        self.frames.close()
 
-
-class ImageOrdinalSource(SimulatedObserver):
+class ImageOrdinalSource(RenderedSource):
     """The image observer answering a left/right-nearer trial (see the module docstring)."""
 
     kind = kind_named("left_right_nearer")
-
-    def __init__(self, params: JsonMapping, *, seed: int, participant: str, plan: SessionPlan) -> None:
-        super().__init__(params, seed=seed, participant=participant)
-        self.model = model_of(params)
-        self.eye, self.motion = stages_of(self.model)
-        self.frames = FrameSource(plan, scale=float(self.model.render_scale),
-                                  frames_per_interval=self.model.frames_per_interval)
-        if len(self.frames.interval_phases()) != 1:
-            raise ValueError(f"the image observer answers a left/right-nearer trial from one interval; this plan has "
-                             f"{len(self.frames.interval_phases())}")
-        self._last: tuple[int, list[float]] | None = None  # (trial seed, its evidence): computed once
+    intervals, does = 1, "answers a left/right-nearer trial from one interval"
 
     def evidence_arcmin(self, row: TrialRow) -> list[float]:
         """Each pair of successive frames' evidence (arcmin) that the left side is nearer in trial ``row``."""
-        key = int(row["trial_seed"])
-        if self._last is None or self._last[0] != key:
-            frames = next(iter(self.frames.intervals(row)))
-            self._last = key, interval_evidence_arcmin(frames, self.eye, self.motion.scale_deg,
-                                                       float(self.model.border_strip_deg))
-        return self._last[1]
+        return self.per_trial(row, lambda: interval_evidence_arcmin(
+            next(iter(self.frames.intervals(row))), self.eye, self.motion.scale_deg, float(self.model.border_strip_deg)))
 
     def decision(self, row: TrialRow) -> tuple[float, float]:
         """``(u, p)``: the trial's uniform draw and p(the near side is answered)."""
@@ -122,9 +91,6 @@ class ImageOrdinalSource(SimulatedObserver):
         values = {"evidence_arcmin": self.evidence_arcmin(row), "noise_arcmin": float(self.model.shift_noise_arcmin)}
         return observer_extras(score(self.kind, row, near if u < p else ("right" if near == "left" else "left")),
                                "side the shifts say nearer", values, u, p)
-
-    def close(self) -> None:
-        self.frames.close()
 
 
 def image_observer_source(params: JsonMapping, *, seed: int, participant: str,
