@@ -69,18 +69,21 @@ lint: $(STAMP)
 # x86-64 only: the names are x86 kernels.
 NARROW_CPU_ENV := NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR" OPENBLAS_CORETYPE=Haswell
 ifeq ($(shell uname -m),x86_64)
-CROSS_CPU_RUN = $(NARROW_CPU_ENV) "$(PY)" -m pytest -n $(TEST_JOBS) -q -m "cross_cpu and not bench" -p no:cacheprovider
+CROSS_CPU_RUN = $(NARROW_CPU_ENV) "$(PY)" -m pytest -n $(TEST_JOBS) $(PYTEST_DIST) -q -m "cross_cpu and not bench" -p no:cacheprovider
 else
 CROSS_CPU_RUN = @echo "[psyop] not x86-64: the cross_cpu tests ran once, with this machine's kernels"
 endif
 
-# pytest workers: one more than the cores, since many tests wait on real time (real-clock sessions, the headset
-# runtime, subprocesses) rather than compute; measured on 2 cores: 535 s with 3 workers, 585 s with 2 (the suite
-# as of issue 40's kinds, a fresh clone, unloaded)
-TEST_JOBS ?= $(shell echo $$(( $(JOBS) + 1 )))
+# pytest workers: two more than the cores, since many tests wait on real time (real-clock sessions, the headset
+# runtime, a Dask cluster, subprocesses) rather than compute, and idle workers steal queued tests (--dist
+# worksteal) so that no slow test waits at the end behind a busy worker. The suite needs about 1,050 CPU seconds
+# (user + system of one run on 2 cores), so 2 cores cannot finish it under 525 s; measured on 2 cores, each a
+# fresh clone: 535 s with 3 workers, 585 s with 2 (the suite as of issue 40's kinds, unloaded)
+TEST_JOBS ?= $(shell echo $$(( $(JOBS) + 2 )))
+PYTEST_DIST := --dist worksteal
 
 test: lint $(STAMP) $(SYSDEPS_STAMP)
-	"$(PY)" -m pytest -n $(TEST_JOBS) -q -m "not bench"
+	"$(PY)" -m pytest -n $(TEST_JOBS) $(PYTEST_DIST) -q -m "not bench"
 	$(CROSS_CPU_RUN)
 
 # only the cross_cpu tests, both ways (the machine's widest kernels, then narrowed to AVX2)
