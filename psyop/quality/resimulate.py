@@ -12,7 +12,7 @@ with the participant's overrides, and session.json ``sim_tracker_faults``) and t
 streams them, and then checks the rebuilt stream against **every** sample the session recorded inside a trial
 window: the same ticks delivered, the same validity, the fixation points within :data:`TOLERANCE_M` (the
 recorded samples come from :meth:`SimulatedTracker.sample_at`, the rebuilt from
-:meth:`SimulatedTracker.samples_block`, which agree to round-off). A session that disagrees anywhere, records
+:meth:`SimulatedTracker.samples_under`, each run's ticks at once, which agree to round-off). A session that disagrees anywhere, records
 no faults, or has no recorded sample to check against is not rebuilt (:attr:`Resimulation.usable` False,
 :attr:`Resimulation.reason` says why) and keeps its requested-stream measures: a rebuilt stream is never used
 on trust. Nothing recorded is read for anything but the check, and nothing is written.
@@ -29,6 +29,7 @@ import pandas as pd
 import pyarrow as pa
 
 from psyop.quality.target import loop_config, trial_phases
+from psyop.session.gaze.plan import FixationPlan
 from psyop.session.gaze.simulated import SampleBlock, SimulatedTracker, SimulatedTrackerConfig, seed_for, tracker_config
 from psyop.session.log.raw_gaze import raw_gaze_block_table, raw_gaze_table
 from psyop.session.log.record import SessionRecord
@@ -84,37 +85,76 @@ def rebuilt_stream(plan: SessionPlan, record: SessionRecord, participant: str, t
     return pa.concat_tables(tables) if tables else raw_gaze_table([], run=0, trial=-1)
 
 
-def _run_stream(tracker: SimulatedTracker, plan: SessionPlan, run: int, trials: pd.DataFrame) -> pa.Table:
-    """:func:`rebuilt_stream` of one run's ``trials`` (its tracker given fresh)."""
-    rate = tracker.config.rate_hz
+@dataclass
+class _Ticks:
+    """The ticks of one run's trial windows in stream order, with the plan :meth:`SimulatedTracker.set_plan` made
+    active for each (an index into ``plans``, every plan set in order after the tracker's first) and its trial."""
+
+    plans: list[FixationPlan]
+    active: list[int]
+    ticks: list[np.ndarray] = dataclasses.field(default_factory=list)
+    which: list[np.ndarray] = dataclasses.field(default_factory=list)
+    trials: list[np.ndarray] = dataclasses.field(default_factory=list)
+
+    def add(self, first: int, last: int, rate_hz: float, trial: int) -> None:
+        """Ticks ``first`` to ``last`` under the active plans, as :meth:`SimulatedTracker.samples_block` picks."""
+        ticks = np.arange(first, last + 1)
+        starts = np.array([self.plans[i].start_s for i in self.active])
+        which = np.clip(np.searchsorted(starts, ticks / rate_hz, side="right") - 1, 0, len(self.active) - 1)
+        self.ticks.append(ticks)
+        self.which.append(np.asarray(self.active, dtype=np.int64)[which])
+        self.trials.append(np.full(len(ticks), trial, dtype=np.int64))
+
+    def set_plan(self, plan: FixationPlan) -> None:
+        """:meth:`SimulatedTracker.set_plan`'s rule: the last plan begun before ``plan`` stays, then ``plan``."""
+        self.active = [i for i in self.active if self.plans[i].start_s < plan.start_s][-1:] + [len(self.plans)]
+        self.plans.append(plan)
+
+
+def _run_ticks(plan: SessionPlan, trials: pd.DataFrame, rate_hz: float) -> _Ticks:
+    """Every tick in each of ``trials``' ``[trial_start_s, trial_end_s)`` (trials in start order), each phase's
+    ticks under the plans set before it, as a tracker stepped through the run phase by phase has them."""
     config = loop_config(plan)
-    tables = []
+    out = _Ticks([FixationPlan("cross", 0.0)], [0])  # a fresh tracker's plan before any is set
     for row in trials.sort_values("trial_start_s", kind="stable").to_dict("records"):
         start_s, end_s = float(row["trial_start_s"]), float(row["trial_end_s"])
-        next_tick, last_tick = math.ceil(start_s * rate), math.ceil(end_s * rate) - 1  # ticks in [start, end)
-        blocks: list[SampleBlock] = []
+        next_tick, last_tick = math.ceil(start_s * rate_hz), math.ceil(end_s * rate_hz) - 1  # ticks in [start, end)
         for phase in trial_phases(plan, row, config):  # each phase's ticks before the next plan, under the plans so far
-            before = min(math.ceil(phase.start_s * rate) - 1, last_tick)
+            before = min(math.ceil(phase.start_s * rate_hz) - 1, last_tick)
             if before >= next_tick:
-                blocks.append(tracker.samples_block(np.arange(next_tick, before + 1)))
+                out.add(next_tick, before, rate_hz, int(row["trial"]))
                 next_tick = before + 1
-            tracker.set_plan(phase.fixation)
+            out.set_plan(phase.fixation)
         if last_tick >= next_tick:
-            blocks.append(tracker.samples_block(np.arange(next_tick, last_tick + 1)))
-        tables.append(_delivered_table(blocks, tracker.config.latency_s, run, int(row["trial"])))
-    return pa.concat_tables(tables) if tables else raw_gaze_table([], run=run, trial=-1)
+            out.add(next_tick, last_tick, rate_hz, int(row["trial"]))
+    return out
 
 
-def _delivered_table(blocks: list[SampleBlock], latency_s: float, run: int, trial: int) -> pa.Table:
+def _run_stream(tracker: SimulatedTracker, plan: SessionPlan, run: int, trials: pd.DataFrame) -> pa.Table:
+    """:func:`rebuilt_stream` of one run's ``trials`` (its tracker given fresh): every tick at once
+    (:meth:`SimulatedTracker.samples_under`), or block by block where the trial windows overlap."""
+    steps = _run_ticks(plan, trials, tracker.config.rate_hz)
+    if not steps.ticks:
+        return raw_gaze_table([], run=run, trial=-1)
+    ticks, which, trial = (np.concatenate(parts) for parts in (steps.ticks, steps.which, steps.trials))
+    if np.all(np.diff(ticks) >= 0):
+        blocks = [tracker.samples_under(ticks, steps.plans, which)]
+    else:  # overlapping windows: each block ascends on its own
+        blocks = [tracker.samples_under(t, steps.plans, w) for t, w in zip(steps.ticks, steps.which)]
+    return _delivered_table(blocks, tracker.config.latency_s, run, trial)
+
+
+def _delivered_table(blocks: list[SampleBlock], latency_s: float, run: int, trial: np.ndarray) -> pa.Table:
     """The ticks of ``blocks`` a dropout did not keep from being delivered, as an every_sample stream
-    records them (:meth:`SimulatedTracker._stream_until`: received ``latency_s`` after the tick)."""
-    if not blocks:
-        return raw_gaze_table([], run=run, trial=trial)
+    records them (:meth:`SimulatedTracker._stream_until`: received ``latency_s`` after the tick), each with
+    its ``trial``."""
     t = np.concatenate([b.t_s for b in blocks])
     keep = np.concatenate([b.delivered for b in blocks])
     fixation = np.concatenate([b.fixation_m for b in blocks])[keep]
-    return raw_gaze_block_table(t[keep], t[keep] + latency_s, np.concatenate([b.valid for b in blocks])[keep],
-                                np.concatenate([b.confidence for b in blocks])[keep], fixation, run=run, trial=trial)
+    table = raw_gaze_block_table(t[keep], t[keep] + latency_s, np.concatenate([b.valid for b in blocks])[keep],
+                                 np.concatenate([b.confidence for b in blocks])[keep], fixation, run=run, trial=-1)
+    column = table.schema.get_field_index("trial")
+    return table.set_column(column, table.schema.field(column), pa.array(trial[keep], type=pa.int64()))
 
 
 def in_trial_windows(gaze: pd.DataFrame, trials: pd.DataFrame) -> np.ndarray:

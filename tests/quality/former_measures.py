@@ -1,7 +1,7 @@
 """The former per-sample forms of psyop.quality's trial measures and trial-window test (boolean masks over the
-whole session per trial and per phase, one mask per saccade, one mask per trial window), kept outside
-production as the reference the span-based forms are held to, exactly, on the same sessions
-(tests/quality/test_quality_speed_equality.py)."""
+whole session per trial and per phase, one mask per saccade, one mask per trial window) and of the rebuilt
+stream (the simulated tracker asked phase by phase), kept outside production as the reference the span-based
+and whole-run forms are held to, exactly, on the same sessions (tests/quality/test_quality_speed_equality.py)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from psyop.quality.events import EventMethod, detect_events
 from psyop.quality.measures import (
@@ -24,6 +25,8 @@ from psyop.quality.resimulate import runs_of
 from psyop.quality.samples import GazeGrid
 from psyop.quality.target import loop_config, trial_phases
 from psyop.session.gaze.plan import FixationPlan
+from psyop.session.gaze.simulated import SampleBlock, SimulatedTracker
+from psyop.session.log.raw_gaze import raw_gaze_block_table, raw_gaze_table
 from psyop.session.loop import LoopConfig
 from psyop.session.plan import SessionPlan
 from psyop.session.rows import TrialRow
@@ -136,3 +139,35 @@ def in_trial_windows(gaze: pd.DataFrame, trials: pd.DataFrame) -> np.ndarray:
         for start, end in zip(rows["trial_start_s"].to_numpy(float), rows["trial_end_s"].to_numpy(float)):
             inside |= mine & (t_s >= start) & (t_s < end)
     return inside
+
+
+def run_stream(tracker: SimulatedTracker, plan: SessionPlan, run: int, trials: pd.DataFrame) -> pa.Table:
+    """The rebuilt stream of one run's ``trials`` phase by phase: :meth:`SimulatedTracker.samples_block` of each
+    phase's ticks under the plans set so far, then :meth:`SimulatedTracker.set_plan` (one table per trial)."""
+    rate = tracker.config.rate_hz
+    config = loop_config(plan)
+    tables = []
+    for row in trials.sort_values("trial_start_s", kind="stable").to_dict("records"):
+        start_s, end_s = float(row["trial_start_s"]), float(row["trial_end_s"])
+        next_tick, last_tick = math.ceil(start_s * rate), math.ceil(end_s * rate) - 1
+        blocks: list[SampleBlock] = []
+        for phase in trial_phases(plan, row, config):
+            before = min(math.ceil(phase.start_s * rate) - 1, last_tick)
+            if before >= next_tick:
+                blocks.append(tracker.samples_block(np.arange(next_tick, before + 1)))
+                next_tick = before + 1
+            tracker.set_plan(phase.fixation)
+        if last_tick >= next_tick:
+            blocks.append(tracker.samples_block(np.arange(next_tick, last_tick + 1)))
+        tables.append(_delivered_table(blocks, tracker.config.latency_s, run, int(row["trial"])))
+    return pa.concat_tables(tables) if tables else raw_gaze_table([], run=run, trial=-1)
+
+
+def _delivered_table(blocks: list[SampleBlock], latency_s: float, run: int, trial: int) -> pa.Table:
+    if not blocks:
+        return raw_gaze_table([], run=run, trial=trial)
+    t = np.concatenate([b.t_s for b in blocks])
+    keep = np.concatenate([b.delivered for b in blocks])
+    fixation = np.concatenate([b.fixation_m for b in blocks])[keep]
+    return raw_gaze_block_table(t[keep], t[keep] + latency_s, np.concatenate([b.valid for b in blocks])[keep],
+                                np.concatenate([b.confidence for b in blocks])[keep], fixation, run=run, trial=trial)

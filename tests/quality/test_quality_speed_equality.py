@@ -1,26 +1,30 @@
 """The span-based trial measures equal their former per-sample forms (tests/quality/former_measures.py)
-exactly on the same sessions; the simulated eye's free-viewing fixations drawn to a shorter horizon are the
-start of the longer list; the quality cache returns exactly what was measured and never a stale entry."""
+exactly on the same sessions, and the stream rebuilt for a whole run at once its former phase-by-phase
+rebuild; the simulated eye's free-viewing fixations drawn to a shorter horizon are the start of the longer
+list; the quality cache returns exactly what was measured and never a stale entry."""
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pytest
 
 from psyop.protocol import load_protocol
 from psyop.quality.cache import QualityCache, code_fingerprint
 from psyop.quality.measures import _saccade_masks, trial_measures
-from psyop.quality.resimulate import in_trial_windows, runs_of
+from psyop.quality.resimulate import in_trial_windows, rebuilt_stream, runs_of
 from psyop.quality.samples import gaze_grid
 from psyop.quality.session import measure_session, measured_session, session_gaze
 from psyop.run.runner import SessionOptions, run_session
 from psyop.schedule import compile_schedule
 from psyop.session.gaze.plan import FixationPlan
-from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig
+from psyop.session.gaze.simulated import SimulatedTracker, SimulatedTrackerConfig, seed_for, tracker_config
+from psyop.session.log.record import read_record_file
 from tests.quality import former_measures as former
 from tests.session.session_helpers import small_protocol
 
@@ -51,6 +55,29 @@ def test_trial_measures_equal_the_former_per_sample_form(sessions: dict[str, Pat
         assert len(new) == len(trials) and len(new_events) > 0
         pd.testing.assert_frame_equal(new, old, check_exact=True)  # tolerance 0: the same arithmetic, indexed apart
         pd.testing.assert_frame_equal(new_events, old_events, check_exact=True)
+
+
+@pytest.mark.parametrize("study", ["detection", "ordinal"])
+def test_the_rebuilt_stream_at_once_equals_the_former_phase_by_phase_rebuild(sessions: dict[str, Path],
+                                                                            study: str) -> None:
+    directory = sessions[study]
+    s = session_gaze(directory)
+    record = read_record_file(directory / "session.json")
+    assert s.stream == "resimulated" and record is not None and record.sim_tracker_faults is not None
+    faults = record.sim_tracker_faults
+    base = dataclasses.replace(SimulatedTrackerConfig(), dropout_rate_hz=faults.dropout_rate_hz,
+                               nan_burst_rate_hz=faults.nan_burst_rate_hz, raw_stream="requested")
+    config = tracker_config(s.plan.observer.eye if s.plan.observer is not None else None, s.participant, base)
+    overlapping = s.trials.copy()  # a window that begins inside the one before it: rebuilt block by block
+    second = overlapping.sort_values("trial_start_s").index[1]
+    overlapping.loc[second, "trial_start_s"] -= 0.5
+    for trials in (s.trials, overlapping):
+        former_tables = [former.run_stream(SimulatedTracker(seed_for(record.seed, "tracker"), config), s.plan, run,
+                                           rows) for run, rows in runs_of(trials)]
+        now = rebuilt_stream(s.plan, record, s.participant, trials).to_pandas()
+        before = pa.concat_tables(former_tables).to_pandas()
+        assert len(now) > 1000 and now["gaze_valid"].any() and (~now["gaze_valid"]).any()
+        pd.testing.assert_frame_equal(now, before, check_exact=True)  # bit for bit: the same arithmetic per tick
 
 
 def test_saccade_masks_and_trial_windows_equal_the_former_masks() -> None:

@@ -232,6 +232,14 @@ class SimulatedTracker:
     def samples_block(self, ticks: np.ndarray) -> SampleBlock:
         """The samples of ``ticks`` (ascending) at once: what :meth:`sample_at` gives per tick (to
         round-off), and which ticks a dropout keeps from being delivered. Uses the plans set so far."""
+        ticks = np.asarray(ticks, dtype=np.int64)
+        starts = np.array([p.start_s for p in self._plans])
+        which = np.clip(np.searchsorted(starts, ticks / self.config.rate_hz, side="right") - 1, 0, len(self._plans) - 1)
+        return self.samples_under(ticks, self._plans, which)
+
+    def samples_under(self, ticks: np.ndarray, plans: list[FixationPlan], which: np.ndarray) -> SampleBlock:
+        """:meth:`samples_block` of ``ticks`` (ascending), tick i under ``plans[which[i]]`` (the plan
+        :meth:`set_plan` made active for it), whatever plans are set: a whole stream's ticks at once."""
         c = self.config
         ticks = np.asarray(ticks, dtype=np.int64)
         t = ticks / c.rate_hz
@@ -240,11 +248,10 @@ class SimulatedTracker:
         angles = np.zeros((len(t), 2))
         offsets = np.zeros((len(t), 2))
         distance = np.ones(len(t))
-        starts = np.array([p.start_s for p in self._plans])
-        which = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(self._plans) - 1)
-        for index in np.unique(which):
-            plan = self._plans[index]
-            rows = which == index
+        order = np.argsort(which, kind="stable")  # each plan's ticks, ascending
+        bounds = np.flatnonzero(np.diff(which[order])) + 1
+        for rows in np.split(order, bounds) if len(order) else []:
+            plan = plans[which[rows[0]]]
             t_rel = t[rows] - plan.start_s
             if plan.kind == "pursuit" and plan.target is not None:
                 angles[rows] = self._pursuit(plan, t_rel)
@@ -256,10 +263,11 @@ class SimulatedTracker:
             distance[rows] = plan.distance_m
         windows, index = np.divmod(ticks, 256)
         noise = np.empty((len(t), 3))
-        for window in np.unique(windows):
-            rows = windows == window
-            self._noise(int(window) * 256)
-            noise[rows] = self._noise_cache[1][index[rows]]  # type: ignore[index]  # _noise() just filled the cache
+        edges = np.flatnonzero(np.diff(windows)) + 1  # ascending ticks: each window's rows are a run
+        for first, stop in zip(np.concatenate([[0], edges]), np.concatenate([edges, [len(t)]])) if len(t) else []:
+            span = slice(int(first), int(stop))
+            self._noise(int(windows[first]) * 256)
+            noise[span] = self._noise_cache[1][index[span]]  # type: ignore[index]  # _noise() just filled the cache
         ecc = np.hypot(angles[:, 0], angles[:, 1])
         err = offsets + self._error_grow_dir[None, :] * c.error_per_15deg * (ecc / 15.0)[:, None]
         drift = self._drift_dir[None, :] * (c.drift_start_deg + c.drift_deg_per_min * t / 60.0)[:, None]
