@@ -14,6 +14,10 @@ into a scratch data root. Then `make figures-build` runs, one after the other, w
   table rebuilt with the sessions' gaze quality already measured (what a change to an analysis or drawing
   script costs; context, not the cold claim).
 
+``PSYOP_BENCH_FIGURES_DATA=DIR`` keeps the simulated data in DIR and reuses it in later runs (simulated there
+only when DIR holds no session; the quality cache under it is emptied before the builds, so the cold build is
+cold); without it the data root is scratch, simulated anew each run.
+
 Outputs compared: every results/ CSV the two builds share is compared column by column (the columns both have;
 numbers to :data:`RTOL` relative and :data:`ATOL` absolute, NaN equal to NaN; anything else exactly), and the
 files and columns only one build has are listed. ``start`` against ``now`` is the gaze-measure check: every
@@ -47,6 +51,8 @@ BASE_REV = "c57032f"
 START_REV = "606a4d0"
 #: tolerances for numbers in the compared CSVs
 RTOL, ATOL = 1e-9, 1e-12
+#: the environment variable naming a data root to keep and reuse between runs (module docstring)
+DATA_ENV = "PSYOP_BENCH_FIGURES_DATA"
 
 
 def _tree(rev: str, root: Path) -> Path | None:
@@ -56,6 +62,19 @@ def _tree(rev: str, root: Path) -> Path | None:
         return None
     with tarfile.open(fileobj=BytesIO(archive.stdout)) as tar:
         tar.extractall(root, filter="data")
+    return root
+
+
+def _copy_tree(root: Path) -> Path:
+    """This working tree's files (tracked and untracked, not ignored) copied under ``root``: what is measured
+    does not change while the benchmark runs (nor its quality cache's code key between the cold and cached builds)."""
+    listed = subprocess.run(["git", "-C", str(REPO), "ls-files", "-z", "-c", "-o", "--exclude-standard"],
+                            capture_output=True, check=True).stdout.decode().split("\0")
+    for name in filter(None, listed):
+        source = REPO / name
+        if source.is_file():
+            (root / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(source, root / name)
     return root
 
 
@@ -128,14 +147,29 @@ def _clear_outputs(out: Path) -> None:
     shutil.rmtree(out / "results", ignore_errors=True)
 
 
-def _builds(trees: dict[str, Path], scratch: Path, jobs: int) -> tuple[dict[str, tuple[float, float]], dict]:
+def _data_root(scratch: Path, now: Path, jobs: int, quick: bool) -> Path:
+    """The simulated data the builds read: :data:`DATA_ENV`'s folder when set (simulated only when it holds no
+    session), else ``scratch``/data, simulated by ``now``; its quality cache emptied (the cold build is cold)."""
+    kept = os.environ.get(DATA_ENV)
+    data = Path(kept).resolve() if kept else scratch / "data"
+    if not any(data.glob("*/sub-*/ses-*/trials.parquet")):
+        participants = ["--participants", "3"] if quick else []  # an rm-ANOVA over three levels needs three
+        subprocess.run([sys.executable, "-m", "psyop", "simulate", "--data", str(data), "--protocols",
+                        str(now / "protocols"), "--jobs", str(jobs), *participants],
+                       check=True, capture_output=True, text=True, env=_env(now), cwd=now)
+    shutil.rmtree(data / ".psyop-cache", ignore_errors=True)
+    return data
+
+
+def _builds(trees: dict[str, Path], scratch: Path, data: Path,
+            jobs: int) -> tuple[dict[str, tuple[float, float]], dict]:
     """The times of each tree's build and of this tree's cached rebuild, and the comparison of ``start``'s
     results with the cold build's (made before the rebuild replaces them)."""
-    times = {label: _build(tree, scratch / "data", scratch / label, jobs) for label, tree in trees.items()}
+    times = {label: _build(tree, data, scratch / label, jobs) for label, tree in trees.items()}
     cold = compare_results(scratch / "start" / "results", scratch / "now" / "results")
     cold["figures"] = differing_figures(scratch / "start" / "figures", scratch / "now" / "figures")
     _clear_outputs(scratch / "now")
-    times["now (cached)"] = _build(trees["now"], scratch / "data", scratch / "now", jobs)
+    times["now (cached)"] = _build(trees["now"], data, scratch / "now", jobs)
     return times, cold
 
 
@@ -165,9 +199,9 @@ def _listing(title: str, report: dict[str, list[str]]) -> list[str]:
             + (f"; figures not byte-identical: {report['figures'] or 'none'}." if "figures" in report else ".")]
 
 
-def run(out_dir: Path, quick: bool, now: Path = REPO) -> str:
-    """The report; ``now``: the tree measured as this one (a copy of it, so that edits during the run do not
-    change what is measured)."""
+def run(out_dir: Path, quick: bool, now: Path | None = None) -> str:
+    """The report; ``now``: the tree measured as this one (default: a copy of this working tree, so that edits
+    during the run do not change what is measured)."""
     jobs = 2
     title = "## make figures-build: c57032f against this tree (bench_figures_vs_c57032f)"
     with tempfile.TemporaryDirectory(prefix="psyop-bench-c57032f-") as tmp:
@@ -175,11 +209,11 @@ def run(out_dir: Path, quick: bool, now: Path = REPO) -> str:
         base, start = _tree(BASE_REV, scratch / "base-tree"), _tree(START_REV, scratch / "start-tree")
         if base is None or start is None:
             return f"{title}\n\nSkipped: commit {BASE_REV} or {START_REV} is not in this clone."
-        participants = ["--participants", "3"] if quick else []  # an rm-ANOVA over three levels needs three
-        subprocess.run([sys.executable, "-m", "psyop", "simulate", "--data", str(scratch / "data"), "--protocols",
-                        str(now / "protocols"), "--jobs", str(jobs), *participants],
-                       check=True, capture_output=True, text=True, env=_env(now), cwd=now)
-        times, gaze = _builds({"c57032f": base, "start": start, "now": now}, scratch, jobs)
+        now = now or _copy_tree(scratch / "now-tree")
+        load = os.getloadavg()[0]
+        data = _data_root(scratch, now, jobs, quick)
+        times, gaze = _builds({"c57032f": base, "start": start, "now": now}, scratch, data, jobs)
+        load_after = os.getloadavg()[0]
         _gaze_check(gaze)
         former = compare_results(scratch / "c57032f" / "results", scratch / "now" / "results")
         cached = compare_results(scratch / "start" / "results", scratch / "now" / "results")
@@ -190,6 +224,7 @@ def run(out_dir: Path, quick: bool, now: Path = REPO) -> str:
         title, "",
         f"c57032f and {START_REV} extracted with git archive; this tree as it is; same interpreter, data and JOBS.",
         *_table(times, jobs, size), "",
+        f"Load average (1 min) before the builds {load:.1f}, after {load_after:.1f} (on {os.cpu_count()} CPUs).", "",
         *_listing(f"{START_REV} vs this tree (cold)", gaze),
         *_listing(f"{START_REV} vs this tree (cached)", cached),
         *_listing("c57032f vs this tree", former),
