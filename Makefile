@@ -75,12 +75,12 @@ CROSS_CPU_RUN = @echo "[psyop] not x86-64: the cross_cpu tests ran once, with th
 endif
 
 # pytest workers: two more than the cores, since many tests wait on real time (real-clock sessions, the headset
-# runtime, a Dask cluster, subprocesses) rather than compute, and idle workers steal queued tests (--dist
-# worksteal) so that no slow test waits at the end behind a busy worker. The suite needs about 1,050 CPU seconds
-# (user + system of one run on 2 cores), so 2 cores cannot finish it under 525 s; measured on 2 cores, each a
-# fresh clone: 535 s with 3 workers, 585 s with 2 (the suite as of issue 40's kinds, unloaded)
+# runtime, a Dask cluster, subprocesses) rather than compute. Each test module goes to one worker whole (--dist
+# loadscope), so a module-scoped fixture (simulated studies, recorded sessions) is built once, not once per worker
+# that runs one of its tests. Measured on 2 cores, one fresh clone, unloaded, back to back, 4 workers:
+# 620.9 s with --dist worksteal, 518.5 s (1,003 CPU s) with --dist loadscope.
 TEST_JOBS ?= $(shell echo $$(( $(JOBS) + 2 )))
-PYTEST_DIST := --dist worksteal
+PYTEST_DIST := --dist loadscope
 
 test: lint $(STAMP) $(SYSDEPS_STAMP)
 	"$(PY)" -m pytest -n $(TEST_JOBS) $(PYTEST_DIST) -q -m "not bench"
