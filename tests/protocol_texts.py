@@ -22,6 +22,30 @@ response:
   order: balanced
 """
 
+
+def disc_on_wall_head(study: str) -> str:
+    """A stereo protocol's head (``study``'s name, the display with the ipd from the tracker, the scene): a red
+    8 deg disc at 1 D in front of a blue 60 deg wall at 0.5 D; append a tail such as :data:`TWO_INTERVAL_TAIL`."""
+    return f"""
+psyop_protocol: 1
+study: {{name: {study}, title: a red disc in front of a blue wall seen by both eyes}}
+display: {{profile: vive_pro, eye_model: gullstrand_emsley_relaxed, ipd: tracker}}
+eyes: stereo
+scene:
+  - id: target
+    kind: disc
+    size_deg: 8
+    depth: {{D: 1}}
+    surface: {{kind: solid, rgb: [1, 0, 0]}}
+  - id: wall
+    kind: quad
+    width_deg: 60
+    height_deg: 60
+    depth: {{D: 0.5}}
+    surface: {{kind: solid, rgb: [0.2, 0.2, 0.6]}}
+"""
+
+
 #: protocols/egocentric.yaml's mesh dining room, and the analytic box room it replaced (kind: room, the
 #: same size), for tests of the room primitive: ``text.replace(EGOCENTRIC_MESH_ROOM, EGOCENTRIC_BOX_ROOM)``
 EGOCENTRIC_MESH_ROOM = """  - id: room

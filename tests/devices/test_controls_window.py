@@ -5,7 +5,6 @@ logged in events.parquet, and Escape ends the session with exit 130."""
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import threading
@@ -20,7 +19,7 @@ from psyop.session.log.store import recover_tables
 
 from session_helpers import wait_until
 from test_controls_combinations import PROTOCOL
-from test_window_escape import Keyboard, _start_xvfb, _xtest
+from test_window_escape import Keyboard, private_keyboard
 
 ROOT = Path(__file__).resolve().parents[2]
 XK_ESCAPE, XK_2, XK_P, XK_C = 0xFF1B, 0x32, 0x70, 0x63
@@ -28,17 +27,8 @@ XK_ESCAPE, XK_2, XK_P, XK_C = 0xFF1B, 0x32, 0x70, 0x63
 
 @pytest.fixture
 def keyboard() -> Iterator[Keyboard]:
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None or _xtest() is None:
-        pytest.skip("needs Xvfb and libXtst (apt-get install xvfb libxtst6)")
-    started = _start_xvfb(xvfb)
-    if started is None:
-        pytest.skip("Xvfb did not start")
-    proc, keys = started
-    yield keys
-    keys.close()
-    proc.terminate()
-    proc.wait(timeout=10)
+    with private_keyboard() as keys:
+        yield keys
 
 
 def test_keys_in_the_session_window_pause_recalibrate_and_end_the_session(tmp_path: Path,

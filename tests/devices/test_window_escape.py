@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pandas as pd
@@ -90,9 +91,10 @@ def _connect(display: str) -> Keyboard | None:
         return None
 
 
-@pytest.fixture(scope="module")
-def x_server() -> Iterator[tuple[str, Keyboard]]:
-    """A private Xvfb server (the key presses must reach this test's window only); its keyboard."""
+@contextmanager
+def private_keyboard() -> Iterator[Keyboard]:
+    """A private Xvfb server (key presses reach this test's windows only) and its XTest keyboard, stopped on exit;
+    skips the test where Xvfb or libXtst is missing or no server comes up."""
     xvfb = shutil.which("Xvfb")
     if xvfb is None or _xtest() is None:
         pytest.skip("needs Xvfb and libXtst (apt-get install xvfb libxtst6)")
@@ -100,10 +102,19 @@ def x_server() -> Iterator[tuple[str, Keyboard]]:
     if started is None:
         pytest.skip("Xvfb did not start")
     proc, keyboard = started
-    yield keyboard.display, keyboard
-    keyboard.close()
-    proc.terminate()
-    proc.wait(timeout=10)
+    try:
+        yield keyboard
+    finally:
+        keyboard.close()
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def x_server() -> Iterator[tuple[str, Keyboard]]:
+    """A private Xvfb server (the key presses must reach this test's window only); its keyboard."""
+    with private_keyboard() as keyboard:
+        yield keyboard.display, keyboard
 
 
 class Session:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import pty
-import shutil
 import subprocess
 import sys
 import tty
@@ -18,33 +17,16 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from protocol_texts import TWO_INTERVAL_TAIL
+from protocol_texts import TWO_INTERVAL_TAIL, disc_on_wall_head
 from psyop.run.backends import backends
 
 from test_controls_terminal import _controlling_tty
-from test_window_escape import _start_xvfb, _xtest
+from test_window_escape import private_keyboard
 
 ROOT = Path(__file__).resolve().parents[2]
 XR_DIR = Path(__file__).parents[1] / "devices" / "xr"
 
-PROTOCOL = """
-psyop_protocol: 1
-study: {name: pairs, title: a red disc in front of a blue wall seen by both eyes}
-display: {profile: vive_pro, eye_model: gullstrand_emsley_relaxed, ipd: tracker}
-eyes: stereo
-scene:
-  - id: target
-    kind: disc
-    size_deg: 8
-    depth: {D: 1}
-    surface: {kind: solid, rgb: [1, 0, 0]}
-  - id: wall
-    kind: quad
-    width_deg: 60
-    height_deg: 60
-    depth: {D: 0.5}
-    surface: {kind: solid, rgb: [0.2, 0.2, 0.6]}
-""" + TWO_INTERVAL_TAIL.replace("duration_s: 1}", "duration_s: 0.1}").replace(
+PROTOCOL = disc_on_wall_head("pairs") + TWO_INTERVAL_TAIL.replace("duration_s: 1}", "duration_s: 0.1}").replace(
     "{kind: response, expected_s: 1}",  # a short prompt: Monado's 320x240 view fits 8 lines of legible text
     "{kind: response, expected_s: 0.2, timeout_s: 0.3, prompt: '1 or 2?'}") + """observer:
   kind: psychometric_2afc
@@ -73,17 +55,8 @@ def test_the_table_covers_every_registered_pair_and_each_refusal_hint_names_a_ru
 
 @pytest.fixture(scope="module")
 def x_display() -> Iterator[str]:
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None or _xtest() is None:
-        pytest.skip("needs Xvfb and libXtst (apt-get install xvfb libxtst6)")
-    started = _start_xvfb(xvfb)
-    if started is None:
-        pytest.skip("Xvfb did not start")
-    proc, keyboard = started
-    yield keyboard.display
-    keyboard.close()
-    proc.terminate()
-    proc.wait(timeout=10)
+    with private_keyboard() as keyboard:
+        yield keyboard.display
 
 
 def _env(display: str, request: pytest.FixtureRequest, tmp_path: Path) -> dict[str, str]:

@@ -120,19 +120,10 @@ BOTH_EYES_SCRIPT = textwrap.dedent(
 def private_x(tmp_path):
     """A private Xvfb server and its keyboard (XTest key events, as tests/devices/test_window_escape.py sends)."""
     sys.path.insert(0, str(REPO / "tests" / "devices"))
-    from test_window_escape import _start_xvfb, _xtest
+    from test_window_escape import private_keyboard
 
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None or _xtest() is None:
-        pytest.skip("needs Xvfb and libXtst (apt-get install xvfb libxtst6)")
-    started = _start_xvfb(xvfb)
-    if started is None:
-        pytest.skip("Xvfb did not start")
-    proc, keyboard = started
-    yield keyboard
-    keyboard.close()
-    proc.terminate()
-    proc.wait(timeout=10)
+    with private_keyboard() as keyboard:
+        yield keyboard
 
 
 class _Run:

@@ -18,30 +18,13 @@ import pandas as pd
 import pytest
 
 from monado import RemoteDriver, RemoteState, free_port, runtime_env
-from protocol_texts import TWO_INTERVAL_TAIL
+from protocol_texts import TWO_INTERVAL_TAIL, disc_on_wall_head
 
 HERE = Path(__file__).parent
 REPO = HERE.parents[2]
 NC_M = 0.0076916  # gullstrand_emsley_relaxed
 
-TINY_HEAD = """
-psyop_protocol: 1
-study: {name: xr_tiny, title: a red disc in front of a blue wall seen by both eyes}
-display: {profile: vive_pro, eye_model: gullstrand_emsley_relaxed, ipd: tracker}
-eyes: stereo
-scene:
-  - id: target
-    kind: disc
-    size_deg: 8
-    depth: {D: 1}
-    surface: {kind: solid, rgb: [1, 0, 0]}
-  - id: wall
-    kind: quad
-    width_deg: 60
-    height_deg: 60
-    depth: {D: 0.5}
-    surface: {kind: solid, rgb: [0.2, 0.2, 0.6]}
-"""
+TINY_HEAD = disc_on_wall_head("xr_tiny")
 
 
 def _protocol(tmp_path: Path, repetitions: int = 1, interval_s: float = 0.3, timeout_s: float = 0.2,
