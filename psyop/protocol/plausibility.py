@@ -70,7 +70,9 @@ def plausibility_warnings(protocol: Protocol) -> list[tuple[Loc, str]]:
             found.append((("scene", index, "near_m"),
                           f"the nearest plane at {near_m:g} m ({1.0 / near_m:g} D) is nearer than an eye can focus or "
                           f"a headset shows; plausible distances are {1.0 / NEAREST_SEEN_D:g} m and farther"))
-    return found + _long_phases(protocol) + _oversized(protocol, conditions)
+    from psyop.protocol.visibility import hidden_behind
+
+    return found + _long_phases(protocol) + _oversized(protocol, conditions) + hidden_behind(protocol, conditions)
 
 
 def _long_phases(protocol: Protocol) -> list[tuple[Loc, str]]:

@@ -131,3 +131,44 @@ def test_a_size_wider_than_the_whole_view_is_warned_as_arcmin_or_pixels(tmp_path
     assert "if you meant arcmin, write size_deg: 2.83333" in err and "if pixels, about 13 deg" in err
     assert main(["validate", str(ROOT / "protocols" / "detection.yaml")]) == 0
     assert "warning" not in capsys.readouterr().err  # the shipped sizes are not warned
+
+
+HIDDEN = """psyop_protocol: 1
+study: {name: hidden, title: a disc behind a nearer quad}
+display:
+  profile: {name: lab_hmd, width_px: 1600, height_px: 1600, refresh_hz: 120, horizontal_fov_deg: 96}
+  eye_model: gullstrand_emsley_relaxed
+  ipd: {mm: 61}
+eyes: stereo
+scene:
+  - {id: back, kind: disc, size_deg: SIZE, depth: {factor: back_D}, surface: {kind: solid, rgb: [1, 0, 0]}}
+  - {id: front, kind: quad, width_deg: 40, height_deg: 40, depth: {D: 3}, surface: {kind: solid, rgb: [0.1, 0.1, 0.5]}}
+trial:
+  phases:
+    - {kind: interval, duration_s: 0.5}
+    - {kind: interval, duration_s: 0.5}
+    - {kind: interval, duration_s: 0.5}
+    - {kind: response, expected_s: 0.5}
+design:
+  factors:
+    back_D: {levels: [0.5, 2.0]}
+  repetitions: 1
+  randomisation: {kind: full}
+response: {kind: n_afc, n: 3, target: {mode: ocular}, reference: {mode: conventional}, level_factor: back_D}
+"""
+
+
+@pytest.mark.parametrize(("size_deg", "hidden"), [(6, True), (36, False)])
+def test_a_disc_a_nearer_quad_covers_in_every_frame_is_warned_at_its_depth(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], size_deg: int, hidden: bool) -> None:
+    """A 6 deg disc behind a 40 deg quad 1-2.5 D nearer is hidden from either eye at any gaze (psyop audit agrees:
+    never visible); a 36 deg disc shows around the quad's sides (its margin, ~4 deg of eye offset, reaches past)."""
+    path = tmp_path / "hidden.yaml"
+    path.write_text(HIDDEN.replace("SIZE", str(size_deg)))
+    assert main(["validate", str(path)]) == 0  # a warning: a head moved in a world-fixed scene may look around it
+    err = capsys.readouterr().err
+    assert ("warning: 'back' is hidden behind the nearer quad 'front'" in err) is hidden, err
+    if hidden:
+        assert f"{path}:9:" in err and "covers 20 deg" in err
+        assert main(["audit", str(path), "--no-progress", "--scale", "0.05", "--gazes", "2"]) == 1
+        assert "FAIL back (item back): never visible" in capsys.readouterr().out
