@@ -6,8 +6,9 @@
 # analysis/ script; make's dependencies rebuild only what changed (new sessions, changed
 # statistics or drawing code). The slow psychometric fits are cached in results/<study>_fits.csv.
 # Every study in data/ is analysed by its response kind and its outputs carry its name.
-# make decides what to rebuild; the scripts it lists then run in one process (analysis/batch.py
-# runs make's dry run of figures-all), so the statistics stack is imported once, not per script.
+# make decides what to rebuild; the scripts it lists then run in JOBS processes (analysis/batch.py
+# runs make's dry run of figures-all, its independent parts side by side), so the statistics stack is
+# imported once per process, not per script.
 # `make figures-all` runs each script in a process of its own instead (same outputs).
 
 # A recipe that fails (a full disk, a crash) leaves no target behind for the next make to trust:
@@ -81,11 +82,11 @@ resimulate: $(STAMP)
 
 # The study rules depend on what data/ holds, so they are written first (psyop studies), then a
 # second make reads them: its dry run lists what is out of date and analysis/batch.py runs that in
-# one process. `+` runs both under `make -n` too, so a dry run shows the real graph.
+# JOBS processes. `+` runs both under `make -n` too, so a dry run shows the real graph.
 figures-build:
 	+@"$(PY)" -m psyop studies "$(DATA)" --protocols protocols --make-rules "$(RESULTS)/.studies.mk"
 ifeq ($(DRY_RUN),)
-	+@"$(PY)" analysis/batch.py "$(MAKE)" -n -s --no-print-directory figures-all STUDIES_MK="$(RESULTS)/.studies.mk"
+	+@"$(PY)" analysis/batch.py --jobs $(JOBS) "$(MAKE)" -n -s --no-print-directory figures-all STUDIES_MK="$(RESULTS)/.studies.mk"
 else
 	+@"$(MAKE)" --no-print-directory figures-all STUDIES_MK="$(RESULTS)/.studies.mk"
 endif

@@ -1,6 +1,7 @@
-"""analysis/batch.py: the steps of a make dry run, run in one process, build what one process per
-script builds (byte for byte), only what make finds out of date, and fail as make does with
-.DELETE_ON_ERROR (the changed target deleted, nothing after it run, exit 2)."""
+"""analysis/batch.py: the steps of a make dry run, run in one process (or, --jobs N, their independent parts
+in N worker processes), build what one process per script builds (byte for byte), only what make finds out
+of date, and fail as make does with .DELETE_ON_ERROR (the changed target deleted, what depends on it
+skipped, the rest run, exit 2)."""
 
 from __future__ import annotations
 
@@ -112,3 +113,59 @@ def test_a_plan_that_cannot_be_made_runs_nothing(tmp_path: Path) -> None:
     done = _batch(tmp_path, "out/parallax.png", "out/no-rule.png")
     assert done.returncode == 2 and "No rule to make target" in done.stderr
     assert not (tmp_path / "out").exists()
+
+
+def _probe(tmp: Path, name: str) -> Path:
+    """A script that writes its --out and prints its process id."""
+    script = tmp / name
+    script.write_text("import os, sys\nfrom pathlib import Path\nout = Path(sys.argv[sys.argv.index('--out') + 1])\n"
+                      "out.parent.mkdir(parents=True, exist_ok=True)\nout.write_text(os.environ.get('PSYOP_FAILED_STUDIES', ''))\n"
+                      "print(f'{out.name} pid', os.getpid())\n")
+    return script
+
+
+def test_jobs_run_independent_parts_in_other_processes_each_part_whole_in_order(tmp_path: Path) -> None:
+    """--jobs 2: the plan's independent parts (here: the two model figures, a probe of study x) run in worker
+    processes, each part's output whole in the plan's order; the collector runs last, in batch.py's own process.
+    (bench_figures_vs_c57032f checks every figure and table of the paper-sized build byte for byte against the
+    former code, which ran them in one process.)"""
+    probe, collector = _probe(tmp_path, "probe.py"), _probe(tmp_path, "results_table.py")
+    _makefile(tmp_path, f"$(OUT)/x.txt: {probe}\n\t@echo \"[psyop] $@\"\n\t@$(ANALYSE) $< --study x --out $@\n"
+                        f"$(OUT)/summary.md: {collector} $(OUT)/x.txt $(OUT)/parallax.png\n\t@$(ANALYSE) $< --out $@\n"
+                        "all: $(OUT)/summary.md\n")
+    batch = subprocess.Popen([sys.executable, str(BATCH), "--jobs", "2", "make", "-n", "-s", "--no-print-directory",
+                              "all"], cwd=tmp_path, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    out, err = batch.communicate(timeout=300)
+    assert batch.returncode == 0, err
+    lines = out.splitlines()
+    assert [line.split(" pid")[0] for line in lines] == ["[psyop] out/x.txt", "x.txt", "[psyop] out/linearity.png",
+                                                         "[psyop] out/parallax.png", "summary.md"]  # make's order
+    assert int(lines[1].split()[-1]) != batch.pid and int(lines[4].split()[-1]) == batch.pid
+    assert all((tmp_path / "out" / name).stat().st_size > 0 for name in ("linearity.pdf", "parallax.png"))
+    assert (tmp_path / "out" / "x.txt").read_text() == "" and (tmp_path / "out" / "summary.md").read_text() == ""
+
+
+def test_jobs_a_failing_part_deletes_its_target_and_the_others_and_the_summary_run(tmp_path: Path) -> None:
+    """--jobs 2, as --jobs 1: the failed step's changed target is deleted and listed, the independent part is
+    built, and the collector, run last, is told which study failed."""
+    bad = tmp_path / "bad.py"
+    bad.write_text("import sys\nfrom pathlib import Path\nPath(sys.argv[sys.argv.index('--out') + 1]).write_text('half')\n"
+                   "print('bad ran', file=sys.stderr)\nsys.exit(1)\n")
+    collector = _probe(tmp_path, "results_table.py")
+    _makefile(tmp_path, f"out/half.png: {bad}\n\t@mkdir -p out\n\t@$(ANALYSE) $< --study broken --out $@\n"
+                        f"out/summary.md: {collector} out/half.png out/parallax.png\n\t@$(ANALYSE) $< --out $@\n"
+                        "all: out/summary.md\n")
+    done = subprocess.run([sys.executable, str(BATCH), "--jobs", "2", "make", "-n", "-s", "--no-print-directory", "all"],
+                          cwd=tmp_path, env=_env(), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2
+    assert "bad ran" in done.stderr and "Deleting file 'out/half.png'" in done.stderr, done.stderr
+    assert not (tmp_path / "out" / "half.png").exists() and (tmp_path / "out" / "parallax.png").is_file()
+    assert (tmp_path / "out" / "summary.md").read_text() == "broken"
+    assert done.stderr.splitlines()[-1] == "batch.py: *** study broken: bad.py -> out/half.png (exit 1)"
+
+
+def test_jobs_must_be_a_whole_number(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, str(BATCH), "--jobs", "two", "make", "-n"], cwd=tmp_path, env=_env(),
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and done.stderr.strip() == (
+        "batch.py: --jobs takes a whole number of processes >= 1, not ['two']; e.g. --jobs 2")
