@@ -12,7 +12,9 @@ into a scratch data root. Then `make figures-build` runs, one after the other, w
   twice, by its quality: rules and by its gaze-quality figure, are measured once);
 - ``now (cached)``: this tree again into emptied results/figures folders, the cache kept: every figure and
   table rebuilt with the sessions' gaze quality already measured (what a change to an analysis or drawing
-  script costs; context, not the cold claim).
+  script costs; context, not the cold claim);
+- ``now (cached, JOBS=1)``: the same with ``JOBS=1``, every script in one process (what the build's
+  independent parts gain from running side by side in JOBS processes, analysis/batch.py ``--jobs``).
 
 ``PSYOP_BENCH_FIGURES_DATA=DIR`` keeps the simulated data in DIR and reuses it in later runs (simulated there
 only when DIR holds no session; the quality cache under it is emptied before the builds, so the cold build is
@@ -163,14 +165,27 @@ def _data_root(scratch: Path, now: Path, jobs: int, quick: bool) -> Path:
 
 def _builds(trees: dict[str, Path], scratch: Path, data: Path,
             jobs: int) -> tuple[dict[str, tuple[float, float]], dict]:
-    """The times of each tree's build and of this tree's cached rebuild, and the comparison of ``start``'s
-    results with the cold build's (made before the rebuild replaces them)."""
+    """The times of each tree's build and of this tree's cached rebuild (in JOBS processes, then in one, whose
+    outputs must be the same), and the comparison of ``start``'s results with the cold build's (made before
+    the rebuild replaces them)."""
     times = {label: _build(tree, data, scratch / label, jobs) for label, tree in trees.items()}
     cold = compare_results(scratch / "start" / "results", scratch / "now" / "results")
     cold["figures"] = differing_figures(scratch / "start" / "figures", scratch / "now" / "figures")
     _clear_outputs(scratch / "now")
     times["now (cached)"] = _build(trees["now"], data, scratch / "now", jobs)
+    serial = scratch / "now-serial"
+    times["now (cached, JOBS=1)"] = _build(trees["now"], data, serial, 1)
+    _same_in_one_process(compare_results(serial / "results", scratch / "now" / "results"),
+                         differing_figures(serial / "figures", scratch / "now" / "figures"))
     return times, cold
+
+
+def _same_in_one_process(report: dict[str, list[str]], figures: list[str]) -> None:
+    """Fail unless the build in one process (JOBS=1) and in JOBS processes wrote the same tables and
+    byte-identical figures."""
+    bad = report["differ"] + report["only_a"] + report["only_b"] + report["columns"] + figures
+    if bad:
+        raise AssertionError(f"bench_figures_vs_c57032f: JOBS=1 and JOBS=2 builds differ: {bad}")
 
 
 def _gaze_check(report: dict[str, list[str]]) -> None:
