@@ -13,7 +13,7 @@ import pandas as pd
 import pyarrow as pa
 
 from psyop.quality.events import EventMethod, detect_events
-from psyop.quality.measures import (
+from tests.quality.former_trial_parts import (
     _err,
     _eye_errors,
     _pursuit_phase,
