@@ -88,27 +88,36 @@ def rebuilt_stream(plan: SessionPlan, record: SessionRecord, participant: str, t
 @dataclass
 class _Ticks:
     """The ticks of one run's trial windows in stream order, with the plan :meth:`SimulatedTracker.set_plan` made
-    active for each (an index into ``plans``, every plan set in order after the tracker's first) and its trial."""
+    active for each (an index into ``plans``, every plan set in order after the tracker's first) and its trial:
+    gathered block by block (``blocks``: first and last tick, the active plans, the trial), built at once by
+    :meth:`arrays`."""
 
     plans: list[FixationPlan]
     active: list[int]
-    ticks: list[np.ndarray] = dataclasses.field(default_factory=list)
-    which: list[np.ndarray] = dataclasses.field(default_factory=list)
-    trials: list[np.ndarray] = dataclasses.field(default_factory=list)
+    blocks: list[tuple[int, int, int, int, float, int]] = dataclasses.field(default_factory=list)
 
-    def add(self, first: int, last: int, rate_hz: float, trial: int) -> None:
-        """Ticks ``first`` to ``last`` under the active plans, as :meth:`SimulatedTracker.samples_block` picks."""
-        ticks = np.arange(first, last + 1)
-        starts = np.array([self.plans[i].start_s for i in self.active])
-        which = np.clip(np.searchsorted(starts, ticks / rate_hz, side="right") - 1, 0, len(self.active) - 1)
-        self.ticks.append(ticks)
-        self.which.append(np.asarray(self.active, dtype=np.int64)[which])
-        self.trials.append(np.full(len(ticks), trial, dtype=np.int64))
+    def add(self, first: int, last: int, trial: int) -> None:
+        """Ticks ``first`` to ``last`` under the active plans (one, or an earlier one and the last set)."""
+        earlier, latest = self.active[0], self.active[-1]
+        later_s = self.plans[latest].start_s if len(self.active) > 1 else math.inf
+        self.blocks.append((first, last, earlier, latest, later_s, trial))
 
     def set_plan(self, plan: FixationPlan) -> None:
         """:meth:`SimulatedTracker.set_plan`'s rule: the last plan begun before ``plan`` stays, then ``plan``."""
         self.active = [i for i in self.active if self.plans[i].start_s < plan.start_s][-1:] + [len(self.plans)]
         self.plans.append(plan)
+
+    def arrays(self, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(ticks, plan of each, trial of each, where each block starts): each tick under the later active plan
+        from that plan's start on (``tick / rate_hz >= start_s``), else the earlier, as
+        :meth:`SimulatedTracker.samples_block` picks among the plans set (their starts ascend)."""
+        first, last, earlier, latest, later_s, trial = (np.array(column) for column in zip(*self.blocks))
+        counts = last - first + 1
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        ticks = np.arange(starts[-1], dtype=np.int64) + np.repeat(first - starts[:-1], counts)
+        which = np.where(ticks / rate_hz >= np.repeat(later_s, counts), np.repeat(latest, counts),
+                         np.repeat(earlier, counts))
+        return ticks, which.astype(np.int64), np.repeat(trial, counts).astype(np.int64), starts[:-1]
 
 
 def _run_ticks(plan: SessionPlan, trials: pd.DataFrame, rate_hz: float) -> _Ticks:
@@ -122,11 +131,11 @@ def _run_ticks(plan: SessionPlan, trials: pd.DataFrame, rate_hz: float) -> _Tick
         for phase in trial_phases(plan, row, config):  # each phase's ticks before the next plan, under the plans so far
             before = min(math.ceil(phase.start_s * rate_hz) - 1, last_tick)
             if before >= next_tick:
-                out.add(next_tick, before, rate_hz, int(row["trial"]))
+                out.add(next_tick, before, int(row["trial"]))
                 next_tick = before + 1
             out.set_plan(phase.fixation)
         if last_tick >= next_tick:
-            out.add(next_tick, last_tick, rate_hz, int(row["trial"]))
+            out.add(next_tick, last_tick, int(row["trial"]))
     return out
 
 
@@ -134,13 +143,14 @@ def _run_stream(tracker: SimulatedTracker, plan: SessionPlan, run: int, trials: 
     """:func:`rebuilt_stream` of one run's ``trials`` (its tracker given fresh): every tick at once
     (:meth:`SimulatedTracker.samples_under`), or block by block where the trial windows overlap."""
     steps = _run_ticks(plan, trials, tracker.config.rate_hz)
-    if not steps.ticks:
+    if not steps.blocks:
         return raw_gaze_table([], run=run, trial=-1)
-    ticks, which, trial = (np.concatenate(parts) for parts in (steps.ticks, steps.which, steps.trials))
+    ticks, which, trial, starts = steps.arrays(tracker.config.rate_hz)
     if np.all(np.diff(ticks) >= 0):
         blocks = [tracker.samples_under(ticks, steps.plans, which)]
     else:  # overlapping windows: each block ascends on its own
-        blocks = [tracker.samples_under(t, steps.plans, w) for t, w in zip(steps.ticks, steps.which)]
+        blocks = [tracker.samples_under(t, steps.plans, w) for t, w in zip(np.split(ticks, starts[1:]),
+                                                                            np.split(which, starts[1:]))]
     return _delivered_table(blocks, tracker.config.latency_s, run, trial)
 
 
@@ -173,6 +183,24 @@ def in_trial_windows(gaze: pd.DataFrame, trials: pd.DataFrame) -> np.ndarray:
     return inside
 
 
+def _matched_rows(rebuilt: pd.DataFrame, recorded: pd.DataFrame, rate_hz: float) -> np.ndarray:
+    """Per recorded row the first rebuilt row of the same run and tick (``rint(t * rate_hz)``), -1 for none."""
+    def keys(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+        runs = frame["run"].to_numpy() if "run" in frame else np.zeros(len(frame), dtype=np.int64)
+        return runs, np.rint(frame["gaze_sample_t_s"].to_numpy(float) * rate_hz).astype(np.int64)
+
+    (rec_run, rec_tick), (reb_run, reb_tick) = keys(recorded), keys(rebuilt)
+    match = np.full(len(recorded), -1, dtype=np.int64)
+    for run in np.unique(rec_run).tolist():
+        rows = np.flatnonzero(reb_run == run)
+        ticks, first = np.unique(reb_tick[rows], return_index=True)  # each tick's first rebuilt row
+        mine = np.flatnonzero(rec_run == run)
+        at = np.minimum(np.searchsorted(ticks, rec_tick[mine]), max(len(ticks) - 1, 0))
+        found = ticks[at] == rec_tick[mine] if len(ticks) else np.zeros(len(mine), dtype=bool)
+        match[mine[found]] = rows[first[at[found]]]
+    return match
+
+
 def check_against_recorded(rebuilt: pd.DataFrame, recorded: pd.DataFrame, trials: pd.DataFrame,
                            rate_hz: float) -> tuple[int, int, float]:
     """(recorded samples checked, of them not rebuilt equal, largest coordinate difference of the matched):
@@ -184,23 +212,18 @@ def check_against_recorded(rebuilt: pd.DataFrame, recorded: pd.DataFrame, trials
     if recorded.empty:
         return 0, 0, math.nan
     axes = [f"fixation_{a}_m" for a in "xyz"]
-    keys = ["run", "tick"]
-
-    def keyed(frame: pd.DataFrame) -> pd.DataFrame:
-        tick = np.rint(frame["gaze_sample_t_s"].to_numpy(float) * rate_hz).astype(np.int64)
-        return frame.assign(tick=tick)[[*keys, "gaze_valid", *axes]]
-
-    both = keyed(recorded).merge(keyed(rebuilt).drop_duplicates(keys), on=keys, how="left", suffixes=("", "_rebuilt"),
-                                 indicator=True)
-    found = (both["_merge"] == "both").to_numpy()
-    same_valid = found & (both["gaze_valid"].to_numpy() == both["gaze_valid_rebuilt"].to_numpy())
-    diff = np.stack([np.abs(both[a].to_numpy(float) - both[f"{a}_rebuilt"].to_numpy(float)) for a in axes], axis=1)
-    nan_both = np.stack([np.isnan(both[a].to_numpy(float)) & np.isnan(both[f"{a}_rebuilt"].to_numpy(float))
-                         for a in axes], axis=1)
+    match = _matched_rows(rebuilt, recorded, rate_hz)
+    found = match >= 0
+    same_valid = np.zeros(len(recorded), dtype=bool)
+    same_valid[found] = recorded["gaze_valid"].to_numpy()[found] == rebuilt["gaze_valid"].to_numpy()[match[found]]
+    ours, theirs = recorded[axes].to_numpy(float), np.full((len(recorded), len(axes)), np.nan)
+    theirs[found] = rebuilt[axes].to_numpy(float)[match[found]]
+    diff = np.abs(ours - theirs)
+    nan_both = np.isnan(ours) & np.isnan(theirs)
     close = np.all(nan_both | (diff <= TOLERANCE_M), axis=1)
     agree = same_valid & close
     finite = diff[found & ~np.any(nan_both, axis=1)]
-    return int(len(both)), int((~agree).sum()), float(np.max(finite)) if finite.size else math.nan
+    return int(len(recorded)), int((~agree).sum()), float(np.max(finite)) if finite.size else math.nan
 
 
 def resimulate_gaze(plan: SessionPlan, record: SessionRecord, participant: str, trials: pd.DataFrame,

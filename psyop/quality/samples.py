@@ -65,7 +65,7 @@ def gaze_grid(gaze: pd.DataFrame, nominal_rate_hz: float | None) -> GazeGrid:
     flags = dict.fromkeys(FLAG_NAMES, 0)
     if len(gaze) == 0 or "gaze_sample_t_s" not in gaze:
         return GazeGrid.empty(float(nominal_rate_hz or math.nan), "no samples", flags)
-    rows, t = _ordered_samples(gaze, flags)
+    kept, t = _ordered_samples(gaze, flags)
     if len(t) == 0:
         return GazeGrid.empty(float(nominal_rate_hz or math.nan), "no samples", flags)
     if nominal_rate_hz is not None:
@@ -75,24 +75,38 @@ def gaze_grid(gaze: pd.DataFrame, nominal_rate_hz: float | None) -> GazeGrid:
     else:
         return GazeGrid.empty(math.nan, "one sample: no rate", flags)
     tick, on = _ticks(t, rate, flags)
-    tick, rows = tick[on], rows[on]
+    tick, rows = tick[on], _Rows(gaze, kept[on])
     n = int(tick[-1]) + 1
     grid_t = t[0] + np.arange(n) / rate
-    valid_col = rows["gaze_valid"].to_numpy(dtype=bool) if "gaze_valid" in rows else np.ones(len(rows), dtype=bool)
+    valid_col = rows.column("gaze_valid", bool) if "gaze_valid" in rows else np.ones(len(tick), dtype=bool)
     columns = [f"fixation_{a}_m" for a in "xyz"]
     if all(c in rows for c in columns):
-        az, el = _angles(*(rows[c].to_numpy(dtype=np.float64) for c in columns))
+        az, el = _angles(*(rows.column(c, np.float64) for c in columns))
     else:
-        az = el = np.full(len(rows), np.nan)
+        az = el = np.full(len(tick), np.nan)
     ok = valid_col & np.isfinite(az) & np.isfinite(el)
     grid_az, grid_el = _place(tick, n, az, el, ok)
     eyes, centres = _placed_eyes(rows, valid_col, tick, n)
     return GazeGrid(grid_t, grid_az, grid_el, np.isfinite(grid_az), rate, source, flags, eyes, centres)
 
 
-def _ordered_samples(gaze: pd.DataFrame, flags: dict[str, int]) -> tuple[pd.DataFrame, np.ndarray]:
-    """The rows of ``gaze`` with a finite, strictly increasing ``gaze_sample_t_s`` and those times; counts
-    the non-finite, backwards and duplicated ones into ``flags``."""
+@dataclass(frozen=True)
+class _Rows:
+    """The rows ``index`` (positions) of ``gaze``, read a column at a time (no copy of the whole frame)."""
+
+    gaze: pd.DataFrame
+    index: np.ndarray
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.gaze
+
+    def column(self, name: str, dtype: type) -> np.ndarray:
+        return self.gaze[name].to_numpy(dtype=dtype)[self.index]
+
+
+def _ordered_samples(gaze: pd.DataFrame, flags: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The rows (positions) of ``gaze`` with a finite, strictly increasing ``gaze_sample_t_s`` and those times;
+    counts the non-finite, backwards and duplicated ones into ``flags``."""
     t = gaze["gaze_sample_t_s"].to_numpy(dtype=np.float64)
     finite = np.isfinite(t)
     flags["n_non_finite_time"] = int((~finite).sum())
@@ -103,7 +117,7 @@ def _ordered_samples(gaze: pd.DataFrame, flags: dict[str, int]) -> tuple[pd.Data
     duplicate = keep & np.concatenate([[False], t[1:] == t[:-1]])
     flags["n_duplicate_timestamps"] = int(duplicate.sum())
     keep &= ~duplicate
-    return gaze[keep], t[keep]
+    return np.flatnonzero(keep), t[keep]
 
 
 def _ticks(t: np.ndarray, rate_hz: float, flags: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -124,26 +138,30 @@ def _place(tick: np.ndarray, n: int, az: np.ndarray, el: np.ndarray,
     return out_az, out_el
 
 
-def _placed_eyes(rows: pd.DataFrame, valid_col: np.ndarray, tick: np.ndarray,
+def _placed_eyes(rows: _Rows, valid_col: np.ndarray, tick: np.ndarray,
                  n: int) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], dict[str, np.ndarray]]:
-    """Per eye whose ``gaze_normal_<eye>_<x|y|z>`` the rows hold (with a valid one): its gaze normal's
+    """Per eye whose ``gaze_normal_<eye>_<x|y|z>`` the rows hold (with a valid, finite one): its gaze normal's
     (az, el) and its centre on the grid."""
     eyes, centres = {}, {}
     for eye in ("left", "right"):
         names = [f"gaze_normal_{eye}_{a}" for a in "xyz"]
-        if all(c in rows for c in names):
-            e_az, e_el = _angles(*(rows[c].to_numpy(dtype=np.float64) for c in names))
-            e_ok = valid_col & np.isfinite(e_az)
-            if e_ok.any():
-                eyes[eye] = _place(tick, n, e_az, e_el, e_ok)
-                centres[eye] = _placed_centre(rows, eye, tick, e_ok, n)
+        if not all(c in rows for c in names):
+            continue
+        normal = [rows.column(c, np.float64) for c in names]
+        if not np.any(valid_col & np.isfinite(normal[0]) & np.isfinite(normal[1]) & np.isfinite(normal[2])):
+            continue  # no valid normal: no angles to place
+        e_az, e_el = _angles(*normal)
+        e_ok = valid_col & np.isfinite(e_az)
+        if e_ok.any():
+            eyes[eye] = _place(tick, n, e_az, e_el, e_ok)
+            centres[eye] = _placed_centre(rows, eye, tick, e_ok, n)
     return eyes, centres
 
 
-def _placed_centre(rows: pd.DataFrame, eye: str, tick: np.ndarray, ok: np.ndarray, n: int) -> np.ndarray:
+def _placed_centre(rows: _Rows, eye: str, tick: np.ndarray, ok: np.ndarray, n: int) -> np.ndarray:
     """The eye's centre (``eye_centre_<eye>_<x|y|z>_m``) on the grid; NaN where absent."""
     out = np.full((n, 3), np.nan)
     names = [f"eye_centre_{eye}_{a}_m" for a in "xyz"]
     if all(c in rows for c in names):
-        out[tick[ok]] = rows[names].to_numpy(dtype=np.float64)[ok]
+        out[tick[ok]] = np.stack([rows.column(c, np.float64) for c in names], axis=1)[ok]
     return out

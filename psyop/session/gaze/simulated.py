@@ -122,15 +122,25 @@ class _EventTimes:
         return None
 
     def covers(self, t_s: np.ndarray) -> np.ndarray:
-        """Whether an event covers each of ``t_s`` (ascending), at once."""
+        """Whether an event covers each of ``t_s`` (ascending), at once: ``start <= t < start + duration_s``
+        of an event begun in a window the times reach, each event's times found by bisection."""
         t_s = np.asarray(t_s, dtype=np.float64)
-        covered = np.zeros(len(t_s), dtype=bool)
         if self.rate_hz <= 0 or not len(t_s):
-            return covered
-        for w in range(int(math.floor(t_s[0] - self.duration_s)), int(math.floor(t_s[-1])) + 1):
-            for start in self._starts(w):
+            return np.zeros(len(t_s), dtype=bool)
+        starts = [start for w in range(int(math.floor(t_s[0] - self.duration_s)), int(math.floor(t_s[-1])) + 1)
+                  for start in self._starts(w)]
+        if np.any(np.diff(t_s) < 0):  # not ascending: event by event over every time
+            covered = np.zeros(len(t_s), dtype=bool)
+            for start in starts:
                 covered |= (t_s >= start) & (t_s < start + self.duration_s)
-        return covered
+            return covered
+        first = np.searchsorted(t_s, starts, side="left")  # each event's times: [first, stop)
+        stop = np.searchsorted(t_s, [start + self.duration_s for start in starts], side="left")
+        some = stop > first
+        depth = np.zeros(len(t_s) + 1, dtype=np.int64)
+        np.add.at(depth, first[some], 1)
+        np.add.at(depth, stop[some], -1)
+        return np.cumsum(depth[:-1]) > 0
 
 
 class SimulatedTracker:
@@ -419,15 +429,16 @@ class SimulatedTracker:
         key = (plan.seed, plan.start_s)
         if self._fixations is None or self._fixations[0] != key or self._fixations[1][-1][0] < t_rel_s:
             rng = self._scratch.at(self.seed, 7, plan.seed)  # drawn here, at once
-            fixations, t = [], 0.0
+            starts, radii, polar, t = [], [], [], 0.0
             while t <= max(t_rel_s, horizon_s):
-                r = plan.radius_deg * math.sqrt(rng.uniform())
-                a = rng.uniform(0, 2 * math.pi)
-                # r deg from the centre at polar angle a (docs/optics.md, "Angles"), as Fick angles
-                az, el = fick_angles_deg(offset_direction(*plan.centre_deg, r, math.degrees(a)))
-                fixations.append((t, float(az), float(el)))
+                starts.append(t)
+                radii.append(plan.radius_deg * math.sqrt(rng.uniform()))
+                polar.append(math.degrees(rng.uniform(0, 2 * math.pi)))
                 t += rng.gamma(4.0, c.fixation_mean_s / 4.0)
-            self._fixations = (key, fixations)
+            # r deg from the centre at polar angle a (docs/optics.md, "Angles"), as Fick angles: every fixation
+            # at once (the same elementwise arithmetic as one at a time)
+            az, el = fick_angles_deg(offset_direction(*plan.centre_deg, np.array(radii), np.array(polar)))
+            self._fixations = (key, list(zip(starts, np.asarray(az).tolist(), np.asarray(el).tolist())))
         fixations = self._fixations[1]
         index = max(i for i, f in enumerate(fixations) if f[0] <= max(t_rel_s, 0.0))
         start, az, el = fixations[index]
