@@ -16,15 +16,12 @@ a scratch folder simulated here (``--quick``: 3 participants per study).
 
 from __future__ import annotations
 
-import json
 import os
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks.bench_figures_vs_c57032f import _copy_tree, _env, _tree
-from benchmarks.bench_gaze_rebuild_vs_a9b7079 import _data
+from benchmarks.bench_gaze_rebuild_vs_a9b7079 import alternate, best_table
 
 #: the code before the session-wide trial measures
 BEFORE_REV = "27a0aec"
@@ -52,14 +49,6 @@ if len(sys.argv) > 3:
 print(json.dumps({"cpu_s": cpu, "wall_s": wall, "sessions": len(sessions),
                   "trials": int(sum(len(m) for m, _ in tables)), "events": int(sum(len(e) for _, e in tables))}))
 """
-
-
-def _time(tree: Path, data: Path, out: Path, keep: bool) -> dict:
-    done = subprocess.run([sys.executable, "-c", _TIMER, str(data), str(out), *(["keep"] if keep else [])],
-                          env=_env(tree), cwd=tree, capture_output=True, text=True)
-    if done.returncode:
-        raise RuntimeError(f"{tree.name}: measuring exited {done.returncode}: {done.stderr[-3000:]}")
-    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def compare_tables(a: Path, b: Path) -> tuple[list[str], int, int]:
@@ -95,22 +84,15 @@ def run(out_dir: Path, quick: bool) -> str:
     title = f"## The cold gaze-quality path: {BEFORE_REV} against this tree (bench_gaze_quality_cold)"
     with tempfile.TemporaryDirectory(prefix="psyop-bench-quality-cold-") as tmp:
         scratch = Path(tmp)
-        before = _tree(BEFORE_REV, scratch / "before-tree")
-        if before is None:
+        timed_runs = alternate(BEFORE_REV, scratch, quick, 1 if quick else 2, _TIMER)
+        if timed_runs is None:
             return f"{title}\n\nSkipped: commit {BEFORE_REV} is not in this clone."
-        now = _copy_tree(scratch / "now-tree")
-        data = _data(scratch, now, quick)
-        load = os.getloadavg()[0]
-        runs: dict[str, list[dict]] = {"before": [], "now": []}
-        for rep in range(1 if quick else 2):
-            for label, tree in (("before", before), ("now", now)):
-                runs[label].append(_time(tree, data, scratch / label, keep=rep == 0))
+        runs, load = timed_runs
         bad, n_numeric, n_exact = compare_tables(scratch / "before", scratch / "now")
         load_after = os.getloadavg()[0]
     if bad:
         raise AssertionError(f"bench_gaze_quality_cold: the quality tables differ between {BEFORE_REV} and this "
                              f"tree: {bad[:20]}")
-    best = {k: (min(r["cpu_s"] for r in v), min(r["wall_s"] for r in v)) for k, v in runs.items()}
     first = runs["now"][0]
     return "\n".join([
         title, "",
@@ -118,10 +100,7 @@ def run(out_dir: Path, quick: bool) -> str:
         f"{len(runs['now'])} time(s), alternating; the smaller of its runs. Load average (1 min) {load:.1f} before, "
         f"{load_after:.1f} after (on {os.cpu_count()} CPUs). Every table the same (numbers to rtol {RTOL:g}, "
         f"atol {ATOL:g}; {n_exact} of {n_numeric} numeric columns bit for bit).", "",
-        "| code | CPU s | wall s |", "|---|---|---|",
-        f"| {BEFORE_REV} | {best['before'][0]:.2f} | {best['before'][1]:.2f} |",
-        f"| this tree | {best['now'][0]:.2f} | {best['now'][1]:.2f} |",
-        f"| {BEFORE_REV} / this | {best['before'][0] / best['now'][0]:.2f} | {best['before'][1] / best['now'][1]:.2f} |",
+        *best_table(BEFORE_REV, runs),
     ])
 
 

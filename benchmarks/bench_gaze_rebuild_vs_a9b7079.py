@@ -49,12 +49,41 @@ print(json.dumps({"cpu_s": cpu, "wall_s": wall, "sessions": len(sessions),
 """
 
 
-def _time(tree: Path, data: Path, out: Path, keep: bool) -> dict:
-    done = subprocess.run([sys.executable, "-c", _TIMER, str(data), str(out), *(["keep"] if keep else [])],
+def timed(tree: Path, timer: str, data: Path, out: Path, keep: bool) -> dict:
+    """Run ``timer`` (a script: argv data, out, and "keep" to write its outputs to out) in ``tree``'s process;
+    the JSON its last line prints."""
+    done = subprocess.run([sys.executable, "-c", timer, str(data), str(out), *(["keep"] if keep else [])],
                           env=_env(tree), cwd=tree, capture_output=True, text=True)
     if done.returncode:
-        raise RuntimeError(f"{tree.name}: the rebuild exited {done.returncode}: {done.stderr[-3000:]}")
+        raise RuntimeError(f"{tree.name}: the timed script exited {done.returncode}: {done.stderr[-3000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def alternate(rev: str, scratch: Path, quick: bool, reps: int, timer: str) -> tuple[dict[str, list[dict]], float] | None:
+    """``timer`` run on the tree of ``rev`` ("before") and on a copy of this one ("now"), alternating, ``reps``
+    times each, over the simulated data (:func:`_data`); the first run of each writes its outputs to
+    ``scratch``/before and ``scratch``/now. The runs and the load average before them; None when this clone does
+    not hold ``rev``."""
+    before = _tree(rev, scratch / "before-tree")
+    if before is None:
+        return None
+    now = _copy_tree(scratch / "now-tree")
+    data = _data(scratch, now, quick)
+    load = os.getloadavg()[0]
+    runs: dict[str, list[dict]] = {"before": [], "now": []}
+    for rep in range(reps):
+        for label, tree in (("before", before), ("now", now)):
+            runs[label].append(timed(tree, timer, data, scratch / label, keep=rep == 0))
+    return runs, load
+
+
+def best_table(rev: str, runs: dict[str, list[dict]]) -> list[str]:
+    """The smaller CPU and wall seconds of each tree's runs, and their ratio, as a table."""
+    best = {k: (min(r["cpu_s"] for r in v), min(r["wall_s"] for r in v)) for k, v in runs.items()}
+    return ["| code | CPU s | wall s |", "|---|---|---|",
+            f"| {rev} | {best['before'][0]:.2f} | {best['before'][1]:.2f} |",
+            f"| this tree | {best['now'][0]:.2f} | {best['now'][1]:.2f} |",
+            f"| {rev} / this | {best['before'][0] / best['now'][0]:.2f} | {best['before'][1] / best['now'][1]:.2f} |"]
 
 
 def _equal_streams(a: Path, b: Path) -> list[str]:
@@ -89,32 +118,22 @@ def run(out_dir: Path, quick: bool) -> str:
     title = f"## The simulated sessions' stream rebuild: {BEFORE_REV} against this tree (bench_gaze_rebuild_vs_a9b7079)"
     with tempfile.TemporaryDirectory(prefix="psyop-bench-rebuild-") as tmp:
         scratch = Path(tmp)
-        before = _tree(BEFORE_REV, scratch / "before-tree")
-        if before is None:
+        timed_runs = alternate(BEFORE_REV, scratch, quick, 2, _TIMER)
+        if timed_runs is None:
             return f"{title}\n\nSkipped: commit {BEFORE_REV} is not in this clone."
-        now = _copy_tree(scratch / "now-tree")
-        data = _data(scratch, now, quick)
-        load = os.getloadavg()[0]
-        runs: dict[str, list[dict]] = {"before": [], "now": []}
-        for rep in range(2):
-            for label, tree in (("before", before), ("now", now)):
-                runs[label].append(_time(tree, data, scratch / label, keep=rep == 0))
+        runs, load = timed_runs
         bad = _equal_streams(scratch / "before", scratch / "now")
         load_after = os.getloadavg()[0]
     if bad:
         raise AssertionError(f"bench_gaze_rebuild_vs_a9b7079: rebuilt streams differ between {BEFORE_REV} and this "
                              f"tree: {bad}")
-    best = {k: (min(r["cpu_s"] for r in v), min(r["wall_s"] for r in v)) for k, v in runs.items()}
     first = runs["now"][0]
     return "\n".join([
         title, "",
         f"{first['sessions']} sessions, {first['samples']:,} rebuilt samples (streams: {', '.join(first['streams'])}); "
         f"each tree twice, alternating; the smaller of its two runs. Load average (1 min) {load:.1f} before, "
         f"{load_after:.1f} after (on {os.cpu_count()} CPUs). Every rebuilt stream equal, bit for bit.", "",
-        "| code | CPU s | wall s |", "|---|---|---|",
-        f"| {BEFORE_REV} | {best['before'][0]:.2f} | {best['before'][1]:.2f} |",
-        f"| this tree | {best['now'][0]:.2f} | {best['now'][1]:.2f} |",
-        f"| {BEFORE_REV} / this | {best['before'][0] / best['now'][0]:.2f} | {best['before'][1] / best['now'][1]:.2f} |",
+        *best_table(BEFORE_REV, runs),
     ])
 
 
