@@ -12,6 +12,7 @@ import io
 import json
 import os
 import pty
+import signal
 import subprocess
 import sys
 import termios
@@ -42,7 +43,8 @@ class TerminalSession:
         self.master, slave = pty.openpty()
         self.proc = subprocess.Popen([sys.executable, "-m", "psyop", "run", *args], cwd=ROOT, stdin=slave,
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                                     start_new_session=True, preexec_fn=_controlling_tty)
+                                     start_new_session=True, preexec_fn=_controlling_tty,
+                                     env={**os.environ, "PYTHONFAULTHANDLER": "1"})  # SIGABRT: every thread's stack
         os.close(slave)
         self.err: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -63,9 +65,14 @@ class TerminalSession:
     def finish(self) -> tuple[int, str]:
         try:
             rc = self.proc.wait(timeout=120)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:  # where each thread of the session waits, on its stderr, then it ends
+            self.proc.send_signal(signal.SIGABRT)
+            try:
+                self.proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=30)
+            self._reader.join(timeout=10)
             raise AssertionError("the session did not end:\n" + "\n".join(self.err)) from None
         finally:
             os.close(self.master)
