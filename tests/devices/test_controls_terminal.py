@@ -36,14 +36,21 @@ def _controlling_tty() -> None:  # in the child, after setsid: standard input be
     fcntl.ioctl(0, termios.TIOCSCTTY, 0)
 
 
-class TerminalSession:
-    """`psyop run ARGS` with a pty for its terminal; stderr collected line by line."""
+def _controlling_tty_sigint_ignored() -> None:  # as a background job's child: SIGINT ignored, kept through exec
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _controlling_tty()
 
-    def __init__(self, args: list[str]) -> None:
+
+class TerminalSession:
+    """`psyop run ARGS` with a pty for its terminal; stderr collected line by line. ``sigint_ignored``: the session
+    inherits SIGINT ignored, as a process started by a background job (or a harness that ignores it) does."""
+
+    def __init__(self, args: list[str], sigint_ignored: bool = False) -> None:
         self.master, slave = pty.openpty()
         self.proc = subprocess.Popen([sys.executable, "-m", "psyop", "run", *args], cwd=ROOT, stdin=slave,
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                                     start_new_session=True, preexec_fn=_controlling_tty,
+                                     start_new_session=True,
+                                     preexec_fn=_controlling_tty_sigint_ignored if sigint_ignored else _controlling_tty,
                                      env={**os.environ, "PYTHONFAULTHANDLER": "1"})  # SIGABRT: every thread's stack
         os.close(slave)
         self.err: list[str] = []
@@ -92,11 +99,13 @@ def test_decode_names_the_keys_a_terminal_sends() -> None:
 
 
 def test_terminal_keys_answer_pause_and_end_a_headless_session_which_resumes(tmp_path: Path) -> None:
+    """The first session inherits SIGINT ignored (a background job's child): Escape still ends it (before the
+    terminal's keys handled SIGINT for the session, the session went on after Escape); the resumed one does not."""
     protocol = fast_protocol(tmp_path, "detection", 1, 0.03)
     data = tmp_path / "data"
     args = [str(protocol), "--participant", "T1", "--data", str(data), "--display", "headless", "--responses",
             "keyboard", "--clock", "real", "--no-progress"]
-    session = TerminalSession(args)
+    session = TerminalSession(args, sigint_ignored=True)
     wait_until(lambda: session.said("question for the participant"), what="the session to start")
 
     def answered() -> int:  # the participant types '2' until a trial is recorded

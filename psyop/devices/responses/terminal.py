@@ -13,12 +13,19 @@ sequence following within :data:`ESCAPE_WAIT_S`) is Escape. Each press is stampe
 decoded. Escape and the other control keys go to the session's controls (Escape interrupts the main thread as
 Ctrl-C does); every other key is queued for :meth:`TerminalKeys.poll` (a
 :class:`~psyop.devices.responses.keyboard.KeyEvents` source).
+
+Escape's interrupt needs a Python handler for SIGINT. A process started as a background job (or by a harness
+that ignores SIGINT) inherits SIGINT ignored, and an interrupt to an ignored signal does nothing: Escape would be
+lost. So while the keys are read for a session's controls, an ignored SIGINT is handled as Python's default
+(KeyboardInterrupt) and ignored again at :meth:`TerminalKeys.close`: the terminal is the foreground one, whose
+Escape and Ctrl-C are the experimenter's way to stop.
 """
 
 from __future__ import annotations
 
 import os
 import select
+import signal
 import sys
 import threading
 from typing import TYPE_CHECKING
@@ -48,6 +55,12 @@ def terminal_usable(fd: int | None = None) -> bool:
         return os.tcgetpgrp(fd) == os.getpgrp()
     except OSError:  # a terminal that is no process's controlling one
         return False
+
+
+def _sigint_ignored() -> bool:
+    """Whether this process ignores SIGINT (inherited, as a background job's child does); False off the main
+    thread, where no handler can be set."""
+    return threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGINT) == signal.SIG_IGN
 
 
 def decode(data: str) -> list[str]:
@@ -92,6 +105,9 @@ class TerminalKeys:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._saved = termios.tcgetattr(self.fd)
+        self._sigint_ignored = controls is not None and _sigint_ignored()
+        if self._sigint_ignored:  # Escape interrupts as Ctrl-C does (module docstring)
+            signal.signal(signal.SIGINT, signal.default_int_handler)
         tty.setcbreak(self.fd, termios.TCSANOW)  # keys typed ahead of the session are kept
         self.presses = 0  # keys decoded (answers and controls)
         self._thread = threading.Thread(target=self._read, name="psyop-terminal-keys", daemon=True)
@@ -143,6 +159,8 @@ class TerminalKeys:
             termios.tcsetattr(self.fd, termios.TCSADRAIN, self._saved)
         except (OSError, termios.error):  # the terminal is gone
             pass
+        if self._sigint_ignored:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 __all__ = ["TerminalKeys", "decode", "terminal_usable"]
